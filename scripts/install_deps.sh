@@ -1,0 +1,25 @@
+#!/usr/bin/env bash
+# Installs the Debian packages Tactus needs, only those missing (idempotent; instant when all present).
+# Uses sudo when not root. Set TACTUS_SKIP_DEPS=1 to skip entirely.
+set -euo pipefail
+[[ "${TACTUS_SKIP_DEPS:-0}" == "1" ]] && exit 0
+packages=(
+  build-essential cmake ninja-build pkg-config
+  libeigen3-dev libboost-dev libspdlog-dev libsuitesparse-dev libyaml-cpp-dev
+  libcli11-dev libgtest-dev libgmock-dev libbenchmark-dev zlib1g-dev
+  python3 python3-matplotlib
+)
+missing=()
+for p in "${packages[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+[[ ${#missing[@]} -eq 0 ]] && exit 0
+echo "tactus: installing missing Debian packages: ${missing[*]}"
+sudo=""
+if [[ $(id -u) -ne 0 ]]; then
+  command -v sudo >/dev/null || { echo "tactus: need root or sudo to install: ${missing[*]}" >&2; exit 1; }
+  sudo="sudo"
+fi
+export DEBIAN_FRONTEND=noninteractive
+$sudo apt-get update -qq
+$sudo apt-get install -y -qq --no-install-recommends "${missing[@]}"

@@ -1,0 +1,72 @@
+#pragma once
+// Tetrahedral meshes: the in-memory type, readers for the common file formats, surface
+// extraction and VTK output.
+//
+// Supported inputs (chosen by content, not only by extension):
+//  * Gmsh ASCII 1.0 (`$NOD`/`$ELM`), 2.2 and 4.1 (`$MeshFormat`): 4-node tetrahedra are kept
+//    (element type 4); other element types are ignored and counted.
+//  * Legacy VTK unstructured grids (`# vtk DataFile`, ASCII, DATASET UNSTRUCTURED_GRID,
+//    cell type 10).
+//  * VTK XML `.vtu` (ASCII, base64 binary, zlib-compressed base64 where present).
+// Node ids in files may be sparse and unordered; they are renumbered densely in file order.
+// Nodes not referenced by any tetrahedron are dropped (counted in MeshReport).
+
+#include <Eigen/Core>
+#include <array>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+namespace tactus::sim {
+
+/// A tetrahedral mesh. Positions in the file's units until a scene transforms them (SI inside).
+struct TetMesh {
+  Eigen::Matrix3Xd nodes;                 ///< node positions, one column per node
+  std::vector<std::array<int, 4>> tets;   ///< node indices; positive orientation after loading
+  std::string source;                     ///< file it came from (for messages)
+
+  int nodeCount() const { return static_cast<int>(nodes.cols()); }
+  int tetCount() const { return static_cast<int>(tets.size()); }
+};
+
+/// What a reader repaired or skipped; every non-zero count is also logged as a warning.
+struct MeshReport {
+  std::string format;            ///< "gmsh1", "gmsh2", "gmsh4", "vtk-legacy", "vtu"
+  int ignored_elements = 0;      ///< non-tetrahedral elements skipped
+  int flipped_tets = 0;          ///< negatively oriented tets re-oriented (two nodes swapped)
+  int dropped_nodes = 0;         ///< nodes referenced by no tetrahedron
+};
+
+/// Reads a tetrahedral mesh. Throws tactus::MeshError naming the file and line on malformed input:
+/// truncated file, missing section, an element referring to an unknown node, a degenerate
+/// (zero-volume, relative to the mesh size) tetrahedron, no tetrahedra at all. Negatively
+/// oriented tetrahedra are repaired (counted in `report`). Never crashes on bad input.
+TetMesh loadTetMesh(const std::filesystem::path& path, MeshReport* report = nullptr);
+
+/// Same as loadTetMesh but from an in-memory buffer; `name` is used in messages and the format is
+/// detected from the content.
+TetMesh parseTetMesh(const std::string& content, const std::string& name,
+                     MeshReport* report = nullptr);
+
+/// The boundary of a tetrahedral mesh: faces that belong to exactly one tetrahedron, oriented so
+/// that their normal (counter-clockwise, right hand) points out of the volume.
+struct SurfaceMesh {
+  std::vector<std::array<int, 3>> triangles;  ///< indices into TetMesh::nodes
+  std::vector<int> triangle_tet;              ///< the tetrahedron each triangle bounds
+  std::vector<int> nodes;                     ///< sorted unique surface node indices
+};
+
+SurfaceMesh extractSurface(const TetMesh& mesh);
+
+/// Writes one VTK XML unstructured grid (.vtu, ASCII): the mesh at positions `positions`
+/// (3 x n), with point data "displacement" (3 x n, may be empty) and cell data "von_mises"
+/// (one per tet, may be empty). Throws tactus::Error on I/O failure.
+void writeVtu(const std::filesystem::path& path, const TetMesh& mesh,
+              const Eigen::Matrix3Xd& positions, const Eigen::Matrix3Xd& displacement,
+              const Eigen::VectorXd& von_mises);
+
+/// Writes a ParaView collection (.pvd) listing `files` (relative to the .pvd) at `times_s`.
+void writePvd(const std::filesystem::path& path, const std::vector<std::string>& files,
+              const std::vector<double>& times_s);
+
+}  // namespace tactus::sim

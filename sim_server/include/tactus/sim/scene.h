@@ -1,0 +1,139 @@
+#pragma once
+// Scene description: the YAML file a user writes, parsed into plain structs (spec -> pipeline).
+//
+// A scene names only the effects it wants; everything optional is std::optional or has a
+// `present`/`enabled` flag, and an absent effect is never computed (see pipeline.h). Units are
+// SI everywhere (metres, seconds, kilograms, pascals, newtons, radians) except where a field name
+// says otherwise (`*_deg`). The full schema with defaults is documented in scenes/README.md.
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace tactus::sim {
+
+enum class MaterialLaw { kLinear, kCorotational };
+enum class ComplianceKind { kExact, kWarped, kRest, kUncoupled };
+enum class LinearSolverKind { kCholmod, kPcg };
+enum class InstrumentKind { kProbe, kGrasper };
+
+/// Axis-aligned box in scene coordinates (after the mesh transform) [m].
+struct BoxSpec {
+  Eigen::Vector3d min_m = Eigen::Vector3d::Zero();
+  Eigen::Vector3d max_m = Eigen::Vector3d::Zero();
+};
+
+/// Rayleigh damping B = alpha M + beta K.
+struct RayleighSpec {
+  double mass_alpha_per_s = 0.0;    ///< alpha [1/s]
+  double stiffness_beta_s = 0.0;    ///< beta [s]
+};
+
+/// One deformable object.
+struct TissueSpec {
+  std::string name = "tissue";
+  std::filesystem::path mesh_path;                 ///< absolute, resolved against the scene file
+  double scale = 1.0;                              ///< applied first (file units -> metres)
+  Eigen::Vector3d rotation_deg = Eigen::Vector3d::Zero();  ///< then rotation, XYZ Euler [deg]
+  Eigen::Vector3d translation_m = Eigen::Vector3d::Zero(); ///< then translation [m]
+  MaterialLaw law = MaterialLaw::kCorotational;
+  double young_pa = 3000.0;
+  double poisson = 0.45;
+  double density_kgpm3 = 1000.0;
+  std::optional<RayleighSpec> damping;             ///< absent: no damping terms at all
+  std::vector<int> fixed_nodes;                    ///< node indices (file order, 0-based)
+  std::vector<BoxSpec> fixed_boxes;                ///< nodes inside any box are fixed too
+  ComplianceKind compliance = ComplianceKind::kWarped;
+  std::filesystem::path compliance_cache_dir;      ///< empty: no on-disk cache
+};
+
+/// A pose: position [m] and orientation (unit quaternion), world frame.
+struct PoseSpec {
+  Eigen::Vector3d position_m = Eigen::Vector3d::Zero();
+  Eigen::Quaterniond orientation = Eigen::Quaterniond::Identity();
+};
+
+/// One key of a scripted instrument trajectory (linear/slerp interpolation between keys).
+struct TrajectoryKey {
+  double t_s = 0.0;
+  PoseSpec pose;
+  double gripper_opening = 1.0;   ///< 0 closed .. 1 fully open
+};
+
+/// The instrument (god object) and its coupling to the device.
+struct InstrumentSpec {
+  bool present = false;
+  InstrumentKind kind = InstrumentKind::kProbe;
+  double mass_kg = 0.05;
+  double inertia_kgm2 = 1e-5;                   ///< isotropic rotational inertia
+  double coupling_k_npm = 500.0;                ///< translational PD stiffness
+  double coupling_b_nspm = 5.0;                 ///< translational PD damping
+  double coupling_k_rot_nmprad = 0.5;           ///< rotational PD stiffness
+  double coupling_b_rot_nmsprad = 0.005;        ///< rotational PD damping
+  double friction_mu = 0.0;                     ///< Coulomb coefficient tool/tissue (0: no tangential rows)
+  double alarm_distance_m = 0.004;              ///< collision query radius beyond contact
+  double contact_distance_m = 0.0;              ///< gap offset treated as contact
+  // probe: a capsule from the tool origin along -z (shaft) with a spherical tip
+  double tip_radius_m = 0.003;
+  double shaft_length_m = 0.0;
+  // grasper: two jaws hinged at the tool origin, opening about the tool x axis, pointing along -z
+  double jaw_length_m = 0.02;
+  double jaw_radius_m = 0.002;
+  double max_opening_rad = 0.6;                 ///< half-angle of each jaw when fully open
+  int jaw_samples = 8;                          ///< capsules (segments) per jaw
+  PoseSpec initial_pose;
+  std::vector<TrajectoryKey> trajectory;        ///< scripted device target when no device drives it
+};
+
+struct SolverSpec {
+  LinearSolverKind linear = LinearSolverKind::kCholmod;
+  double cg_tolerance = 1e-8;
+  int cg_max_iterations = 500;
+  double nsgs_tolerance = 1e-6;
+  int nsgs_max_sweeps = 500;
+  double nsgs_sor = 1.0;                        ///< over-relaxation factor in (0, 2)
+  int max_contacts = 300;
+};
+
+struct HapticsSpec {
+  bool enabled = false;
+  double rate_hz = 1000.0;
+  std::string device = "simulated";
+  double force_scale = 1.0;
+  double max_force_n = 8.0;
+  double watchdog_ms = 50.0;
+  int max_sweeps_per_tick = 50;
+  double nsgs_tolerance = 1e-6;
+};
+
+struct OutputSpec {
+  bool enabled = false;
+  std::filesystem::path directory;              ///< resolved against the working directory
+  int every_n_steps = 1;
+};
+
+struct SceneSpec {
+  std::filesystem::path source;                 ///< the YAML file (for messages)
+  double time_step_s = 0.01;
+  std::optional<Eigen::Vector3d> gravity_mps2;  ///< absent: no gravity
+  std::vector<TissueSpec> tissues;
+  InstrumentSpec instrument;
+  SolverSpec solver;
+  HapticsSpec haptics;
+  OutputSpec output;
+  double duration_s = 0.0;                      ///< scripted length (0: until stopped)
+};
+
+/// Reads and validates a scene file. Throws tactus::SceneError listing every problem found
+/// (unknown keys, wrong types, out-of-range values, missing mesh), each with file, line, column
+/// and the field path (e.g. `scene.yaml:12:5: tissues[0].material.poisson: must be < 0.5`).
+SceneSpec loadScene(const std::filesystem::path& path);
+
+/// Same from a string; relative paths resolve against `base_dir`, `name` is used in messages.
+SceneSpec parseScene(const std::string& yaml, const std::string& name,
+                     const std::filesystem::path& base_dir);
+
+}  // namespace tactus::sim
