@@ -8,6 +8,7 @@ packages=(
   libeigen3-dev libboost-dev libspdlog-dev libsuitesparse-dev libyaml-cpp-dev
   libcli11-dev libgtest-dev libgmock-dev libbenchmark-dev zlib1g-dev
   python3 python3-matplotlib
+  libhdf5-dev
 )
 missing=()
 for p in "${packages[@]}"; do
@@ -21,5 +22,5 @@ if [[ $(id -u) -ne 0 ]]; then
   sudo="sudo"
 fi
 export DEBIAN_FRONTEND=noninteractive
-$sudo apt-get update -qq
-$sudo apt-get install -y -qq --no-install-recommends "${missing[@]}"
+$sudo apt-get update -qq >/dev/null
+$sudo apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null

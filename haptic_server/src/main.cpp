@@ -1,1 +1,160 @@
-int main() { return 0; }
+// haptic_server: the hard-real-time haptic loop. Pins a core, runs at SCHED_FIFO where allowed,
+// polls a device backend and re-solves the simulation's last contact problem every period.
+#include <CLI/CLI.hpp>
+#include <spdlog/spdlog.h>
+
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <csignal>
+#include <thread>
+
+#include "tactus/device/device.h"
+#include "tactus/haptic/haptic_loop.h"
+#include "tactus/haptic/supervisor.h"
+#include "tactus/shared/clock.h"
+#include "tactus/shared/rt.h"
+
+namespace {
+std::atomic<bool> g_stop{false};
+void onSignal(int) { g_stop.store(true); }
+}  // namespace
+
+int main(int argc, char** argv) {
+  using namespace tactus;
+  CLI::App app{"Tactus haptic server: renders contact forces at 1 kHz or more"};
+  std::string segment = "tactus";
+  std::string device_name{device::kDefaultDevice};
+  std::vector<std::string> device_options;
+  double rate_hz = 1000.0;
+  int core = -1;
+  int priority = 80;
+  bool require_rt = false;
+  double duration_s = 0.0;
+  bool status = false;
+  std::string log_level = "info";
+  haptic::HapticSettings settings;
+  app.add_option("--segment", segment, "Shared-memory segment name")->capture_default_str();
+  app.add_option("--device", device_name,
+                 "Device backend: simulated, replay, null, or a plugin .so path")
+      ->capture_default_str();
+  app.add_option("--device-option", device_options, "Backend option key=value (repeatable)");
+  app.add_option("--rate", rate_hz, "Loop rate [Hz]")->check(CLI::Range(50.0, 4000.0))
+      ->capture_default_str();
+  app.add_option("--core", core, "CPU core to pin the loop to (-1: the last core)");
+  app.add_option("--priority", priority, "SCHED_FIFO priority (0: do not ask)")
+      ->check(CLI::Range(0, 99))->capture_default_str();
+  app.add_flag("--require-rt", require_rt, "Fail if pinning, SCHED_FIFO or mlockall is refused");
+  app.add_option("--max-force", settings.max_force_n, "Force clamp [N]")->capture_default_str();
+  app.add_option("--force-scale", settings.force_scale, "Rendered force per contact force")
+      ->capture_default_str();
+  app.add_option("--watchdog-ms", settings.watchdog_ms, "Fade out when the snapshot is older")
+      ->capture_default_str();
+  app.add_option("--fade-ms", settings.fade_ms, "Fade ramp [ms]")->capture_default_str();
+  app.add_option("--slew", settings.slew_n_per_s, "Force slew-rate limit [N/s]")
+      ->capture_default_str();
+  app.add_option("--max-sweeps", settings.max_sweeps, "NSGS sweeps per tick")
+      ->capture_default_str();
+  app.add_option("--tolerance", settings.tolerance, "NSGS tolerance")->capture_default_str();
+  app.add_flag("--render-torque", settings.render_torque, "Render torques too");
+  app.add_option("--duration", duration_s, "Stop after S seconds (0: until SIGINT/SIGTERM)");
+  app.add_flag("--status", status, "Log a status line every second");
+  app.add_option("--log-level", log_level, "trace, debug, info, warn, error")
+      ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error"}));
+  CLI11_PARSE(app, argc, argv);
+  spdlog::set_level(spdlog::level::from_str(log_level));
+  spdlog::set_pattern("[%H:%M:%S.%e] [haptic] [%^%l%$] %v");
+  std::signal(SIGINT, onSignal);
+  std::signal(SIGTERM, onSignal);
+
+  try {
+    shared::Segment::validateName(segment);
+    device::DeviceConfig config;
+    for (const auto& kv : device_options) device::addDeviceOption(config, kv);
+    std::unique_ptr<device::Device> dev = device::loadDevice(device_name, config);
+    dev->open();
+    dev->calibrate();
+    const device::DeviceInfo info = dev->info();
+    if (info.max_force_n > 0.0 && info.max_force_n < settings.max_force_n) {
+      spdlog::info("clamping to the device's maximum force {} N", info.max_force_n);
+      settings.max_force_n = info.max_force_n;
+    }
+    settings.render_torque = settings.render_torque && info.has_rotation;
+    settings.period_ns = static_cast<std::int64_t>(std::llround(1e9 / rate_hz));
+    settings.solve_budget_ns = settings.period_ns * 4 / 10;
+    spdlog::info("device '{}' ({}), max force {} N, loop {} Hz", device_name, info.model,
+                 settings.max_force_n, rate_hz);
+
+    haptic::HapticLoop loop(*dev, settings);
+    haptic::Supervisor supervisor(loop, segment);
+    if (core < 0) core = shared::availableCpuCount() - 1;
+
+    std::atomic<bool> loop_stop{false};
+    std::string rt_summary;
+    std::atomic<bool> rt_ready{false};
+    std::exception_ptr rt_error;
+    dev->enableForces(true);
+    std::thread rt([&] {
+      try {
+        rt_summary = shared::setupRealtimeThread(
+            core, priority,
+            require_rt ? shared::RealtimeConfig::kEnforce : shared::RealtimeConfig::kIgnore);
+      } catch (...) {
+        rt_error = std::current_exception();
+        rt_ready.store(true);
+        return;
+      }
+      rt_ready.store(true);
+      shared::PeriodicTimer timer(settings.period_ns);
+      while (!loop_stop.load(std::memory_order_relaxed)) {
+        const shared::TimerTick t = timer.wait();
+        loop.tick(t.scheduled_ns, t.woken_ns);
+      }
+      // leave the device with zero force
+      (void)dev->write(device::DeviceCommand{});
+    });
+    while (!rt_ready.load()) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    if (rt_error) {
+      rt.join();
+      std::rethrow_exception(rt_error);
+    }
+    if (rt_summary.empty()) {
+      spdlog::info("real-time: core {} pinned, SCHED_FIFO {}, memory locked", core, priority);
+    } else {
+      spdlog::warn("real-time set-up incomplete (running anyway; --require-rt to refuse): {}",
+                   rt_summary);
+    }
+
+    const std::int64_t t0 = shared::monotonicNs();
+    std::int64_t last_status = t0;
+    std::uint64_t last_ticks = 0;
+    while (!g_stop.load()) {
+      supervisor.poll();
+      supervisor.drainEvents();
+      const std::int64_t now = shared::monotonicNs();
+      if (duration_s > 0.0 && now - t0 > static_cast<std::int64_t>(duration_s * 1e9)) break;
+      if (status && now - last_status >= 1'000'000'000) {
+        const std::uint64_t ticks = loop.counters().ticks.load();
+        spdlog::info("{:.0f} Hz, {} snapshots, {} stale ticks, {} clamped, segment {}",
+                     1e9 * static_cast<double>(ticks - last_ticks) /
+                         static_cast<double>(now - last_status),
+                     loop.counters().snapshots_taken.load(), loop.counters().stale_ticks.load(),
+                     loop.counters().clamped.load(), supervisor.attached() ? "attached" : "absent");
+        last_ticks = ticks;
+        last_status = now;
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+    spdlog::info("stopping: {} ticks", loop.counters().ticks.load());
+    supervisor.detach();
+    loop_stop.store(true);
+    rt.join();
+    supervisor.drainEvents();
+    dev->enableForces(false);
+    dev->close();
+    return 0;
+  } catch (const std::exception& e) {
+    spdlog::error("{}", e.what());
+    return 1;
+  }
+}

@@ -11,8 +11,26 @@
 //
 // Real-time: solveNsgs and naturalMapError never allocate, lock or throw; all scratch memory is
 // in NsgsWorkspace, sized once for a capacity (rows, contacts).
+//
+// Algorithm (solveNsgs). One sweep visits the contacts in order; contact i solves its local
+// problem delta_i = W_ii f_i + b_i exactly, with b_i = delta_i - W_ii f_i (the other contacts
+// frozen), then delta is updated by W(:, rows_i) * df_i (kColumnUpdate, the default) or b_i is
+// gathered from the rows of W (kRowGather). Local problem of a 3-row contact:
+//   1. separation: b_n >= 0  ->  f_i = 0 (f = 0 is then a solution: delta_hat = b_hat in K*);
+//   2. stick: f = -W_ii^-1 b_i, accepted when f_n > 0 and ||f_t|| <= mu f_n;
+//   3. slip: f = f_n (1, mu cos(theta), mu sin(theta)) with delta_n = 0, which fixes
+//      f_n(theta) = -b_n / (W_nn + mu W_nt e(theta)); theta solves the scalar equation
+//      e(theta) x delta_t(theta) = 0 with e . delta_t < 0 (friction opposite to sliding).
+//      Newton on theta from the stick solution's direction (a few iterations, exact to machine
+//      precision); if it fails, a 72-point scan of the circle plus bisection on the bracket
+//      nearest the start; if that fails too (degenerate W_ii), 100 projected fixed-point
+//      iterations f <- P_K(f - rho (W_ii f + b)_hat). The local solve is thus exact, and the
+//      outer iteration behaves like Siconos' NSGS with an exact one-contact solver.
+// A 3-row contact with mu = 0 and a 1-row contact use the scalar projection
+// f_n = max(0, -b_n / W_nn), f_t = 0. Over-relaxation: f_i <- P_K(f_i + sor (f_local - f_i)).
 
 #include <cstdint>
+#include <string_view>
 #include <vector>
 
 namespace tactus::shared {
@@ -27,20 +45,40 @@ struct ContactProblemView {
   const double* mu = nullptr;        ///< nc friction coefficients (ignored for 1-row contacts)
 };
 
+/// How the solver keeps the coupling between contacts (both give the same iterates up to
+/// rounding). kColumnUpdate keeps delta = W f + q current by adding W(:, rows_i) df_i after each
+/// contact (strided columns of the row-major W; the error check is then O(m), and contacts
+/// whose force does not change cost nothing). kRowGather recomputes b_i from the contiguous rows
+/// W(rows_i, :) f (every contact costs 3m, every error check one more W pass).
+/// Measured (tests/bench/nsgs_bench.cpp, 450 rows): see the README / report; kColumnUpdate is the
+/// default because it is not slower per sweep and its checks are free.
+enum class NsgsCoupling : std::uint8_t { kColumnUpdate, kRowGather };
+
 struct NsgsSettings {
   double tolerance = 1e-6;           ///< on the normalised natural-map error
   int max_sweeps = 500;
   double sor = 1.0;                  ///< over-relaxation in (0, 2); 1 = plain Gauss-Seidel
   std::int64_t time_budget_ns = 0;   ///< 0: none; else stop after the sweep that crosses it
-  int check_every = 1;               ///< compute the error every k sweeps (cost: one W pass)
+  int check_every = 1;               ///< compute the error every k sweeps (kRowGather: one W pass)
+  NsgsCoupling coupling = NsgsCoupling::kColumnUpdate;
 };
 
+/// kConverged: error <= tolerance. kMaxSweeps / kTimeBudget: stopped first (f is the last
+/// iterate, error its error). kNonFinite: W, q, mu or the warm start holds NaN/Inf, or the
+/// iteration produced one; f is zeroed,
+/// error = +inf. kEmpty: no contacts, problem larger than the workspace,
+/// or an inconsistent view (null pointer, ld < rows, row_offset steps other than 1 or 3); f is
+/// left untouched.
 enum class NsgsStatus : std::uint8_t { kConverged, kMaxSweeps, kTimeBudget, kNonFinite, kEmpty };
+
+/// "converged", "max_sweeps", "time_budget", "non_finite", "empty" (static strings).
+std::string_view toString(NsgsStatus status) noexcept;
 
 struct NsgsResult {
   NsgsStatus status = NsgsStatus::kEmpty;
   int sweeps = 0;
   double error = 0.0;                ///< normalised natural-map error at exit
+  std::int64_t elapsed_ns = 0;       ///< wall time spent in solveNsgs (CLOCK_MONOTONIC)
 };
 
 /// Preallocated scratch for a capacity; reusable for any problem up to that size.
@@ -52,8 +90,8 @@ class NsgsWorkspace {
   int maxRows() const;
   int maxContacts() const;
   // (implementation-defined scratch below)
-  std::vector<double> delta;         ///< m: W f + delta_free, kept up to date
-  std::vector<double> scratch;
+  std::vector<double> delta;         ///< m: W f + delta_free, kept up to date (valid on exit)
+  std::vector<double> scratch;       ///< m: reserved
  private:
   int max_rows_ = 0;
   int max_contacts_ = 0;
@@ -61,13 +99,21 @@ class NsgsWorkspace {
 
 /// Solves in place: `f` (m entries) holds the warm start on entry (zeros for a cold start) and
 /// the solution on exit. Never allocates. Problems larger than the workspace return kEmpty.
+/// Costs one W pass to form delta = W f + q on entry, then one W pass per sweep. The error is
+/// checked after sweeps check_every, 2 check_every, ... and at exit, never before the first
+/// sweep (so a warm start that is already a solution costs exactly one sweep).
+/// On exit workspace.delta holds W f + q for the returned f.
 NsgsResult solveNsgs(const ContactProblemView& problem, const NsgsSettings& settings,
                      NsgsWorkspace& workspace, double* f) noexcept;
 
 /// Siconos' fc3d error: sqrt(sum_i ||f_i - P_K(f_i - delta_hat_i)||^2) / max(||q||,||f||,||delta||)
 /// (for 1-row contacts: the projection onto R+). Allocation-free; writes delta = W f + q into
-/// `delta_out` (m entries) when not null.
+/// `delta_out` (m entries) when not null. When the three norms are all zero, the error is not
+/// divided (it is then 0). NaN/Inf in the input gives a non-finite error.
 double naturalMapError(const ContactProblemView& problem, const double* f,
                        double* delta_out = nullptr) noexcept;
+
+/// Projection onto the Coulomb cone K_mu = {||z_t|| <= mu z_n} (z has 3 entries, in place).
+void projectOnCone(double mu, double* z) noexcept;
 
 }  // namespace tactus::shared

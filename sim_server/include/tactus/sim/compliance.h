@@ -6,7 +6,8 @@
 // point in barycentric form; signs are carried by `weight`/`dir`, chosen by the caller).
 //
 // Models:
-//  * exact     : C from the current tangent (FemBody::solveCompliance), one solve per row.
+//  * exact     : C from the current tangent (FemBody::solveCompliance): one solve per DOF of the
+//                nodes the rows touch (3|U| solves, batched), then W = P^T C_UU P.
 //  * warped    : C ~ R C0 R^T (eq. 12) with C0 precomputed for the surface DOFs (dense block,
 //                CHOLMOD: one factorisation, one solve per surface DOF, progress shown),
 //                cached on disk (header: magic, version, hash of mesh+material+h, sizes; a stale
@@ -15,12 +16,19 @@
 //  * uncoupled : diagonal per-node compliance (diag of C0, isotropic 3x3 per node).
 // Constrained motion (paper 3.3): r0 = (H R)^T f, dq0 = C0 r0 (all DOFs, one solve with the
 // rest factorisation), dq = R dq0 (exact: dq = C H^T f).
+//
+// W build (warped/rest/uncoupled): P (3|U| x m, U = nodes the rows touch) has at most 9 nonzeros
+// per column (w_k R_a^T dir); G = C0_UU P is formed column by column from 3x3 blocks and
+// W += P^T G, so the cost is O(m |U|) + O(m^2), independent of the mesh size.
+// C0 is stored dense in double precision (3s x 3s for s surface nodes): liver2 (s ~ 400)
+// takes a few MB; the memory figure of each model is memoryBytes().
 
 #include <Eigen/Core>
 #include <array>
 #include <filesystem>
 #include <memory>
 #include <span>
+#include <string>
 
 #include "tactus/sim/fem.h"
 
@@ -37,6 +45,21 @@ struct ComplianceOptions {
   double h_s = 0.01;                       ///< time step the compliance is built for
   std::filesystem::path cache_dir;         ///< empty: no disk cache
   bool show_progress = true;               ///< progress bar on stderr for the precomputation
+  /// Cache file stem inside cache_dir (file `<name>.c0.bin`). Empty: the mesh source's stem, or
+  /// "tissue". Give each tissue of a scene its own name. A file left by another configuration
+  /// (mesh, material, h, fixed nodes) is detected by its header hash and rebuilt.
+  std::string cache_name;
+  int solve_batch = 64;                    ///< right-hand sides per CHOLMOD call in the precompute
+};
+
+/// How the model was built (for logs and tests).
+struct ComplianceBuildInfo {
+  bool loaded_from_cache = false;          ///< C0 read from a valid cache file
+  bool cache_rejected = false;             ///< a cache file existed but was stale/corrupt/truncated
+  std::string cache_message;               ///< why it was rejected (empty otherwise)
+  double precompute_s = 0.0;               ///< C0 factorisation + solves (0 when loaded)
+  int surface_nodes = 0;                   ///< nodes whose C0 block is stored
+  long skipped_row_nodes = 0;              ///< row nodes ignored because not on the surface
 };
 
 class TissueCompliance {
@@ -53,7 +76,14 @@ class TissueCompliance {
                           Eigen::VectorXd& dq) = 0;
   /// Bytes held by the model (C0 block etc.), for the log and the README.
   virtual std::size_t memoryBytes() const = 0;
+  /// How the model was built; skipped_row_nodes is cumulative over addW/correction calls
+  /// (warped/rest/uncoupled only know the surface nodes: a row node inside the volume contributes
+  /// zero compliance and is counted here).
+  virtual ComplianceBuildInfo buildInfo() const { return {}; }
 };
+
+/// Cache file used for `body` under `options` (empty path when options.cache_dir is empty).
+std::filesystem::path complianceCachePath(const FemBody& body, const ComplianceOptions& options);
 
 /// Builds the model. `warped`/`rest`/`uncoupled` precompute C0 (or load it from the cache).
 std::unique_ptr<TissueCompliance> makeCompliance(ComplianceKind kind, FemBody& body,

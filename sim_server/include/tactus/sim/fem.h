@@ -19,7 +19,9 @@
 
 #include <Eigen/Core>
 #include <Eigen/SparseCore>
+#include <cstdint>
 #include <memory>
+#include <optional>
 #include <vector>
 
 #include "tactus/sim/mesh.h"
@@ -35,10 +37,18 @@ struct FemMaterial {
   std::optional<RayleighSpec> damping;          ///< absent: B = 0, no damping terms computed
 };
 
+/// Preconditioner of the PCG solver.
+enum class PcgPreconditioner {
+  kJacobi,        ///< diagonal of A (cheap, many iterations on large meshes)
+  kRestCholesky,  ///< CHOLMOD factor of the rest-shape A0 = M/h + B0 + h K0 (factorised once
+                  ///< per h; few iterations while the rotations stay moderate)
+};
+
 struct FemSolverOptions {
   LinearSolverKind linear = LinearSolverKind::kCholmod;
-  double cg_tolerance = 1e-8;                   ///< relative residual
+  double cg_tolerance = 1e-8;                   ///< relative residual ||A dv - b|| / ||b||
   int cg_max_iterations = 500;
+  PcgPreconditioner pcg_preconditioner = PcgPreconditioner::kJacobi;
 };
 
 /// Per-stage wall times of the last step [s] and solver figures.
@@ -48,6 +58,7 @@ struct FemStepStats {
   double solve_s = 0.0;
   int cg_iterations = 0;                        ///< 0 for CHOLMOD
   bool ok = true;                               ///< false: factorisation/CG failed, state kept
+  double cg_residual = 0.0;                     ///< final relative residual (CG only)
 };
 
 class FemBody {
@@ -79,16 +90,32 @@ class FemBody {
   /// A = M/h + B + hK at the linearisation point available for solveCompliance().
   FemStepStats freeMotion(double h, const Eigen::VectorXd* external_force_n = nullptr);
 
-  /// Internal elastic force at q (3n), rotations updated from q (corotational).
+  /// Elastic force the material applies to the nodes at positions q (3n): the restoring force,
+  /// i.e. minus the elastic part of F in eq. 7, so that M a = p + force_out (no damping).
+  /// Element rotations are updated from q (corotational). Fixed nodes get their reaction too.
   void elasticForce(const Eigen::VectorXd& q, Eigen::VectorXd& force_out);
+
+  /// Static equilibrium under gravity and `external_force_n` (3n, may be null) by Newton
+  /// iterations on f_el(q) + f_ext = 0 through the same assembly (K only: no mass, no damping),
+  /// CHOLMOD. Linear material: one iteration is exact. Stops when ||residual|| <= tol_n or after
+  /// `max_iterations`. Velocities are set to zero. Returns the stats of the last iteration.
+  FemStepStats solveStatic(const Eigen::VectorXd* external_force_n = nullptr,
+                           int max_iterations = 20, double tol_n = 1e-10);
 
   /// x = C r with C = (M/h^2 + B/h + K)^-1 from the last freeMotion's factorisation (h of that
   /// step). Fixed DOFs of x are zero. r and x are 3n.
+  /// With the PCG solver the current A is factorised by CHOLMOD on the first call after a step.
   void solveCompliance(const Eigen::VectorXd& r, Eigen::VectorXd& x) const;
+  /// Same for the columns of r (3n x k) at once (one CHOLMOD call).
+  void solveComplianceBatch(const Eigen::MatrixXd& r, Eigen::MatrixXd& x) const;
 
   /// x = C0 r with C0 the compliance at the rest shape (K0, same h). Factorised on first use
   /// (or when h changes) and kept.
   void solveRestCompliance(double h, const Eigen::VectorXd& r, Eigen::VectorXd& x);
+  /// Same for the columns of r (3n x k) at once.
+  void solveRestComplianceBatch(double h, const Eigen::MatrixXd& r, Eigen::MatrixXd& x);
+  /// Time step of the last freeMotion (0 before the first).
+  double lastStepH() const;
 
   /// Per-element rotations of the last evaluation (identity for linear material).
   const std::vector<Eigen::Matrix3d>& elementRotations() const;
@@ -98,6 +125,9 @@ class FemBody {
 
   /// Per-element von Mises stress [Pa] at the current positions.
   void vonMises(Eigen::VectorXd& out) const;
+  /// Per-element stress tensor [Pa] at the current positions: the corotated linear stress
+  /// R sigma(eps) R^T with eps = sym(R^T F) - I (linear material: R = I, eps = sym(F) - I).
+  void stresses(std::vector<Eigen::Matrix3d>& out) const;
   /// Kinetic energy 1/2 v^T M v and elastic energy (corotational strain energy) [J].
   double kineticEnergy() const;
   double elasticEnergy() const;
@@ -112,12 +142,23 @@ class FemBody {
   };
   const Counters& counters() const;
 
+  /// Unknowns of the reduced system (free DOFs) and nonzeros of the CHOLMOD factor of the
+  /// system matrix (0 before the first factorisation).
+  int freeDofCount() const;
+  std::size_t factorNonzeros() const;
+  /// Sorted unique boundary nodes (faces that belong to one tetrahedron), computed once.
+  const std::vector<int>& surfaceNodes() const;
+  /// Hash of everything the rest compliance depends on except h: node positions at rest, tets,
+  /// material (law, E, nu, rho, damping) and fixed nodes.
+  std::uint64_t restHash() const;
+
  private:
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };
 
 /// Applies a scene transform (scale, then XYZ Euler rotation in degrees, then translation).
+/// The rotation is extrinsic x, then y, then z: R = Rz(rz) Ry(ry) Rx(rx).
 void transformMesh(TetMesh& mesh, double scale, const Eigen::Vector3d& rotation_deg,
                    const Eigen::Vector3d& translation_m);
 

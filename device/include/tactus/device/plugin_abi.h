@@ -1,0 +1,114 @@
+/* Tactus haptic device plugin C ABI.
+ *
+ * An out-of-tree backend is a shared library that exports one C function:
+ *
+ *   extern "C" const TactusDevicePlugin* tactus_device_plugin(void);
+ *
+ * returning a pointer to a static table (below) that stays valid while the library is loaded.
+ * haptic_server loads it with `--device /path/to/libmydevice.so` (or `--device mydevice` with
+ * libmydevice.so on TACTUS_DEVICE_PATH) and passes `--device-option key=value` pairs to create().
+ *
+ * This header is plain C (C99) and self-contained: a plugin needs nothing else from Tactus, and
+ * no C++ types cross the boundary. Errors are return codes plus a message written into a
+ * caller-provided buffer (NUL-terminated, at most error_size bytes).
+ *
+ * Threading and real-time contract:
+ *   - create, destroy, open, calibrate, enable_forces, close, info: called from a normal thread;
+ *     they may block, allocate and take their time.
+ *   - read and write: called once per haptic tick (1 kHz or more) from the real-time thread.
+ *     They must not allocate, lock a mutex another thread may hold long, log, or block; return
+ *     TACTUS_IO_NO_DATA when no new sample is available.
+ *
+ * Frames and units: SI units; device frame x toward the operator, z up; quaternion scalar first
+ * (w, x, y, z); t_ns from CLOCK_MONOTONIC.
+ *
+ * Versioning: abi_version must equal TACTUS_DEVICE_PLUGIN_ABI_VERSION of the loading program,
+ * which refuses any other value. struct_size lets the loader check the table's size too.
+ */
+#ifndef TACTUS_DEVICE_PLUGIN_ABI_H_
+#define TACTUS_DEVICE_PLUGIN_ABI_H_
+
+#include <stddef.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#define TACTUS_DEVICE_PLUGIN_ABI_VERSION 1u
+#define TACTUS_DEVICE_PLUGIN_SYMBOL "tactus_device_plugin"
+
+/* Return codes of open/calibrate/enable_forces/info. */
+#define TACTUS_DEVICE_OK 0
+#define TACTUS_DEVICE_ERROR 1
+
+/* Return codes of read/write (same meaning as tactus::device::IoStatus). */
+#define TACTUS_IO_OK 0
+#define TACTUS_IO_NO_DATA 1
+#define TACTUS_IO_FAULT 2
+
+typedef struct TactusDeviceState {
+  int64_t t_ns;              /* CLOCK_MONOTONIC time of the sample */
+  double pos_m[3];
+  double vel_mps[3];
+  double quat_wxyz[4];
+  double angvel_radps[3];
+  double gripper_rad;
+  uint32_t buttons;          /* bit i = button i pressed */
+  uint32_t reserved;
+} TactusDeviceState;
+
+typedef struct TactusDeviceCommand {
+  double force_n[3];
+  double torque_nm[3];
+  double gripper_force_n;
+} TactusDeviceCommand;
+
+typedef struct TactusDeviceInfo {
+  char model[64];            /* NUL-terminated */
+  double max_force_n;
+  double max_stiffness_npm;
+  double workspace_radius_m;
+  int32_t has_rotation;      /* 0 or 1 */
+  int32_t has_gripper;       /* 0 or 1 */
+} TactusDeviceInfo;
+
+typedef struct TactusKeyValue {
+  const char* key;
+  const char* value;
+} TactusKeyValue;
+
+/* Opaque per-instance state owned by the plugin. */
+typedef void* TactusDeviceHandle;
+
+typedef struct TactusDevicePlugin {
+  uint32_t abi_version;      /* TACTUS_DEVICE_PLUGIN_ABI_VERSION */
+  uint32_t struct_size;      /* sizeof(TactusDevicePlugin) */
+  const char* name;          /* short backend name, e.g. "spring" */
+
+  /* Creates an instance from option pairs (options may be NULL when count is 0). Returns NULL
+   * on failure with a message in error (e.g. an unknown option and the list of known ones). */
+  TactusDeviceHandle (*create)(const TactusKeyValue* options, size_t count, char* error,
+                               size_t error_size);
+  void (*destroy)(TactusDeviceHandle handle);
+
+  int (*open)(TactusDeviceHandle handle, char* error, size_t error_size);
+  int (*calibrate)(TactusDeviceHandle handle, char* error, size_t error_size);
+  int (*enable_forces)(TactusDeviceHandle handle, int on, char* error, size_t error_size);
+  void (*close)(TactusDeviceHandle handle);
+
+  /* Real-time: see the contract above. */
+  int (*read)(TactusDeviceHandle handle, TactusDeviceState* out);
+  int (*write)(TactusDeviceHandle handle, const TactusDeviceCommand* command);
+
+  int (*info)(TactusDeviceHandle handle, TactusDeviceInfo* out);
+} TactusDevicePlugin;
+
+/* The one symbol a plugin exports. */
+typedef const TactusDevicePlugin* (*TactusDevicePluginEntry)(void);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* TACTUS_DEVICE_PLUGIN_ABI_H_ */

@@ -1,0 +1,90 @@
+#include <cerrno>
+#include <cmath>
+#include <cstdlib>
+
+#include "tactus/device/backends.h"
+
+namespace tactus::device {
+
+namespace {
+// Parses a full-string double or throws naming the option.
+double parseNumber(const std::string& backend, const std::string& key, const std::string& text) {
+  const char* begin = text.c_str();
+  char* end = nullptr;
+  errno = 0;
+  const double v = std::strtod(begin, &end);
+  if (text.empty() || end == begin || *end != '\0' || errno == ERANGE || !std::isfinite(v)) {
+    throw DeviceError("device '" + backend + "': option " + key + "=" + text +
+                      " is not a finite number");
+  }
+  return v;
+}
+}  // namespace
+
+void addDeviceOption(DeviceConfig& config, std::string_view key_equals_value) {
+  const auto eq = key_equals_value.find('=');
+  if (eq == std::string_view::npos || eq == 0) {
+    throw DeviceError("device option '" + std::string(key_equals_value) +
+                      "' must look like key=value (e.g. --device-option mass=0.5)");
+  }
+  config[std::string(key_equals_value.substr(0, eq))] = std::string(key_equals_value.substr(eq + 1));
+}
+
+OptionReader::OptionReader(std::string backend, const DeviceConfig& config)
+    : backend_(std::move(backend)), config_(config) {}
+
+bool OptionReader::has(const std::string& key) const { return config_.count(key) != 0; }
+
+double OptionReader::number(const std::string& key, double fallback) {
+  known_.insert(key);
+  const auto it = config_.find(key);
+  return it == config_.end() ? fallback : parseNumber(backend_, key, it->second);
+}
+
+std::array<double, 3> OptionReader::vec3(const std::string& key,
+                                         const std::array<double, 3>& fallback) {
+  known_.insert(key);
+  const auto it = config_.find(key);
+  if (it == config_.end()) return fallback;
+  std::array<double, 3> v{};
+  std::string rest = it->second;
+  for (int i = 0; i < 3; ++i) {
+    const auto comma = rest.find(',');
+    if ((i < 2) != (comma != std::string::npos)) {
+      throw DeviceError("device '" + backend_ + "': option " + key + "=" + it->second +
+                        " must be three comma-separated numbers x,y,z");
+    }
+    v[static_cast<std::size_t>(i)] = parseNumber(backend_, key, rest.substr(0, comma));
+    rest = comma == std::string::npos ? "" : rest.substr(comma + 1);
+  }
+  return v;
+}
+
+std::string OptionReader::text(const std::string& key, const std::string& fallback) {
+  known_.insert(key);
+  const auto it = config_.find(key);
+  return it == config_.end() ? fallback : it->second;
+}
+
+bool OptionReader::flag(const std::string& key, bool fallback) {
+  known_.insert(key);
+  const auto it = config_.find(key);
+  if (it == config_.end()) return fallback;
+  const std::string& v = it->second;
+  if (v == "1" || v == "true" || v == "yes" || v == "on") return true;
+  if (v == "0" || v == "false" || v == "no" || v == "off") return false;
+  throw DeviceError("device '" + backend_ + "': option " + key + "=" + v +
+                    " must be true or false");
+}
+
+void OptionReader::rejectUnknown() const {
+  for (const auto& [key, value] : config_) {
+    if (known_.count(key) != 0) continue;
+    std::string list;
+    for (const auto& k : known_) list += (list.empty() ? "" : ", ") + k;
+    throw DeviceError("device '" + backend_ + "': unknown option '" + key + "' (known: " +
+                      (list.empty() ? std::string("none") : list) + ", and record)");
+  }
+}
+
+}  // namespace tactus::device

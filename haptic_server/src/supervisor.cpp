@@ -1,0 +1,103 @@
+// Segment attach/detach for the haptic loop and the event drain.
+#include "tactus/haptic/supervisor.h"
+
+#include <spdlog/spdlog.h>
+
+#include <chrono>
+#include <thread>
+
+#include <unistd.h>
+
+namespace tactus::haptic {
+
+Supervisor::Supervisor(HapticLoop& loop, std::string segment_name)
+    : loop_(loop), name_(std::move(segment_name)) {
+  shared::Segment::validateName(name_);
+}
+
+Supervisor::~Supervisor() {
+  // the loop may already be stopped: nothing uses the links any more
+  loop_.offerLink(nullptr);
+}
+
+const shared::Segment* Supervisor::segment() const {
+  return link_ ? &link_->segment : nullptr;
+}
+
+void Supervisor::retire(std::unique_ptr<HapticLink> old) {
+  loop_.offerLink(nullptr);
+  retired_ = std::move(old);
+}
+
+void Supervisor::detach() {
+  if (!link_) return;
+  retire(std::move(link_));
+  for (int i = 0; i < 500 && loop_.linkInUse() == retired_.get(); ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  }
+}
+
+void Supervisor::poll() {
+  // free a retired link once the loop acknowledged it no longer uses it
+  if (retired_ && loop_.linkInUse() != retired_.get()) retired_.reset();
+  if (retired_) return;
+
+  if (link_) {
+    const bool current = link_->segment.stillCurrent();
+    const bool alive = link_->segment.creatorAlive();
+    if (current && alive) return;
+    spdlog::warn("segment '{}' {}: detaching (forces fade out)", name_,
+                 !current ? "was removed or replaced" : "lost its simulation (stale heartbeat)");
+    retire(std::move(link_));
+    return;
+  }
+
+  shared::TryOpenResult r = shared::Segment::tryOpen(name_, shared::Access::kReadWrite);
+  if (!r.ok()) {
+    if (r.message != last_open_message_) {
+      if (r.status == shared::OpenStatus::kAbsent || r.status == shared::OpenStatus::kInitializing) {
+        spdlog::info("waiting for the simulation (segment '{}'): {}", name_, r.message);
+      } else {
+        spdlog::error("cannot attach to segment '{}': {}", name_, r.message);
+      }
+      last_open_message_ = r.message;
+    }
+    return;
+  }
+  last_open_message_.clear();
+  if (!r.segment->creatorAlive()) return;  // a stale segment: wait for the simulation to replace it
+  link_ = std::make_unique<HapticLink>(std::move(*r.segment));
+  link_->segment.setHapticPid(static_cast<std::int64_t>(::getpid()));
+  spdlog::info("attached to segment '{}' (generation {}, up to {} contacts / {} rows)", name_,
+               link_->segment.generation(), link_->segment.capacity().max_contacts,
+               link_->segment.capacity().max_rows);
+  loop_.offerLink(link_.get());
+}
+
+int Supervisor::drainEvents() {
+  int n = 0;
+  shared::RtEvent e;
+  while (loop_.events().tryPop(&e)) {
+    ++n;
+    switch (e.code) {
+      case shared::kEventSnapshotStale:
+        spdlog::warn("contact snapshot stale ({:.1f} ms old): fading the force out", 1e-6 * e.arg0);
+        break;
+      case shared::kEventSnapshotFresh:
+        spdlog::info("contact snapshots fresh again (seq {}): forces back", e.arg0);
+        break;
+      case shared::kEventDeviceFault:
+        spdlog::warn("device read fault: force faded out until the device recovers");
+        break;
+      case kEventNonFinite:
+        spdlog::warn("device returned NaN/Inf: sample ignored, force faded out");
+        break;
+      default:
+        spdlog::info("haptic event: {} ({}, {})", eventName(e.code), e.arg0, e.arg1);
+        break;
+    }
+  }
+  return n;
+}
+
+}  // namespace tactus::haptic

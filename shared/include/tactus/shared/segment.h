@@ -1,0 +1,210 @@
+#pragma once
+// The POSIX shared-memory segment between sim_server and haptic_server (Boost.Interprocess
+// shared_memory_object + mapped_region, i.e. /dev/shm/<name>).
+//
+// Layout (fixed POD, offsets only, every part 64-byte aligned):
+//
+//   [ SegmentHeader | snapshot triple buffer (ContactSnapshot, runtime size)
+//                   | device triple buffer (DeviceSample) | stats ring (StatsRecord) ]
+//
+// The creator (the simulation) chooses the capacity (max rows, max contacts) from the scene,
+// initialises every part, and writes `magic` last (release), so an attacher that sees the magic
+// sees a complete segment. An attacher checks magic, ABI version, header size, total size and
+// every offset/size against what this build computes from the stored capacity, and refuses a
+// mismatch with a message naming what differs and what to do.
+//
+// Lifetime: the segment is owner-only (0600). Either daemon may start first (the haptic side polls
+// tryOpen(), which never blocks). A segment left by a dead creator is stale: create() replaces it
+// (creator pid gone, or its heartbeat older than CreateOptions::stale_after_ns) and bumps the
+// generation; a live creator is refused. An attached side detects re-creation with stillCurrent()
+// (the name now refers to another object) and re-opens.
+//
+// Not real-time: create/open/remove/stillCurrent allocate and make system calls. The accessors
+// (header, heartbeats, shutdown flags) and the endpoints they return are real-time safe.
+
+#include <atomic>
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+#include <string_view>
+
+#include "tactus/shared/clock.h"
+#include "tactus/shared/messages.h"
+#include "tactus/shared/stats_ring.h"
+#include "tactus/shared/triple_buffer.h"
+
+namespace tactus::shared {
+
+inline constexpr std::uint64_t kSegmentMagic = 0x3147'4553'5554'4354ULL;  // "TCTUSEG1" (LE)
+/// Bump on any change of SegmentHeader, the messages or the part layout.
+inline constexpr std::uint32_t kSegmentAbiVersion = 1;
+/// Stats ring capacity: 8192 records (8 s at 1 kHz).
+inline constexpr std::uint64_t kStatsRingCapacity = 8192;
+/// A creator whose heartbeat (or creation time) is older than this is considered gone.
+inline constexpr std::int64_t kDefaultStaleAfterNs = 3 * kNsPerS;
+
+/// Capacity chosen by the creator from the scene.
+struct SegmentCapacity {
+  std::int32_t max_rows = 0;         ///< rows of W (3 per frictional contact, 1 frictionless)
+  std::int32_t max_contacts = 0;
+  /// Rows for `contacts` frictional (3 rows) or frictionless (1 row) contacts.
+  static constexpr SegmentCapacity forContacts(std::int32_t contacts, bool friction = true) {
+    return {friction ? 3 * contacts : contacts, contacts};
+  }
+};
+
+enum class Access : std::uint8_t { kReadWrite, kReadOnly };
+enum class Side : std::uint8_t { kSim, kHaptic };
+
+/// Header at offset 0. The first 64 bytes are a stable prefix whose offsets never change across
+/// ABI versions, so any build can diagnose (and, if its creator is dead, replace) any segment.
+struct SegmentHeader {
+  // stable prefix
+  std::uint64_t magic = 0;                        ///< kSegmentMagic, written last by the creator
+  std::uint32_t abi_version = 0;                  ///< kSegmentAbiVersion of the creator
+  std::uint32_t header_bytes = 0;                 ///< sizeof(SegmentHeader) of the creator
+  std::uint64_t total_bytes = 0;                  ///< mapped size
+  std::int64_t creator_pid = 0;
+  std::uint64_t generation = 0;                   ///< 1 + generation of the segment it replaced
+  std::int64_t created_ns = 0;                    ///< monotonic creation time
+  std::atomic<std::int64_t> sim_heartbeat_ns{0};  ///< monotonic, bumped by the simulation
+  std::atomic<std::int64_t> haptic_heartbeat_ns{0};
+  // ABI-versioned part
+  std::int32_t max_rows = 0;
+  std::int32_t max_contacts = 0;
+  std::uint64_t snapshot_offset = 0;              ///< TripleBufferControl of the snapshots
+  std::uint64_t snapshot_bytes = 0;               ///< whole triple buffer
+  std::uint64_t snapshot_slot_bytes = 0;          ///< SnapshotLayout::total_bytes
+  std::uint64_t device_offset = 0;                ///< TripleBufferControl of the DeviceSamples
+  std::uint64_t device_bytes = 0;
+  std::uint64_t device_slot_bytes = 0;            ///< sizeof(DeviceSample)
+  std::uint64_t stats_offset = 0;                 ///< SeqRingControl of the stats ring
+  std::uint64_t stats_bytes = 0;
+  std::uint64_t stats_capacity = 0;
+  std::uint64_t stats_record_bytes = 0;           ///< sizeof(StatsRecord)
+  std::uint32_t snapshot_header_bytes = 0;        ///< sizeof(ContactSnapshotHeader)
+  std::uint32_t reserved0 = 0;
+  std::atomic<std::uint32_t> sim_shutdown{0};     ///< 1: the simulation is asked to stop
+  std::atomic<std::uint32_t> haptic_shutdown{0};  ///< 1: the haptic loop is asked to stop
+  std::atomic<std::int64_t> haptic_pid{0};        ///< set by the haptic side on attach
+};
+static_assert(std::is_standard_layout_v<SegmentHeader>);
+static_assert(offsetof(SegmentHeader, sim_heartbeat_ns) == 48);
+static_assert(offsetof(SegmentHeader, max_rows) == 64);
+static_assert(std::atomic<std::int64_t>::is_always_lock_free);
+static_assert(std::atomic<std::uint32_t>::is_always_lock_free);
+
+/// Where every part goes for a capacity (pure function of the capacity and this build).
+struct SegmentLayout {
+  SnapshotLayout snapshot;
+  std::size_t snapshot_offset = 0, snapshot_bytes = 0;
+  std::size_t device_offset = 0, device_bytes = 0;
+  std::size_t stats_offset = 0, stats_bytes = 0;
+  std::size_t total_bytes = 0;
+  static SegmentLayout forCapacity(SegmentCapacity capacity) noexcept;
+};
+
+struct CreateOptions {
+  std::int64_t stale_after_ns = kDefaultStaleAfterNs;
+  bool remove_on_destroy = true;     ///< the creator's destructor removes the name (if still ours)
+};
+
+enum class OpenStatus : std::uint8_t {
+  kOpened,        ///< segment attached
+  kAbsent,        ///< no object of that name (the simulation has not started yet)
+  kInitializing,  ///< exists but its creator has not finished initialising it
+  kMismatch,      ///< not a Tactus segment, or another ABI / layout: message says what to do
+  kError,         ///< invalid name, permission denied, mapping failed
+};
+
+struct TryOpenResult;
+
+/// An attached (or created) segment. Move-only; unmaps on destruction (and, for the creator with
+/// remove_on_destroy, removes the name if it still refers to this segment).
+class Segment {
+ public:
+  /// Creates `name` with `capacity` (sim side). Replaces a stale segment (dead creator or
+  /// heartbeat older than options.stale_after_ns) and refuses a live one. Throws SegmentError.
+  static Segment create(const std::string& name, SegmentCapacity capacity,
+                        const CreateOptions& options = {});
+
+  /// Attaches to an existing segment; throws SegmentError (absent, initialising, mismatch, ...).
+  static Segment open(const std::string& name, Access access = Access::kReadWrite);
+
+  /// Non-blocking attach attempt (haptic side waiting for the simulation; never throws).
+  static TryOpenResult tryOpen(const std::string& name, Access access = Access::kReadWrite);
+
+  /// Removes the name (the memory stays mapped in processes attached to it). True if removed.
+  static bool remove(const std::string& name) noexcept;
+
+  /// Whether an object of that name exists in /dev/shm.
+  static bool exists(const std::string& name) noexcept;
+
+  /// [A-Za-z0-9_.-]{1,64}, not "." or "..".
+  static bool isValidName(std::string_view name) noexcept;
+  /// Throws SegmentError explaining the rule when the name is invalid.
+  static void validateName(std::string_view name);
+  /// "/dev/shm/<name>": for messages.
+  static std::string pathOf(std::string_view name);
+
+  Segment(Segment&& other) noexcept;
+  Segment& operator=(Segment&& other) noexcept;
+  Segment(const Segment&) = delete;
+  Segment& operator=(const Segment&) = delete;
+  ~Segment();
+
+  const std::string& name() const noexcept;
+  Access access() const noexcept;
+  bool isCreator() const noexcept;
+  std::size_t sizeBytes() const noexcept;
+  const SegmentHeader& header() const noexcept;
+  SegmentCapacity capacity() const noexcept;
+  std::uint64_t generation() const noexcept;
+  const SnapshotLayout& snapshotLayout() const noexcept;
+  /// Base address of the mapping (for tests and tools).
+  const void* data() const noexcept;
+
+  // Endpoints. Writers (and the snapshot/device readers, which write the triple-buffer state)
+  // need kReadWrite and throw SegmentError on a read-only segment. The stats reader works on
+  // both. One writer and one reader per triple buffer at a time.
+  SnapshotPublisher snapshotPublisher();             ///< sim
+  SnapshotSubscriber snapshotSubscriber();           ///< haptic
+  TripleWriter<DeviceSample> deviceWriter();         ///< haptic
+  TripleReader<DeviceSample> deviceReader();         ///< sim
+  StatsRingWriter statsWriter();                     ///< haptic
+  StatsRingReader statsReader(StatsRingReader::Start start = StatsRingReader::Start::kNewest) const;
+
+  // Liveness and shutdown (real-time safe; heartbeat and flag writers need kReadWrite).
+  void beat(Side side, std::int64_t now_ns) noexcept;
+  void beat(Side side) noexcept { beat(side, monotonicNs()); }
+  std::int64_t heartbeatNs(Side side) const noexcept;
+  /// Asks `side` to stop (e.g. the simulation asks the haptic loop to fade out and stop).
+  void requestShutdown(Side side) noexcept;
+  bool shutdownRequested(Side side) const noexcept;
+  void setHapticPid(std::int64_t pid) noexcept;
+
+  /// The creator process exists and its heartbeat (or creation time if it never beat) is at most
+  /// stale_after_ns old. Not real-time (kill(pid, 0)).
+  bool creatorAlive(std::int64_t stale_after_ns = kDefaultStaleAfterNs) const noexcept;
+  /// The name still refers to this very segment (not removed, not replaced). Not real-time.
+  bool stillCurrent() const noexcept;
+
+ private:
+  struct Impl;
+  explicit Segment(std::unique_ptr<Impl> impl) noexcept;
+  SegmentHeader* mutableHeader() noexcept;
+  unsigned char* writableBase(const char* what);
+  std::unique_ptr<Impl> impl_;
+};
+
+/// Result of Segment::tryOpen.
+struct TryOpenResult {
+  OpenStatus status = OpenStatus::kAbsent;
+  std::string message;               ///< why not opened (empty when opened)
+  std::optional<Segment> segment;    ///< set when status == kOpened
+  bool ok() const noexcept { return status == OpenStatus::kOpened; }
+};
+
+}  // namespace tactus::shared

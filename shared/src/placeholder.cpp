@@ -1,1 +1,0 @@
-// Placeholder until the shared library's code lands.

@@ -1,0 +1,523 @@
+#include "tactus/shared/segment.h"
+
+#include <errno.h>
+#include <signal.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <boost/interprocess/mapped_region.hpp>
+#include <boost/interprocess/shared_memory_object.hpp>
+#include <cstdio>
+#include <cstring>
+#include <ctime>
+#include <new>
+#include <sstream>
+#include <utility>
+
+#include "tactus/shared/error.h"
+
+namespace tactus::shared {
+
+namespace bip = boost::interprocess;
+
+namespace {
+
+constexpr std::size_t kStablePrefixBytes = 64;
+constexpr std::size_t kMaxSegmentBytes = std::size_t{2} << 30;  // 2 GiB
+
+// Name of this executable for messages ("haptic_server", "sim_server", a test...).
+std::string programName() {
+  char buf[64] = {0};
+  std::FILE* f = std::fopen("/proc/self/comm", "r");
+  if (f != nullptr) {
+    if (std::fgets(buf, sizeof(buf), f) == nullptr) buf[0] = 0;
+    std::fclose(f);
+  }
+  std::string s(buf);
+  while (!s.empty() && (s.back() == '\n' || s.back() == ' ')) s.pop_back();
+  return s.empty() ? std::string("this program") : s;
+}
+
+bool pidAlive(std::int64_t pid) noexcept {
+  if (pid <= 0) return false;
+  if (::kill(static_cast<pid_t>(pid), 0) == 0) return true;
+  return errno == EPERM;
+}
+
+std::uint64_t loadMagic(const SegmentHeader* h) noexcept {
+  // acquire: pairs with the creator's release store of the magic (initialisation complete)
+  return __atomic_load_n(&h->magic, __ATOMIC_ACQUIRE);
+}
+
+// Age of an object in /dev/shm by its modification time, in ns (large when unknown).
+std::int64_t objectAgeNs(const std::string& name) noexcept {
+  struct stat st {};
+  if (::stat(Segment::pathOf(name).c_str(), &st) != 0) return 0;
+  timespec now{};
+  clock_gettime(CLOCK_REALTIME, &now);
+  return (static_cast<std::int64_t>(now.tv_sec) - st.st_mtim.tv_sec) * kNsPerS +
+         (now.tv_nsec - st.st_mtim.tv_nsec);
+}
+
+std::string secondsText(std::int64_t ns) {
+  char buf[32];
+  std::snprintf(buf, sizeof(buf), "%.1f s", nsToSeconds(ns));
+  return buf;
+}
+
+// What create() found under the name it wanted.
+struct Existing {
+  bool live = false;           // refuse
+  bool vanished = false;       // gone meanwhile: just retry
+  std::string message;
+  std::uint64_t generation = 0;
+};
+
+Existing inspectExisting(const std::string& name, std::int64_t stale_after_ns) {
+  Existing ex;
+  const std::string path = Segment::pathOf(name);
+  bip::shared_memory_object shm;
+  try {
+    shm = bip::shared_memory_object(bip::open_only, name.c_str(), bip::read_only);
+  } catch (const bip::interprocess_exception& e) {
+    if (e.get_error_code() == bip::not_found_error) {
+      ex.vanished = true;
+      return ex;
+    }
+    ex.live = true;
+    ex.message = "shared memory '" + path + "' exists and cannot be opened (" + e.what() +
+                 "): it may belong to another user; choose another --segment name or remove it";
+    return ex;
+  }
+  bip::offset_t size = 0;
+  shm.get_size(size);
+  const std::int64_t age_ns = objectAgeNs(name);
+  // too small to hold even the stable prefix: being created right now, or a crashed creation
+  if (size < static_cast<bip::offset_t>(kStablePrefixBytes)) {
+    if (age_ns > stale_after_ns) return ex;
+    ex.live = true;
+    ex.message = "segment '" + name + "' is being created by another process right now; wait for "
+                 "it or choose another --segment name";
+    return ex;
+  }
+  bip::mapped_region region(shm, bip::read_only, 0, kStablePrefixBytes);
+  const auto* h = static_cast<const SegmentHeader*>(region.get_address());
+  const std::uint64_t magic = loadMagic(h);
+  const std::int64_t pid = h->creator_pid;
+  if (magic == 0) {
+    // initialising (or its creator died while initialising)
+    if ((pid != 0 && !pidAlive(pid)) || age_ns > stale_after_ns) return ex;
+    ex.live = true;
+    ex.message = "segment '" + name + "' is being initialised by process " + std::to_string(pid) +
+                 "; wait for it or choose another --segment name";
+    return ex;
+  }
+  if (magic != kSegmentMagic) {
+    ex.live = true;
+    ex.message = "'" + path + "' exists but is not a Tactus segment: choose another --segment "
+                 "name, or remove that file if you know it is unused";
+    return ex;
+  }
+  ex.generation = h->generation;
+  if (!pidAlive(pid)) return ex;
+  // relaxed: a timestamp, no data depends on it
+  const std::int64_t beat = h->sim_heartbeat_ns.load(std::memory_order_relaxed);
+  const std::int64_t last = std::max(beat, h->created_ns);
+  const std::int64_t since = monotonicNs() - last;
+  if (since > stale_after_ns) return ex;  // hung creator or a recycled pid
+  ex.live = true;
+  ex.message = "segment '" + name + "' is in use by a live simulation (pid " + std::to_string(pid) +
+               ", last heartbeat " + secondsText(since) + " ago): stop that sim_server first or "
+               "pass another --segment name";
+  return ex;
+}
+
+void describeDiff(std::ostringstream& out, bool& any, const char* field, std::uint64_t found,
+                  std::uint64_t expected) {
+  if (found == expected) return;
+  out << (any ? ", " : "") << field << " " << found << " (expected " << expected << ")";
+  any = true;
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------------
+
+SegmentLayout SegmentLayout::forCapacity(SegmentCapacity capacity) noexcept {
+  SegmentLayout l;
+  l.snapshot = SnapshotLayout::forCapacity(capacity.max_rows, capacity.max_contacts);
+  std::size_t at = roundUpToCacheLine(sizeof(SegmentHeader));
+  l.snapshot_offset = at;
+  l.snapshot_bytes = tripleBufferBytes(l.snapshot.total_bytes);
+  at = roundUpToCacheLine(at + l.snapshot_bytes);
+  l.device_offset = at;
+  l.device_bytes = tripleBufferBytes(sizeof(DeviceSample));
+  at = roundUpToCacheLine(at + l.device_bytes);
+  l.stats_offset = at;
+  l.stats_bytes = seqRingBytes<StatsRecord>(kStatsRingCapacity);
+  at = roundUpToCacheLine(at + l.stats_bytes);
+  l.total_bytes = at;
+  return l;
+}
+
+struct Segment::Impl {
+  std::string name;
+  Access access = Access::kReadWrite;
+  bool creator = false;
+  bool remove_on_destroy = false;
+  bip::shared_memory_object shm;
+  bip::mapped_region region;
+  SegmentHeader* header = nullptr;
+  SnapshotLayout snapshot_layout;
+  dev_t dev = 0;
+  ino_t ino = 0;
+
+  unsigned char* base() const { return static_cast<unsigned char*>(region.get_address()); }
+  void recordIdentity() {
+    struct stat st {};
+    if (::fstat(shm.get_mapping_handle().handle, &st) == 0) {
+      dev = st.st_dev;
+      ino = st.st_ino;
+    }
+  }
+};
+
+Segment::Segment(std::unique_ptr<Impl> impl) noexcept : impl_(std::move(impl)) {}
+Segment::Segment(Segment&& other) noexcept = default;
+Segment& Segment::operator=(Segment&& other) noexcept = default;
+
+Segment::~Segment() {
+  if (impl_ && impl_->creator && impl_->remove_on_destroy && stillCurrent()) remove(impl_->name);
+}
+
+bool Segment::isValidName(std::string_view name) noexcept {
+  if (name.empty() || name.size() > 64 || name == "." || name == "..") return false;
+  return std::all_of(name.begin(), name.end(), [](char c) {
+    return (c >= 'A' && c <= 'Z') || (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') ||
+           c == '_' || c == '.' || c == '-';
+  });
+}
+
+void Segment::validateName(std::string_view name) {
+  if (isValidName(name)) return;
+  throw SegmentError("invalid segment name '" + std::string(name) +
+                     "': use 1 to 64 characters from [A-Za-z0-9_.-] (no slash), e.g. "
+                     "--segment tactus");
+}
+
+std::string Segment::pathOf(std::string_view name) { return "/dev/shm/" + std::string(name); }
+
+bool Segment::exists(const std::string& name) noexcept {
+  if (!isValidName(name)) return false;
+  struct stat st {};
+  return ::stat(pathOf(name).c_str(), &st) == 0;
+}
+
+bool Segment::remove(const std::string& name) noexcept {
+  if (!isValidName(name)) return false;
+  return bip::shared_memory_object::remove(name.c_str());
+}
+
+Segment Segment::create(const std::string& name, SegmentCapacity capacity,
+                        const CreateOptions& options) {
+  validateName(name);
+  if (capacity.max_rows < 0 || capacity.max_contacts < 0) {
+    throw SegmentError("segment '" + name + "': negative capacity (max_rows " +
+                       std::to_string(capacity.max_rows) + ", max_contacts " +
+                       std::to_string(capacity.max_contacts) + ")");
+  }
+  const SegmentLayout layout = SegmentLayout::forCapacity(capacity);
+  if (layout.total_bytes > kMaxSegmentBytes) {
+    throw SegmentError("segment '" + name + "': capacity " + std::to_string(capacity.max_rows) +
+                       " rows needs " + std::to_string(layout.total_bytes >> 20) +
+                       " MiB (W is rows x rows doubles); lower max_contacts in the scene");
+  }
+
+  auto impl = std::make_unique<Impl>();
+  impl->name = name;
+  impl->access = Access::kReadWrite;
+  impl->creator = true;
+  impl->remove_on_destroy = options.remove_on_destroy;
+  std::uint64_t generation = 1;
+  bip::permissions owner_only(0600);
+  // exclusive create; on a name clash inspect the owner and replace it only if stale
+  for (int attempt = 0;; ++attempt) {
+    try {
+      impl->shm = bip::shared_memory_object(bip::create_only, name.c_str(), bip::read_write,
+                                            owner_only);
+      break;
+    } catch (const bip::interprocess_exception& e) {
+      if (e.get_error_code() != bip::already_exists_error || attempt >= 3) {
+        throw SegmentError("cannot create shared memory '" + pathOf(name) + "': " + e.what());
+      }
+    }
+    const Existing ex = inspectExisting(name, options.stale_after_ns);
+    if (ex.live) throw SegmentError(ex.message);
+    if (!ex.vanished) {
+      generation = ex.generation + 1;
+      remove(name);
+    }
+  }
+
+  // size, map, and initialise every part; the magic goes last
+  try {
+    impl->shm.truncate(static_cast<bip::offset_t>(layout.total_bytes));
+    impl->region = bip::mapped_region(impl->shm, bip::read_write);
+  } catch (const bip::interprocess_exception& e) {
+    remove(name);
+    throw SegmentError("cannot size/map segment '" + name + "' (" +
+                       std::to_string(layout.total_bytes) + " bytes): " + e.what() +
+                       "; check free space in /dev/shm (df -h /dev/shm)");
+  }
+  impl->recordIdentity();
+  unsigned char* base = impl->base();
+  auto* h = new (base) SegmentHeader();
+  h->creator_pid = ::getpid();
+  h->created_ns = monotonicNs();
+  h->abi_version = kSegmentAbiVersion;
+  h->header_bytes = sizeof(SegmentHeader);
+  h->total_bytes = layout.total_bytes;
+  h->generation = generation;
+  h->max_rows = capacity.max_rows;
+  h->max_contacts = capacity.max_contacts;
+  h->snapshot_offset = layout.snapshot_offset;
+  h->snapshot_bytes = layout.snapshot_bytes;
+  h->snapshot_slot_bytes = layout.snapshot.total_bytes;
+  h->device_offset = layout.device_offset;
+  h->device_bytes = layout.device_bytes;
+  h->device_slot_bytes = sizeof(DeviceSample);
+  h->stats_offset = layout.stats_offset;
+  h->stats_bytes = layout.stats_bytes;
+  h->stats_capacity = kStatsRingCapacity;
+  h->stats_record_bytes = sizeof(StatsRecord);
+  h->snapshot_header_bytes = sizeof(ContactSnapshotHeader);
+  initTripleBuffer(base + layout.snapshot_offset, layout.snapshot.total_bytes);
+  initTripleBuffer(base + layout.device_offset, sizeof(DeviceSample));
+  initSeqRing<StatsRecord>(base + layout.stats_offset, kStatsRingCapacity);
+  // release: everything above is visible to an attacher that acquires the magic
+  __atomic_store_n(&h->magic, kSegmentMagic, __ATOMIC_RELEASE);
+  impl->header = h;
+  impl->snapshot_layout = layout.snapshot;
+  return Segment(std::move(impl));
+}
+
+TryOpenResult Segment::tryOpen(const std::string& name, Access access) {
+  TryOpenResult r;
+  const std::string path = pathOf(name);
+  if (!isValidName(name)) {
+    r.status = OpenStatus::kError;
+    r.message = "invalid segment name '" + name + "': use 1 to 64 characters from [A-Za-z0-9_.-]";
+    return r;
+  }
+  auto impl = std::make_unique<Impl>();
+  impl->name = name;
+  impl->access = access;
+  const bip::mode_t mode = access == Access::kReadOnly ? bip::read_only : bip::read_write;
+  try {
+    impl->shm = bip::shared_memory_object(bip::open_only, name.c_str(), mode);
+  } catch (const bip::interprocess_exception& e) {
+    if (e.get_error_code() == bip::not_found_error) {
+      r.status = OpenStatus::kAbsent;
+      r.message = "segment '" + name + "' does not exist yet: start sim_server --segment " + name;
+    } else {
+      r.status = OpenStatus::kError;
+      r.message = "cannot open '" + path + "': " + e.what() +
+                  " (segments are owner-only: run both daemons as the same user)";
+    }
+    return r;
+  }
+  bip::offset_t size = 0;
+  impl->shm.get_size(size);
+  if (size < static_cast<bip::offset_t>(kStablePrefixBytes)) {
+    r.status = OpenStatus::kInitializing;
+    r.message = "segment '" + name + "' is still being created";
+    return r;
+  }
+  try {
+    impl->region = bip::mapped_region(impl->shm, mode);
+  } catch (const bip::interprocess_exception& e) {
+    r.status = OpenStatus::kError;
+    r.message = "cannot map '" + path + "': " + e.what();
+    return r;
+  }
+  const auto* h = static_cast<const SegmentHeader*>(impl->region.get_address());
+  const std::uint64_t magic = loadMagic(h);
+  const std::string fix = "rebuild both daemons from the same checkout or remove " + path;
+  r.status = OpenStatus::kMismatch;
+  if (magic == 0) {
+    r.status = OpenStatus::kInitializing;
+    r.message = "segment '" + name + "' is still being initialised";
+    return r;
+  }
+  if (magic != kSegmentMagic) {
+    r.message = "'" + path + "' is not a Tactus segment (bad magic): choose another --segment "
+                "name or remove it if you know it is unused";
+    return r;
+  }
+  if (h->abi_version != kSegmentAbiVersion) {
+    r.message = "segment '" + name + "' has ABI version " + std::to_string(h->abi_version) +
+                ", this " + programName() + " expects " + std::to_string(kSegmentAbiVersion) +
+                ": " + fix;
+    return r;
+  }
+  if (h->header_bytes != sizeof(SegmentHeader)) {
+    r.message = "segment '" + name + "' has a " + std::to_string(h->header_bytes) +
+                "-byte header, this " + programName() + " expects " +
+                std::to_string(sizeof(SegmentHeader)) + ": " + fix;
+    return r;
+  }
+  if (h->total_bytes != static_cast<std::uint64_t>(size) ||
+      static_cast<std::size_t>(size) < sizeof(SegmentHeader)) {
+    r.message = "segment '" + name + "' says it is " + std::to_string(h->total_bytes) +
+                " bytes but the object is " + std::to_string(size) +
+                " bytes: it is corrupt or being re-created; restart sim_server, or remove " + path;
+    return r;
+  }
+  if (h->max_rows < 0 || h->max_contacts < 0) {
+    r.message = "segment '" + name + "' has a negative capacity: " + fix;
+    return r;
+  }
+  // every part must sit where this build would put it for the stored capacity
+  const SegmentLayout l = SegmentLayout::forCapacity({h->max_rows, h->max_contacts});
+  std::ostringstream diff;
+  bool any = false;
+  describeDiff(diff, any, "total_bytes", h->total_bytes, l.total_bytes);
+  describeDiff(diff, any, "snapshot_offset", h->snapshot_offset, l.snapshot_offset);
+  describeDiff(diff, any, "snapshot_bytes", h->snapshot_bytes, l.snapshot_bytes);
+  describeDiff(diff, any, "snapshot_slot_bytes", h->snapshot_slot_bytes, l.snapshot.total_bytes);
+  describeDiff(diff, any, "snapshot_header_bytes", h->snapshot_header_bytes,
+               sizeof(ContactSnapshotHeader));
+  describeDiff(diff, any, "device_offset", h->device_offset, l.device_offset);
+  describeDiff(diff, any, "device_bytes", h->device_bytes, l.device_bytes);
+  describeDiff(diff, any, "device_slot_bytes", h->device_slot_bytes, sizeof(DeviceSample));
+  describeDiff(diff, any, "stats_offset", h->stats_offset, l.stats_offset);
+  describeDiff(diff, any, "stats_bytes", h->stats_bytes, l.stats_bytes);
+  describeDiff(diff, any, "stats_capacity", h->stats_capacity, kStatsRingCapacity);
+  describeDiff(diff, any, "stats_record_bytes", h->stats_record_bytes, sizeof(StatsRecord));
+  if (any) {
+    r.message = "segment '" + name + "' layout differs from this " + programName() + "'s (" +
+                diff.str() + "): " + fix;
+    return r;
+  }
+  impl->recordIdentity();
+  impl->header = const_cast<SegmentHeader*>(h);
+  impl->snapshot_layout = l.snapshot;
+  r.status = OpenStatus::kOpened;
+  r.segment.emplace(Segment(std::move(impl)));
+  return r;
+}
+
+Segment Segment::open(const std::string& name, Access access) {
+  TryOpenResult r = tryOpen(name, access);
+  if (!r.ok()) throw SegmentError(r.message);
+  return std::move(*r.segment);
+}
+
+const std::string& Segment::name() const noexcept { return impl_->name; }
+Access Segment::access() const noexcept { return impl_->access; }
+bool Segment::isCreator() const noexcept { return impl_->creator; }
+std::size_t Segment::sizeBytes() const noexcept { return impl_->region.get_size(); }
+const SegmentHeader& Segment::header() const noexcept { return *impl_->header; }
+SegmentCapacity Segment::capacity() const noexcept {
+  return {impl_->header->max_rows, impl_->header->max_contacts};
+}
+std::uint64_t Segment::generation() const noexcept { return impl_->header->generation; }
+const SnapshotLayout& Segment::snapshotLayout() const noexcept { return impl_->snapshot_layout; }
+const void* Segment::data() const noexcept { return impl_->region.get_address(); }
+SegmentHeader* Segment::mutableHeader() noexcept { return impl_->header; }
+
+unsigned char* Segment::writableBase(const char* what) {
+  if (impl_->access == Access::kReadOnly) {
+    throw SegmentError("segment '" + impl_->name + "' is attached read-only: " + what +
+                       " needs Access::kReadWrite");
+  }
+  return impl_->base();
+}
+
+SnapshotPublisher Segment::snapshotPublisher() {
+  unsigned char* b = writableBase("the snapshot publisher");
+  return SnapshotPublisher(
+      reinterpret_cast<TripleBufferControl*>(b + impl_->header->snapshot_offset),
+      impl_->snapshot_layout);
+}
+
+SnapshotSubscriber Segment::snapshotSubscriber() {
+  unsigned char* b = writableBase("the snapshot subscriber (it swaps triple-buffer slots)");
+  return SnapshotSubscriber(
+      reinterpret_cast<TripleBufferControl*>(b + impl_->header->snapshot_offset),
+      impl_->snapshot_layout);
+}
+
+TripleWriter<DeviceSample> Segment::deviceWriter() {
+  unsigned char* b = writableBase("the device-sample writer");
+  return TripleWriter<DeviceSample>(
+      reinterpret_cast<TripleBufferControl*>(b + impl_->header->device_offset));
+}
+
+TripleReader<DeviceSample> Segment::deviceReader() {
+  unsigned char* b = writableBase("the device-sample reader (it swaps triple-buffer slots)");
+  return TripleReader<DeviceSample>(
+      reinterpret_cast<TripleBufferControl*>(b + impl_->header->device_offset));
+}
+
+StatsRingWriter Segment::statsWriter() {
+  unsigned char* b = writableBase("the stats writer");
+  return StatsRingWriter(reinterpret_cast<SeqRingControl*>(b + impl_->header->stats_offset));
+}
+
+StatsRingReader Segment::statsReader(StatsRingReader::Start start) const {
+  const unsigned char* b = static_cast<const unsigned char*>(impl_->region.get_address());
+  return StatsRingReader(reinterpret_cast<const SeqRingControl*>(b + impl_->header->stats_offset),
+                         start);
+}
+
+void Segment::beat(Side side, std::int64_t now_ns) noexcept {
+  if (impl_->access == Access::kReadOnly) return;
+  // relaxed: a timestamp; nothing else is published through it
+  (side == Side::kSim ? impl_->header->sim_heartbeat_ns : impl_->header->haptic_heartbeat_ns)
+      .store(now_ns, std::memory_order_relaxed);
+}
+
+std::int64_t Segment::heartbeatNs(Side side) const noexcept {
+  // relaxed: a timestamp
+  return (side == Side::kSim ? impl_->header->sim_heartbeat_ns
+                             : impl_->header->haptic_heartbeat_ns)
+      .load(std::memory_order_relaxed);
+}
+
+void Segment::requestShutdown(Side side) noexcept {
+  if (impl_->access == Access::kReadOnly) return;
+  // release: whatever the requester wrote before asking is visible to the side that stops
+  (side == Side::kSim ? impl_->header->sim_shutdown : impl_->header->haptic_shutdown)
+      .store(1, std::memory_order_release);
+}
+
+bool Segment::shutdownRequested(Side side) const noexcept {
+  // acquire: pairs with requestShutdown's release
+  return (side == Side::kSim ? impl_->header->sim_shutdown : impl_->header->haptic_shutdown)
+             .load(std::memory_order_acquire) != 0;
+}
+
+void Segment::setHapticPid(std::int64_t pid) noexcept {
+  if (impl_->access == Access::kReadOnly) return;
+  // relaxed: informational
+  impl_->header->haptic_pid.store(pid, std::memory_order_relaxed);
+}
+
+bool Segment::creatorAlive(std::int64_t stale_after_ns) const noexcept {
+  const SegmentHeader& h = *impl_->header;
+  if (!pidAlive(h.creator_pid)) return false;
+  // relaxed: a timestamp
+  const std::int64_t last = std::max(h.sim_heartbeat_ns.load(std::memory_order_relaxed),
+                                     h.created_ns);
+  return monotonicNs() - last <= stale_after_ns;
+}
+
+bool Segment::stillCurrent() const noexcept {
+  struct stat st {};
+  if (::stat(pathOf(impl_->name).c_str(), &st) != 0) return false;
+  return st.st_dev == impl_->dev && st.st_ino == impl_->ino;
+}
+
+}  // namespace tactus::shared

@@ -1,0 +1,146 @@
+#pragma once
+// Collision detection between the instrument and the deformed tissue surface (DESIGN 3 step 2),
+// and the contact rows of the contact problem (step 3).
+//
+// Two AABB trees over the tissue surface (one over triangles, one over surface vertices) are
+// built once from the topology and refit every step from the FEM state q (3n, node-major xyz).
+// Queries return every contact whose gap is within the alarm distance.
+//
+// Contact frame convention: n points from the tissue toward the tool, i.e. the direction in
+// which the tool must move (relative to the tissue) to separate. The gap
+//     gap = distance - radius - contact_distance      (< 0: penetration)
+// grows when the tool moves along +n and shrinks when the tissue point moves along +n.
+// (t1, t2) complete n to an orthonormal right-handed frame (n x t1 = t2): t1 is the normalised
+// projection of the world x axis on the tangent plane (of the world y axis when |n.x| > 0.9).
+//
+// (a) kVertexCapsule: surface vertex v vs tool capsule (axis a..b, radius r). c = closest axis
+//     point, n = (c - v)/|c - v| (the capsule's outward normal at v, reversed), gap = |v - c| -
+//     r - contact_distance. Contact at the vertex: nodes (v, -1, -1), weights (1, 0, 0); tool
+//     point c - r n. Rules: a vertex that does not face the tool (n . vertex_normal <= 0,
+//     angle-weighted vertex normal) is skipped (far side of a thin part, or pushed through the
+//     axis); with skip_cap_a, vertices whose closest axis point is the end a are skipped.
+//     If v lies on the axis, n = the vertex normal.
+// (b) kSphereTriangle: tool sphere (centre c, radius r) vs surface triangles. Per sphere:
+//     1. candidates: triangles within r + contact_distance + alarm of c; closest point s
+//        (barycentric weights), its region (face interior, edge, vertex) and distance d.
+//     2. keep only local minima of the distance over the surface: candidates are visited by
+//        increasing (d, triangle index); a candidate whose closest point lies on an edge/vertex
+//        of an already visited triangle is dropped (the neighbour is at least as close), so one
+//        contact remains per distinct closest point (a sphere over a flat patch gives one).
+//     3. side: the nearest candidate decides whether c is outside or inside the tissue, by the
+//        sign of (c - s) . N with N the angle-weighted pseudo-normal of its closest element
+//        (face normal, sum of the two edge normals, angle-weighted vertex normals).
+//        Outside: keep front-facing candidates ((c - s) . N >= 0); n = (c - s)/d,
+//                 gap = d - r - contact_distance.
+//        Inside:  keep back-facing candidates whose N is not opposed to the nearest one's
+//                 (N . N0 > -0.1, so the far side of a thin slab is ignored); n = N,
+//                 gap = (c - s) . N - r - contact_distance (signed distance to the plane).
+//     Tissue point s, tool point c - r n.
+// Every contact gets a stable id: (kind << 56) | (feature id << 32) | (vertex or triangle
+// index); it does not change while the same feature touches the same vertex/triangle, so warm
+// starts can be matched across steps. Contacts are returned sorted by id. When there are more
+// than max_contacts, the max_contacts smallest gaps (ties: smaller id) are kept and the rest
+// counted as overflow.
+
+#include <Eigen/Core>
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <vector>
+
+#include "tactus/shared/pose.h"
+#include "tactus/sim/compliance.h"
+#include "tactus/sim/instrument.h"
+#include "tactus/sim/mesh.h"
+
+namespace tactus::sim {
+
+enum class ContactKind : std::uint8_t { kVertexCapsule = 0, kSphereTriangle = 1 };
+
+struct Contact {
+  std::uint64_t id = 0;                   ///< stable identity, see above
+  ContactKind kind = ContactKind::kVertexCapsule;
+  int feature = -1;                       ///< tool feature id
+  int element = -1;                       ///< tissue node (a) or surface triangle index (b)
+  std::array<int, 3> nodes{-1, -1, -1};   ///< tissue nodes (TetMesh indices), unused: -1
+  std::array<double, 3> weights{0, 0, 0}; ///< barycentric weights of the tissue point
+  Eigen::Vector3d tissue_point_m = Eigen::Vector3d::Zero();
+  Eigen::Vector3d tool_point_m = Eigen::Vector3d::Zero();   ///< world
+  Eigen::Vector3d tool_local_m = Eigen::Vector3d::Zero();   ///< tool frame
+  Eigen::Vector3d n = Eigen::Vector3d::UnitZ();             ///< tissue -> tool
+  Eigen::Vector3d t1 = Eigen::Vector3d::UnitX();
+  Eigen::Vector3d t2 = Eigen::Vector3d::UnitY();
+  double gap_m = 0.0;
+};
+
+struct CollisionOptions {
+  double alarm_distance_m = 0.004;     ///< contacts are reported while gap <= this
+  double contact_distance_m = 0.0;     ///< subtracted from every gap
+  int max_contacts = 300;              ///< cap (the smallest gaps are kept)
+  bool vertex_vs_capsule = true;       ///< kind (a)
+  bool sphere_vs_triangle = true;      ///< kind (b)
+  bool brute_force = false;            ///< skip the trees (reference for tests)
+};
+
+struct CollisionStats {
+  int candidates = 0;                  ///< exact primitive tests in the last detect()
+  int contacts = 0;                    ///< returned by the last detect()
+  int overflow = 0;                    ///< dropped by the cap in the last detect()
+  std::int64_t overflow_total = 0;     ///< since construction
+  int max_contacts_seen = 0;           ///< high-water mark before capping
+};
+
+/// Deterministic tangents (t1, t2) for a unit normal (see the header comment).
+void contactTangents(const Eigen::Vector3d& n, Eigen::Vector3d& t1, Eigen::Vector3d& t2);
+
+class Collision {
+ public:
+  /// `q` (3n) gives the initial positions the trees are built from; triangles must index nodes
+  /// of q. Throws tactus::Error on inconsistent sizes/indices or bad options.
+  Collision(const SurfaceMesh& surface, const Eigen::VectorXd& q, const CollisionOptions& options);
+  ~Collision();
+  Collision(Collision&&) noexcept;
+  Collision& operator=(Collision&&) noexcept;
+
+  const CollisionOptions& options() const;
+  void setOptions(const CollisionOptions& options);   ///< throws tactus::Error on bad values
+
+  /// Updates positions, normals and both trees (topology kept). q must have the size given at
+  /// construction (throws tactus::Error otherwise).
+  void refit(const Eigen::VectorXd& q);
+
+  /// Contacts of the features against the surface at the last refit. `tool_pose` gives the tool
+  /// frame for tool_local_m. Buffers are reused (no allocation once warmed up).
+  const std::vector<Contact>& detect(std::span<const ToolFeature> features,
+                                     const shared::Pose& tool_pose);
+  const std::vector<Contact>& detect(const Instrument& tool) {
+    return detect(tool.features(), tool.pose());
+  }
+
+  const std::vector<Contact>& contacts() const;
+  const CollisionStats& stats() const;
+  const SurfaceMesh& surface() const;
+  const Eigen::Matrix3Xd& triangleNormals() const;   ///< unit, outward, at the last refit
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+/// The rows of the contact problem for a set of contacts.
+struct ContactRows {
+  std::vector<int> row_offset;                         ///< contacts + 1 entries
+  std::vector<TissueRow> tissue;                       ///< one per row
+  Eigen::Matrix<double, Eigen::Dynamic, 6, Eigen::RowMajor> tool;  ///< H_tool, rows x 6
+  std::vector<double> delta_free;                      ///< n row: gap; t1, t2 rows: 0
+  int rows() const { return static_cast<int>(delta_free.size()); }
+};
+
+/// One row per contact (n) when mu == 0, else three (n, t1, t2). Tissue rows carry negated
+/// weights: (H dq)_dir = -sum_k w_k dir . dq[node_k] (a tissue motion along n closes the gap);
+/// tool rows: dir^T [I, -[r]x], r = tool point - tool origin (a tool twist along n opens it).
+void buildContactRows(std::span<const Contact> contacts, double mu,
+                      const Eigen::Vector3d& tool_origin_m, ContactRows& out);
+
+}  // namespace tactus::sim

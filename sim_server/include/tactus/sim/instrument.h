@@ -1,0 +1,142 @@
+#pragma once
+// The instrument: a rigid 6-DOF god object coupled to the device (paper 4.1, DESIGN 3 "The
+// instrument"), and its collision geometry.
+//
+// Dynamics. State: pose x = (p, R), twist [v; w] (world frame, see tactus/shared/pose.h).
+// The device target x_h = (p_h, R_h) with twist [v_h; w_h] pulls the god object through a PD
+// coupling (isotropic gains):
+//     F_c   = K_c (p_h - p) + B_c (v_h - v)
+//     tau_c = K_r log(R_h R^-1) + B_r (w_h - w)
+// Mass m and isotropic inertia I (so no gyroscopic term). Integration follows the tissue's
+// scheme:
+//  * free motion: implicit Euler with the coupling linearised at the start of the step (so any
+//    K_c is stable; for K_c -> inf the god object lands on the target in one step):
+//        (m/h + B_c + h K_c) v+ = m v/h + K_c (p_h - p) + B_c v_h,     p+ = p + h v+
+//        (I/h + B_r + h K_r) w+ = I w/h + K_r log(R_h R^-1) + B_r w_h, R+ = exp(h w+) R
+//  * correction from the contact wrench r (force at the tool origin, torque about it):
+//        dx = C6 r,  C6 = (M_t/h^2 + B_c/h + K_c)^-1 = diag(c_l I3, c_r I3),
+//        x <- x [+] dx,  [v; w] += dx / h.
+// The force rendered to the hand is -(F_c, tau_c) at the current state and the last target.
+//
+// Geometry (tool frame: origin at the tool point / hinge, z along the instrument):
+//  * probe:   feature 0 = sphere of tip_radius at the origin (queried against tissue
+//             triangles); feature 1 (only if shaft_length > 0) = capsule of radius tip_radius
+//             from the origin to (0, 0, +shaft_length) (the shaft rises away from the tip;
+//             queried against tissue vertices, ignoring vertices whose closest axis point is
+//             the origin end, which belong to the tip).
+//  * grasper: two jaws hinged at the origin pointing along -z. Jaw j in {0, 1}, side
+//             s_j = +1 / -1: axis from a_j = (0, s_j r_jaw, 0) to a_j + L Rx(s_j phi)(0,0,-1),
+//             phi = opening * max_opening_rad, Rx the rotation about the tool x axis. Opening 0:
+//             the two parallel axes are 2 r_jaw apart, so the closed jaw surfaces touch along
+//             the plane y = 0 (pinch); opening > 0 moves jaw 0's tip toward +y and jaw 1's
+//             toward -y. Each jaw is one capsule (vertex queries) plus jaw_samples spheres of
+//             jaw_radius centred on its axis at t = i/(n-1), i = 0..n-1 (t = 1 when n = 1), t
+//             measured from the hinge end (triangle queries).
+//             Ids: jaw 0 capsule 0, its samples 1..n; jaw 1 capsule n+1, samples n+2..2n+1.
+//  The jaws are kinematic: the opening follows the gripper value given to freeMotion.
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <span>
+#include <vector>
+
+#include "tactus/shared/pose.h"
+#include "tactus/sim/scene.h"
+
+namespace tactus::sim {
+
+using shared::Matrix6d;
+using shared::Vector6d;
+
+enum class FeatureShape : std::uint8_t {
+  kSphere,    ///< centre a_m (== b_m): queried against tissue surface triangles
+  kCapsule,   ///< segment a_m..b_m: queried against tissue surface vertices
+};
+
+/// One collision primitive of the tool, in world coordinates at the current pose and opening.
+struct ToolFeature {
+  int id = 0;                        ///< stable id (see the header comment)
+  FeatureShape shape = FeatureShape::kSphere;
+  int part = 0;                      ///< probe: 0; grasper: jaw index 0 or 1
+  Eigen::Vector3d a_m = Eigen::Vector3d::Zero();
+  Eigen::Vector3d b_m = Eigen::Vector3d::Zero();
+  double radius_m = 0.0;
+  bool skip_cap_a = false;           ///< capsule: ignore vertices whose closest axis point is a
+};
+
+/// PoseSpec (scene file) -> Pose.
+inline shared::Pose toPose(const PoseSpec& spec) {
+  shared::Pose p;
+  p.pos_m = spec.position_m;
+  p.rot = spec.orientation.normalized();
+  return p;
+}
+
+class Instrument {
+ public:
+  /// Validates the spec (throws tactus::SceneError naming the `instrument.<field>` at fault) and
+  /// places the god object at spec.initial_pose, at rest, with the opening of the first
+  /// trajectory key (or fully open).
+  explicit Instrument(const InstrumentSpec& spec);
+
+  const InstrumentSpec& spec() const { return spec_; }
+
+  /// Places the god object at `pose` with zero twist; the target becomes that pose.
+  void reset(const shared::Pose& pose, double gripper_opening = 1.0);
+
+  /// Free motion over h_s toward the device target (pose, world twist [v; w]) and gripper
+  /// opening (clamped to [0, 1]). Updates pose, twist and features. No allocation.
+  void freeMotion(double h_s, const shared::Pose& target, const Vector6d& target_twist,
+                  double gripper_opening);
+
+  /// C6 = (M_t/h^2 + B_c/h + K_c)^-1 (6x6, [lin; ang] blocks, diagonal): pose increment per unit
+  /// wrench.
+  Matrix6d compliance6(double h_s) const;
+
+  /// G = d(free pose) / d(target pose) of the last freeMotion (6x6; both sides as world twists,
+  /// see poseDifference): lin block c_l K_c I3, rot block J_l(h w+) c_r K_r J_l^-1(theta0) with
+  /// theta0 = log(R_h R^-1) at the start of that step. Before any freeMotion: for a target at the
+  /// current pose. The lead forms J = H_tool G (d delta_free / d x_h).
+  Matrix6d freeMotionSensitivity(double h_s) const;
+
+  /// Constrained motion: dx = C6(h) wrench with h the last freeMotion step, pose <- pose [+] dx,
+  /// twist += dx / h. Returns dx. Does nothing (returns zero) before the first freeMotion.
+  Vector6d applyCorrection(const Vector6d& wrench);
+
+  /// The wrench on the hand [force_n; torque_nm] = -(coupling wrench on the god object), at the
+  /// current state and the last target. This is what the device renders (before scaling).
+  Vector6d couplingWrench() const;
+
+  double kineticEnergy() const;
+  const shared::Pose& pose() const { return pose_; }
+  const Vector6d& twist() const { return twist_; }              ///< [v; w], world frame
+  const shared::Pose& targetPose() const { return target_; }
+  double gripperOpening() const { return opening_; }
+  double lastStep() const { return h_s_; }
+
+  /// Current features (world frame). Updated by reset/freeMotion/applyCorrection.
+  std::span<const ToolFeature> features() const { return features_; }
+
+  /// 3x6 map from a pose increment [dp; dtheta] to the displacement of the rigidly attached
+  /// world point: [I, -[r]x], r = point - origin.
+  Eigen::Matrix<double, 3, 6> toolPointJacobian(const Eigen::Vector3d& point_m) const;
+
+  /// World point -> tool frame.
+  Eigen::Vector3d toLocal(const Eigen::Vector3d& point_m) const;
+
+ private:
+  void updateFeatures();
+
+  InstrumentSpec spec_;
+  shared::Pose pose_;
+  Vector6d twist_ = Vector6d::Zero();
+  shared::Pose target_;
+  Vector6d target_twist_ = Vector6d::Zero();
+  double opening_ = 1.0;
+  double h_s_ = 0.0;
+  Eigen::Vector3d theta0_ = Eigen::Vector3d::Zero();   ///< log(R_h R^-1) at the last free motion
+  Eigen::Vector3d rot_step_ = Eigen::Vector3d::Zero(); ///< h w+ of the last free motion
+  std::vector<ToolFeature> features_;                   ///< sized once in the constructor
+};
+
+}  // namespace tactus::sim

@@ -1,0 +1,138 @@
+#pragma once
+// The simulation pipeline built from a scene (paper 3.1, DESIGN section 3):
+//
+//   free motion (tissues, instrument) -> collision -> contact rows, W = H C H^T -> NSGS
+//   -> constrained motion -> [publish snapshot] -> [VTK output]
+//
+// Only the stages a scene calls for are constructed: no collision, W or solve without an
+// instrument; no tangential rows when friction is zero; no rotation extraction for linear
+// materials; no damping terms without damping; no VTK writer without output. `stages()` lists
+// what will run and the server prints it at start.
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "tactus/shared/nsgs.h"
+#include "tactus/shared/pose.h"
+#include "tactus/sim/scene.h"
+
+namespace tactus::sim {
+
+class FemBody;
+class TissueCompliance;
+class Instrument;
+
+/// Wall time per stage of the last step [s].
+struct StageTimes {
+  double free_motion_s = 0.0;
+  double collision_s = 0.0;
+  double w_build_s = 0.0;
+  double solve_s = 0.0;
+  double correction_s = 0.0;
+  double output_s = 0.0;
+  double total_s = 0.0;
+};
+
+/// What one step did.
+struct StepReport {
+  int contacts = 0;
+  int rows = 0;
+  int contacts_dropped = 0;          ///< over max_contacts (deepest kept)
+  shared::NsgsResult nsgs;
+  double max_penetration_m = 0.0;    ///< max(-gap) after the constrained motion, >= 0
+  double complementarity = 0.0;      ///< max_i |f_n,i * delta_n,i| after the correction [N m]
+  bool finite = true;                ///< every state value finite
+  StageTimes times;
+};
+
+/// The device target driving the god object.
+struct DeviceTarget {
+  shared::Pose pose;
+  Eigen::Matrix<double, 6, 1> twist = Eigen::Matrix<double, 6, 1>::Zero();  ///< [v; w]
+  double gripper_opening = 1.0;      ///< 0 closed .. 1 open
+};
+
+/// The last contact problem, in the form the haptic loop needs (DESIGN 3, "local model").
+struct ContactProblemData {
+  int contacts = 0;
+  int rows = 0;
+  std::vector<int> row_offset;                 ///< contacts + 1
+  std::vector<std::uint64_t> contact_id;
+  std::vector<double> mu;
+  Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> W;
+  Eigen::VectorXd delta_free;
+  Eigen::VectorXd f;
+  Eigen::Matrix<double, Eigen::Dynamic, 6, Eigen::RowMajor> J;   ///< d delta_free / d x_h
+  std::vector<Eigen::Vector3d> point_m;        ///< per contact, on the tissue
+  std::vector<Eigen::Vector3d> normal;         ///< per contact (row n), tissue -> tool
+  std::vector<Eigen::Vector3d> tangent1;       ///< per contact (row t1)
+  std::vector<Eigen::Vector3d> tangent2;       ///< per contact (row t2)
+  shared::Pose device_pose;                    ///< x_h* used for this step
+  double device_gripper = 1.0;                 ///< opening (0..1) used for this step
+  shared::Pose tool_pose;                      ///< god object after the step
+  /// The solver's view of this problem (pointers into this object).
+  shared::ContactProblemView view() const;
+};
+
+/// Counters that prove absent effects cost nothing.
+struct PipelineCounters {
+  long steps = 0;
+  long collision_queries = 0;
+  long w_builds = 0;
+  long solves = 0;
+  long tangential_rows = 0;
+  long vtk_frames = 0;
+  long rotation_extractions = 0;     ///< summed over tissues
+  long damping_evaluations = 0;      ///< summed over tissues
+};
+
+class Simulation {
+ public:
+  /// Builds everything the scene calls for (meshes, FEM, compliance precomputation, collision
+  /// structures, instrument). Throws tactus::Error subclasses with clear messages.
+  explicit Simulation(const SceneSpec& spec);
+  ~Simulation();
+  Simulation(const Simulation&) = delete;
+  Simulation& operator=(const Simulation&) = delete;
+
+  const SceneSpec& spec() const;
+  /// Human-readable list of the stages this scene runs (printed at start).
+  std::vector<std::string> stages() const;
+
+  /// Sets the device target for the next steps (device sample or scripted trajectory).
+  void setDeviceTarget(const DeviceTarget& target);
+  /// The scripted target at time t (the scene's trajectory; the initial pose if none).
+  DeviceTarget scriptedTarget(double t_s) const;
+  bool hasInstrument() const;
+
+  /// Advances one time step.
+  StepReport step();
+
+  double time() const;
+  long stepIndex() const;
+  int tissueCount() const;
+  FemBody& tissue(int i);
+  const FemBody& tissue(int i) const;
+  TissueCompliance* compliance(int i);
+  Instrument* instrument();
+  const ContactProblemData& lastProblem() const;
+  const PipelineCounters& counters() const;
+
+  /// Sum over tissues and the instrument of kinetic + elastic + gravity energy [J].
+  double totalEnergy() const;
+  /// Force the god object's coupling applies to the hand (what a device renders) [N, N m].
+  Eigen::Matrix<double, 6, 1> renderedWrench() const;
+
+  /// Writes the VTK frame of the current state if output is enabled and due (and the .pvd).
+  void writeOutputIfDue();
+  void finishOutput();
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace tactus::sim

@@ -1,0 +1,60 @@
+#pragma once
+// The sim_server main loop: offline (a fixed number of steps, as fast as possible) or paced to
+// real time, publishing each step's contact problem to the haptic process and reading its
+// device samples when the scene enables haptics.
+
+#include <atomic>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "tactus/sim/pipeline.h"
+
+namespace tactus::sim {
+
+struct RunOptions {
+  std::filesystem::path scene_path;
+  long steps = 0;                    ///< > 0: offline, exactly this many steps, unpaced
+  double duration_s = 0.0;           ///< > 0: stop at this simulated time (else the scene's)
+  std::string output_dir;            ///< overrides the scene's VTK output directory
+  int output_every = 0;              ///< overrides the scene's output period (steps)
+  std::string segment = "tactus";
+  bool no_haptics = false;
+  std::string stats_json;            ///< write per-stage statistics here at the end
+};
+
+/// Percentile summary of one stage over a run [s].
+struct StageSummary {
+  std::string name;
+  double median_s = 0.0;
+  double p90_s = 0.0;
+  double p99_s = 0.0;
+  double max_s = 0.0;
+  double mean_s = 0.0;
+};
+
+/// Collects per-step reports and summarises them.
+class RunStatistics {
+ public:
+  void add(const StepReport& report);
+  std::vector<StageSummary> stages() const;
+  long steps() const { return static_cast<long>(total_.size()); }
+  double medianContacts() const;
+  double medianSweeps() const;
+  int maxContacts() const;
+  double maxPenetration() const { return max_penetration_m_; }
+  /// Fixed-width table for the console.
+  std::string table() const;
+  /// JSON object (stages with percentiles, contacts, sweeps) for comparison between commits.
+  std::string json(const std::string& scene) const;
+
+ private:
+  std::vector<double> free_motion_, collision_, w_build_, solve_, correction_, output_, total_;
+  std::vector<double> contacts_, sweeps_;
+  double max_penetration_m_ = 0.0;
+};
+
+/// Runs a scene until `stop`, the step count or the duration. Returns the process exit code.
+int runSimulation(const RunOptions& options, const std::atomic<bool>& stop);
+
+}  // namespace tactus::sim

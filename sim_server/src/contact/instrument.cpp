@@ -1,0 +1,209 @@
+#include "tactus/sim/instrument.h"
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+
+#include "tactus/shared/error.h"
+
+namespace tactus::sim {
+namespace {
+
+void requirePositive(double value, const char* field) {
+  if (!(value > 0.0) || !std::isfinite(value)) {
+    throw SceneError(std::string("instrument.") + field + ": must be a finite value > 0 (got " +
+                     std::to_string(value) + ")");
+  }
+}
+
+void requireNonNegative(double value, const char* field) {
+  if (!(value >= 0.0) || !std::isfinite(value)) {
+    throw SceneError(std::string("instrument.") + field + ": must be a finite value >= 0 (got " +
+                     std::to_string(value) + ")");
+  }
+}
+
+}  // namespace
+
+Instrument::Instrument(const InstrumentSpec& spec) : spec_(spec) {
+  requirePositive(spec.mass_kg, "mass_kg");
+  requirePositive(spec.inertia_kgm2, "inertia_kgm2");
+  requireNonNegative(spec.coupling_k_npm, "coupling_k_npm");
+  requireNonNegative(spec.coupling_b_nspm, "coupling_b_nspm");
+  requireNonNegative(spec.coupling_k_rot_nmprad, "coupling_k_rot_nmprad");
+  requireNonNegative(spec.coupling_b_rot_nmsprad, "coupling_b_rot_nmsprad");
+  requireNonNegative(spec.alarm_distance_m, "alarm_distance_m");
+  requireNonNegative(spec.contact_distance_m, "contact_distance_m");
+  if (spec.kind == InstrumentKind::kProbe) {
+    requirePositive(spec.tip_radius_m, "tip_radius_m");
+    requireNonNegative(spec.shaft_length_m, "shaft_length_m");
+    features_.resize(spec.shaft_length_m > 0.0 ? 2 : 1);
+  } else {
+    requirePositive(spec.jaw_length_m, "jaw_length_m");
+    requirePositive(spec.jaw_radius_m, "jaw_radius_m");
+    requireNonNegative(spec.max_opening_rad, "max_opening_rad");
+    if (spec.jaw_samples < 1) {
+      throw SceneError("instrument.jaw_samples: must be >= 1 (got " +
+                       std::to_string(spec.jaw_samples) + ")");
+    }
+    features_.resize(2 * (spec.jaw_samples + 1));
+  }
+  const double opening = spec.trajectory.empty() ? 1.0 : spec.trajectory.front().gripper_opening;
+  reset(toPose(spec.initial_pose), opening);
+}
+
+void Instrument::reset(const shared::Pose& pose, double gripper_opening) {
+  pose_ = pose;
+  pose_.rot.normalize();
+  twist_.setZero();
+  target_ = pose_;
+  target_twist_.setZero();
+  opening_ = std::clamp(gripper_opening, 0.0, 1.0);
+  theta0_.setZero();
+  rot_step_.setZero();
+  updateFeatures();
+}
+
+void Instrument::freeMotion(double h_s, const shared::Pose& target, const Vector6d& target_twist,
+                            double gripper_opening) {
+  h_s_ = h_s;
+  target_ = target;
+  target_twist_ = target_twist;
+  opening_ = std::clamp(gripper_opening, 0.0, 1.0);
+  const double h = h_s;
+  // translation: (m/h + B + hK) v+ = m v/h + K (p_h - p) + B v_h
+  const double m = spec_.mass_kg;
+  const double kl = spec_.coupling_k_npm;
+  const double bl = spec_.coupling_b_nspm;
+  const Eigen::Vector3d v_new =
+      (m / h * twist_.head<3>() + kl * (target.pos_m - pose_.pos_m) + bl * target_twist.head<3>()) /
+      (m / h + bl + h * kl);
+  // rotation: (I/h + B_r + h K_r) w+ = I w/h + K_r log(R_h R^-1) + B_r w_h
+  const double inertia = spec_.inertia_kgm2;
+  const double kr = spec_.coupling_k_rot_nmprad;
+  const double br = spec_.coupling_b_rot_nmsprad;
+  theta0_ = shared::rotationVector(target.rot * pose_.rot.conjugate());
+  const Eigen::Vector3d w_new =
+      (inertia / h * twist_.tail<3>() + kr * theta0_ + br * target_twist.tail<3>()) /
+      (inertia / h + br + h * kr);
+  rot_step_ = h * w_new;
+  twist_.head<3>() = v_new;
+  twist_.tail<3>() = w_new;
+  pose_.pos_m += h * v_new;
+  pose_.rot = (shared::quaternionFromRotationVector(rot_step_) * pose_.rot).normalized();
+  updateFeatures();
+}
+
+Matrix6d Instrument::compliance6(double h_s) const {
+  const double h2 = h_s * h_s;
+  const double cl =
+      1.0 / (spec_.mass_kg / h2 + spec_.coupling_b_nspm / h_s + spec_.coupling_k_npm);
+  const double cr = 1.0 / (spec_.inertia_kgm2 / h2 + spec_.coupling_b_rot_nmsprad / h_s +
+                           spec_.coupling_k_rot_nmprad);
+  Matrix6d c = Matrix6d::Zero();
+  c.topLeftCorner<3, 3>().diagonal().setConstant(cl);
+  c.bottomRightCorner<3, 3>().diagonal().setConstant(cr);
+  return c;
+}
+
+Matrix6d Instrument::freeMotionSensitivity(double h_s) const {
+  const Matrix6d c = compliance6(h_s);
+  Matrix6d g = Matrix6d::Zero();
+  g.topLeftCorner<3, 3>() = c(0, 0) * spec_.coupling_k_npm * Eigen::Matrix3d::Identity();
+  g.bottomRightCorner<3, 3>() = c(3, 3) * spec_.coupling_k_rot_nmprad *
+                                shared::leftJacobianSo3(rot_step_) *
+                                shared::leftJacobianInverseSo3(theta0_);
+  return g;
+}
+
+Vector6d Instrument::applyCorrection(const Vector6d& wrench) {
+  if (!(h_s_ > 0.0)) return Vector6d::Zero();
+  const Vector6d dx = compliance6(h_s_) * wrench;
+  pose_ = shared::applyTwist(pose_, dx);
+  twist_ += dx / h_s_;
+  updateFeatures();
+  return dx;
+}
+
+Vector6d Instrument::couplingWrench() const {
+  Vector6d w;
+  w.head<3>() = spec_.coupling_k_npm * (target_.pos_m - pose_.pos_m) +
+                spec_.coupling_b_nspm * (target_twist_.head<3>() - twist_.head<3>());
+  w.tail<3>() = spec_.coupling_k_rot_nmprad *
+                    shared::rotationVector(target_.rot * pose_.rot.conjugate()) +
+                spec_.coupling_b_rot_nmsprad * (target_twist_.tail<3>() - twist_.tail<3>());
+  return -w;
+}
+
+double Instrument::kineticEnergy() const {
+  return 0.5 * spec_.mass_kg * twist_.head<3>().squaredNorm() +
+         0.5 * spec_.inertia_kgm2 * twist_.tail<3>().squaredNorm();
+}
+
+Eigen::Matrix<double, 3, 6> Instrument::toolPointJacobian(const Eigen::Vector3d& point_m) const {
+  return shared::pointJacobian(pose_.pos_m, point_m);
+}
+
+Eigen::Vector3d Instrument::toLocal(const Eigen::Vector3d& point_m) const {
+  return pose_.rot.conjugate() * (point_m - pose_.pos_m);
+}
+
+void Instrument::updateFeatures() {
+  const Eigen::Matrix3d rot = pose_.rot.toRotationMatrix();
+  const Eigen::Vector3d& o = pose_.pos_m;
+  if (spec_.kind == InstrumentKind::kProbe) {
+    ToolFeature& tip = features_[0];
+    tip.id = 0;
+    tip.shape = FeatureShape::kSphere;
+    tip.part = 0;
+    tip.a_m = o;
+    tip.b_m = o;
+    tip.radius_m = spec_.tip_radius_m;
+    if (features_.size() > 1) {
+      ToolFeature& shaft = features_[1];
+      shaft.id = 1;
+      shaft.shape = FeatureShape::kCapsule;
+      shaft.part = 0;
+      shaft.a_m = o;
+      shaft.b_m = o + rot.col(2) * spec_.shaft_length_m;
+      shaft.radius_m = spec_.tip_radius_m;
+      shaft.skip_cap_a = true;
+    }
+    return;
+  }
+  // grasper: per jaw one capsule then its sample spheres
+  const int n = spec_.jaw_samples;
+  const double phi = opening_ * spec_.max_opening_rad;
+  const double r = spec_.jaw_radius_m;
+  for (int j = 0; j < 2; ++j) {
+    const double side = j == 0 ? 1.0 : -1.0;
+    const double angle = side * phi;
+    const Eigen::Vector3d a_local(0.0, side * r, 0.0);
+    // Rx(angle) * (0, 0, -1) = (0, sin(angle), -cos(angle))
+    const Eigen::Vector3d dir_local(0.0, std::sin(angle), -std::cos(angle));
+    const Eigen::Vector3d a = o + rot * a_local;
+    const Eigen::Vector3d b = a + rot * (spec_.jaw_length_m * dir_local);
+    const int base = j * (n + 1);
+    ToolFeature& cap = features_[base];
+    cap.id = base;
+    cap.shape = FeatureShape::kCapsule;
+    cap.part = j;
+    cap.a_m = a;
+    cap.b_m = b;
+    cap.radius_m = r;
+    cap.skip_cap_a = false;
+    for (int i = 0; i < n; ++i) {
+      const double t = n == 1 ? 1.0 : static_cast<double>(i) / (n - 1);
+      ToolFeature& s = features_[base + 1 + i];
+      s.id = base + 1 + i;
+      s.shape = FeatureShape::kSphere;
+      s.part = j;
+      s.a_m = a + t * (b - a);
+      s.b_m = s.a_m;
+      s.radius_m = r;
+      s.skip_cap_a = false;
+    }
+  }
+}
+
+}  // namespace tactus::sim

@@ -1,0 +1,412 @@
+#include "tactus/sim/compliance.h"
+
+#include <spdlog/spdlog.h>
+
+#include <chrono>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include "fem_internal.h"
+#include "tactus/shared/error.h"
+
+namespace tactus::sim {
+
+namespace {
+
+constexpr char kMagic[8] = {'T', 'A', 'C', 'T', 'C', '0', '\0', '\1'};
+constexpr std::uint32_t kVersion = 1;
+
+struct CacheHeader {
+  char magic[8];
+  std::uint32_t version;
+  std::uint32_t reserved;
+  std::uint64_t hash;        // FemBody::restHash combined with h
+  std::uint64_t node_count;
+  std::uint64_t surface_count;
+};
+
+std::uint64_t cacheHash(const FemBody& body, double h) {
+  const std::uint64_t base = body.restHash();
+  return fem_detail::fnv1a(&h, sizeof(h), base);
+}
+
+// Rest compliance block on the surface DOFs, with the surface numbering.
+struct RestBlock {
+  std::vector<int> surface;        // sorted surface node indices
+  std::vector<int> local;          // node -> surface index, -1 inside the volume
+  Eigen::MatrixXd c0;              // 3s x 3s
+};
+
+void progress(bool show, int done, int total) {
+  if (!show) return;
+  const int width = 40;
+  const int filled = total > 0 ? width * done / total : width;
+  std::fprintf(stderr, "\r[tactus] C0 precompute [%s%s] %3d%% (%d/%d DOFs)",
+               std::string(filled, '#').c_str(), std::string(width - filled, ' ').c_str(),
+               total > 0 ? 100 * done / total : 100, done, total);
+  if (done == total) std::fprintf(stderr, "\n");
+  std::fflush(stderr);
+}
+
+// Reads and validates a cache file; returns false (with a reason) unless every check passes.
+bool readCache(const std::filesystem::path& path, std::uint64_t hash, const FemBody& body,
+               RestBlock& blk, std::string& why) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) {
+    why = "cannot open";
+    return false;
+  }
+  in.seekg(0, std::ios::end);
+  const auto file_size = static_cast<std::uint64_t>(in.tellg());
+  in.seekg(0);
+  CacheHeader hdr{};
+  if (file_size < sizeof(hdr) || !in.read(reinterpret_cast<char*>(&hdr), sizeof(hdr))) {
+    why = "truncated header";
+    return false;
+  }
+  if (std::memcmp(hdr.magic, kMagic, sizeof(kMagic)) != 0) {
+    why = "bad magic (not a compliance cache)";
+    return false;
+  }
+  if (hdr.version != kVersion) {
+    why = "version " + std::to_string(hdr.version) + " != " + std::to_string(kVersion);
+    return false;
+  }
+  if (hdr.hash != hash) {
+    why = "stale (mesh, material, fixed nodes or h changed)";
+    return false;
+  }
+  const auto& surface = body.surfaceNodes();
+  if (hdr.node_count != static_cast<std::uint64_t>(body.nodeCount()) ||
+      hdr.surface_count != surface.size()) {
+    why = "sizes do not match the mesh";
+    return false;
+  }
+  const std::uint64_t s = hdr.surface_count, d = 3 * s;
+  const std::uint64_t expected = sizeof(hdr) + s * sizeof(int) + d * d * sizeof(double) + 8;
+  if (file_size != expected) {
+    why = "size " + std::to_string(file_size) + " bytes, expected " + std::to_string(expected) +
+          " (truncated or corrupt)";
+    return false;
+  }
+  std::vector<int> nodes(s);
+  blk.c0.resize(static_cast<Eigen::Index>(d), static_cast<Eigen::Index>(d));
+  std::uint64_t checksum = 0;
+  in.read(reinterpret_cast<char*>(nodes.data()), static_cast<std::streamsize>(s * sizeof(int)));
+  in.read(reinterpret_cast<char*>(blk.c0.data()),
+          static_cast<std::streamsize>(d * d * sizeof(double)));
+  in.read(reinterpret_cast<char*>(&checksum), sizeof(checksum));
+  if (!in) {
+    why = "read error";
+    return false;
+  }
+  std::uint64_t sum = fem_detail::fnv1a(nodes.data(), s * sizeof(int));
+  sum = fem_detail::fnv1a(blk.c0.data(), d * d * sizeof(double), sum);
+  if (sum != checksum) {
+    why = "checksum mismatch (corrupt)";
+    return false;
+  }
+  if (nodes != surface) {
+    why = "surface nodes differ";
+    return false;
+  }
+  if (!blk.c0.allFinite()) {
+    why = "non-finite values";
+    return false;
+  }
+  return true;
+}
+
+void writeCache(const std::filesystem::path& path, std::uint64_t hash, const FemBody& body,
+                const RestBlock& blk) {
+  std::error_code ec;
+  std::filesystem::create_directories(path.parent_path(), ec);
+  const auto tmp = path.string() + ".tmp";
+  {
+    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+    if (!out) {
+      spdlog::warn("compliance cache: cannot write {} (continuing without cache)", tmp);
+      return;
+    }
+    CacheHeader hdr{};
+    std::memcpy(hdr.magic, kMagic, sizeof(kMagic));
+    hdr.version = kVersion;
+    hdr.hash = hash;
+    hdr.node_count = static_cast<std::uint64_t>(body.nodeCount());
+    hdr.surface_count = blk.surface.size();
+    const std::uint64_t d = 3 * hdr.surface_count;
+    std::uint64_t sum = fem_detail::fnv1a(blk.surface.data(), blk.surface.size() * sizeof(int));
+    sum = fem_detail::fnv1a(blk.c0.data(), d * d * sizeof(double), sum);
+    out.write(reinterpret_cast<const char*>(&hdr), sizeof(hdr));
+    out.write(reinterpret_cast<const char*>(blk.surface.data()),
+              static_cast<std::streamsize>(blk.surface.size() * sizeof(int)));
+    out.write(reinterpret_cast<const char*>(blk.c0.data()),
+              static_cast<std::streamsize>(d * d * sizeof(double)));
+    out.write(reinterpret_cast<const char*>(&sum), sizeof(sum));
+    if (!out) {
+      spdlog::warn("compliance cache: write to {} failed (continuing without cache)", tmp);
+      return;
+    }
+  }
+  // atomic replace: a reader never sees a half-written file under the final name
+  std::filesystem::rename(tmp, path, ec);
+  if (ec) spdlog::warn("compliance cache: cannot rename {} to {}: {}", tmp, path.string(),
+                       ec.message());
+}
+
+// C0 on the surface DOFs: one rest factorisation, one (batched) solve per surface DOF.
+void computeRestBlock(FemBody& body, const ComplianceOptions& opt, RestBlock& blk) {
+  const int n = body.nodeCount();
+  const int s = static_cast<int>(blk.surface.size());
+  const int d = 3 * s;
+  blk.c0.resize(d, d);
+  const int batch = std::max(1, opt.solve_batch);
+  Eigen::MatrixXd rhs, sol;
+  progress(opt.show_progress, 0, d);
+  for (int c0 = 0; c0 < d; c0 += batch) {
+    const int k = std::min(batch, d - c0);
+    rhs.setZero(3 * n, k);
+    for (int j = 0; j < k; ++j) {
+      const int col = c0 + j;
+      rhs(3 * blk.surface[col / 3] + col % 3, j) = 1.0;
+    }
+    body.solveRestComplianceBatch(opt.h_s, rhs, sol);
+    for (int j = 0; j < k; ++j)
+      for (int a = 0; a < s; ++a)
+        blk.c0.block<3, 1>(3 * a, c0 + j) = sol.block<3, 1>(3 * blk.surface[a], j);
+    progress(opt.show_progress, c0 + k, d);
+  }
+  // remove the solver's round-off asymmetry
+  blk.c0 = (0.5 * (blk.c0 + blk.c0.transpose())).eval();
+}
+
+// Row-to-node expansion of H: (local node, 3-vector p) pairs per row.
+struct RowTerms {
+  int count = 0;
+  std::array<int, 3> local{};
+  std::array<Eigen::Vector3d, 3> p;
+};
+
+class ComplianceModel final : public TissueCompliance {
+ public:
+  ComplianceModel(ComplianceKind kind, FemBody& body, const ComplianceOptions& opt)
+      : kind_(kind), body_(&body), opt_(opt) {
+    if (!(opt.h_s > 0.0)) throw Error("makeCompliance: h_s must be > 0");
+    const int n = body.nodeCount();
+    rot_.assign(n, Eigen::Matrix3d::Identity());
+    local_.assign(n, -1);
+    if (kind_ != ComplianceKind::kExact) buildRest();
+  }
+
+  ComplianceKind kind() const override { return kind_; }
+
+  void update(FemBody& body) override {
+    body_ = &body;
+    if (kind_ == ComplianceKind::kWarped) body.nodeRotations(rot_);
+  }
+
+  void addW(std::span<const TissueRow> rows, Eigen::Ref<Eigen::MatrixXd> w) override {
+    const int m = static_cast<int>(rows.size());
+    if (m == 0) return;
+    const int u = collect(rows);
+    const int du = 3 * u;
+    // G = C_UU P, column by column from 3x3 blocks
+    g_.setZero(du, m);
+    if (kind_ == ComplianceKind::kUncoupled) {
+      for (int l = 0; l < m; ++l)
+        for (int t = 0; t < terms_[l].count; ++t) {
+          const int b = terms_[l].local[t];
+          g_.col(l).segment<3>(3 * b) += diag_[blk_.local[touched_[b]]] * terms_[l].p[t];
+        }
+    } else {
+      gatherCuu(u);
+      for (int l = 0; l < m; ++l)
+        for (int t = 0; t < terms_[l].count; ++t)
+          g_.col(l).noalias() += cuu_.middleCols<3>(3 * terms_[l].local[t]) * terms_[l].p[t];
+    }
+    // W += P^T G
+    for (int l = 0; l < m; ++l)
+      for (int k = 0; k < m; ++k) {
+        double acc = 0.0;
+        for (int t = 0; t < terms_[k].count; ++t)
+          acc += terms_[k].p[t].dot(g_.col(l).segment<3>(3 * terms_[k].local[t]));
+        w(k, l) += acc;
+      }
+    release();
+  }
+
+  void correction(FemBody& body, std::span<const TissueRow> rows, const double* f,
+                  Eigen::VectorXd& dq) override {
+    body_ = &body;
+    const int n = body.nodeCount();
+    const int m = static_cast<int>(rows.size());
+    collect(rows);
+    // r0 = (H R)^T f on the touched nodes
+    r_.setZero(3 * n);
+    for (int k = 0; k < m; ++k)
+      for (int t = 0; t < terms_[k].count; ++t)
+        r_.segment<3>(3 * touched_[terms_[k].local[t]]) += f[k] * terms_[k].p[t];
+    switch (kind_) {
+      case ComplianceKind::kExact:
+        body.solveCompliance(r_, dq);
+        break;
+      case ComplianceKind::kRest:
+        body.solveRestCompliance(opt_.h_s, r_, dq);
+        break;
+      case ComplianceKind::kWarped:
+        body.solveRestCompliance(opt_.h_s, r_, dq);
+        for (int i = 0; i < n; ++i) dq.segment<3>(3 * i) = rot_[i] * dq.segment<3>(3 * i).eval();
+        break;
+      case ComplianceKind::kUncoupled:
+        dq.setZero(3 * n);
+        for (int node : touched_) dq.segment<3>(3 * node) = diag_[blk_.local[node]] * r_.segment<3>(3 * node);
+        break;
+    }
+    // fixed DOFs stay at rest
+    const auto& fixed = body.fixedMask();
+    for (int i = 0; i < n; ++i)
+      if (fixed[i]) dq.segment<3>(3 * i).setZero();
+    release();
+  }
+
+  std::size_t memoryBytes() const override {
+    return sizeof(double) * static_cast<std::size_t>(blk_.c0.size()) +
+           sizeof(int) * (blk_.surface.size() + blk_.local.size() + local_.size()) +
+           sizeof(double) * diag_.size() + sizeof(Eigen::Matrix3d) * rot_.size() +
+           sizeof(double) * static_cast<std::size_t>(cuu_.size() + g_.size() + r_.size());
+  }
+
+  ComplianceBuildInfo buildInfo() const override { return info_; }
+
+ private:
+  void buildRest() {
+    FemBody& body = *body_;
+    blk_.surface = body.surfaceNodes();
+    blk_.local.assign(body.nodeCount(), -1);
+    for (std::size_t i = 0; i < blk_.surface.size(); ++i)
+      blk_.local[blk_.surface[i]] = static_cast<int>(i);
+    info_.surface_nodes = static_cast<int>(blk_.surface.size());
+    const auto path = complianceCachePath(body, opt_);
+    const std::uint64_t hash = cacheHash(body, opt_.h_s);
+    bool loaded = false;
+    if (!path.empty() && std::filesystem::exists(path)) {
+      std::string why;
+      loaded = readCache(path, hash, body, blk_, why);
+      if (!loaded) {
+        info_.cache_rejected = true;
+        info_.cache_message = why;
+        spdlog::warn("compliance cache {} rejected: {}; rebuilding", path.string(), why);
+      }
+    }
+    if (loaded) {
+      info_.loaded_from_cache = true;
+      spdlog::info("compliance cache {} loaded ({} surface nodes)", path.string(),
+                   blk_.surface.size());
+    } else {
+      const auto t0 = std::chrono::steady_clock::now();
+      computeRestBlock(body, opt_, blk_);
+      info_.precompute_s =
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      if (!path.empty()) writeCache(path, hash, body, blk_);
+    }
+    if (kind_ == ComplianceKind::kUncoupled) {
+      // isotropic per node: mean of the diagonal of the node's 3x3 block; drop the dense block
+      const int s = static_cast<int>(blk_.surface.size());
+      diag_.resize(s);
+      for (int a = 0; a < s; ++a) diag_[a] = blk_.c0.block<3, 3>(3 * a, 3 * a).trace() / 3.0;
+      blk_.c0.resize(0, 0);
+    }
+  }
+
+  // Fills touched_ / terms_ for the rows; returns |U|. Warped/rest/uncoupled keep only
+  // surface nodes (others are counted and skipped).
+  int collect(std::span<const TissueRow> rows) {
+    touched_.clear();
+    terms_.resize(rows.size());
+    const bool surface_only = kind_ != ComplianceKind::kExact;
+    const int n = body_->nodeCount();
+    for (std::size_t k = 0; k < rows.size(); ++k) {
+      RowTerms& rt = terms_[k];
+      rt.count = 0;
+      for (int t = 0; t < 3; ++t) {
+        const int node = rows[k].node[t];
+        if (node < 0 || rows[k].weight[t] == 0.0) continue;
+        if (node >= n) throw Error("TissueCompliance: row node " + std::to_string(node) +
+                                   " out of range");
+        if (surface_only && blk_.local[node] < 0) {
+          ++info_.skipped_row_nodes;
+          continue;
+        }
+        if (local_[node] < 0) {
+          local_[node] = static_cast<int>(touched_.size());
+          touched_.push_back(node);
+        }
+        Eigen::Vector3d p = rows[k].weight[t] * rows[k].dir;
+        if (kind_ == ComplianceKind::kWarped) p = rot_[node].transpose() * p;
+        rt.local[rt.count] = local_[node];
+        rt.p[rt.count] = p;
+        ++rt.count;
+      }
+    }
+    return static_cast<int>(touched_.size());
+  }
+
+  void release() {
+    for (int node : touched_) local_[node] = -1;
+  }
+
+  // C_UU: from C0 (warped/rest) or from 3|U| solves with the current factorisation (exact).
+  void gatherCuu(int u) {
+    const int du = 3 * u;
+    cuu_.resize(du, du);
+    if (kind_ == ComplianceKind::kExact) {
+      const int n = body_->nodeCount();
+      e_.setZero(3 * n, du);
+      for (int a = 0; a < u; ++a)
+        for (int c = 0; c < 3; ++c) e_(3 * touched_[a] + c, 3 * a + c) = 1.0;
+      body_->solveComplianceBatch(e_, x_);
+      for (int b = 0; b < u; ++b) cuu_.middleRows<3>(3 * b) = x_.middleRows<3>(3 * touched_[b]);
+      return;
+    }
+    for (int b = 0; b < u; ++b) {
+      const int sb = blk_.local[touched_[b]];
+      for (int a = 0; a < u; ++a) {
+        const int sa = blk_.local[touched_[a]];
+        cuu_.block<3, 3>(3 * a, 3 * b) = blk_.c0.block<3, 3>(3 * sa, 3 * sb);
+      }
+    }
+  }
+
+  ComplianceKind kind_;
+  FemBody* body_;
+  ComplianceOptions opt_;
+  RestBlock blk_;
+  std::vector<double> diag_;                 // uncoupled: per surface node
+  std::vector<Eigen::Matrix3d> rot_;         // warped: node rotations rest -> current
+  std::vector<int> local_;                   // node -> index in touched_, -1 otherwise
+  std::vector<int> touched_;
+  std::vector<RowTerms> terms_;
+  Eigen::MatrixXd cuu_, g_, e_, x_;
+  Eigen::VectorXd r_;
+  ComplianceBuildInfo info_;
+};
+
+}  // namespace
+
+std::filesystem::path complianceCachePath(const FemBody& body, const ComplianceOptions& options) {
+  if (options.cache_dir.empty()) return {};
+  std::string name = options.cache_name;
+  if (name.empty()) name = std::filesystem::path(body.mesh().source).stem().string();
+  if (name.empty()) name = "tissue";
+  return options.cache_dir / (name + ".c0.bin");
+}
+
+std::unique_ptr<TissueCompliance> makeCompliance(ComplianceKind kind, FemBody& body,
+                                                 const ComplianceOptions& options) {
+  return std::make_unique<ComplianceModel>(kind, body, options);
+}
+
+}  // namespace tactus::sim

@@ -1,0 +1,682 @@
+#include <Eigen/Geometry>
+#include <Eigen/LU>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <string>
+
+#include "fem_internal.h"
+#include "tactus/shared/error.h"
+#include "tactus/sim/fem.h"
+
+namespace tactus::sim {
+
+using fem_detail::CholmodSolver;
+using Sparse = CholmodSolver::Sparse;
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double secondsSince(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+// Entries of one element's lower-triangular contribution: blocks (a, b) with a >= b, and only
+// i >= j inside diagonal blocks: 4 * 6 + 6 * 9.
+constexpr int kEntriesPerElement = 78;
+
+}  // namespace
+
+struct FemBody::Impl {
+  TetMesh mesh;
+  FemMaterial material;
+  FemSolverOptions options;
+  bool corotational = true;
+  bool has_gravity = false;
+  Eigen::Vector3d gravity = Eigen::Vector3d::Zero();
+  double lambda = 0.0, mu = 0.0;
+
+  int n = 0;
+  std::vector<bool> fixed;
+  std::vector<int> dof_base;  // first reduced DOF of each node, -1 when fixed
+  int n_free = 0;             // reduced DOFs
+
+  Eigen::VectorXd rest, q, v, mass;
+
+  // per element: shape function gradients (columns g_0..g_3) and rest volume
+  std::vector<Eigen::Matrix<double, 3, 4>> grad;
+  std::vector<double> volume;
+  std::vector<Eigen::Matrix3d> rotation;
+
+  // system matrix A (lower triangle, fixed pattern) and where each element writes
+  Sparse a;
+  std::vector<int> elem_offset;  // kEntriesPerElement per element, -1 for fixed DOFs
+  std::vector<int> diag_offset;  // per reduced DOF
+  CholmodSolver chol;
+  bool chol_current = false;     // chol holds the factor of the current `a`
+  double compliance_scale = 0.0; // C = compliance_scale * A^-1 for the current `a`
+  double last_h = 0.0;
+
+  // rest-shape factorisation
+  Sparse a_rest;
+  CholmodSolver chol_rest;
+  double rest_h = -1.0;
+
+  // step buffers (reduced or full)
+  Eigen::VectorXd f_int, kv, rhs_full, rhs, dv, dv_prev, x_lin;
+  Eigen::VectorXd cg_r, cg_z, cg_p, cg_ap, jacobi_inv;
+
+  std::vector<int> surface;
+  bool surface_ready = false;
+  std::uint64_t hash = 0;
+  Counters counters;
+
+  void init(const TetMesh& m, const FemMaterial& mat, const std::vector<int>& fixed_nodes,
+            const Eigen::Vector3d* g, const FemSolverOptions& opt);
+  void buildPattern();
+  // Element loop at positions x: internal force (+K u sense) into f_out (3n, if non-null),
+  // cK * K + cM * M into `target` (if non-null), K v into kv_out (if v_in non-null).
+  // use_rest_frame: R = I without rotation extraction (rest tangent).
+  void evaluate(const Eigen::VectorXd& x, Eigen::VectorXd* f_out, Sparse* target, double c_k,
+                double c_m, const Eigen::VectorXd* v_in, Eigen::VectorXd* kv_out,
+                bool use_rest_frame);
+  Eigen::Matrix3d elementF(int e, const Eigen::VectorXd& x) const {
+    const auto& t = mesh.tets[e];
+    Eigen::Matrix<double, 3, 4> xe;
+    for (int k = 0; k < 4; ++k) xe.col(k) = x.segment<3>(3 * t[k]);
+    return xe * grad[e].transpose();
+  }
+  Eigen::Matrix3d sigma(const Eigen::Matrix3d& eps) const {
+    return lambda * eps.trace() * Eigen::Matrix3d::Identity() + 2.0 * mu * eps;
+  }
+  void reduce(const Eigen::VectorXd& full, double* out) const {
+    for (int i = 0; i < n; ++i)
+      if (dof_base[i] >= 0)
+        for (int c = 0; c < 3; ++c) out[dof_base[i] + c] = full[3 * i + c];
+  }
+  void expand(const double* red, double scale, double* out) const {
+    for (int i = 0; i < n; ++i)
+      for (int c = 0; c < 3; ++c)
+        out[3 * i + c] = dof_base[i] >= 0 ? scale * red[dof_base[i] + c] : 0.0;
+  }
+  void ensureRestFactor(double h);
+  void ensureCurrentFactor();
+  bool pcg(double tol, int max_iter, FemStepStats& stats);
+};
+
+void FemBody::Impl::init(const TetMesh& m, const FemMaterial& mat,
+                         const std::vector<int>& fixed_nodes, const Eigen::Vector3d* g,
+                         const FemSolverOptions& opt) {
+  mesh = m;
+  material = mat;
+  options = opt;
+  corotational = mat.law == MaterialLaw::kCorotational;
+  n = mesh.nodeCount();
+  const std::string where = "FemBody(" + (mesh.source.empty() ? "mesh" : mesh.source) + "): ";
+  if (n == 0 || mesh.tets.empty()) throw Error(where + "mesh has no nodes or no tetrahedra");
+  if (!(mat.young_pa > 0.0)) throw Error(where + "young_pa must be > 0");
+  if (!(mat.poisson > -1.0 && mat.poisson < 0.5))
+    throw Error(where + "poisson must be in (-1, 0.5)");
+  if (!(mat.density_kgpm3 > 0.0)) throw Error(where + "density_kgpm3 must be > 0");
+  if (mat.damping && (mat.damping->mass_alpha_per_s < 0.0 || mat.damping->stiffness_beta_s < 0.0))
+    throw Error(where + "Rayleigh coefficients must be >= 0");
+  lambda = mat.young_pa * mat.poisson / ((1.0 + mat.poisson) * (1.0 - 2.0 * mat.poisson));
+  mu = mat.young_pa / (2.0 * (1.0 + mat.poisson));
+  if (g) {
+    has_gravity = true;
+    gravity = *g;
+  }
+
+  fixed.assign(n, false);
+  for (int i : fixed_nodes) {
+    if (i < 0 || i >= n)
+      throw Error(where + "fixed node " + std::to_string(i) + " out of range [0, " +
+                  std::to_string(n) + ")");
+    fixed[i] = true;
+  }
+  dof_base.assign(n, -1);
+  for (int i = 0; i < n; ++i)
+    if (!fixed[i]) {
+      dof_base[i] = n_free;
+      n_free += 3;
+    }
+  if (n_free == 0) throw Error(where + "every node is fixed");
+
+  rest.resize(3 * n);
+  for (int i = 0; i < n; ++i) rest.segment<3>(3 * i) = mesh.nodes.col(i);
+  q = rest;
+  v = Eigen::VectorXd::Zero(3 * n);
+  mass = Eigen::VectorXd::Zero(3 * n);
+
+  // element gradients, volumes and lumped mass
+  const int ne = mesh.tetCount();
+  grad.resize(ne);
+  volume.resize(ne);
+  rotation.assign(ne, Eigen::Matrix3d::Identity());
+  double mean_edge = 0.0;
+  for (int e = 0; e < ne; ++e) {
+    const auto& t = mesh.tets[e];
+    for (int k = 0; k < 4; ++k)
+      if (t[k] < 0 || t[k] >= n)
+        throw Error(where + "tet " + std::to_string(e) + " refers to node " +
+                    std::to_string(t[k]) + " out of range");
+    Eigen::Matrix3d dm;
+    dm << rest.segment<3>(3 * t[1]) - rest.segment<3>(3 * t[0]),
+        rest.segment<3>(3 * t[2]) - rest.segment<3>(3 * t[0]),
+        rest.segment<3>(3 * t[3]) - rest.segment<3>(3 * t[0]);
+    const double det = dm.determinant();
+    const double edge = dm.colwise().norm().mean();
+    mean_edge += edge;
+    if (!(std::abs(det) > 1e-12 * edge * edge * edge))
+      throw NumericalError(where + "tet " + std::to_string(e) +
+                           " is degenerate (zero volume): fix the mesh");
+    const Eigen::Matrix3d dm_inv = dm.inverse();
+    // gradient of the shape functions: rows of Dm^-1 for nodes 1..3, minus their sum for node 0
+    grad[e].block<3, 3>(0, 1) = dm_inv.transpose();
+    grad[e].col(0) = -grad[e].block<3, 3>(0, 1).rowwise().sum();
+    volume[e] = std::abs(det) / 6.0;
+    const double m4 = material.density_kgpm3 * volume[e] / 4.0;
+    for (int k = 0; k < 4; ++k) mass.segment<3>(3 * t[k]).array() += m4;
+  }
+
+  buildPattern();
+  f_int.resize(3 * n);
+  kv.resize(3 * n);
+  rhs_full.resize(3 * n);
+  x_lin.resize(3 * n);
+  rhs.resize(n_free);
+  dv = Eigen::VectorXd::Zero(n_free);
+  dv_prev = Eigen::VectorXd::Zero(n_free);
+
+  // hash of what the rest compliance depends on (h excluded)
+  using fem_detail::fnv1a;
+  std::uint64_t hsh = fnv1a(rest.data(), sizeof(double) * rest.size());
+  hsh = fnv1a(mesh.tets.data(), sizeof(int) * 4 * mesh.tets.size(), hsh);
+  const double mat_vals[6] = {
+      static_cast<double>(corotational), mat.young_pa, mat.poisson, mat.density_kgpm3,
+      mat.damping ? mat.damping->mass_alpha_per_s : -1.0,
+      mat.damping ? mat.damping->stiffness_beta_s : -1.0};
+  hsh = fnv1a(mat_vals, sizeof(mat_vals), hsh);
+  std::vector<int> fixed_sorted;
+  for (int i = 0; i < n; ++i)
+    if (fixed[i]) fixed_sorted.push_back(i);
+  hsh = fnv1a(fixed_sorted.data(), sizeof(int) * fixed_sorted.size(), hsh);
+  hash = hsh;
+}
+
+void FemBody::Impl::buildPattern() {
+  const int ne = mesh.tetCount();
+  std::vector<Eigen::Triplet<double, int>> trip;
+  trip.reserve(static_cast<std::size_t>(ne) * kEntriesPerElement + n_free);
+  for (int d = 0; d < n_free; ++d) trip.emplace_back(d, d, 0.0);
+  auto forEntry = [&](int e, auto&& fn) {
+    const auto& t = mesh.tets[e];
+    for (int a = 0; a < 4; ++a)
+      for (int b = 0; b <= a; ++b)
+        for (int i = 0; i < 3; ++i)
+          for (int j = 0; j < (a == b ? i + 1 : 3); ++j) {
+            const int ra = dof_base[t[a]], cb = dof_base[t[b]];
+            if (ra < 0 || cb < 0) {
+              fn(-1, -1);
+            } else {
+              const int r = ra + i, c = cb + j;
+              fn(std::max(r, c), std::min(r, c));
+            }
+          }
+  };
+  for (int e = 0; e < ne; ++e)
+    forEntry(e, [&](int r, int c) {
+      if (r >= 0) trip.emplace_back(r, c, 0.0);
+    });
+  a.resize(n_free, n_free);
+  a.setFromTriplets(trip.begin(), trip.end());
+  a.makeCompressed();
+  const int* outer = a.outerIndexPtr();
+  const int* inner = a.innerIndexPtr();
+  auto offsetOf = [&](int r, int c) {
+    const int* lo = inner + outer[c];
+    const int* hi = inner + outer[c + 1];
+    const int* it = std::lower_bound(lo, hi, r);
+    return static_cast<int>(it - inner);
+  };
+  elem_offset.resize(static_cast<std::size_t>(ne) * kEntriesPerElement);
+  for (int e = 0; e < ne; ++e) {
+    int k = 0;
+    forEntry(e, [&](int r, int c) {
+      elem_offset[static_cast<std::size_t>(e) * kEntriesPerElement + k++] =
+          r >= 0 ? offsetOf(r, c) : -1;
+    });
+  }
+  diag_offset.resize(n_free);
+  for (int d = 0; d < n_free; ++d) diag_offset[d] = offsetOf(d, d);
+  a_rest = a;
+}
+
+void FemBody::Impl::evaluate(const Eigen::VectorXd& x, Eigen::VectorXd* f_out, Sparse* target,
+                             double c_k, double c_m, const Eigen::VectorXd* v_in,
+                             Eigen::VectorXd* kv_out, bool use_rest_frame) {
+  if (f_out) f_out->setZero(3 * n);
+  if (kv_out) kv_out->setZero(3 * n);
+  double* vals = target ? target->valuePtr() : nullptr;
+  if (target) std::fill(vals, vals + target->nonZeros(), 0.0);
+  const bool rotate = corotational && !use_rest_frame;
+  const int ne = mesh.tetCount();
+  for (int e = 0; e < ne; ++e) {
+    const auto& t = mesh.tets[e];
+    const auto& g = grad[e];
+    const double vol = volume[e];
+    Eigen::Matrix3d r = Eigen::Matrix3d::Identity();
+    if (rotate) {
+      r = fem_detail::polarRotation(elementF(e, x));
+      rotation[e] = r;
+    }
+    // rotated gradients r_a = R g_a
+    const Eigen::Matrix<double, 3, 4> rg = rotate ? Eigen::Matrix<double, 3, 4>(r * g) : g;
+    if (f_out) {
+      // internal force R V sigma(sym(R^T F) - I) g_a
+      const Eigen::Matrix3d fl = rotate ? Eigen::Matrix3d(r.transpose() * elementF(e, x))
+                                        : elementF(e, x);
+      const Eigen::Matrix3d eps =
+          0.5 * (fl + fl.transpose()) - Eigen::Matrix3d::Identity();
+      const Eigen::Matrix3d s = vol * sigma(eps);
+      const Eigen::Matrix<double, 3, 4> fe = rotate ? Eigen::Matrix<double, 3, 4>(r * s * g)
+                                                    : Eigen::Matrix<double, 3, 4>(s * g);
+      for (int k = 0; k < 4; ++k) f_out->segment<3>(3 * t[k]) += fe.col(k);
+    }
+    if (v_in && kv_out) {
+      // K v = R V sigma(sym(R^T grad v)) g_a
+      Eigen::Matrix<double, 3, 4> ve;
+      for (int k = 0; k < 4; ++k) ve.col(k) = v_in->segment<3>(3 * t[k]);
+      Eigen::Matrix3d gv = ve * g.transpose();
+      if (rotate) gv = r.transpose() * gv;
+      const Eigen::Matrix3d s = vol * sigma(0.5 * (gv + gv.transpose()));
+      const Eigen::Matrix<double, 3, 4> fe = rotate ? Eigen::Matrix<double, 3, 4>(r * s * g)
+                                                    : Eigen::Matrix<double, 3, 4>(s * g);
+      for (int k = 0; k < 4; ++k) kv_out->segment<3>(3 * t[k]) += fe.col(k);
+    }
+    if (target) {
+      // block (a, b) = c_k V (lambda r_a r_b^T + mu r_b r_a^T + mu (g_a . g_b) I)
+      const int* off = elem_offset.data() + static_cast<std::size_t>(e) * kEntriesPerElement;
+      const double cl = c_k * vol * lambda, cm = c_k * vol * mu;
+      int k = 0;
+      for (int ia = 0; ia < 4; ++ia)
+        for (int ib = 0; ib <= ia; ++ib) {
+          const Eigen::Vector3d ra = rg.col(ia), rb = rg.col(ib);
+          const double gg = cm * g.col(ia).dot(g.col(ib));
+          for (int i = 0; i < 3; ++i)
+            for (int j = 0; j < (ia == ib ? i + 1 : 3); ++j, ++k) {
+              if (off[k] < 0) continue;
+              vals[off[k]] += cl * ra[i] * rb[j] + cm * rb[i] * ra[j] + (i == j ? gg : 0.0);
+            }
+        }
+    }
+  }
+  if (rotate) counters.rotation_extractions += ne;
+  if (target && c_m != 0.0)
+    for (int i = 0; i < n; ++i)
+      if (dof_base[i] >= 0)
+        for (int c = 0; c < 3; ++c) vals[diag_offset[dof_base[i] + c]] += c_m * mass[3 * i + c];
+}
+
+void FemBody::Impl::ensureRestFactor(double h) {
+  if (rest_h == h && chol_rest.factorized()) return;
+  const double alpha = material.damping ? material.damping->mass_alpha_per_s : 0.0;
+  const double beta = material.damping ? material.damping->stiffness_beta_s : 0.0;
+  evaluate(rest, nullptr, &a_rest, h + beta, 1.0 / h + alpha, nullptr, nullptr, true);
+  if (!chol_rest.analyzed()) chol_rest.analyze(a_rest);
+  ++counters.factorisations;
+  if (!chol_rest.factorize(a_rest))
+    throw NumericalError("FemBody(" + mesh.source +
+                         "): rest-shape system matrix is not positive definite; check the "
+                         "material parameters and the time step");
+  rest_h = h;
+}
+
+void FemBody::Impl::ensureCurrentFactor() {
+  if (chol_current) return;
+  if (compliance_scale == 0.0)
+    throw Error("FemBody::solveCompliance: no system matrix yet; call freeMotion() first");
+  if (!chol.analyzed()) chol.analyze(a);
+  ++counters.factorisations;
+  if (!chol.factorize(a))
+    throw NumericalError("FemBody(" + mesh.source +
+                         "): current system matrix is not positive definite");
+  chol_current = true;
+}
+
+bool FemBody::Impl::pcg(double tol, int max_iter, FemStepStats& stats) {
+  const auto sa = a.selfadjointView<Eigen::Lower>();
+  const bool use_rest = options.pcg_preconditioner == PcgPreconditioner::kRestCholesky;
+  if (!use_rest) {
+    jacobi_inv.resize(n_free);
+    const double* vals = a.valuePtr();
+    for (int d = 0; d < n_free; ++d) jacobi_inv[d] = 1.0 / vals[diag_offset[d]];
+  }
+  auto precond = [&](const Eigen::VectorXd& r, Eigen::VectorXd& z) {
+    if (use_rest) {
+      z.resize(n_free);
+      chol_rest.solve(r.data(), z.data(), 1);
+    } else {
+      z = jacobi_inv.cwiseProduct(r);
+    }
+  };
+  const double b_norm = rhs.norm();
+  stats.cg_iterations = 0;
+  if (b_norm == 0.0) {
+    dv.setZero();
+    stats.cg_residual = 0.0;
+    return true;
+  }
+  dv = dv_prev;  // warm start
+  cg_r = rhs;
+  cg_r.noalias() -= sa * dv;
+  double res = cg_r.norm() / b_norm;
+  if (!(res < 1e300)) {
+    dv.setZero();
+    cg_r = rhs;
+    res = 1.0;
+  }
+  precond(cg_r, cg_z);
+  cg_p = cg_z;
+  double rz = cg_r.dot(cg_z);
+  int it = 0;
+  while (res > tol && it < max_iter) {
+    cg_ap.noalias() = sa * cg_p;
+    const double pap = cg_p.dot(cg_ap);
+    if (!(pap > 0.0)) break;
+    const double step = rz / pap;
+    dv.noalias() += step * cg_p;
+    cg_r.noalias() -= step * cg_ap;
+    ++it;
+    res = cg_r.norm() / b_norm;
+    if (res <= tol) break;
+    precond(cg_r, cg_z);
+    const double rz_new = cg_r.dot(cg_z);
+    cg_p = cg_z + (rz_new / rz) * cg_p;
+    rz = rz_new;
+  }
+  stats.cg_iterations = it;
+  stats.cg_residual = res;
+  return res <= tol && dv.allFinite();
+}
+
+// ---- FemBody ----
+
+FemBody::FemBody(const TetMesh& mesh, const FemMaterial& material,
+                 const std::vector<int>& fixed_nodes, const Eigen::Vector3d* gravity_mps2,
+                 const FemSolverOptions& options)
+    : impl_(std::make_unique<Impl>()) {
+  impl_->init(mesh, material, fixed_nodes, gravity_mps2, options);
+  // symbolic analysis once, on the fixed pattern
+  if (options.linear == LinearSolverKind::kCholmod) impl_->chol.analyze(impl_->a);
+}
+
+FemBody::~FemBody() = default;
+
+const TetMesh& FemBody::mesh() const { return impl_->mesh; }
+int FemBody::nodeCount() const { return impl_->n; }
+int FemBody::dofCount() const { return 3 * impl_->n; }
+int FemBody::freeDofCount() const { return impl_->n_free; }
+const std::vector<bool>& FemBody::fixedMask() const { return impl_->fixed; }
+const Eigen::VectorXd& FemBody::restPositions() const { return impl_->rest; }
+Eigen::VectorXd& FemBody::positions() { return impl_->q; }
+Eigen::VectorXd& FemBody::velocities() { return impl_->v; }
+const Eigen::VectorXd& FemBody::positions() const { return impl_->q; }
+const Eigen::VectorXd& FemBody::velocities() const { return impl_->v; }
+const Eigen::VectorXd& FemBody::lumpedMass() const { return impl_->mass; }
+const std::vector<Eigen::Matrix3d>& FemBody::elementRotations() const { return impl_->rotation; }
+const FemBody::Counters& FemBody::counters() const { return impl_->counters; }
+double FemBody::lastStepH() const { return impl_->last_h; }
+std::uint64_t FemBody::restHash() const { return impl_->hash; }
+std::size_t FemBody::factorNonzeros() const { return impl_->chol.factorNonzeros(); }
+
+const std::vector<int>& FemBody::surfaceNodes() const {
+  if (!impl_->surface_ready) {
+    impl_->surface = fem_detail::boundaryNodes(impl_->mesh);
+    impl_->surface_ready = true;
+  }
+  return impl_->surface;
+}
+
+FemStepStats FemBody::freeMotion(double h, const Eigen::VectorXd* external_force_n) {
+  Impl& m = *impl_;
+  FemStepStats stats;
+  if (!(h > 0.0)) throw Error("FemBody::freeMotion: time step must be > 0");
+  const auto t0 = Clock::now();
+  const bool damped = m.material.damping.has_value();
+  const double alpha = damped ? m.material.damping->mass_alpha_per_s : 0.0;
+  const double beta = damped ? m.material.damping->stiffness_beta_s : 0.0;
+
+  // linearise at q + h v: internal force, tangent, and K v for the damping force
+  m.x_lin = m.q + h * m.v;
+  m.evaluate(m.x_lin, &m.f_int, &m.a, h + beta, 1.0 / h + alpha, damped ? &m.v : nullptr,
+             damped ? &m.kv : nullptr, false);
+  m.chol_current = false;
+  m.compliance_scale = h;
+  // p - F(q + h v, v) with F = f_int + B v
+  m.rhs_full = -m.f_int;
+  if (external_force_n) m.rhs_full += *external_force_n;
+  if (m.has_gravity)
+    for (int i = 0; i < m.n; ++i) m.rhs_full.segment<3>(3 * i) += m.mass[3 * i] * m.gravity;
+  if (damped) {
+    m.rhs_full -= alpha * m.mass.cwiseProduct(m.v) + beta * m.kv;
+    ++m.counters.damping_evaluations;
+  }
+  m.reduce(m.rhs_full, m.rhs.data());
+  stats.assembly_s = secondsSince(t0);
+
+  if (m.options.linear == LinearSolverKind::kCholmod) {
+    const auto t1 = Clock::now();
+    ++m.counters.factorisations;
+    if (!m.chol.factorize(m.a)) {
+      stats.ok = false;
+      stats.factorisation_s = secondsSince(t1);
+      return stats;
+    }
+    m.chol_current = true;
+    stats.factorisation_s = secondsSince(t1);
+    const auto t2 = Clock::now();
+    m.chol.solve(m.rhs.data(), m.dv.data(), 1);
+    stats.solve_s = secondsSince(t2);
+  } else {
+    const auto t1 = Clock::now();
+    if (m.options.pcg_preconditioner == PcgPreconditioner::kRestCholesky) m.ensureRestFactor(h);
+    stats.factorisation_s = secondsSince(t1);
+    const auto t2 = Clock::now();
+    const bool ok = m.pcg(m.options.cg_tolerance, m.options.cg_max_iterations, stats);
+    stats.solve_s = secondsSince(t2);
+    if (!ok && !m.dv.allFinite()) {
+      stats.ok = false;
+      return stats;
+    }
+    stats.ok = ok;
+  }
+  if (!m.dv.allFinite()) {
+    stats.ok = false;
+    return stats;
+  }
+  m.dv_prev = m.dv;
+  // v_free = v + dv, q_free = q + h v_free (free DOFs only)
+  for (int i = 0; i < m.n; ++i) {
+    const int d = m.dof_base[i];
+    if (d < 0) continue;
+    m.v.segment<3>(3 * i) += m.dv.segment<3>(d);
+    m.q.segment<3>(3 * i) += h * m.v.segment<3>(3 * i);
+  }
+  m.last_h = h;
+  return stats;
+}
+
+FemStepStats FemBody::solveStatic(const Eigen::VectorXd* external_force_n, int max_iterations,
+                                  double tol_n) {
+  Impl& m = *impl_;
+  FemStepStats stats;
+  m.v.setZero();
+  if (!m.chol.analyzed()) m.chol.analyze(m.a);
+  for (int it = 0; it < max_iterations; ++it) {
+    const auto t0 = Clock::now();
+    m.evaluate(m.q, &m.f_int, &m.a, 1.0, 0.0, nullptr, nullptr, false);
+    m.chol_current = false;
+    m.compliance_scale = 1.0;
+    m.rhs_full = -m.f_int;
+    if (external_force_n) m.rhs_full += *external_force_n;
+    if (m.has_gravity)
+      for (int i = 0; i < m.n; ++i) m.rhs_full.segment<3>(3 * i) += m.mass[3 * i] * m.gravity;
+    m.reduce(m.rhs_full, m.rhs.data());
+    stats.assembly_s = secondsSince(t0);
+    if (m.rhs.norm() <= tol_n) break;
+    const auto t1 = Clock::now();
+    ++m.counters.factorisations;
+    if (!m.chol.factorize(m.a)) {
+      stats.ok = false;
+      return stats;
+    }
+    m.chol_current = true;
+    stats.factorisation_s = secondsSince(t1);
+    const auto t2 = Clock::now();
+    m.chol.solve(m.rhs.data(), m.dv.data(), 1);
+    stats.solve_s = secondsSince(t2);
+    for (int i = 0; i < m.n; ++i)
+      if (m.dof_base[i] >= 0) m.q.segment<3>(3 * i) += m.dv.segment<3>(m.dof_base[i]);
+    if (!m.corotational) break;  // linear: one Newton step is exact
+  }
+  return stats;
+}
+
+void FemBody::elasticForce(const Eigen::VectorXd& q, Eigen::VectorXd& force_out) {
+  impl_->evaluate(q, &force_out, nullptr, 0.0, 0.0, nullptr, nullptr, false);
+  force_out = -force_out;
+}
+
+void FemBody::solveCompliance(const Eigen::VectorXd& r, Eigen::VectorXd& x) const {
+  Impl& m = *impl_;
+  m.ensureCurrentFactor();
+  Eigen::VectorXd rr(m.n_free), xr(m.n_free);
+  m.reduce(r, rr.data());
+  m.chol.solve(rr.data(), xr.data(), 1);
+  x.resize(3 * m.n);
+  m.expand(xr.data(), m.compliance_scale, x.data());
+}
+
+void FemBody::solveComplianceBatch(const Eigen::MatrixXd& r, Eigen::MatrixXd& x) const {
+  Impl& m = *impl_;
+  m.ensureCurrentFactor();
+  const int k = static_cast<int>(r.cols());
+  Eigen::MatrixXd rr(m.n_free, k);
+  for (int c = 0; c < k; ++c) m.reduce(r.col(c), rr.col(c).data());
+  m.chol.solve(rr.data(), rr.data(), k);
+  x.resize(3 * m.n, k);
+  for (int c = 0; c < k; ++c) m.expand(rr.col(c).data(), m.compliance_scale, x.col(c).data());
+}
+
+void FemBody::solveRestCompliance(double h, const Eigen::VectorXd& r, Eigen::VectorXd& x) {
+  Impl& m = *impl_;
+  m.ensureRestFactor(h);
+  Eigen::VectorXd rr(m.n_free), xr(m.n_free);
+  m.reduce(r, rr.data());
+  m.chol_rest.solve(rr.data(), xr.data(), 1);
+  x.resize(3 * m.n);
+  m.expand(xr.data(), h, x.data());
+}
+
+void FemBody::solveRestComplianceBatch(double h, const Eigen::MatrixXd& r, Eigen::MatrixXd& x) {
+  Impl& m = *impl_;
+  m.ensureRestFactor(h);
+  const int k = static_cast<int>(r.cols());
+  Eigen::MatrixXd rr(m.n_free, k);
+  for (int c = 0; c < k; ++c) m.reduce(r.col(c), rr.col(c).data());
+  m.chol_rest.solve(rr.data(), rr.data(), k);
+  x.resize(3 * m.n, k);
+  for (int c = 0; c < k; ++c) m.expand(rr.col(c).data(), h, x.col(c).data());
+}
+
+void FemBody::nodeRotations(std::vector<Eigen::Matrix3d>& out) const {
+  Impl& m = *impl_;
+  out.assign(m.n, Eigen::Matrix3d::Identity());
+  if (!m.corotational) return;
+  std::vector<Eigen::Matrix3d> acc(m.n, Eigen::Matrix3d::Zero());
+  for (int e = 0; e < m.mesh.tetCount(); ++e) {
+    const Eigen::Matrix3d r = fem_detail::polarRotation(m.elementF(e, m.q));
+    for (int k = 0; k < 4; ++k) acc[m.mesh.tets[e][k]] += m.volume[e] * r;
+  }
+  m.counters.rotation_extractions += m.mesh.tetCount();
+  for (int i = 0; i < m.n; ++i)
+    if (acc[i].squaredNorm() > 0.0) out[i] = fem_detail::polarRotation(acc[i]);
+}
+
+void FemBody::stresses(std::vector<Eigen::Matrix3d>& out) const {
+  const Impl& m = *impl_;
+  out.resize(m.mesh.tetCount());
+  for (int e = 0; e < m.mesh.tetCount(); ++e) {
+    const Eigen::Matrix3d f = m.elementF(e, m.q);
+    const Eigen::Matrix3d r =
+        m.corotational ? fem_detail::polarRotation(f) : Eigen::Matrix3d::Identity();
+    const Eigen::Matrix3d fl = r.transpose() * f;
+    const Eigen::Matrix3d s =
+        m.sigma(0.5 * (fl + fl.transpose()) - Eigen::Matrix3d::Identity());
+    out[e] = r * s * r.transpose();
+  }
+}
+
+void FemBody::vonMises(Eigen::VectorXd& out) const {
+  std::vector<Eigen::Matrix3d> s;
+  stresses(s);
+  out.resize(static_cast<Eigen::Index>(s.size()));
+  for (std::size_t e = 0; e < s.size(); ++e) {
+    const Eigen::Matrix3d dev = s[e] - s[e].trace() / 3.0 * Eigen::Matrix3d::Identity();
+    out[static_cast<Eigen::Index>(e)] = std::sqrt(1.5 * dev.squaredNorm());
+  }
+}
+
+double FemBody::kineticEnergy() const {
+  return 0.5 * impl_->v.dot(impl_->mass.cwiseProduct(impl_->v));
+}
+
+double FemBody::elasticEnergy() const {
+  const Impl& m = *impl_;
+  double energy = 0.0;
+  for (int e = 0; e < m.mesh.tetCount(); ++e) {
+    const Eigen::Matrix3d f = m.elementF(e, m.q);
+    const Eigen::Matrix3d fl =
+        m.corotational ? Eigen::Matrix3d(fem_detail::polarRotation(f).transpose() * f) : f;
+    const Eigen::Matrix3d eps = 0.5 * (fl + fl.transpose()) - Eigen::Matrix3d::Identity();
+    energy += m.volume[e] * (m.mu * eps.squaredNorm() + 0.5 * m.lambda * eps.trace() * eps.trace());
+  }
+  return energy;
+}
+
+double FemBody::gravityEnergy() const {
+  const Impl& m = *impl_;
+  if (!m.has_gravity) return 0.0;
+  double energy = 0.0;
+  for (int i = 0; i < m.n; ++i) energy -= m.mass[3 * i] * m.gravity.dot(m.q.segment<3>(3 * i));
+  return energy;
+}
+
+// ---- free functions ----
+
+void transformMesh(TetMesh& mesh, double scale, const Eigen::Vector3d& rotation_deg,
+                   const Eigen::Vector3d& translation_m) {
+  const double k = M_PI / 180.0;
+  const Eigen::Matrix3d r =
+      (Eigen::AngleAxisd(rotation_deg.z() * k, Eigen::Vector3d::UnitZ()) *
+       Eigen::AngleAxisd(rotation_deg.y() * k, Eigen::Vector3d::UnitY()) *
+       Eigen::AngleAxisd(rotation_deg.x() * k, Eigen::Vector3d::UnitX()))
+          .toRotationMatrix();
+  mesh.nodes = ((r * (scale * mesh.nodes)).colwise() + translation_m).eval();
+}
+
+std::vector<int> nodesInBoxes(const TetMesh& mesh, const std::vector<BoxSpec>& boxes) {
+  std::vector<int> out;
+  for (int i = 0; i < mesh.nodeCount(); ++i) {
+    const Eigen::Vector3d p = mesh.nodes.col(i);
+    for (const auto& b : boxes)
+      if ((p.array() >= b.min_m.array()).all() && (p.array() <= b.max_m.array()).all()) {
+        out.push_back(i);
+        break;
+      }
+  }
+  return out;
+}
+
+}  // namespace tactus::sim

@@ -1,0 +1,158 @@
+#include "fem_internal.h"
+
+#include <Eigen/LU>
+#include <Eigen/SVD>
+#include <algorithm>
+#include <array>
+#include <cstring>
+
+#include "tactus/shared/error.h"
+
+namespace tactus::sim::fem_detail {
+
+Eigen::Matrix3d polarRotation(const Eigen::Matrix3d& F) {
+  const double scale = F.norm();
+  const double det = F.determinant();
+  // fast path: scaled Newton iteration X <- (g X + X^-T / g) / 2 (Higham), converges
+  // quadratically to the polar factor when det F > 0 and F is not near-singular
+  if (scale > 0.0 && det > 1e-3 * scale * scale * scale) {
+    Eigen::Matrix3d x = F;
+    for (int it = 0; it < 30; ++it) {
+      const Eigen::Matrix3d x_inv_t = x.inverse().transpose();
+      double g = 1.0;
+      if (it < 6) g = std::sqrt(std::sqrt(x_inv_t.squaredNorm() / x.squaredNorm()));
+      const Eigen::Matrix3d next = 0.5 * (g * x + x_inv_t / g);
+      const double change = (next - x).squaredNorm();
+      x = next;
+      if (change < 1e-26) return x;
+    }
+  }
+  // robust path: SVD with sign correction on the smallest singular value's vector
+  Eigen::JacobiSVD<Eigen::Matrix3d> svd(F, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Eigen::Matrix3d u = svd.matrixU();
+  const Eigen::Matrix3d& v = svd.matrixV();
+  if ((u * v.transpose()).determinant() < 0.0) u.col(2) *= -1.0;  // singular values descend
+  return u * v.transpose();
+}
+
+// ---- CHOLMOD ----
+
+CholmodSolver::CholmodSolver() {
+  cholmod_start(&common_);
+  common_.print = 0;
+  common_.error_handler = nullptr;
+}
+
+CholmodSolver::~CholmodSolver() {
+  if (factor_) cholmod_free_factor(&factor_, &common_);
+  if (x_) cholmod_free_dense(&x_, &common_);
+  if (y_) cholmod_free_dense(&y_, &common_);
+  if (e_) cholmod_free_dense(&e_, &common_);
+  cholmod_finish(&common_);
+}
+
+cholmod_sparse CholmodSolver::view(Sparse& lower) const {
+  cholmod_sparse s{};
+  s.nrow = static_cast<std::size_t>(lower.rows());
+  s.ncol = static_cast<std::size_t>(lower.cols());
+  s.nzmax = static_cast<std::size_t>(lower.nonZeros());
+  s.p = lower.outerIndexPtr();
+  s.i = lower.innerIndexPtr();
+  s.nz = nullptr;
+  s.x = lower.valuePtr();
+  s.z = nullptr;
+  s.stype = -1;  // lower triangle holds the symmetric matrix
+  s.itype = CHOLMOD_INT;
+  s.xtype = CHOLMOD_REAL;
+  s.dtype = CHOLMOD_DOUBLE;
+  s.sorted = 1;
+  s.packed = 1;
+  return s;
+}
+
+void CholmodSolver::analyze(Sparse& lower) {
+  if (!lower.isCompressed()) lower.makeCompressed();
+  if (factor_) cholmod_free_factor(&factor_, &common_);
+  cholmod_sparse a = view(lower);
+  factor_ = cholmod_analyze(&a, &common_);
+  factorized_ = false;
+  if (!factor_ || common_.status < CHOLMOD_OK) {
+    throw NumericalError("CHOLMOD symbolic analysis failed (status " +
+                         std::to_string(common_.status) + ") for a system of " +
+                         std::to_string(lower.rows()) + " unknowns");
+  }
+}
+
+bool CholmodSolver::factorize(Sparse& lower) {
+  cholmod_sparse a = view(lower);
+  const int ok = cholmod_factorize(&a, factor_, &common_);
+  factorized_ = ok && common_.status == CHOLMOD_OK && factor_->minor == factor_->n;
+  return factorized_;
+}
+
+void CholmodSolver::solve(const double* b, double* x, int ncols) {
+  const auto n = factor_->n;
+  cholmod_dense bd{};
+  bd.nrow = n;
+  bd.ncol = static_cast<std::size_t>(ncols);
+  bd.nzmax = n * bd.ncol;
+  bd.d = n;
+  bd.x = const_cast<double*>(b);
+  bd.z = nullptr;
+  bd.xtype = CHOLMOD_REAL;
+  bd.dtype = CHOLMOD_DOUBLE;
+  cholmod_solve2(CHOLMOD_A, factor_, &bd, nullptr, &x_, nullptr, &y_, &e_, &common_);
+  if (!x_) throw NumericalError("CHOLMOD solve failed (out of memory?)");
+  std::memcpy(x, x_->x, sizeof(double) * n * bd.ncol);
+}
+
+std::size_t CholmodSolver::factorNonzeros() const {
+  if (!factor_) return 0;
+  if (factor_->is_super) {
+    // supernodal: count the stored values
+    return factor_->xsize;
+  }
+  return factor_->nzmax;
+}
+
+// ---- boundary ----
+
+std::vector<int> boundaryNodes(const TetMesh& mesh) {
+  struct Face {
+    std::array<int, 3> key;
+    bool operator<(const Face& o) const { return key < o.key; }
+    bool operator==(const Face& o) const { return key == o.key; }
+  };
+  static constexpr int kFaces[4][3] = {{1, 2, 3}, {0, 3, 2}, {0, 1, 3}, {0, 2, 1}};
+  std::vector<Face> faces;
+  faces.reserve(mesh.tets.size() * 4);
+  for (const auto& t : mesh.tets)
+    for (const auto& f : kFaces) {
+      Face face{{t[f[0]], t[f[1]], t[f[2]]}};
+      std::sort(face.key.begin(), face.key.end());
+      faces.push_back(face);
+    }
+  std::sort(faces.begin(), faces.end());
+  std::vector<int> nodes;
+  for (std::size_t i = 0; i < faces.size();) {
+    std::size_t j = i + 1;
+    while (j < faces.size() && faces[j] == faces[i]) ++j;
+    if (j - i == 1) nodes.insert(nodes.end(), faces[i].key.begin(), faces[i].key.end());
+    i = j;
+  }
+  std::sort(nodes.begin(), nodes.end());
+  nodes.erase(std::unique(nodes.begin(), nodes.end()), nodes.end());
+  return nodes;
+}
+
+std::uint64_t fnv1a(const void* data, std::size_t bytes, std::uint64_t seed) {
+  const auto* p = static_cast<const unsigned char*>(data);
+  std::uint64_t h = seed;
+  for (std::size_t i = 0; i < bytes; ++i) {
+    h ^= p[i];
+    h *= 0x100000001b3ull;
+  }
+  return h;
+}
+
+}  // namespace tactus::sim::fem_detail

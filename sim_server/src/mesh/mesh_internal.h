@@ -1,0 +1,77 @@
+#pragma once
+// Private helpers shared by the mesh readers: a raw (file-id) mesh every reader fills, the
+// validation that turns it into a TetMesh, a line-aware text cursor and number parsing.
+
+#include <array>
+#include <cstdint>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "tactus/sim/mesh.h"
+
+namespace tactus::sim::detail {
+
+/// What a reader collected, before ids are resolved and tets are checked.
+struct RawMesh {
+  std::string format;                           ///< MeshReport::format
+  std::string element_word = "element";         ///< "element" (gmsh) or "cell" (VTK) in messages
+  std::string node_word = "node";               ///< "node" (gmsh) or "point" (VTK) in messages
+  std::vector<std::int64_t> node_ids;           ///< file ids, file order
+  std::vector<double> coords;                   ///< x y z per node
+  std::vector<int> node_lines;                  ///< line of each node (for messages)
+  std::vector<std::array<std::int64_t, 4>> tets;  ///< file node ids
+  std::vector<std::int64_t> tet_ids;            ///< file element ids
+  std::vector<int> tet_lines;                   ///< line of each tet
+  int ignored_elements = 0;
+  int last_line = 1;                            ///< where "no tetrahedra" is reported
+};
+
+/// Throws MeshError "name:line: message".
+[[noreturn]] void fail(const std::string& name, int line, const std::string& message);
+
+/// Resolves ids, drops unreferenced nodes, rejects degenerate tets and flips inverted ones.
+TetMesh finalizeMesh(RawMesh&& raw, const std::string& name, MeshReport* report);
+
+/// Parses a whole token as a number; false on any trailing garbage, overflow or empty input.
+bool parseDouble(std::string_view token, double* out);
+bool parseInt(std::string_view token, std::int64_t* out);
+
+/// Splits a line into whitespace-separated tokens (views into the line).
+void splitTokens(std::string_view line, std::vector<std::string_view>* tokens);
+
+/// Readers, one per format. `content` is the whole file.
+void readGmsh(const std::string& content, const std::string& name, RawMesh* raw);
+void readVtkLegacy(const std::string& content, const std::string& name, RawMesh* raw);
+void readVtu(const std::string& content, const std::string& name, RawMesh* raw);
+
+/// A cursor over text lines with 1-based line numbers.
+class LineCursor {
+ public:
+  explicit LineCursor(std::string_view text) : text_(text) {}
+  /// Next line (without the end-of-line characters); false at end of input.
+  bool next(std::string_view* line) {
+    if (pos_ >= text_.size()) return false;
+    const std::size_t end = text_.find('\n', pos_);
+    const std::size_t stop = end == std::string_view::npos ? text_.size() : end;
+    std::string_view l = text_.substr(pos_, stop - pos_);
+    if (!l.empty() && l.back() == '\r') l.remove_suffix(1);
+    pos_ = end == std::string_view::npos ? text_.size() : end + 1;
+    ++line_;
+    *line = l;
+    return true;
+  }
+  /// Line number of the line last returned by next() (0 before the first call).
+  int line() const { return line_; }
+  bool atEnd() const { return pos_ >= text_.size(); }
+
+ private:
+  std::string_view text_;
+  std::size_t pos_ = 0;
+  int line_ = 0;
+};
+
+/// 1-based line number of byte offset `pos` in `text`.
+int lineOf(std::string_view text, std::size_t pos);
+
+}  // namespace tactus::sim::detail

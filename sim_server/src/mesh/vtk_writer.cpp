@@ -1,0 +1,132 @@
+// VTK output: ASCII .vtu files and ParaView .pvd collections.
+
+#include <spdlog/fmt/fmt.h>
+
+#include <charconv>
+#include <fstream>
+#include <string>
+
+#include "tactus/shared/error.h"
+#include "tactus/sim/mesh.h"
+
+namespace tactus::sim {
+namespace {
+
+// Shortest text that reads back to the same double.
+void appendDouble(std::string* out, double v) {
+  char buf[32];
+  auto [ptr, ec] = std::to_chars(buf, buf + sizeof(buf), v);
+  (void)ec;
+  out->append(buf, ptr);
+}
+
+void writeFile(const std::filesystem::path& path, const std::string& text) {
+  std::ofstream out(path, std::ios::binary | std::ios::trunc);
+  if (!out) {
+    throw Error(fmt::format("{}: cannot open for writing (does the folder exist?)",
+                            path.string()));
+  }
+  out << text;
+  out.close();
+  if (!out) throw Error(fmt::format("{}: write failed (disk full?)", path.string()));
+}
+
+std::string xmlEscape(const std::string& s) {
+  std::string out;
+  for (char c : s) {
+    switch (c) {
+      case '&': out += "&amp;"; break;
+      case '<': out += "&lt;"; break;
+      case '>': out += "&gt;"; break;
+      case '"': out += "&quot;"; break;
+      default: out += c;
+    }
+  }
+  return out;
+}
+
+}  // namespace
+
+void writeVtu(const std::filesystem::path& path, const TetMesh& mesh,
+              const Eigen::Matrix3Xd& positions, const Eigen::Matrix3Xd& displacement,
+              const Eigen::VectorXd& von_mises) {
+  const Eigen::Index n = mesh.nodes.cols();
+  const auto m = static_cast<Eigen::Index>(mesh.tets.size());
+  if (positions.cols() != n) {
+    throw Error(fmt::format("{}: writeVtu got {} positions for {} nodes", path.string(),
+                            positions.cols(), n));
+  }
+  if (displacement.cols() != 0 && displacement.cols() != n) {
+    throw Error(fmt::format("{}: writeVtu got {} displacements for {} nodes", path.string(),
+                            displacement.cols(), n));
+  }
+  if (von_mises.size() != 0 && von_mises.size() != m) {
+    throw Error(fmt::format("{}: writeVtu got {} von Mises values for {} tets", path.string(),
+                            von_mises.size(), m));
+  }
+  std::string s;
+  s.reserve(static_cast<std::size_t>(n * 80 + m * 40 + 1024));
+  s += "<?xml version=\"1.0\"?>\n";
+  s += "<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" byte_order=\"LittleEndian\" "
+       "header_type=\"UInt32\">\n";
+  s += "<UnstructuredGrid>\n";
+  s += fmt::format("<Piece NumberOfPoints=\"{}\" NumberOfCells=\"{}\">\n", n, m);
+  // points
+  s += "<Points>\n<DataArray type=\"Float64\" NumberOfComponents=\"3\" format=\"ascii\">\n";
+  for (Eigen::Index i = 0; i < n; ++i) {
+    for (int k = 0; k < 3; ++k) {
+      appendDouble(&s, positions(k, i));
+      s += k < 2 ? ' ' : '\n';
+    }
+  }
+  s += "</DataArray>\n</Points>\n";
+  // cells
+  s += "<Cells>\n<DataArray type=\"Int32\" Name=\"connectivity\" format=\"ascii\">\n";
+  for (const auto& t : mesh.tets) s += fmt::format("{} {} {} {}\n", t[0], t[1], t[2], t[3]);
+  s += "</DataArray>\n<DataArray type=\"Int32\" Name=\"offsets\" format=\"ascii\">\n";
+  for (Eigen::Index c = 0; c < m; ++c) s += fmt::format("{}\n", 4 * (c + 1));
+  s += "</DataArray>\n<DataArray type=\"UInt8\" Name=\"types\" format=\"ascii\">\n";
+  for (Eigen::Index c = 0; c < m; ++c) s += "10\n";
+  s += "</DataArray>\n</Cells>\n";
+  if (displacement.cols() == n && n > 0) {
+    s += "<PointData Vectors=\"displacement\">\n<DataArray type=\"Float64\" "
+         "Name=\"displacement\" NumberOfComponents=\"3\" format=\"ascii\">\n";
+    for (Eigen::Index i = 0; i < n; ++i) {
+      for (int k = 0; k < 3; ++k) {
+        appendDouble(&s, displacement(k, i));
+        s += k < 2 ? ' ' : '\n';
+      }
+    }
+    s += "</DataArray>\n</PointData>\n";
+  }
+  if (von_mises.size() == m && m > 0) {
+    s += "<CellData Scalars=\"von_mises\">\n<DataArray type=\"Float64\" Name=\"von_mises\" "
+         "format=\"ascii\">\n";
+    for (Eigen::Index c = 0; c < m; ++c) {
+      appendDouble(&s, von_mises(c));
+      s += '\n';
+    }
+    s += "</DataArray>\n</CellData>\n";
+  }
+  s += "</Piece>\n</UnstructuredGrid>\n</VTKFile>\n";
+  writeFile(path, s);
+}
+
+void writePvd(const std::filesystem::path& path, const std::vector<std::string>& files,
+              const std::vector<double>& times_s) {
+  if (files.size() != times_s.size()) {
+    throw Error(fmt::format("{}: writePvd got {} files for {} times", path.string(), files.size(),
+                            times_s.size()));
+  }
+  std::string s = "<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\">\n"
+                  "<Collection>\n";
+  for (std::size_t i = 0; i < files.size(); ++i) {
+    s += "<DataSet timestep=\"";
+    appendDouble(&s, times_s[i]);
+    s += fmt::format("\" group=\"\" part=\"0\" file=\"{}\"/>\n", xmlEscape(files[i]));
+  }
+  s += "</Collection>\n</VTKFile>\n";
+  writeFile(path, s);
+}
+
+}  // namespace tactus::sim

@@ -1,0 +1,127 @@
+// Segment publishing for the haptic process.
+#include "haptic_link.h"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <cmath>
+
+namespace tactus::sim {
+
+HapticLink::HapticLink(const std::string& name, const SceneSpec& spec)
+    : segment_(shared::Segment::create(
+          name, shared::SegmentCapacity::forContacts(spec.solver.max_contacts,
+                                                     spec.instrument.friction_mu > 0.0))),
+      publisher_(segment_.snapshotPublisher()),
+      device_(segment_.deviceReader()),
+      watchdog_ns_(static_cast<std::int64_t>(spec.haptics.watchdog_ms * 1e6)),
+      max_opening_rad_(spec.instrument.max_opening_rad > 0.0 ? spec.instrument.max_opening_rad
+                                                             : 1.0) {
+  segment_.beat(shared::Side::kSim);
+  spdlog::info("segment '{}' created ({:.1f} MiB, up to {} contacts / {} rows)", name,
+               static_cast<double>(segment_.sizeBytes()) / (1024.0 * 1024.0),
+               segment_.capacity().max_contacts, segment_.capacity().max_rows);
+}
+
+HapticLink::~HapticLink() {
+  // tell the haptic side to fade out now rather than after its watchdog
+  if (publisher_.attached()) {
+    auto slot = publisher_.slot();
+    slot.header().flags = shared::kSnapshotShuttingDown;
+    slot.setSize(0, 0);
+    publisher_.publish();
+  }
+}
+
+bool HapticLink::deviceTarget(DeviceTarget& target) {
+  const shared::DeviceSample& s = device_.latest();
+  const std::int64_t age = shared::monotonicNs() - s.t_ns;
+  const bool fresh = s.seq != 0 && age < watchdog_ns_ && (s.status & shared::kDeviceFault) == 0;
+  if (fresh != device_active_) {
+    spdlog::info(fresh ? "device samples arriving: the instrument follows the device"
+                       : "no fresh device sample: the instrument follows the scene's script");
+    device_active_ = fresh;
+  }
+  if (!fresh) return false;
+  const bool finite = std::all_of(s.pos_m.begin(), s.pos_m.end(), [](double x) { return std::isfinite(x); }) &&
+                      std::all_of(s.quat_wxyz.begin(), s.quat_wxyz.end(), [](double x) { return std::isfinite(x); });
+  if (!finite) return false;
+  target.pose.pos_m = Eigen::Vector3d(s.pos_m[0], s.pos_m[1], s.pos_m[2]);
+  target.pose.rot = Eigen::Quaterniond(s.quat_wxyz[0], s.quat_wxyz[1], s.quat_wxyz[2], s.quat_wxyz[3]);
+  if (target.pose.rot.norm() < 1e-9) target.pose.rot = Eigen::Quaterniond::Identity();
+  target.pose.rot.normalize();
+  for (int i = 0; i < 3; ++i) {
+    target.twist[i] = std::isfinite(s.vel_mps[i]) ? s.vel_mps[i] : 0.0;
+    target.twist[3 + i] = std::isfinite(s.angvel_radps[i]) ? s.angvel_radps[i] : 0.0;
+  }
+  // the device's gripper angle maps onto the jaws' opening range
+  const double opening = std::isfinite(s.gripper_rad) ? s.gripper_rad / max_opening_rad_ : 1.0;
+  target.gripper_opening = std::clamp(opening, 0.0, 1.0);
+  device_seq_ = s.seq;
+  ++samples_used_;
+  return true;
+}
+
+void HapticLink::publish(const Simulation& sim) {
+  const ContactProblemData& p = sim.lastProblem();
+  auto slot = publisher_.slot();
+  auto& hdr = slot.header();
+  int contacts = p.contacts;
+  int rows = p.rows;
+  if (!slot.setSize(rows, contacts)) {
+    // cannot happen with the scene's capacity; publish an empty problem rather than a wrong one
+    ++truncated_;
+    contacts = 0;
+    rows = 0;
+    slot.setSize(0, 0);
+  }
+  hdr.seq = ++published_;
+  hdr.t_ns = shared::monotonicNs();
+  hdr.step = static_cast<std::uint64_t>(sim.stepIndex());
+  hdr.h_s = sim.spec().time_step_s;
+  hdr.device_seq = device_seq_;
+  hdr.solver_sweeps = 0;
+  hdr.solver_error = 0.0;
+  hdr.flags = shared::kSnapshotValid | shared::kSnapshotHasJacobian;
+  auto put_pose = [](shared::PoseSample& out, const shared::Pose& pose, double gripper) {
+    for (int i = 0; i < 3; ++i) out.pos_m[i] = pose.pos_m[i];
+    out.quat_wxyz = {pose.rot.w(), pose.rot.x(), pose.rot.y(), pose.rot.z()};
+    out.gripper_rad = gripper;
+  };
+  put_pose(hdr.device_pose, p.device_pose, p.device_gripper * max_opening_rad_);
+  put_pose(hdr.tool_pose, p.tool_pose, p.device_gripper * max_opening_rad_);
+  const int ld = slot.ld();
+  for (int c = 0; c <= contacts; ++c) slot.rowOffset()[c] = p.row_offset[c];
+  for (int c = 0; c < contacts; ++c) {
+    slot.contactId()[c] = p.contact_id[c];
+    slot.mu()[c] = p.mu[c];
+    for (int k = 0; k < 3; ++k) {
+      slot.contactPoint()[3 * c + k] = p.point_m[c][k];
+      slot.contactNormal()[3 * c + k] = p.normal[c][k];
+      slot.contactTangent()[6 * c + k] = p.tangent1[c][k];
+      slot.contactTangent()[6 * c + 3 + k] = p.tangent2[c][k];
+    }
+  }
+  double* W = slot.W();
+  for (int i = 0; i < rows; ++i) {
+    std::copy_n(p.W.data() + static_cast<std::ptrdiff_t>(i) * rows, rows, W + static_cast<std::ptrdiff_t>(i) * ld);
+    slot.deltaFree()[i] = p.delta_free[i];
+    slot.f()[i] = p.f[i];
+    for (int k = 0; k < 6; ++k) slot.J()[6 * i + k] = p.J(i, k);
+  }
+  publisher_.publish();
+  segment_.beat(shared::Side::kSim);
+}
+
+void HapticLink::logStatus() {
+  const std::int64_t beat = segment_.heartbeatNs(shared::Side::kHaptic);
+  if (beat == 0) {
+    spdlog::info("published {} snapshots; no haptic process attached yet", published_);
+    return;
+  }
+  spdlog::info("published {} snapshots; haptic heartbeat {:.1f} ms ago; {} device samples used",
+               published_, 1e-6 * static_cast<double>(shared::monotonicNs() - beat), samples_used_);
+  if (truncated_ > 0) spdlog::warn("{} snapshots exceeded the segment capacity", truncated_);
+}
+
+}  // namespace tactus::sim

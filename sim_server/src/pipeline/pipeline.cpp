@@ -1,0 +1,464 @@
+// The simulation step built from a scene: only the stages the scene calls for exist.
+#include "tactus/sim/pipeline.h"
+
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <unordered_map>
+
+#include "tactus/shared/error.h"
+#include "tactus/sim/collision.h"
+#include "tactus/sim/compliance.h"
+#include "tactus/sim/fem.h"
+#include "tactus/sim/instrument.h"
+#include "tactus/sim/mesh.h"
+
+namespace tactus::sim {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double secondsSince(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+const char* toString(ComplianceKind k) {
+  switch (k) {
+    case ComplianceKind::kExact: return "exact";
+    case ComplianceKind::kWarped: return "warped";
+    case ComplianceKind::kRest: return "rest";
+    case ComplianceKind::kUncoupled: return "uncoupled";
+  }
+  return "?";
+}
+
+bool allFinite(const Eigen::VectorXd& v) { return v.allFinite(); }
+
+}  // namespace
+
+shared::ContactProblemView ContactProblemData::view() const {
+  shared::ContactProblemView v;
+  v.contacts = contacts;
+  v.rows = rows;
+  v.row_offset = row_offset.data();
+  v.W = W.data();
+  v.ld = rows;
+  v.delta_free = delta_free.data();
+  v.mu = mu.data();
+  return v;
+}
+
+/// One deformable object and the stages attached to it.
+struct TissueState {
+  std::string name;
+  TetMesh mesh;
+  SurfaceMesh surface;
+  std::unique_ptr<FemBody> body;
+  std::unique_ptr<TissueCompliance> compliance;   ///< only with an instrument
+  std::unique_ptr<Collision> collision;           ///< only with an instrument
+  ContactRows rows;                               ///< this step's rows on this tissue
+  int row_begin = 0;                              ///< first global row
+  int contact_begin = 0;                          ///< first global contact
+  Eigen::VectorXd dq;                             ///< correction scratch
+};
+
+struct Simulation::Impl {
+  SceneSpec spec;
+  std::vector<TissueState> tissues;
+  std::unique_ptr<Instrument> instrument;
+  DeviceTarget target;
+  double t_s = 0.0;
+  long step = 0;
+  ContactProblemData problem;
+  shared::NsgsWorkspace workspace;
+  shared::NsgsSettings nsgs;
+  std::unordered_map<std::uint64_t, std::array<double, 3>> previous_f;
+  std::vector<Contact> all_contacts;
+  PipelineCounters counters;
+  // VTK output
+  std::vector<std::string> vtk_files;
+  std::vector<double> vtk_times;
+  long frame = 0;
+  Eigen::Matrix<double, 6, 1> last_wrench = Eigen::Matrix<double, 6, 1>::Zero();
+
+  void buildTissues();
+  void solveContacts(StepReport& report);
+};
+
+void Simulation::Impl::buildTissues() {
+  const Eigen::Vector3d* gravity = spec.gravity_mps2 ? &*spec.gravity_mps2 : nullptr;
+  for (const TissueSpec& ts : spec.tissues) {
+    TissueState state;
+    state.name = ts.name;
+    MeshReport mesh_report;
+    state.mesh = loadTetMesh(ts.mesh_path, &mesh_report);
+    transformMesh(state.mesh, ts.scale, ts.rotation_deg, ts.translation_m);
+    std::vector<int> fixed = ts.fixed_nodes;
+    for (int n : fixed) {
+      if (n < 0 || n >= state.mesh.nodeCount()) {
+        throw SceneError(fmt::format("{}: tissue '{}': fixed node {} is not in the mesh ({} nodes)",
+                                     spec.source.string(), ts.name, n, state.mesh.nodeCount()));
+      }
+    }
+    const std::vector<int> boxed = nodesInBoxes(state.mesh, ts.fixed_boxes);
+    fixed.insert(fixed.end(), boxed.begin(), boxed.end());
+    std::sort(fixed.begin(), fixed.end());
+    fixed.erase(std::unique(fixed.begin(), fixed.end()), fixed.end());
+    FemMaterial material;
+    material.law = ts.law;
+    material.young_pa = ts.young_pa;
+    material.poisson = ts.poisson;
+    material.density_kgpm3 = ts.density_kgpm3;
+    material.damping = ts.damping;
+    FemSolverOptions solver;
+    solver.linear = spec.solver.linear;
+    solver.cg_tolerance = spec.solver.cg_tolerance;
+    solver.cg_max_iterations = spec.solver.cg_max_iterations;
+    state.body = std::make_unique<FemBody>(state.mesh, material, fixed, gravity, solver);
+    spdlog::info("tissue '{}': {} nodes, {} tets, {} fixed nodes", ts.name, state.mesh.nodeCount(),
+                 state.mesh.tetCount(), fixed.size());
+    if (spec.instrument.present) {
+      state.surface = extractSurface(state.mesh);
+      ComplianceOptions copt;
+      copt.h_s = spec.time_step_s;
+      copt.cache_dir = ts.compliance_cache_dir;
+      copt.cache_name = ts.name;
+      state.compliance = makeCompliance(ts.compliance, *state.body, copt);
+      spdlog::info("tissue '{}': {} compliance, {:.1f} MiB", ts.name, toString(ts.compliance),
+                   static_cast<double>(state.compliance->memoryBytes()) / (1024.0 * 1024.0));
+      CollisionOptions col;
+      col.alarm_distance_m = spec.instrument.alarm_distance_m;
+      col.contact_distance_m = spec.instrument.contact_distance_m;
+      col.max_contacts = spec.solver.max_contacts;
+      state.collision =
+          std::make_unique<Collision>(state.surface, state.body->positions(), col);
+    }
+    tissues.push_back(std::move(state));
+  }
+}
+
+Simulation::Simulation(const SceneSpec& spec) : impl_(std::make_unique<Impl>()) {
+  Impl& s = *impl_;
+  s.spec = spec;
+  if (!(spec.time_step_s > 0.0)) throw SceneError("time_step must be > 0");
+  s.buildTissues();
+  if (spec.instrument.present) {
+    s.instrument = std::make_unique<Instrument>(spec.instrument);
+    s.target = scriptedTarget(0.0);
+    s.instrument->reset(s.target.pose, s.target.gripper_opening);
+    const int max_rows = (spec.instrument.friction_mu > 0.0 ? 3 : 1) * spec.solver.max_contacts;
+    s.workspace.reserve(max_rows, spec.solver.max_contacts);
+    s.nsgs.tolerance = spec.solver.nsgs_tolerance;
+    s.nsgs.max_sweeps = spec.solver.nsgs_max_sweeps;
+    s.nsgs.sor = spec.solver.nsgs_sor;
+  }
+  s.problem.row_offset.assign(1, 0);
+}
+
+Simulation::~Simulation() = default;
+
+const SceneSpec& Simulation::spec() const { return impl_->spec; }
+
+std::vector<std::string> Simulation::stages() const {
+  const Impl& s = *impl_;
+  std::vector<std::string> out;
+  for (const auto& ts : s.spec.tissues) {
+    std::string effects = ts.law == MaterialLaw::kCorotational ? "corotational" : "linear";
+    effects += ts.damping ? ", Rayleigh damping" : ", no damping";
+    effects += s.spec.gravity_mps2 ? ", gravity" : ", no gravity";
+    effects += s.spec.solver.linear == LinearSolverKind::kCholmod ? ", CHOLMOD" : ", PCG";
+    out.push_back(fmt::format("free motion of tissue '{}' (implicit Euler; {})", ts.name, effects));
+  }
+  if (!s.instrument) {
+    out.push_back("no instrument: no collision, no contact problem");
+  } else {
+    const auto& in = s.spec.instrument;
+    out.push_back(fmt::format("free motion of the {} god object (PD coupling k = {} N/m)",
+                              in.kind == InstrumentKind::kGrasper ? "grasper" : "probe",
+                              in.coupling_k_npm));
+    out.push_back(fmt::format("collision detection (BVH refit, alarm {} mm, at most {} contacts)",
+                              1e3 * in.alarm_distance_m, s.spec.solver.max_contacts));
+    for (const auto& ts : s.spec.tissues) {
+      out.push_back(fmt::format("W = H C H^T with {} compliance of '{}'", toString(ts.compliance),
+                                ts.name));
+    }
+    out.push_back(in.friction_mu > 0.0
+                      ? fmt::format("NSGS with Coulomb friction mu = {} (3 rows per contact)",
+                                    in.friction_mu)
+                      : std::string("NSGS frictionless (1 row per contact)"));
+    out.push_back("constrained motion (tissue and instrument)");
+  }
+  if (s.spec.output.enabled) {
+    out.push_back(fmt::format("VTK output every {} steps into {}", s.spec.output.every_n_steps,
+                              s.spec.output.directory.string()));
+  }
+  return out;
+}
+
+void Simulation::setDeviceTarget(const DeviceTarget& target) { impl_->target = target; }
+
+DeviceTarget Simulation::scriptedTarget(double t_s) const {
+  const InstrumentSpec& in = impl_->spec.instrument;
+  DeviceTarget out;
+  out.pose = toPose(in.initial_pose);
+  out.gripper_opening = 1.0;
+  const auto& keys = in.trajectory;
+  if (keys.empty()) return out;
+  if (t_s <= keys.front().t_s || keys.size() == 1) {
+    out.pose = toPose(keys.front().pose);
+    out.gripper_opening = keys.front().gripper_opening;
+    return out;
+  }
+  if (t_s >= keys.back().t_s) {
+    out.pose = toPose(keys.back().pose);
+    out.gripper_opening = keys.back().gripper_opening;
+    return out;
+  }
+  std::size_t i = 1;
+  while (keys[i].t_s < t_s) ++i;
+  const TrajectoryKey& a = keys[i - 1];
+  const TrajectoryKey& b = keys[i];
+  const double dt = b.t_s - a.t_s;
+  const double u = dt > 0.0 ? (t_s - a.t_s) / dt : 1.0;
+  const shared::Pose pa = toPose(a.pose);
+  const shared::Pose pb = toPose(b.pose);
+  out.pose = shared::interpolate(pa, pb, u);
+  out.gripper_opening = (1.0 - u) * a.gripper_opening + u * b.gripper_opening;
+  if (dt > 0.0) out.twist = shared::poseDifference(pb, pa) / dt;
+  return out;
+}
+
+bool Simulation::hasInstrument() const { return impl_->instrument != nullptr; }
+
+void Simulation::Impl::solveContacts(StepReport& report) {
+  const double h = spec.time_step_s;
+  const double mu = spec.instrument.friction_mu;
+  const shared::Pose& tool_pose = instrument->pose();
+
+  // collision against every tissue, rows per tissue
+  auto t0 = Clock::now();
+  int rows = 0;
+  int contacts = 0;
+  all_contacts.clear();
+  for (TissueState& ts : tissues) {
+    ts.collision->refit(ts.body->positions());
+    const std::vector<Contact>& found = ts.collision->detect(*instrument);
+    report.contacts_dropped += ts.collision->stats().overflow;
+    ++counters.collision_queries;
+    buildContactRows(found, mu, tool_pose.pos_m, ts.rows);
+    ts.row_begin = rows;
+    ts.contact_begin = contacts;
+    rows += ts.rows.rows();
+    contacts += static_cast<int>(found.size());
+    all_contacts.insert(all_contacts.end(), found.begin(), found.end());
+  }
+  // the scene's capacity is per scene: with several tissues keep it globally
+  report.times.collision_s = secondsSince(t0);
+
+  // assemble the problem: W = sum_tissue H C H^T + H_tool C6 H_tool^T
+  t0 = Clock::now();
+  ContactProblemData& p = problem;
+  p.contacts = contacts;
+  p.rows = rows;
+  p.row_offset.assign(1, 0);
+  p.contact_id.resize(contacts);
+  p.mu.assign(contacts, mu);
+  p.point_m.resize(contacts);
+  p.normal.resize(contacts);
+  p.tangent1.resize(contacts);
+  p.tangent2.resize(contacts);
+  p.W.setZero(rows, rows);
+  p.delta_free.resize(rows);
+  p.J.resize(rows, 6);
+  Eigen::Matrix<double, Eigen::Dynamic, 6, Eigen::RowMajor> h_tool(rows, 6);
+  Eigen::MatrixXd w_tissue;
+  for (TissueState& ts : tissues) {
+    const int m = ts.rows.rows();
+    const int nc = static_cast<int>(ts.rows.row_offset.size()) - 1;
+    for (int c = 1; c <= nc; ++c) p.row_offset.push_back(ts.row_begin + ts.rows.row_offset[c]);
+    if (m == 0) continue;
+    w_tissue.setZero(m, m);
+    ts.compliance->addW(ts.rows.tissue, w_tissue);
+    p.W.block(ts.row_begin, ts.row_begin, m, m) = w_tissue;
+    h_tool.middleRows(ts.row_begin, m) = ts.rows.tool;
+    for (int r = 0; r < m; ++r) p.delta_free[ts.row_begin + r] = ts.rows.delta_free[r];
+    ++counters.w_builds;
+  }
+  for (int c = 0; c < contacts; ++c) {
+    p.contact_id[c] = all_contacts[c].id;
+    p.point_m[c] = all_contacts[c].tissue_point_m;
+    p.normal[c] = all_contacts[c].n;
+    p.tangent1[c] = all_contacts[c].t1;
+    p.tangent2[c] = all_contacts[c].t2;
+  }
+  if (rows > 0) {
+    const shared::Matrix6d c6 = instrument->compliance6(h);
+    p.W.noalias() += h_tool * c6 * h_tool.transpose();
+    p.J.noalias() = h_tool * instrument->freeMotionSensitivity(h);
+  }
+  if (mu > 0.0) counters.tangential_rows += rows - contacts;
+  report.contacts = contacts;
+  report.rows = rows;
+  report.times.w_build_s += secondsSince(t0);
+
+  // warm start by contact identity, then NSGS
+  t0 = Clock::now();
+  p.f.setZero(rows);
+  for (int c = 0; c < contacts; ++c) {
+    auto it = previous_f.find(p.contact_id[c]);
+    if (it == previous_f.end()) continue;
+    const int r0 = p.row_offset[c];
+    const int nr = p.row_offset[c + 1] - r0;
+    for (int k = 0; k < nr; ++k) p.f[r0 + k] = it->second[k];
+  }
+  if (rows > 0) {
+    report.nsgs = shared::solveNsgs(p.view(), nsgs, workspace, p.f.data());
+    ++counters.solves;
+    if (report.nsgs.status == shared::NsgsStatus::kNonFinite) p.f.setZero();
+  } else {
+    report.nsgs = shared::NsgsResult{};
+  }
+  previous_f.clear();
+  for (int c = 0; c < contacts; ++c) {
+    const int r0 = p.row_offset[c];
+    const int nr = p.row_offset[c + 1] - r0;
+    std::array<double, 3> fc{0.0, 0.0, 0.0};
+    for (int k = 0; k < nr; ++k) fc[k] = p.f[r0 + k];
+    previous_f.emplace(p.contact_id[c], fc);
+  }
+  report.times.solve_s = secondsSince(t0);
+
+  // constrained motion: tissue dq = C H^T f (per model), tool dx = C6 H_tool^T f
+  t0 = Clock::now();
+  if (rows > 0) {
+    for (TissueState& ts : tissues) {
+      if (ts.rows.rows() == 0) continue;
+      ts.compliance->correction(*ts.body, ts.rows.tissue, p.f.data() + ts.row_begin, ts.dq);
+      ts.body->positions() += ts.dq;
+      ts.body->velocities() += ts.dq / h;
+    }
+    const shared::Vector6d wrench = h_tool.transpose() * p.f;
+    last_wrench = wrench;
+    instrument->applyCorrection(wrench);
+    // linearised gaps after the correction: delta = W f + delta_free
+    Eigen::VectorXd delta = p.W * p.f + p.delta_free;
+    double pen = 0.0;
+    double comp = 0.0;
+    for (int c = 0; c < contacts; ++c) {
+      const int r0 = p.row_offset[c];
+      pen = std::max(pen, -delta[r0]);
+      comp = std::max(comp, std::abs(delta[r0] * p.f[r0]));
+    }
+    report.max_penetration_m = pen;
+    report.complementarity = comp;
+  } else {
+    last_wrench.setZero();
+  }
+  report.times.correction_s = secondsSince(t0);
+}
+
+StepReport Simulation::step() {
+  Impl& s = *impl_;
+  StepReport report;
+  const auto t_step = Clock::now();
+  const double h = s.spec.time_step_s;
+
+  // free motion of every object (no contact forces)
+  auto t0 = Clock::now();
+  for (TissueState& ts : s.tissues) {
+    const FemStepStats st = ts.body->freeMotion(h);
+    if (!st.ok) report.finite = false;
+  }
+  if (s.instrument) {
+    s.instrument->freeMotion(h, s.target.pose, s.target.twist, s.target.gripper_opening);
+    s.problem.device_pose = s.target.pose;
+    s.problem.device_gripper = s.target.gripper_opening;
+  }
+  report.times.free_motion_s = secondsSince(t0);
+
+  if (s.instrument) {
+    t0 = Clock::now();
+    for (TissueState& ts : s.tissues) ts.compliance->update(*ts.body);
+    report.times.w_build_s = secondsSince(t0);
+    s.solveContacts(report);
+    s.problem.tool_pose = s.instrument->pose();
+  }
+
+  s.t_s += h;
+  ++s.step;
+  ++s.counters.steps;
+  s.counters.rotation_extractions = 0;
+  s.counters.damping_evaluations = 0;
+  for (TissueState& ts : s.tissues) {
+    s.counters.rotation_extractions += ts.body->counters().rotation_extractions;
+    s.counters.damping_evaluations += ts.body->counters().damping_evaluations;
+    report.finite = report.finite && allFinite(ts.body->positions()) &&
+                    allFinite(ts.body->velocities());
+  }
+  if (s.instrument) {
+    report.finite = report.finite && s.instrument->pose().pos_m.allFinite() &&
+                    s.instrument->twist().allFinite();
+  }
+  report.times.total_s = secondsSince(t_step);
+  return report;
+}
+
+double Simulation::time() const { return impl_->t_s; }
+long Simulation::stepIndex() const { return impl_->step; }
+int Simulation::tissueCount() const { return static_cast<int>(impl_->tissues.size()); }
+FemBody& Simulation::tissue(int i) { return *impl_->tissues.at(i).body; }
+const FemBody& Simulation::tissue(int i) const { return *impl_->tissues.at(i).body; }
+TissueCompliance* Simulation::compliance(int i) { return impl_->tissues.at(i).compliance.get(); }
+Instrument* Simulation::instrument() { return impl_->instrument.get(); }
+const ContactProblemData& Simulation::lastProblem() const { return impl_->problem; }
+const PipelineCounters& Simulation::counters() const { return impl_->counters; }
+
+double Simulation::totalEnergy() const {
+  double e = 0.0;
+  for (const TissueState& ts : impl_->tissues) {
+    e += ts.body->kineticEnergy() + ts.body->elasticEnergy() + ts.body->gravityEnergy();
+  }
+  if (impl_->instrument) e += impl_->instrument->kineticEnergy();
+  return e;
+}
+
+Eigen::Matrix<double, 6, 1> Simulation::renderedWrench() const {
+  return impl_->instrument ? impl_->instrument->couplingWrench()
+                           : Eigen::Matrix<double, 6, 1>::Zero();
+}
+
+void Simulation::writeOutputIfDue() {
+  Impl& s = *impl_;
+  if (!s.spec.output.enabled) return;
+  if (s.step % std::max(1, s.spec.output.every_n_steps) != 0) return;
+  const std::filesystem::path dir = s.spec.output.directory;
+  std::filesystem::create_directories(dir);
+  for (const TissueState& ts : s.tissues) {
+    const Eigen::VectorXd& q = ts.body->positions();
+    const int n = ts.body->nodeCount();
+    Eigen::Matrix3Xd pos = Eigen::Map<const Eigen::Matrix3Xd>(q.data(), 3, n);
+    Eigen::Matrix3Xd disp =
+        pos - Eigen::Map<const Eigen::Matrix3Xd>(ts.body->restPositions().data(), 3, n);
+    Eigen::VectorXd vm;
+    ts.body->vonMises(vm);
+    const std::string file = fmt::format("{}_{:06d}.vtu", ts.name, s.frame);
+    writeVtu(dir / file, ts.body->mesh(), pos, disp, vm);
+    s.vtk_files.push_back(file);
+    s.vtk_times.push_back(s.t_s);
+  }
+  ++s.frame;
+  ++s.counters.vtk_frames;
+  writePvd(dir / "series.pvd", s.vtk_files, s.vtk_times);
+}
+
+void Simulation::finishOutput() {
+  Impl& s = *impl_;
+  if (!s.spec.output.enabled || s.vtk_files.empty()) return;
+  writePvd(s.spec.output.directory / "series.pvd", s.vtk_files, s.vtk_times);
+  spdlog::info("VTK series: {} ({} frames)", (s.spec.output.directory / "series.pvd").string(),
+               s.frame);
+}
+
+}  // namespace tactus::sim

@@ -1,0 +1,189 @@
+// The simulation daemon's loop and its statistics.
+#include "tactus/sim/runner.h"
+
+#include <spdlog/spdlog.h>
+#include <time.h>
+
+#include <algorithm>
+#include <cmath>
+#include <fmt/format.h>
+#include <sstream>
+
+#include "haptic_link.h"
+#include "tactus/shared/error.h"
+
+namespace tactus::sim {
+namespace {
+
+double percentile(std::vector<double> v, double p) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  const double pos = p * static_cast<double>(v.size() - 1);
+  const auto lo = static_cast<std::size_t>(std::floor(pos));
+  const auto hi = std::min(lo + 1, v.size() - 1);
+  return v[lo] + (pos - static_cast<double>(lo)) * (v[hi] - v[lo]);
+}
+
+StageSummary summarise(const std::string& name, const std::vector<double>& v) {
+  StageSummary s;
+  s.name = name;
+  if (v.empty()) return s;
+  s.median_s = percentile(v, 0.5);
+  s.p90_s = percentile(v, 0.9);
+  s.p99_s = percentile(v, 0.99);
+  s.max_s = *std::max_element(v.begin(), v.end());
+  double sum = 0.0;
+  for (double x : v) sum += x;
+  s.mean_s = sum / static_cast<double>(v.size());
+  return s;
+}
+
+std::int64_t nowNs() {
+  timespec ts{};
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return static_cast<std::int64_t>(ts.tv_sec) * 1000000000LL + ts.tv_nsec;
+}
+
+void sleepUntilNs(std::int64_t t_ns) {
+  timespec ts{};
+  ts.tv_sec = t_ns / 1000000000LL;
+  ts.tv_nsec = t_ns % 1000000000LL;
+  while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
+  }
+}
+
+}  // namespace
+
+void RunStatistics::add(const StepReport& r) {
+  free_motion_.push_back(r.times.free_motion_s);
+  collision_.push_back(r.times.collision_s);
+  w_build_.push_back(r.times.w_build_s);
+  solve_.push_back(r.times.solve_s);
+  correction_.push_back(r.times.correction_s);
+  output_.push_back(r.times.output_s);
+  total_.push_back(r.times.total_s);
+  contacts_.push_back(r.contacts);
+  sweeps_.push_back(r.nsgs.sweeps);
+  max_penetration_m_ = std::max(max_penetration_m_, r.max_penetration_m);
+}
+
+std::vector<StageSummary> RunStatistics::stages() const {
+  return {summarise("free motion", free_motion_), summarise("collision", collision_),
+          summarise("W build", w_build_),         summarise("solve", solve_),
+          summarise("correction", correction_),   summarise("output", output_),
+          summarise("total step", total_)};
+}
+
+double RunStatistics::medianContacts() const { return percentile(contacts_, 0.5); }
+double RunStatistics::medianSweeps() const { return percentile(sweeps_, 0.5); }
+int RunStatistics::maxContacts() const {
+  return contacts_.empty() ? 0 : static_cast<int>(*std::max_element(contacts_.begin(), contacts_.end()));
+}
+
+std::string RunStatistics::table() const {
+  std::string out = fmt::format("{:<12} {:>10} {:>10} {:>10} {:>10}   ({} steps)\n", "stage [ms]",
+                                "median", "p90", "p99", "max", steps());
+  for (const auto& s : stages()) {
+    out += fmt::format("{:<12} {:>10.3f} {:>10.3f} {:>10.3f} {:>10.3f}\n", s.name,
+                       1e3 * s.median_s, 1e3 * s.p90_s, 1e3 * s.p99_s, 1e3 * s.max_s);
+  }
+  out += fmt::format("contacts: median {:.0f}, max {}; NSGS sweeps median {:.0f}; max penetration "
+                     "{:.3g} mm\n",
+                     medianContacts(), maxContacts(), medianSweeps(), 1e3 * max_penetration_m_);
+  return out;
+}
+
+std::string RunStatistics::json(const std::string& scene) const {
+  std::string out = fmt::format("{{\n  \"scene\": \"{}\",\n  \"steps\": {},\n  \"stages_ms\": {{\n",
+                                scene, steps());
+  const auto st = stages();
+  for (std::size_t i = 0; i < st.size(); ++i) {
+    out += fmt::format("    \"{}\": {{\"median\": {:.6f}, \"p90\": {:.6f}, \"p99\": {:.6f}, "
+                       "\"max\": {:.6f}, \"mean\": {:.6f}}}{}\n",
+                       st[i].name, 1e3 * st[i].median_s, 1e3 * st[i].p90_s, 1e3 * st[i].p99_s,
+                       1e3 * st[i].max_s, 1e3 * st[i].mean_s, i + 1 < st.size() ? "," : "");
+  }
+  out += fmt::format("  }},\n  \"contacts_median\": {:.1f},\n  \"contacts_max\": {},\n"
+                     "  \"sweeps_median\": {:.1f},\n  \"max_penetration_mm\": {:.6f}\n}}\n",
+                     medianContacts(), maxContacts(), medianSweeps(), 1e3 * max_penetration_m_);
+  return out;
+}
+
+int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
+  SceneSpec spec = loadScene(options.scene_path);
+  if (!options.output_dir.empty()) {
+    spec.output.enabled = true;
+    spec.output.directory = options.output_dir;
+  }
+  if (options.output_every > 0) spec.output.every_n_steps = options.output_every;
+  const bool offline = options.steps > 0;
+  if (offline || options.no_haptics) spec.haptics.enabled = false;
+
+  Simulation sim(spec);
+  spdlog::info("scene {}: stages:", spec.source.string());
+  for (const auto& s : sim.stages()) spdlog::info("  - {}", s);
+
+  std::unique_ptr<HapticLink> link;
+  if (spec.haptics.enabled && sim.hasInstrument()) {
+    link = std::make_unique<HapticLink>(options.segment, spec);
+  }
+
+  const double h = spec.time_step_s;
+  const double duration = options.duration_s > 0.0 ? options.duration_s : spec.duration_s;
+  RunStatistics stats;
+  const std::int64_t t0 = nowNs();
+  long late_steps = 0;
+  std::int64_t last_report_ns = t0;
+  int exit_code = 0;
+  for (long k = 0; !stop.load(std::memory_order_relaxed); ++k) {
+    if (offline && k >= options.steps) break;
+    if (!offline && duration > 0.0 && sim.time() >= duration - 1e-12) break;
+    // device target: the newest haptic sample when fresh, else the scene's script
+    if (sim.hasInstrument()) {
+      DeviceTarget target = sim.scriptedTarget(sim.time());
+      if (link) link->deviceTarget(target);
+      sim.setDeviceTarget(target);
+    }
+    const StepReport report = sim.step();
+    stats.add(report);
+    if (link) link->publish(sim);
+    sim.writeOutputIfDue();
+    if (!report.finite) {
+      spdlog::error("step {}: the state became non-finite; stopping", k);
+      exit_code = 2;
+      break;
+    }
+    if (offline) continue;
+    // pace to real time; report when the step cannot keep up
+    const std::int64_t deadline = t0 + static_cast<std::int64_t>(std::llround((k + 1) * h * 1e9));
+    const std::int64_t now = nowNs();
+    if (now > deadline) {
+      ++late_steps;
+    } else {
+      sleepUntilNs(deadline);
+    }
+    if (now - last_report_ns > 5'000'000'000LL) {
+      last_report_ns = now;
+      if (late_steps > 0) {
+        spdlog::warn("cannot keep up with real time: {} of the last steps overran h = {} ms",
+                     late_steps, 1e3 * h);
+        late_steps = 0;
+      }
+      if (link) link->logStatus();
+    }
+  }
+  sim.finishOutput();
+  const double wall_s = 1e-9 * static_cast<double>(nowNs() - t0);
+  spdlog::info("{} steps, simulated {:.3f} s in {:.3f} s wall", stats.steps(), sim.time(), wall_s);
+  std::printf("%s", stats.table().c_str());
+  if (!options.stats_json.empty()) {
+    std::FILE* f = std::fopen(options.stats_json.c_str(), "w");
+    if (f == nullptr) throw Error("cannot write " + options.stats_json);
+    const std::string js = stats.json(spec.source.string());
+    std::fwrite(js.data(), 1, js.size(), f);
+    std::fclose(f);
+  }
+  return exit_code;
+}
+
+}  // namespace tactus::sim

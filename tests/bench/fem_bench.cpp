@@ -1,0 +1,200 @@
+// FEM free motion (one implicit Euler step) on the livers, CHOLMOD vs PCG, with the per-stage
+// breakdown as counters; warped-compliance precompute and W build for 450 rows.
+//   build-*/tests/bench/fem_bench --benchmark_filter=Liver2
+#include <benchmark/benchmark.h>
+
+#include <Eigen/Geometry>
+#include <filesystem>
+#include <map>
+#include <memory>
+#include <random>
+
+#include "tactus/sim/compliance.h"
+#include "tactus/sim/fem.h"
+#include "tactus/sim/mesh_gen.h"
+
+namespace tactus::sim {
+namespace {
+
+const double kH = 0.01;
+
+TetMesh loadLiver(const char* name) {
+  static std::map<std::string, TetMesh> cache;
+  auto it = cache.find(name);
+  if (it != cache.end()) return it->second;
+  TetMesh mesh = loadTetMesh(std::filesystem::path(TACTUS_TEST_DATA_DIR) / "meshes" / name);
+  transformMesh(mesh, 0.1, Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero());  // dm -> m
+  cache[name] = mesh;
+  return mesh;
+}
+
+std::vector<int> lowestX(const TetMesh& mesh, int count) {
+  std::vector<std::pair<double, int>> by_x;
+  for (int i = 0; i < mesh.nodeCount(); ++i) by_x.emplace_back(mesh.nodes(0, i), i);
+  std::sort(by_x.begin(), by_x.end());
+  std::vector<int> out;
+  for (int i = 0; i < count && i < mesh.nodeCount(); ++i) out.push_back(by_x[i].second);
+  return out;
+}
+
+std::unique_ptr<FemBody> makeBody(const TetMesh& mesh, LinearSolverKind solver,
+                                  PcgPreconditioner pre, int fixed) {
+  FemMaterial mat;
+  mat.law = MaterialLaw::kCorotational;
+  mat.young_pa = 3000.0;
+  mat.poisson = 0.45;
+  mat.density_kgpm3 = 1000.0;
+  mat.damping = RayleighSpec{0.1, 0.01};
+  FemSolverOptions opt;
+  opt.linear = solver;
+  opt.pcg_preconditioner = pre;
+  opt.cg_tolerance = 1e-6;
+  opt.cg_max_iterations = 1000;
+  static const Eigen::Vector3d gravity(0, 0, -9.81);
+  return std::make_unique<FemBody>(mesh, mat, lowestX(mesh, fixed), &gravity, opt);
+}
+
+void runStep(benchmark::State& state, const TetMesh& mesh, LinearSolverKind solver,
+             PcgPreconditioner pre = PcgPreconditioner::kJacobi) {
+  auto body = makeBody(mesh, solver, pre, std::max(4, mesh.nodeCount() / 30));
+  for (int s = 0; s < 5; ++s) body->freeMotion(kH);  // sagging, rotated state
+  double assembly = 0, factor = 0, solve = 0, iters = 0;
+  for (auto _ : state) {
+    const FemStepStats st = body->freeMotion(kH);
+    if (!st.ok) state.SkipWithError("step failed");
+    assembly += st.assembly_s;
+    factor += st.factorisation_s;
+    solve += st.solve_s;
+    iters += st.cg_iterations;
+  }
+  const double n = static_cast<double>(state.iterations());
+  state.counters["assembly_ms"] = 1e3 * assembly / n;
+  state.counters["factor_ms"] = 1e3 * factor / n;
+  state.counters["solve_ms"] = 1e3 * solve / n;
+  state.counters["cg_iters"] = iters / n;
+  state.counters["dofs"] = body->freeDofCount();
+  state.counters["tets"] = mesh.tetCount();
+  if (solver == LinearSolverKind::kCholmod)
+    state.counters["factor_nnz"] = static_cast<double>(body->factorNonzeros());
+}
+
+void BM_FemStep_Small(benchmark::State& state) {
+  static const TetMesh mesh = makeBoxTetMesh(6, 3, 3, Eigen::Vector3d(0.12, 0.06, 0.06));
+  runStep(state, mesh, LinearSolverKind::kCholmod);
+}
+void BM_FemStep_Small_Pcg(benchmark::State& state) {
+  static const TetMesh mesh = makeBoxTetMesh(6, 3, 3, Eigen::Vector3d(0.12, 0.06, 0.06));
+  runStep(state, mesh, LinearSolverKind::kPcg);
+}
+void BM_FemStep_Liver2_Cholmod(benchmark::State& s) {
+  runStep(s, loadLiver("liver2.msh"), LinearSolverKind::kCholmod);
+}
+void BM_FemStep_Liver2_PcgJacobi(benchmark::State& s) {
+  runStep(s, loadLiver("liver2.msh"), LinearSolverKind::kPcg, PcgPreconditioner::kJacobi);
+}
+void BM_FemStep_Liver2_PcgRestChol(benchmark::State& s) {
+  runStep(s, loadLiver("liver2.msh"), LinearSolverKind::kPcg, PcgPreconditioner::kRestCholesky);
+}
+void BM_FemStep_Liver23k_Cholmod(benchmark::State& s) {
+  runStep(s, loadLiver("liver_23k.msh"), LinearSolverKind::kCholmod);
+}
+void BM_FemStep_Liver23k_PcgJacobi(benchmark::State& s) {
+  runStep(s, loadLiver("liver_23k.msh"), LinearSolverKind::kPcg, PcgPreconditioner::kJacobi);
+}
+void BM_FemStep_Liver23k_PcgRestChol(benchmark::State& s) {
+  runStep(s, loadLiver("liver_23k.msh"), LinearSolverKind::kPcg,
+          PcgPreconditioner::kRestCholesky);
+}
+BENCHMARK(BM_FemStep_Small)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_FemStep_Small_Pcg)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_FemStep_Liver2_Cholmod)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_FemStep_Liver2_PcgJacobi)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_FemStep_Liver2_PcgRestChol)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_FemStep_Liver23k_Cholmod)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_FemStep_Liver23k_PcgJacobi)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_FemStep_Liver23k_PcgRestChol)->Unit(benchmark::kMillisecond);
+
+// 150 contacts x (n, t1, t2) on random surface triangles around one area (a grasp).
+std::vector<TissueRow> rows450(const FemBody& body) {
+  const auto& surf = body.surfaceNodes();
+  const Eigen::VectorXd& q = body.positions();
+  // the 60 surface nodes closest to the first surface node: a local contact patch
+  std::vector<std::pair<double, int>> by_d;
+  const Eigen::Vector3d c = q.segment<3>(3 * surf[0]);
+  for (int i : surf) by_d.emplace_back((q.segment<3>(3 * i) - c).squaredNorm(), i);
+  std::sort(by_d.begin(), by_d.end());
+  std::mt19937 rng(7);
+  std::uniform_int_distribution<int> pick(0, std::min<int>(60, static_cast<int>(by_d.size())) - 1);
+  std::vector<TissueRow> rows;
+  for (int k = 0; k < 150; ++k) {
+    TissueRow r;
+    r.node = {by_d[pick(rng)].second, by_d[pick(rng)].second, by_d[pick(rng)].second};
+    r.weight = {0.5, 0.3, 0.2};
+    const Eigen::Vector3d n = Eigen::Vector3d(0.1 * k, 1.0, 0.3).normalized();
+    const Eigen::Vector3d t1 = n.unitOrthogonal(), t2 = n.cross(t1);
+    for (const Eigen::Vector3d& d : {n, t1, t2}) {
+      r.dir = d;
+      rows.push_back(r);
+    }
+  }
+  return rows;
+}
+
+void precompute(benchmark::State& state, const char* name) {
+  const TetMesh mesh = loadLiver(name);
+  std::size_t bytes = 0;
+  int surface = 0;
+  for (auto _ : state) {
+    auto body = makeBody(mesh, LinearSolverKind::kCholmod, PcgPreconditioner::kJacobi, 20);
+    auto model = makeCompliance(ComplianceKind::kWarped, *body, {kH, {}, false});
+    bytes = model->memoryBytes();
+    surface = model->buildInfo().surface_nodes;
+  }
+  state.counters["surface_nodes"] = surface;
+  state.counters["memory_MB"] = static_cast<double>(bytes) / 1e6;
+}
+void BM_WarpedPrecompute_Liver2(benchmark::State& s) { precompute(s, "liver2.msh"); }
+void BM_WarpedPrecompute_Liver23k(benchmark::State& s) { precompute(s, "liver_23k.msh"); }
+BENCHMARK(BM_WarpedPrecompute_Liver2)->Unit(benchmark::kMillisecond)->Iterations(1);
+BENCHMARK(BM_WarpedPrecompute_Liver23k)->Unit(benchmark::kMillisecond)->Iterations(1);
+
+void buildW(benchmark::State& state, const TetMesh& mesh, ComplianceKind kind) {
+  auto body = makeBody(mesh, LinearSolverKind::kCholmod, PcgPreconditioner::kJacobi, 20);
+  for (int s = 0; s < 5; ++s) body->freeMotion(kH);
+  auto model = makeCompliance(kind, *body, {kH, {}, false});
+  model->update(*body);
+  const auto rows = rows450(*body);
+  Eigen::MatrixXd w(rows.size(), rows.size());
+  for (auto _ : state) {
+    w.setZero();
+    model->addW(rows, w);
+    benchmark::DoNotOptimize(w.data());
+  }
+  state.counters["rows"] = static_cast<double>(rows.size());
+}
+void BM_W450_Small_Warped(benchmark::State& s) {
+  static const TetMesh mesh = makeBoxTetMesh(6, 3, 3, Eigen::Vector3d(0.12, 0.06, 0.06));
+  buildW(s, mesh, ComplianceKind::kWarped);
+}
+void BM_W450_Liver2_Warped(benchmark::State& s) {
+  buildW(s, loadLiver("liver2.msh"), ComplianceKind::kWarped);
+}
+void BM_W450_Liver2_Uncoupled(benchmark::State& s) {
+  buildW(s, loadLiver("liver2.msh"), ComplianceKind::kUncoupled);
+}
+void BM_W450_Liver2_Exact(benchmark::State& s) {
+  buildW(s, loadLiver("liver2.msh"), ComplianceKind::kExact);
+}
+void BM_W450_Liver23k_Warped(benchmark::State& s) {
+  buildW(s, loadLiver("liver_23k.msh"), ComplianceKind::kWarped);
+}
+BENCHMARK(BM_W450_Small_Warped)->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_W450_Liver2_Warped)->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_W450_Liver2_Uncoupled)->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_W450_Liver2_Exact)->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_W450_Liver23k_Warped)->Unit(benchmark::kMicrosecond)->Iterations(20);
+
+}  // namespace
+}  // namespace tactus::sim
+
+BENCHMARK_MAIN();

@@ -1,0 +1,206 @@
+// NSGS cost on a realistic dense problem: 150 contacts (450 rows) on a compliant surface patch.
+// Figures: the cost of one sweep against the time to stream W once (counter sweep_per_stream),
+// for both coupling schemes; cold solves against warm-started ones along a haptic-like sequence
+// of slowly moving free velocities (counter sweeps = mean sweeps per solve). "Small" variants
+// (10 contacts) feed the ctest smoke run.
+//
+// Run: build/tests/bench/nsgs_bench  (or --benchmark_filter=Nsgs).
+
+#include <benchmark/benchmark.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <random>
+#include <vector>
+
+#include "tactus/shared/nsgs.h"
+
+namespace {
+
+using tactus::shared::ContactProblemView;
+using tactus::shared::NsgsCoupling;
+using tactus::shared::NsgsResult;
+using tactus::shared::NsgsSettings;
+using tactus::shared::NsgsStatus;
+using tactus::shared::NsgsWorkspace;
+
+// Contacts spread over a 1 x 1 patch of a soft surface pressed by a round indenter that also
+// drags sideways. W = R^T (C (x) S) R: C_ij = exp(-|p_i - p_j| / l) + c0 delta_ij (a positive
+// definite surface-compliance kernel), S a 3x3 SPD normal/tangent compliance with a little
+// coupling, R per-contact rotations of the tangent plane. So W is dense and SPD, as the
+// condensed FEM compliance H C H^T of a tissue is.
+struct SurfaceProblem {
+  int nc = 0;
+  std::vector<int> row_offset;
+  std::vector<double> W, q0, dq, q, mu;
+
+  explicit SurfaceProblem(int contacts, unsigned seed = 1) : nc(contacts) {
+    const int m = 3 * nc;
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<double> u01(0.0, 1.0);
+    std::vector<double> px(nc), py(nc), phi(nc);
+    for (int i = 0; i < nc; ++i) {
+      px[i] = u01(rng);
+      py[i] = u01(rng);
+      phi[i] = 2.0 * M_PI * u01(rng);
+    }
+    const double s[3][3] = {{1.0, 0.1, 0.0}, {0.1, 0.6, 0.0}, {0.0, 0.0, 0.6}};
+    W.assign(static_cast<std::size_t>(m) * m, 0.0);
+    for (int i = 0; i < nc; ++i) {
+      for (int j = 0; j < nc; ++j) {
+        const double r = std::hypot(px[i] - px[j], py[i] - py[j]);
+        const double c = std::exp(-r / 0.15) + (i == j ? 0.5 : 0.0);
+        // R_i^T S R_j with R = rotation of (t1, t2) by phi about n
+        double ri[3][3] = {{1, 0, 0}, {0, std::cos(phi[i]), -std::sin(phi[i])},
+                           {0, std::sin(phi[i]), std::cos(phi[i])}};
+        double rj[3][3] = {{1, 0, 0}, {0, std::cos(phi[j]), -std::sin(phi[j])},
+                           {0, std::sin(phi[j]), std::cos(phi[j])}};
+        for (int a = 0; a < 3; ++a) {
+          for (int b = 0; b < 3; ++b) {
+            double v = 0.0;
+            for (int k = 0; k < 3; ++k) {
+              for (int l = 0; l < 3; ++l) v += ri[k][a] * s[k][l] * rj[l][b];
+            }
+            W[static_cast<std::size_t>(3 * i + a) * m + 3 * j + b] = c * v;
+          }
+        }
+      }
+    }
+    // indenter at the centre: approaching inside radius 0.4, separating outside; drag along x
+    q0.resize(m);
+    dq.resize(m);
+    for (int i = 0; i < nc; ++i) {
+      const double d2 = (px[i] - 0.5) * (px[i] - 0.5) + (py[i] - 0.5) * (py[i] - 0.5);
+      q0[3 * i] = -(1.0 - d2 / 0.16);
+      q0[3 * i + 1] = 0.4 * std::cos(phi[i]);   // drag (1, 0) in the rotated tangent frame
+      q0[3 * i + 2] = -0.4 * std::sin(phi[i]);
+      dq[3 * i] = -1.0;                          // the indenter pushes a little deeper
+      dq[3 * i + 1] = 0.2 * std::sin(phi[i]);
+      dq[3 * i + 2] = 0.2 * std::cos(phi[i]);
+    }
+    q = q0;
+    mu.assign(nc, 0.3);
+    row_offset.resize(nc + 1);
+    for (int i = 0; i <= nc; ++i) row_offset[i] = 3 * i;
+  }
+
+  int rows() const { return 3 * nc; }
+
+  // Free velocity at haptic tick k (1 ms): a slow oscillation of the indenter.
+  void setTick(int k) {
+    const double a = 0.02 * std::sin(2.0 * M_PI * k / 500.0);
+    for (std::size_t j = 0; j < q.size(); ++j) q[j] = q0[j] + a * dq[j];
+  }
+
+  ContactProblemView view() const {
+    ContactProblemView v;
+    v.contacts = nc;
+    v.rows = rows();
+    v.row_offset = row_offset.data();
+    v.W = W.data();
+    v.ld = rows();
+    v.delta_free = q.data();
+    v.mu = mu.data();
+    return v;
+  }
+};
+
+// Sum of all entries of W with four partial sums (bandwidth-bound, not add-latency bound).
+double sumW(const SurfaceProblem& p) {
+  const double* w = p.W.data();
+  const std::size_t n = p.W.size();
+  double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0;
+  for (std::size_t k = 0; k + 4 <= n; k += 4) {
+    s0 += w[k];
+    s1 += w[k + 1];
+    s2 += w[k + 2];
+    s3 += w[k + 3];
+  }
+  return (s0 + s1) + (s2 + s3);
+}
+
+// Best-of time (ns) to stream W once (sum of all entries).
+double streamNs(const SurfaceProblem& p) {
+  double best = 1e30;
+  for (int rep = 0; rep < 30; ++rep) {
+    const auto t0 = std::chrono::steady_clock::now();
+    benchmark::DoNotOptimize(sumW(p));
+    const auto t1 = std::chrono::steady_clock::now();
+    best = std::min(best, std::chrono::duration<double, std::nano>(t1 - t0).count());
+  }
+  return best;
+}
+
+void BM_StreamW(benchmark::State& state, int contacts) {
+  const SurfaceProblem p(contacts);
+  for (auto _ : state) {
+    benchmark::DoNotOptimize(sumW(p));
+  }
+  state.SetBytesProcessed(state.iterations() * static_cast<std::int64_t>(p.W.size() * 8));
+}
+
+// 20 sweeps from a mid-solve state (contacts active and changing), no error checks in between.
+void BM_NsgsSweep(benchmark::State& state, int contacts, NsgsCoupling coupling) {
+  SurfaceProblem p(contacts);
+  NsgsWorkspace ws(p.rows(), p.nc);
+  std::vector<double> f0(p.rows(), 0.0), f(p.rows());
+  NsgsSettings s;
+  s.max_sweeps = 3;
+  s.tolerance = 0.0;
+  tactus::shared::solveNsgs(p.view(), s, ws, f0.data());
+  constexpr int kSweeps = 20;
+  s.max_sweeps = kSweeps;
+  s.check_every = 1000;
+  s.coupling = coupling;
+  double total_ns = 0.0;
+  for (auto _ : state) {
+    std::copy(f0.begin(), f0.end(), f.begin());
+    const auto t0 = std::chrono::steady_clock::now();
+    const NsgsResult r = tactus::shared::solveNsgs(p.view(), s, ws, f.data());
+    total_ns += std::chrono::duration<double, std::nano>(std::chrono::steady_clock::now() - t0)
+                    .count();
+    benchmark::DoNotOptimize(r);
+  }
+  // includes 1/20 of the entry pass (delta = W f + q) and the final error check
+  const double sweep_ns = total_ns / (static_cast<double>(state.iterations()) * kSweeps);
+  state.counters["sweep_us"] = sweep_ns * 1e-3;
+  state.counters["stream_us"] = streamNs(p) * 1e-3;
+  state.counters["sweep_per_stream"] = sweep_ns / streamNs(p);
+}
+
+// Haptic-like sequence: the free velocity moves every tick; cold (f = 0) or warm (previous f).
+void BM_NsgsSequence(benchmark::State& state, int contacts, bool warm) {
+  SurfaceProblem p(contacts);
+  NsgsWorkspace ws(p.rows(), p.nc);
+  std::vector<double> f(p.rows(), 0.0);
+  NsgsSettings s;
+  s.tolerance = 1e-6;
+  s.max_sweeps = 1000;
+  long sweeps = 0, solves = 0, failures = 0;
+  int tick = 0;
+  for (auto _ : state) {
+    p.setTick(tick++);
+    if (!warm) std::fill(f.begin(), f.end(), 0.0);
+    const NsgsResult r = tactus::shared::solveNsgs(p.view(), s, ws, f.data());
+    sweeps += r.sweeps;
+    ++solves;
+    failures += r.status != NsgsStatus::kConverged;
+  }
+  state.counters["sweeps"] = static_cast<double>(sweeps) / std::max(solves, 1L);
+  state.counters["not_converged"] = static_cast<double>(failures);
+}
+
+}  // namespace
+
+BENCHMARK_CAPTURE(BM_StreamW, 450rows, 150);
+BENCHMARK_CAPTURE(BM_NsgsSweep, 450rows_column, 150, NsgsCoupling::kColumnUpdate);
+BENCHMARK_CAPTURE(BM_NsgsSweep, 450rows_row, 150, NsgsCoupling::kRowGather);
+BENCHMARK_CAPTURE(BM_NsgsSequence, 450rows_cold, 150, false)->Unit(benchmark::kMicrosecond);
+BENCHMARK_CAPTURE(BM_NsgsSequence, 450rows_warm, 150, true)->Unit(benchmark::kMicrosecond);
+BENCHMARK_CAPTURE(BM_NsgsSweep, Small_column, 10, NsgsCoupling::kColumnUpdate);
+BENCHMARK_CAPTURE(BM_NsgsSweep, Small_row, 10, NsgsCoupling::kRowGather);
+BENCHMARK_CAPTURE(BM_NsgsSequence, Small_cold, 10, false);
+BENCHMARK_CAPTURE(BM_NsgsSequence, Small_warm, 10, true);
+
+BENCHMARK_MAIN();

@@ -1,0 +1,366 @@
+// Contact compliance models: exact against a dense inverse, warped against exact (rest and
+// rotated), the disk cache (round trip, stale, corrupt, truncated) and the constrained-motion
+// correction's consistency with W.
+#include <gtest/gtest.h>
+
+#include <Eigen/Dense>
+#include <Eigen/Geometry>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <unistd.h>
+
+#include "tactus/sim/compliance.h"
+#include "tactus/sim/fem.h"
+#include "tactus/sim/mesh_gen.h"
+
+namespace tactus::sim {
+namespace {
+
+namespace fs = std::filesystem;
+
+FemMaterial liverMaterial() {
+  FemMaterial m;
+  m.law = MaterialLaw::kCorotational;
+  m.young_pa = 5000.0;
+  m.poisson = 0.4;
+  m.density_kgpm3 = 1000.0;
+  m.damping = RayleighSpec{0.1, 0.01};
+  return m;
+}
+
+TetMesh liver() {
+  TetMesh mesh = loadTetMesh(fs::path(TACTUS_TEST_DATA_DIR) / "meshes" / "liver2.msh");
+  transformMesh(mesh, 0.1, Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero());  // dm -> m
+  return mesh;
+}
+
+// Rows n, t1, t2 of `contacts` random contact points on surface triangles built from surface
+// nodes (triples of nearby surface nodes are enough for H).
+std::vector<TissueRow> randomRows(const FemBody& body, int contacts, unsigned seed) {
+  const auto& surf = body.surfaceNodes();
+  std::mt19937 rng(seed);
+  std::uniform_int_distribution<int> pick(0, static_cast<int>(surf.size()) - 1);
+  std::uniform_real_distribution<double> unit(0.05, 1.0);
+  std::vector<TissueRow> rows;
+  for (int c = 0; c < contacts; ++c) {
+    std::array<int, 3> nodes{surf[pick(rng)], surf[pick(rng)], surf[pick(rng)]};
+    if (nodes[1] == nodes[0]) nodes[1] = -1;
+    if (nodes[2] == nodes[0] || nodes[2] == nodes[1]) nodes[2] = -1;
+    std::array<double, 3> w{unit(rng), unit(rng), unit(rng)};
+    const double sum = w[0] + w[1] + w[2];
+    for (double& x : w) x /= sum;
+    const Eigen::Vector3d n = Eigen::Vector3d(unit(rng) - 0.5, unit(rng) - 0.5, 1.0).normalized();
+    const Eigen::Vector3d t1 = n.unitOrthogonal(), t2 = n.cross(t1);
+    for (const Eigen::Vector3d& d : {n, t1, t2}) {
+      TissueRow r;
+      r.node = nodes;
+      r.weight = w;
+      r.dir = d;
+      rows.push_back(r);
+    }
+  }
+  return rows;
+}
+
+// Dense H (m x 3n).
+Eigen::MatrixXd denseH(const FemBody& body, const std::vector<TissueRow>& rows) {
+  Eigen::MatrixXd h = Eigen::MatrixXd::Zero(static_cast<Eigen::Index>(rows.size()),
+                                            body.dofCount());
+  for (std::size_t k = 0; k < rows.size(); ++k)
+    for (int t = 0; t < 3; ++t)
+      if (rows[k].node[t] >= 0)
+        h.block<1, 3>(static_cast<Eigen::Index>(k), 3 * rows[k].node[t]) +=
+            rows[k].weight[t] * rows[k].dir.transpose();
+  return h;
+}
+
+Eigen::MatrixXd buildW(TissueCompliance& model, const std::vector<TissueRow>& rows) {
+  const auto m = static_cast<Eigen::Index>(rows.size());
+  Eigen::MatrixXd w = Eigen::MatrixXd::Zero(m, m);
+  model.addW(rows, w);
+  return w;
+}
+
+double relErr(const Eigen::MatrixXd& a, const Eigen::MatrixXd& ref) {
+  return (a - ref).norm() / ref.norm();
+}
+
+struct TempDir {
+  fs::path path = fs::temp_directory_path() /
+                  ("tactus_compliance_test_" + std::to_string(::getpid()));
+  TempDir() { fs::create_directories(path); }
+  ~TempDir() {
+    std::error_code ec;
+    fs::remove_all(path, ec);
+  }
+};
+
+// Exact compliance against the dense inverse of M/h^2 + K, with K by central differences of the
+// elastic force (exact for the linear law).
+TEST(Compliance, ExactMatchesDenseInverse) {
+  const TetMesh mesh = makeBoxTetMesh(3, 2, 2, Eigen::Vector3d(0.06, 0.04, 0.04));
+  FemMaterial mat = liverMaterial();
+  mat.law = MaterialLaw::kLinear;
+  mat.damping.reset();
+  std::vector<int> fixed;
+  for (int i = 0; i < mesh.nodeCount(); ++i)
+    if (mesh.nodes(0, i) < 1e-12) fixed.push_back(i);
+  FemBody body(mesh, mat, fixed, nullptr);
+  const double h = 0.02;
+  ASSERT_TRUE(body.freeMotion(h).ok);  // at rest: factorises A at the rest shape
+  const int n3 = body.dofCount();
+  Eigen::MatrixXd k(n3, n3);
+  const double eps = 1e-6;
+  Eigen::VectorXd fp, fm;
+  for (int j = 0; j < n3; ++j) {
+    Eigen::VectorXd q = body.restPositions();
+    q[j] += eps;
+    body.elasticForce(q, fp);
+    q[j] -= 2 * eps;
+    body.elasticForce(q, fm);
+    k.col(j) = -(fp - fm) / (2 * eps);
+  }
+  Eigen::MatrixXd a = k;
+  a.diagonal() += body.lumpedMass() / (h * h);
+  // eliminate fixed DOFs
+  std::vector<int> free_dofs;
+  for (int i = 0; i < body.nodeCount(); ++i)
+    if (!body.fixedMask()[i])
+      for (int c = 0; c < 3; ++c) free_dofs.push_back(3 * i + c);
+  const auto nf = static_cast<Eigen::Index>(free_dofs.size());
+  Eigen::MatrixXd af(nf, nf);
+  for (Eigen::Index r = 0; r < nf; ++r)
+    for (Eigen::Index c = 0; c < nf; ++c) af(r, c) = a(free_dofs[r], free_dofs[c]);
+  const Eigen::MatrixXd cf = af.inverse();
+  Eigen::MatrixXd c_dense = Eigen::MatrixXd::Zero(n3, n3);
+  for (Eigen::Index r = 0; r < nf; ++r)
+    for (Eigen::Index c = 0; c < nf; ++c) c_dense(free_dofs[r], free_dofs[c]) = cf(r, c);
+
+  // column by column through solveCompliance
+  Eigen::VectorXd e, x;
+  for (int j : {3 * 5, 3 * 5 + 1, n3 - 1}) {
+    e.setZero(n3);
+    e[j] = 1.0;
+    body.solveCompliance(e, x);
+    EXPECT_LT((x - c_dense.col(j)).norm(), 1e-6 * c_dense.col(j).norm()) << "column " << j;
+  }
+  // W through the exact model, on rows that include interior and fixed nodes
+  auto model = makeCompliance(ComplianceKind::kExact, body, {h, {}, false});
+  std::vector<TissueRow> rows;
+  for (int node : {0, 5, 11, 23, mesh.nodeCount() - 1}) {
+    for (int c = 0; c < 3; ++c) {
+      TissueRow r;
+      r.node = {node, (node + 7) % mesh.nodeCount(), -1};
+      r.weight = {0.7, 0.3, 0.0};
+      r.dir = Eigen::Vector3d::Unit(c) + 0.2 * Eigen::Vector3d::Ones();
+      rows.push_back(r);
+    }
+  }
+  const Eigen::MatrixXd hm = denseH(body, rows);
+  const Eigen::MatrixXd w_ref = hm * c_dense * hm.transpose();
+  EXPECT_LT(relErr(buildW(*model, rows), w_ref), 1e-6);
+}
+
+class LiverCompliance : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    mesh_ = liver();
+    // fix the nodes of the left lobe's tip (lowest x) so the problem is anchored
+    std::vector<std::pair<double, int>> by_x;
+    for (int i = 0; i < mesh_.nodeCount(); ++i) by_x.emplace_back(mesh_.nodes(0, i), i);
+    std::sort(by_x.begin(), by_x.end());
+    for (int i = 0; i < 15; ++i) fixed_.push_back(by_x[i].second);
+  }
+  std::unique_ptr<FemBody> makeBody(const FemMaterial& mat = liverMaterial()) {
+    return std::make_unique<FemBody>(mesh_, mat, fixed_, nullptr);
+  }
+  TetMesh mesh_;
+  std::vector<int> fixed_;
+  double h_ = 0.01;
+};
+
+TEST_F(LiverCompliance, WarpedEqualsExactAtRest) {
+  auto body = makeBody();
+  ASSERT_TRUE(body->freeMotion(h_).ok);  // from rest, no gravity: stays at rest
+  const auto rows = randomRows(*body, 40, 1);
+  auto exact = makeCompliance(ComplianceKind::kExact, *body, {h_, {}, false});
+  auto warped = makeCompliance(ComplianceKind::kWarped, *body, {h_, {}, false});
+  auto rest = makeCompliance(ComplianceKind::kRest, *body, {h_, {}, false});
+  exact->update(*body);
+  warped->update(*body);
+  rest->update(*body);
+  const Eigen::MatrixXd w_exact = buildW(*exact, rows);
+  EXPECT_GT(w_exact.norm(), 0.0);
+  EXPECT_LT(relErr(buildW(*warped, rows), w_exact), 1e-9);
+  EXPECT_LT(relErr(buildW(*rest, rows), w_exact), 1e-9);
+  // W is symmetric positive definite
+  EXPECT_LT((w_exact - w_exact.transpose()).norm(), 1e-12 * w_exact.norm());
+  EXPECT_GT(Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(w_exact).eigenvalues().minCoeff(),
+            0.0);
+  EXPECT_GT(warped->memoryBytes(), sizeof(double) * 9 * body->surfaceNodes().size() *
+                                       body->surfaceNodes().size());
+  EXPECT_LT(exact->memoryBytes(), warped->memoryBytes());
+}
+
+TEST_F(LiverCompliance, WarpedBeatsRestUnderLargeRotation) {
+  // no fixed nodes here: a free organ rotated rigidly by 75 degrees about an oblique axis, then
+  // squashed a little so the state is not a pure rotation
+  fixed_.clear();
+  auto body = makeBody();
+  const Eigen::Matrix3d rot =
+      Eigen::AngleAxisd(75.0 * M_PI / 180.0, Eigen::Vector3d(1, 2, -1).normalized())
+          .toRotationMatrix();
+  Eigen::Vector3d centre = mesh_.nodes.rowwise().mean();
+  const Eigen::Vector3d squash(1.0, 1.0, 0.93);
+  for (int i = 0; i < mesh_.nodeCount(); ++i)
+    body->positions().segment<3>(3 * i) =
+        centre + rot * squash.cwiseProduct(mesh_.nodes.col(i) - centre);
+  ASSERT_TRUE(body->freeMotion(h_).ok);
+  auto exact = makeCompliance(ComplianceKind::kExact, *body, {h_, {}, false});
+  auto warped = makeCompliance(ComplianceKind::kWarped, *body, {h_, {}, false});
+  auto rest = makeCompliance(ComplianceKind::kRest, *body, {h_, {}, false});
+  auto uncoupled = makeCompliance(ComplianceKind::kUncoupled, *body, {h_, {}, false});
+  for (auto* m : {exact.get(), warped.get(), rest.get(), uncoupled.get()}) m->update(*body);
+  const auto rows = randomRows(*body, 40, 2);
+  const Eigen::MatrixXd w_exact = buildW(*exact, rows);
+  const double e_warped = relErr(buildW(*warped, rows), w_exact);
+  const double e_rest = relErr(buildW(*rest, rows), w_exact);
+  const double e_uncoupled = relErr(buildW(*uncoupled, rows), w_exact);
+  RecordProperty("err_warped", std::to_string(e_warped));
+  RecordProperty("err_rest", std::to_string(e_rest));
+  RecordProperty("err_uncoupled", std::to_string(e_uncoupled));
+  EXPECT_LT(e_warped, e_rest);
+  EXPECT_LT(e_warped, 0.2);
+  EXPECT_GT(e_rest, 0.3);  // rotation by 75 degrees: the rest model is badly wrong
+}
+
+TEST_F(LiverCompliance, CorrectionIsConsistentWithW) {
+  auto body = makeBody();
+  // deform: a few steps under gravity-like load so rotations are non-trivial
+  Eigen::VectorXd load = Eigen::VectorXd::Zero(body->dofCount());
+  for (int i = 0; i < body->nodeCount(); ++i) load[3 * i + 2] = -0.02;
+  for (int s = 0; s < 10; ++s) ASSERT_TRUE(body->freeMotion(h_, &load).ok);
+  const auto rows = randomRows(*body, 30, 3);
+  const Eigen::MatrixXd hm = denseH(*body, rows);
+  Eigen::VectorXd f(static_cast<Eigen::Index>(rows.size()));
+  std::mt19937 rng(4);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (auto& x : f) x = u(rng);
+  for (ComplianceKind kind : {ComplianceKind::kExact, ComplianceKind::kWarped,
+                              ComplianceKind::kRest, ComplianceKind::kUncoupled}) {
+    auto model = makeCompliance(kind, *body, {h_, {}, false});
+    model->update(*body);
+    const Eigen::MatrixXd w = buildW(*model, rows);
+    Eigen::VectorXd dq;
+    model->correction(*body, rows, f.data(), dq);
+    ASSERT_EQ(dq.size(), body->dofCount());
+    const Eigen::VectorXd lhs = hm * dq, rhs = w * f;
+    EXPECT_LT((lhs - rhs).norm(), 1e-8 * rhs.norm()) << "kind " << static_cast<int>(kind);
+    for (int i : fixed_) EXPECT_EQ(dq.segment<3>(3 * i).norm(), 0.0);
+  }
+}
+
+TEST_F(LiverCompliance, CacheRoundTripStaleCorruptTruncated) {
+  TempDir dir;
+  ComplianceOptions opt{h_, dir.path, false, "liver", 64};
+  auto body = makeBody();
+  const auto rows = randomRows(*body, 20, 5);
+  const fs::path file = complianceCachePath(*body, opt);
+  ASSERT_EQ(file, dir.path / "liver.c0.bin");
+
+  auto first = makeCompliance(ComplianceKind::kWarped, *body, opt);
+  EXPECT_FALSE(first->buildInfo().loaded_from_cache);
+  EXPECT_GT(first->buildInfo().precompute_s, 0.0);
+  ASSERT_TRUE(fs::exists(file));
+  const Eigen::MatrixXd w_ref = buildW(*first, rows);
+
+  // round trip: loaded, identical
+  auto second = makeCompliance(ComplianceKind::kWarped, *body, opt);
+  EXPECT_TRUE(second->buildInfo().loaded_from_cache);
+  EXPECT_FALSE(second->buildInfo().cache_rejected);
+  EXPECT_EQ(buildW(*second, rows), w_ref);
+
+  // stale: different h, then different material -> rejected and rebuilt (file rewritten)
+  {
+    ComplianceOptions other = opt;
+    other.h_s = 2 * h_;
+    auto m = makeCompliance(ComplianceKind::kWarped, *body, other);
+    EXPECT_TRUE(m->buildInfo().cache_rejected);
+    EXPECT_FALSE(m->buildInfo().loaded_from_cache);
+    EXPECT_GT(relErr(buildW(*m, rows), w_ref), 1e-3);
+  }
+  {
+    FemMaterial stiff = liverMaterial();
+    stiff.young_pa *= 2;
+    auto stiff_body = makeBody(stiff);
+    auto m = makeCompliance(ComplianceKind::kWarped, *stiff_body, opt);
+    EXPECT_TRUE(m->buildInfo().cache_rejected);
+    EXPECT_FALSE(m->buildInfo().loaded_from_cache);
+  }
+  // file now holds the stiff material's C0: the original body rebuilds and rewrites it
+  {
+    auto m = makeCompliance(ComplianceKind::kWarped, *body, opt);
+    EXPECT_TRUE(m->buildInfo().cache_rejected);
+    EXPECT_LT(relErr(buildW(*m, rows), w_ref), 1e-12);
+  }
+  const auto size = fs::file_size(file);
+  // corrupt: one byte of the payload flipped
+  {
+    std::fstream io(file, std::ios::in | std::ios::out | std::ios::binary);
+    io.seekp(static_cast<std::streamoff>(size / 2));
+    char c = 0;
+    io.read(&c, 1);
+    io.seekp(static_cast<std::streamoff>(size / 2));
+    c = static_cast<char>(c ^ 0x5a);
+    io.write(&c, 1);
+  }
+  {
+    auto m = makeCompliance(ComplianceKind::kWarped, *body, opt);
+    EXPECT_TRUE(m->buildInfo().cache_rejected);
+    EXPECT_NE(m->buildInfo().cache_message.find("checksum"), std::string::npos)
+        << m->buildInfo().cache_message;
+    EXPECT_LT(relErr(buildW(*m, rows), w_ref), 1e-12);
+  }
+  // truncated
+  fs::resize_file(file, size - 100);
+  {
+    auto m = makeCompliance(ComplianceKind::kRest, *body, opt);
+    EXPECT_TRUE(m->buildInfo().cache_rejected);
+    EXPECT_FALSE(m->buildInfo().loaded_from_cache);
+  }
+  EXPECT_EQ(fs::file_size(file), size);  // rewritten whole
+  // garbage file of the right size with a bad magic
+  {
+    std::ofstream out(file, std::ios::binary | std::ios::trunc);
+    out << std::string(size, 'x');
+  }
+  {
+    auto m = makeCompliance(ComplianceKind::kUncoupled, *body, opt);
+    EXPECT_TRUE(m->buildInfo().cache_rejected);
+  }
+  auto last = makeCompliance(ComplianceKind::kWarped, *body, opt);
+  EXPECT_TRUE(last->buildInfo().loaded_from_cache);
+  EXPECT_EQ(buildW(*last, rows), w_ref);
+}
+
+TEST_F(LiverCompliance, UncoupledCouplesOnlyRowsSharingNodes) {
+  auto body = makeBody();
+  auto model = makeCompliance(ComplianceKind::kUncoupled, *body, {h_, {}, false});
+  const auto& surf = body->surfaceNodes();
+  std::vector<TissueRow> rows(2);
+  rows[0].node = {surf[0], -1, -1};
+  rows[0].weight = {1, 0, 0};
+  rows[0].dir = Eigen::Vector3d::UnitX();
+  rows[1].node = {surf[1], -1, -1};
+  rows[1].weight = {1, 0, 0};
+  rows[1].dir = Eigen::Vector3d::UnitX();
+  const Eigen::MatrixXd w = buildW(*model, rows);
+  EXPECT_GT(w(0, 0), 0.0);
+  EXPECT_GT(w(1, 1), 0.0);
+  EXPECT_EQ(w(0, 1), 0.0);
+  EXPECT_LT(model->memoryBytes(), 100 * sizeof(double) * surf.size() + 200000);
+}
+
+}  // namespace
+}  // namespace tactus::sim

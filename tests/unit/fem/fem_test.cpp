@@ -1,0 +1,316 @@
+// Physics of the tetrahedral FEM body: corotational invariance, patch test, cantilever bending,
+// energy behaviour of implicit Euler, inversion recovery, solver agreement, counters.
+#include <gtest/gtest.h>
+
+#include <Eigen/Geometry>
+#include <cmath>
+
+#include "tactus/shared/error.h"
+#include "tactus/sim/fem.h"
+#include "tactus/sim/mesh_gen.h"
+
+namespace tactus::sim {
+namespace {
+
+FemMaterial material(MaterialLaw law, double young = 1e4, double poisson = 0.3) {
+  FemMaterial m;
+  m.law = law;
+  m.young_pa = young;
+  m.poisson = poisson;
+  m.density_kgpm3 = 1000.0;
+  return m;
+}
+
+std::vector<int> nodesAtX(const TetMesh& mesh, double x) {
+  std::vector<int> out;
+  for (int i = 0; i < mesh.nodeCount(); ++i)
+    if (std::abs(mesh.nodes(0, i) - x) < 1e-12) out.push_back(i);
+  return out;
+}
+
+double maxNodeForce(const Eigen::VectorXd& f) {
+  return f.reshaped(3, f.size() / 3).colwise().norm().maxCoeff();
+}
+
+TEST(MeshGen, BoxMeshesArePositiveAndFillTheVolume) {
+  for (HexSplit split : {HexSplit::kSix, HexSplit::kFive}) {
+    const Eigen::Vector3d size(0.3, 0.2, 0.1);
+    const TetMesh mesh = makeBoxTetMesh(3, 2, 2, size, Eigen::Vector3d(1, 2, 3), split);
+    EXPECT_EQ(mesh.nodeCount(), 4 * 3 * 3);
+    EXPECT_EQ(mesh.tetCount(), 12 * (split == HexSplit::kSix ? 6 : 5));
+    double total = 0.0;
+    for (const auto& t : mesh.tets) {
+      Eigen::Matrix3d d;
+      d << mesh.nodes.col(t[1]) - mesh.nodes.col(t[0]), mesh.nodes.col(t[2]) - mesh.nodes.col(t[0]),
+          mesh.nodes.col(t[3]) - mesh.nodes.col(t[0]);
+      EXPECT_GT(d.determinant(), 0.0);
+      total += d.determinant() / 6.0;
+    }
+    EXPECT_NEAR(total, size.prod(), 1e-12);
+  }
+  EXPECT_THROW(makeBoxTetMesh(0, 1, 1, Eigen::Vector3d::Ones()), tactus::Error);
+}
+
+// A rigidly rotated mesh carries no elastic force under the corotational law; the linear law
+// produces a large spurious force.
+TEST(Corotational, RigidRotationGivesZeroForce) {
+  const double young = 1e4, edge = 0.1 / 3;
+  const TetMesh mesh = makeBoxTetMesh(3, 3, 3, Eigen::Vector3d::Constant(0.1));
+  FemBody corot(mesh, material(MaterialLaw::kCorotational, young), {}, nullptr);
+  FemBody linear(mesh, material(MaterialLaw::kLinear, young), {}, nullptr);
+  const double scale = young * edge * edge;
+  const std::vector<Eigen::Vector3d> axes = {Eigen::Vector3d::UnitX(), Eigen::Vector3d::UnitY(),
+                                             Eigen::Vector3d::UnitZ(),
+                                             Eigen::Vector3d(1, -2, 0.5).normalized()};
+  for (const auto& axis : axes)
+    for (double deg : {90.0, 180.0}) {
+      const Eigen::Matrix3d r = Eigen::AngleAxisd(deg * M_PI / 180.0, axis).toRotationMatrix();
+      Eigen::VectorXd q(corot.dofCount());
+      for (int i = 0; i < mesh.nodeCount(); ++i)
+        q.segment<3>(3 * i) = r * mesh.nodes.col(i) + Eigen::Vector3d(0.3, -0.1, 0.2);
+      Eigen::VectorXd f;
+      corot.elasticForce(q, f);
+      EXPECT_LT(maxNodeForce(f), 1e-9 * scale) << "axis " << axis.transpose() << " " << deg;
+      linear.elasticForce(q, f);
+      EXPECT_GT(maxNodeForce(f), 0.1 * scale) << "axis " << axis.transpose() << " " << deg;
+    }
+  EXPECT_GT(corot.counters().rotation_extractions, 0);
+  EXPECT_EQ(linear.counters().rotation_extractions, 0);
+}
+
+// Affine displacement: every element carries the same stress, interior nodes no net force.
+TEST(PatchTest, UniformStretchGivesUniformStress) {
+  for (MaterialLaw law : {MaterialLaw::kLinear, MaterialLaw::kCorotational})
+    for (HexSplit split : {HexSplit::kSix, HexSplit::kFive}) {
+      const TetMesh mesh =
+          makeBoxTetMesh(4, 3, 3, Eigen::Vector3d(0.2, 0.15, 0.1), Eigen::Vector3d::Zero(), split);
+      FemBody body(mesh, material(law, 1e4, 0.3), {}, nullptr);
+      Eigen::Matrix3d f_aff;
+      f_aff << 1.05, 0.01, 0.0, 0.02, 0.98, 0.01, 0.0, 0.015, 1.03;
+      for (int i = 0; i < mesh.nodeCount(); ++i)
+        body.positions().segment<3>(3 * i) = f_aff * mesh.nodes.col(i);
+      std::vector<Eigen::Matrix3d> s;
+      body.stresses(s);
+      const double ref = s[0].norm();
+      ASSERT_GT(ref, 10.0);  // a real stress (E * strain ~ 500 Pa)
+      for (const auto& se : s) EXPECT_LT((se - s[0]).norm(), 1e-9 * ref);
+      Eigen::VectorXd f;
+      body.elasticForce(body.positions(), f);
+      const double force_scale = ref * 0.05 * 0.05;  // stress * element face area
+      int interior = 0;
+      for (int i = 0; i < mesh.nodeCount(); ++i) {
+        const Eigen::Vector3d x = mesh.nodes.col(i);
+        const bool inside = x.x() > 1e-9 && x.x() < 0.2 - 1e-9 && x.y() > 1e-9 &&
+                            x.y() < 0.15 - 1e-9 && x.z() > 1e-9 && x.z() < 0.1 - 1e-9;
+        if (!inside) continue;
+        ++interior;
+        EXPECT_LT(f.segment<3>(3 * i).norm(), 1e-9 * force_scale) << "node " << i;
+      }
+      EXPECT_EQ(interior, 3 * 2 * 2);
+    }
+}
+
+// Tip deflection of a clamped beam under its own weight against Euler-Bernoulli
+// w = q L^4 / (8 E I); direct static solve K u = f through the same assembly.
+TEST(Cantilever, ConvergesToEulerBernoulli) {
+  const double length = 0.5, side = 0.05, young = 5e7, rho = 1000.0, g = 9.81;
+  const double inertia = side * side * side * side / 12.0;
+  const double w_eb = rho * side * side * g * std::pow(length, 4) / (8.0 * young * inertia);
+  ASSERT_LT(w_eb / length, 0.05);  // small deflection
+  // Poisson 0: no lateral contraction at the clamp; Timoshenko shear adds
+  // (E / (3 k G)) (b / L)^2 = 0.8% to w_eb at L/b = 10, inside the 5% band.
+  // Linear tets lock in bending: cubic cells (aspect 1) with the 5-tet split, refined together
+  // along and across the beam, converge from about 12% (4 through the thickness) down to ~3%.
+  std::vector<double> errors;
+  for (int t : {4, 6, 8}) {
+    const TetMesh mesh = makeBoxTetMesh(10 * t, t, t, Eigen::Vector3d(length, side, side),
+                                        Eigen::Vector3d::Zero(), HexSplit::kFive);
+    FemMaterial mat = material(MaterialLaw::kLinear, young, 0.0);
+    mat.density_kgpm3 = rho;
+    const Eigen::Vector3d gravity(0, 0, -g);
+    FemBody body(mesh, mat, nodesAtX(mesh, 0.0), &gravity);
+    const FemStepStats st = body.solveStatic();
+    ASSERT_TRUE(st.ok);
+    double tip = 0.0;
+    const auto tip_nodes = nodesAtX(mesh, length);
+    for (int i : tip_nodes) tip += body.restPositions()[3 * i + 2] - body.positions()[3 * i + 2];
+    tip /= static_cast<double>(tip_nodes.size());
+    errors.push_back(std::abs(tip - w_eb) / w_eb);
+    RecordProperty("err_" + std::to_string(t), std::to_string(errors.back()));
+  }
+  EXPECT_LT(errors[2], 0.05) << "finest error " << errors[2];
+  EXPECT_LT(errors[1], errors[0]);
+  EXPECT_LT(errors[2], errors[1]);
+}
+
+// A small corotational beam bent statically by Newton iterations agrees with the linear law for
+// small loads (the rotations are small).
+TEST(Cantilever, CorotationalStaticMatchesLinearForSmallLoad) {
+  const TetMesh mesh = makeBoxTetMesh(10, 2, 2, Eigen::Vector3d(0.2, 0.04, 0.04));
+  const Eigen::Vector3d gravity(0, 0, -9.81);
+  FemBody lin(mesh, material(MaterialLaw::kLinear, 1e7), nodesAtX(mesh, 0.0), &gravity);
+  FemBody cor(mesh, material(MaterialLaw::kCorotational, 1e7), nodesAtX(mesh, 0.0), &gravity);
+  ASSERT_TRUE(lin.solveStatic().ok);
+  ASSERT_TRUE(cor.solveStatic().ok);
+  const Eigen::VectorXd ul = lin.positions() - lin.restPositions();
+  const Eigen::VectorXd uc = cor.positions() - cor.restPositions();
+  EXPECT_GT(ul.norm(), 0.0);
+  EXPECT_LT((ul - uc).norm(), 1e-2 * ul.norm());
+}
+
+struct Block {
+  TetMesh mesh = makeBoxTetMesh(4, 2, 2, Eigen::Vector3d(0.1, 0.05, 0.05));
+  std::vector<int> fixed = nodesAtX(mesh, 0.0);
+  void stretch(FemBody& body, double factor) const {
+    for (int i = 0; i < mesh.nodeCount(); ++i) body.positions()[3 * i] *= factor;
+  }
+};
+
+double totalEnergy(const FemBody& b) { return b.kineticEnergy() + b.elasticEnergy(); }
+
+TEST(ImplicitEuler, DampedReleaseLosesEnergyMonotonicallyAndRests) {
+  Block blk;
+  FemMaterial mat = material(MaterialLaw::kCorotational, 1e4, 0.3);
+  mat.damping = RayleighSpec{1.0, 0.01};
+  FemBody body(blk.mesh, mat, blk.fixed, nullptr);
+  blk.stretch(body, 1.2);
+  double e_prev = totalEnergy(body);
+  const double e0 = e_prev;
+  ASSERT_GT(e0, 0.0);
+  for (int step = 0; step < 400; ++step) {
+    ASSERT_TRUE(body.freeMotion(0.01).ok);
+    const double e = totalEnergy(body);
+    ASSERT_TRUE(std::isfinite(e));
+    EXPECT_LE(e, e_prev + 1e-12 * e0) << "step " << step;
+    e_prev = e;
+  }
+  EXPECT_LT(e_prev, 1e-6 * e0);
+  EXPECT_LT(body.velocities().norm(), 1e-4);
+  EXPECT_EQ(body.counters().damping_evaluations, 400);
+}
+
+TEST(ImplicitEuler, UndampedEnergyNeverGrowsAndLossShrinksWithStep) {
+  Block blk;
+  std::vector<double> loss;
+  for (double h : {0.004, 0.002}) {
+    FemBody body(blk.mesh, material(MaterialLaw::kCorotational, 1e4, 0.3), blk.fixed, nullptr);
+    blk.stretch(body, 1.1);
+    const double e0 = totalEnergy(body);
+    double e_prev = e0;
+    const int steps = static_cast<int>(std::lround(0.2 / h));
+    for (int s = 0; s < steps; ++s) {
+      ASSERT_TRUE(body.freeMotion(h).ok);
+      const double e = totalEnergy(body);
+      EXPECT_LE(e, e_prev * (1.0 + 1e-9)) << "h " << h << " step " << s;
+      e_prev = e;
+    }
+    loss.push_back((e0 - e_prev) / e0);
+    EXPECT_EQ(body.counters().damping_evaluations, 0);  // absent damping: never computed
+  }
+  EXPECT_GT(loss[0], 0.0);
+  EXPECT_LT(loss[1], loss[0]);
+}
+
+// A node pushed through the opposite face: the corotational element recovers its rest shape.
+TEST(Inversion, InvertedElementsRecover) {
+  for (int variant = 0; variant < 2; ++variant) {
+    const TetMesh mesh = variant == 0
+                             ? makeBoxTetMesh(1, 1, 1, Eigen::Vector3d::Constant(0.05),
+                                              Eigen::Vector3d::Zero(), HexSplit::kFive)
+                             : makeBoxTetMesh(2, 2, 2, Eigen::Vector3d::Constant(0.05));
+    FemMaterial mat = material(MaterialLaw::kCorotational, 1e4, 0.3);
+    mat.damping = RayleighSpec{2.0, 0.02};
+    FemBody body(mesh, mat, {}, nullptr);
+    // corner node 0 mirrored through the opposite side of the box: through several faces
+    body.positions().segment<3>(0) = Eigen::Vector3d(0.07, 0.06, 0.065);
+    EXPECT_GT(body.elasticEnergy(), 0.0);
+    for (int s = 0; s < 600; ++s) {
+      const FemStepStats st = body.freeMotion(0.01);
+      ASSERT_TRUE(st.ok) << "step " << s;
+      ASSERT_TRUE(body.positions().allFinite()) << "step " << s;
+    }
+    // rest shape up to a rigid motion: no strain energy left, every element positive
+    EXPECT_LT(body.elasticEnergy(), 1e-10);
+    const auto& q = body.positions();
+    for (const auto& t : mesh.tets) {
+      Eigen::Matrix3d d;
+      d << q.segment<3>(3 * t[1]) - q.segment<3>(3 * t[0]),
+          q.segment<3>(3 * t[2]) - q.segment<3>(3 * t[0]),
+          q.segment<3>(3 * t[3]) - q.segment<3>(3 * t[0]);
+      EXPECT_GT(d.determinant(), 0.0);
+    }
+  }
+}
+
+TEST(Solvers, PcgMatchesCholmod) {
+  const TetMesh mesh = makeBoxTetMesh(6, 3, 3, Eigen::Vector3d(0.12, 0.06, 0.06));
+  const Eigen::Vector3d gravity(0, 0, -9.81);
+  FemMaterial mat = material(MaterialLaw::kCorotational, 5e3, 0.4);
+  mat.damping = RayleighSpec{0.5, 0.005};
+  const auto fixed = nodesAtX(mesh, 0.0);
+  FemSolverOptions chol_opt;
+  FemBody ref(mesh, mat, fixed, &gravity, chol_opt);
+  for (PcgPreconditioner pre : {PcgPreconditioner::kJacobi, PcgPreconditioner::kRestCholesky}) {
+    FemSolverOptions pcg_opt;
+    pcg_opt.linear = LinearSolverKind::kPcg;
+    pcg_opt.cg_tolerance = 1e-12;
+    pcg_opt.cg_max_iterations = 2000;
+    pcg_opt.pcg_preconditioner = pre;
+    FemBody ref_local(mesh, mat, fixed, &gravity, chol_opt);
+    FemBody pcg(mesh, mat, fixed, &gravity, pcg_opt);
+    // a few steps of large sag so rotations are non-trivial, then compare each step
+    for (int s = 0; s < 5; ++s) {
+      ASSERT_TRUE(ref_local.freeMotion(0.02).ok);
+      const FemStepStats st = pcg.freeMotion(0.02);
+      ASSERT_TRUE(st.ok) << "iterations " << st.cg_iterations << " residual " << st.cg_residual;
+      EXPECT_GT(st.cg_iterations, 0);
+      const double dv = (ref_local.velocities() - pcg.velocities()).norm();
+      EXPECT_LT(dv, 1e-8 * ref_local.velocities().norm()) << "step " << s;
+      EXPECT_LT((ref_local.positions() - pcg.positions()).norm(),
+                1e-8 * (ref_local.positions() - ref_local.restPositions()).norm());
+    }
+  }
+}
+
+TEST(Counters, AbsentEffectsAreNotComputed) {
+  const TetMesh mesh = makeBoxTetMesh(2, 2, 2, Eigen::Vector3d::Constant(0.05));
+  const Eigen::Vector3d gravity(0, 0, -9.81);
+  FemBody lin(mesh, material(MaterialLaw::kLinear), nodesAtX(mesh, 0.0), &gravity);
+  for (int s = 0; s < 3; ++s) ASSERT_TRUE(lin.freeMotion(0.01).ok);
+  std::vector<Eigen::Matrix3d> rot;
+  lin.nodeRotations(rot);
+  EXPECT_EQ(lin.counters().rotation_extractions, 0);
+  EXPECT_EQ(lin.counters().damping_evaluations, 0);
+  EXPECT_EQ(lin.counters().factorisations, 3);
+  for (const auto& r : rot) EXPECT_TRUE(r.isIdentity(0.0));
+  EXPECT_LT(lin.gravityEnergy(), 1e300);
+
+  FemMaterial mat = material(MaterialLaw::kCorotational);
+  mat.damping = RayleighSpec{1.0, 0.0};
+  FemBody cor(mesh, mat, nodesAtX(mesh, 0.0), &gravity);
+  ASSERT_TRUE(cor.freeMotion(0.01).ok);
+  EXPECT_EQ(cor.counters().rotation_extractions, mesh.tetCount());
+  EXPECT_EQ(cor.counters().damping_evaluations, 1);
+}
+
+TEST(Material, RejectsBadInput) {
+  const TetMesh mesh = makeBoxTetMesh(1, 1, 1, Eigen::Vector3d::Constant(0.05));
+  EXPECT_THROW(FemBody(mesh, material(MaterialLaw::kLinear, -1.0), {}, nullptr), tactus::Error);
+  EXPECT_THROW(FemBody(mesh, material(MaterialLaw::kLinear, 1e3, 0.5), {}, nullptr), tactus::Error);
+  EXPECT_THROW(FemBody(mesh, material(MaterialLaw::kLinear), {99}, nullptr), tactus::Error);
+  TetMesh flat = mesh;
+  flat.nodes.row(2).setZero();
+  EXPECT_THROW(FemBody(flat, material(MaterialLaw::kLinear), {}, nullptr), tactus::Error);
+}
+
+TEST(Transform, ScaleRotateTranslate) {
+  TetMesh mesh = makeBoxTetMesh(1, 1, 1, Eigen::Vector3d::Ones());
+  transformMesh(mesh, 0.1, Eigen::Vector3d(0, 0, 90), Eigen::Vector3d(1, 0, 0));
+  // node (1,0,0) scaled to (0.1,0,0), rotated 90 deg about z to (0,0.1,0), shifted by x+1
+  EXPECT_TRUE(mesh.nodes.col(1).isApprox(Eigen::Vector3d(1.0, 0.1, 0.0), 1e-12));
+  BoxSpec box{Eigen::Vector3d(0.95, -1, -1), Eigen::Vector3d(1.05, 1, 1)};
+  EXPECT_EQ(nodesInBoxes(mesh, {box}).size(), 4u);
+}
+
+}  // namespace
+}  // namespace tactus::sim

@@ -1,0 +1,322 @@
+// Scene loader: full scene values, defaults, absent effects, and exact error messages.
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include "tactus/shared/error.h"
+#include "tactus/sim/scene.h"
+
+namespace tactus::sim {
+namespace {
+
+const std::filesystem::path kData = TACTUS_TEST_DATA_DIR;
+const std::filesystem::path kScenes = kData / "scenes";
+
+std::filesystem::path normal(const std::filesystem::path& p) {
+  return std::filesystem::absolute(p).lexically_normal();
+}
+
+// Parses `yaml` as "s.yaml" located in tests/data/scenes; returns the error message.
+std::string sceneError(const std::string& yaml) {
+  try {
+    parseScene(yaml, "s.yaml", kScenes);
+  } catch (const SceneError& e) {
+    return e.what();
+  }
+  return "(no error)";
+}
+
+// A valid prefix: errors below are in the lines that follow it.
+const std::string kHead =
+    "time_step: 0.01\n"
+    "tissues:\n"
+    "  - mesh: ../meshes/liver.msh\n";
+
+TEST(Scene, FullSceneParsesToTheExpectedValues) {
+  const SceneSpec s = loadScene(kScenes / "full_scene.yaml");
+  EXPECT_EQ(s.source, kScenes / "full_scene.yaml");
+  EXPECT_DOUBLE_EQ(s.time_step_s, 0.01);
+  EXPECT_DOUBLE_EQ(s.duration_s, 10.0);
+  ASSERT_TRUE(s.gravity_mps2.has_value());
+  EXPECT_EQ(*s.gravity_mps2, Eigen::Vector3d(0, 0, -9.81));
+
+  ASSERT_EQ(s.tissues.size(), 2u);
+  const TissueSpec& liver = s.tissues[0];
+  EXPECT_EQ(liver.name, "liver");
+  EXPECT_EQ(liver.mesh_path, normal(kData / "meshes" / "liver2.msh"));
+  EXPECT_TRUE(liver.mesh_path.is_absolute());
+  EXPECT_DOUBLE_EQ(liver.scale, 0.1);
+  EXPECT_EQ(liver.rotation_deg, Eigen::Vector3d(90, 0, 0));
+  EXPECT_EQ(liver.translation_m, Eigen::Vector3d(0.01, 0.02, 0.03));
+  EXPECT_EQ(liver.law, MaterialLaw::kCorotational);
+  EXPECT_DOUBLE_EQ(liver.young_pa, 3000.0);
+  EXPECT_DOUBLE_EQ(liver.poisson, 0.45);
+  EXPECT_DOUBLE_EQ(liver.density_kgpm3, 1000.0);
+  ASSERT_TRUE(liver.damping.has_value());
+  EXPECT_DOUBLE_EQ(liver.damping->mass_alpha_per_s, 0.1);
+  EXPECT_DOUBLE_EQ(liver.damping->stiffness_beta_s, 0.01);
+  EXPECT_EQ(liver.fixed_nodes, (std::vector<int>{1, 2, 3}));
+  ASSERT_EQ(liver.fixed_boxes.size(), 1u);
+  EXPECT_EQ(liver.fixed_boxes[0].min_m, Eigen::Vector3d(-1, -1, -1));
+  EXPECT_EQ(liver.fixed_boxes[0].max_m, Eigen::Vector3d(1, 1, -0.5));
+  EXPECT_EQ(liver.compliance, ComplianceKind::kExact);
+  EXPECT_EQ(liver.compliance_cache_dir, normal(kScenes / "cache"));
+
+  const TissueSpec& cube = s.tissues[1];
+  EXPECT_EQ(cube.name, "cube");
+  EXPECT_EQ(cube.law, MaterialLaw::kLinear);
+  EXPECT_DOUBLE_EQ(cube.young_pa, 1e5);
+  EXPECT_FALSE(cube.damping.has_value());
+  EXPECT_EQ(cube.compliance, ComplianceKind::kWarped);
+
+  const InstrumentSpec& in = s.instrument;
+  EXPECT_TRUE(in.present);
+  EXPECT_EQ(in.kind, InstrumentKind::kGrasper);
+  EXPECT_DOUBLE_EQ(in.mass_kg, 0.05);
+  EXPECT_DOUBLE_EQ(in.inertia_kgm2, 1e-5);
+  EXPECT_DOUBLE_EQ(in.coupling_k_npm, 500);
+  EXPECT_DOUBLE_EQ(in.coupling_b_nspm, 5);
+  EXPECT_DOUBLE_EQ(in.coupling_k_rot_nmprad, 0.5);
+  EXPECT_DOUBLE_EQ(in.coupling_b_rot_nmsprad, 0.005);
+  EXPECT_DOUBLE_EQ(in.friction_mu, 0.8);
+  EXPECT_DOUBLE_EQ(in.alarm_distance_m, 0.004);
+  EXPECT_DOUBLE_EQ(in.contact_distance_m, 0.001);
+  EXPECT_DOUBLE_EQ(in.tip_radius_m, 0.003);
+  EXPECT_DOUBLE_EQ(in.shaft_length_m, 0.05);
+  EXPECT_DOUBLE_EQ(in.jaw_length_m, 0.02);
+  EXPECT_DOUBLE_EQ(in.jaw_radius_m, 0.002);
+  EXPECT_NEAR(in.max_opening_rad, 35.0 * M_PI / 180.0, 1e-15);
+  EXPECT_EQ(in.jaw_samples, 8);
+  EXPECT_EQ(in.initial_pose.position_m, Eigen::Vector3d(0, 0, 0.1));
+  // 90 degrees about z takes x to y
+  EXPECT_TRUE((in.initial_pose.orientation * Eigen::Vector3d::UnitX())
+                  .isApprox(Eigen::Vector3d::UnitY(), 1e-12));
+  ASSERT_EQ(in.trajectory.size(), 2u);
+  EXPECT_DOUBLE_EQ(in.trajectory[0].t_s, 0.0);
+  EXPECT_DOUBLE_EQ(in.trajectory[0].gripper_opening, 1.0);
+  EXPECT_TRUE(in.trajectory[0].pose.orientation.isApprox(Eigen::Quaterniond::Identity()));
+  EXPECT_DOUBLE_EQ(in.trajectory[1].t_s, 1.5);
+  EXPECT_EQ(in.trajectory[1].pose.position_m, Eigen::Vector3d(0, 0, 0.05));
+  EXPECT_TRUE(in.trajectory[1].pose.orientation.isApprox(Eigen::Quaterniond(0, 1, 0, 0)));
+  EXPECT_DOUBLE_EQ(in.trajectory[1].gripper_opening, 0.25);
+
+  EXPECT_EQ(s.solver.linear, LinearSolverKind::kPcg);
+  EXPECT_DOUBLE_EQ(s.solver.cg_tolerance, 1e-9);
+  EXPECT_EQ(s.solver.cg_max_iterations, 400);
+  EXPECT_DOUBLE_EQ(s.solver.nsgs_tolerance, 1e-7);
+  EXPECT_EQ(s.solver.nsgs_max_sweeps, 300);
+  EXPECT_DOUBLE_EQ(s.solver.nsgs_sor, 1.2);
+  EXPECT_EQ(s.solver.max_contacts, 200);
+
+  EXPECT_TRUE(s.haptics.enabled);
+  EXPECT_DOUBLE_EQ(s.haptics.rate_hz, 2000);
+  EXPECT_EQ(s.haptics.device, "replay");
+  EXPECT_DOUBLE_EQ(s.haptics.force_scale, 0.5);
+  EXPECT_DOUBLE_EQ(s.haptics.max_force_n, 6.0);
+  EXPECT_DOUBLE_EQ(s.haptics.watchdog_ms, 40);
+  EXPECT_EQ(s.haptics.max_sweeps_per_tick, 30);
+  EXPECT_DOUBLE_EQ(s.haptics.nsgs_tolerance, 1e-5);
+
+  EXPECT_TRUE(s.output.enabled);
+  EXPECT_EQ(s.output.directory, std::filesystem::path("out/liver"));
+  EXPECT_EQ(s.output.every_n_steps, 10);
+}
+
+TEST(Scene, MinimalSceneTakesDefaultsAndLeavesEffectsAbsent) {
+  const SceneSpec s = loadScene(kScenes / "minimal_scene.yaml");
+  const SceneSpec def;
+  const TissueSpec tdef;
+  EXPECT_DOUBLE_EQ(s.time_step_s, 0.005);
+  EXPECT_DOUBLE_EQ(s.duration_s, 0.0);
+  EXPECT_FALSE(s.gravity_mps2.has_value());
+  ASSERT_EQ(s.tissues.size(), 1u);
+  const TissueSpec& t = s.tissues[0];
+  EXPECT_EQ(t.name, "tissue");
+  EXPECT_EQ(t.mesh_path, normal(kData / "meshes" / "liver.msh"));
+  EXPECT_DOUBLE_EQ(t.scale, 1.0);
+  EXPECT_EQ(t.rotation_deg, Eigen::Vector3d::Zero());
+  EXPECT_EQ(t.translation_m, Eigen::Vector3d::Zero());
+  EXPECT_EQ(t.law, MaterialLaw::kCorotational);
+  EXPECT_DOUBLE_EQ(t.young_pa, tdef.young_pa);
+  EXPECT_DOUBLE_EQ(t.poisson, tdef.poisson);
+  EXPECT_DOUBLE_EQ(t.density_kgpm3, tdef.density_kgpm3);
+  EXPECT_FALSE(t.damping.has_value());
+  EXPECT_TRUE(t.fixed_nodes.empty());
+  EXPECT_TRUE(t.fixed_boxes.empty());
+  EXPECT_EQ(t.compliance, ComplianceKind::kWarped);
+  EXPECT_TRUE(t.compliance_cache_dir.empty());
+  EXPECT_FALSE(s.instrument.present);
+  EXPECT_FALSE(s.haptics.enabled);
+  EXPECT_FALSE(s.output.enabled);
+  EXPECT_EQ(s.solver.linear, def.solver.linear);
+  EXPECT_EQ(s.solver.max_contacts, def.solver.max_contacts);
+  EXPECT_DOUBLE_EQ(s.solver.nsgs_sor, def.solver.nsgs_sor);
+}
+
+TEST(Scene, SectionsPresentWithDefaults) {
+  const SceneSpec s = parseScene(kHead +
+                                     "    damping: {}\n"
+                                     "instrument: {}\n"
+                                     "haptics: {rate: 500}\n",
+                                 "s.yaml", kScenes);
+  ASSERT_TRUE(s.tissues[0].damping.has_value());
+  EXPECT_EQ(s.tissues[0].damping->mass_alpha_per_s, 0.0);
+  EXPECT_TRUE(s.instrument.present);
+  EXPECT_EQ(s.instrument.kind, InstrumentKind::kProbe);
+  EXPECT_EQ(s.instrument.friction_mu, 0.0);
+  EXPECT_TRUE(s.haptics.enabled);  // a haptics section turns haptics on
+  EXPECT_EQ(s.haptics.rate_hz, 500);
+  EXPECT_FALSE(parseScene(kHead + "haptics: {enabled: false}\n", "s.yaml", kScenes)
+                   .haptics.enabled);
+}
+
+TEST(Scene, EulerAnglesApplyXThenYThenZ) {
+  const SceneSpec s = parseScene(kHead +
+                                     "instrument:\n"
+                                     "  initial_pose: {rotation_deg: [90, 0, 90]}\n",
+                                 "s.yaml", kScenes);
+  const Eigen::Quaterniond q = s.instrument.initial_pose.orientation;
+  // R = Rz(90) Rx(90): x -> x -> y, y -> z -> z
+  EXPECT_TRUE((q * Eigen::Vector3d::UnitX()).isApprox(Eigen::Vector3d::UnitY(), 1e-12));
+  EXPECT_TRUE((q * Eigen::Vector3d::UnitY()).isApprox(Eigen::Vector3d::UnitZ(), 1e-12));
+}
+
+TEST(Scene, RelativeMeshPathResolvedAgainstTheSceneFolder) {
+  const SceneSpec s = parseScene(kHead, "s.yaml", kScenes);
+  EXPECT_EQ(s.tissues[0].mesh_path, normal(kData / "meshes" / "liver.msh"));
+  // the same text seen from another folder does not find the mesh
+  EXPECT_EQ(
+      [&] {
+        try {
+          parseScene(kHead, "s.yaml", kData);
+        } catch (const SceneError& e) {
+          return std::string(e.what());
+        }
+        return std::string();
+      }(),
+      "s.yaml:3:11: tissues[0].mesh: mesh file not found: " +
+          normal(kData / ".." / "meshes" / "liver.msh").string() +
+          " (relative paths are resolved against the scene file's folder)");
+}
+
+TEST(Scene, EachKindOfErrorHasItsExactMessage) {
+  EXPECT_EQ(sceneError("time_step: 0\ntissues:\n  - mesh: ../meshes/liver.msh\n"),
+            "s.yaml:1:12: time_step: must be > 0 (got 0)");
+  EXPECT_EQ(sceneError("tissues:\n  - mesh: ../meshes/liver.msh\n"),
+            "s.yaml:1:1: time_step: is required");
+  EXPECT_EQ(sceneError("time_step: 0.01\n"),
+            "s.yaml:1:1: tissues: is required (a list with at least one tissue)");
+  EXPECT_EQ(sceneError("time_step: 0.01\ntissues: []\n"),
+            "s.yaml:2:10: tissues: must be a list with at least one tissue (got an empty list)");
+  EXPECT_EQ(sceneError(kHead + "timestep: 0.01\n"),
+            "s.yaml:4:1: timestep: unknown key (expected one of: time_step, duration, gravity, "
+            "tissues, instrument, solver, haptics, output)");
+  EXPECT_EQ(sceneError(kHead + "duration: ten\n"),
+            "s.yaml:4:11: duration: must be a number (got 'ten')");
+  EXPECT_EQ(sceneError(kHead + "gravity: [0, -9.81]\n"),
+            "s.yaml:4:10: gravity: must be a list of 3 numbers (got 2 items)");
+  EXPECT_EQ(sceneError(kHead + "    material: {young_modulus: -3000}\n"),
+            "s.yaml:4:31: tissues[0].material.young_modulus: must be > 0 (got -3000)");
+  EXPECT_EQ(sceneError(kHead + "    material: {poisson_ratio: 0.5}\n"),
+            "s.yaml:4:31: tissues[0].material.poisson_ratio: must be in (-1, 0.5) (got 0.5)");
+  EXPECT_EQ(sceneError(kHead + "    material: {density: 0}\n"),
+            "s.yaml:4:25: tissues[0].material.density: must be > 0 (got 0)");
+  EXPECT_EQ(sceneError(kHead + "    material: {law: neo_hookean}\n"),
+            "s.yaml:4:21: tissues[0].material.law: must be one of linear, corotational (got "
+            "'neo_hookean')");
+  EXPECT_EQ(sceneError(kHead + "    damping: {rayleigh_mass: -0.1}\n"),
+            "s.yaml:4:30: tissues[0].damping.rayleigh_mass: must be >= 0 (got -0.1)");
+  EXPECT_EQ(sceneError(kHead + "    fixed: {nodes: [1, x]}\n"),
+            "s.yaml:4:24: tissues[0].fixed.nodes[1]: must be an integer node index (got 'x')");
+  EXPECT_EQ(sceneError(kHead + "    fixed: {boxes: [{min: [0, 0, 1], max: [1, 1, 0]}]}\n"),
+            "s.yaml:4:43: tissues[0].fixed.boxes[0].max: must be >= min in every coordinate");
+  EXPECT_EQ(sceneError(kHead + "    compliance: {model: fast}\n"),
+            "s.yaml:4:25: tissues[0].compliance.model: must be one of exact, warped, rest, "
+            "uncoupled (got 'fast')");
+  EXPECT_EQ(sceneError(kHead + "    transform: 0.1\n"),
+            "s.yaml:4:16: tissues[0].transform: must be a map (got '0.1')");
+  EXPECT_EQ(sceneError(kHead + "instrument: {friction: -0.5}\n"),
+            "s.yaml:4:24: instrument.friction: must be >= 0 (got -0.5)");
+  EXPECT_EQ(sceneError(kHead + "instrument: {type: scalpel}\n"),
+            "s.yaml:4:20: instrument.type: must be one of probe, grasper (got 'scalpel')");
+  EXPECT_EQ(sceneError(kHead + "instrument: {grasper: {samples: 2.5}}\n"),
+            "s.yaml:4:33: instrument.grasper.samples: must be an integer (got '2.5')");
+  EXPECT_EQ(sceneError(kHead + "instrument: {initial_pose: {quaternion: [2, 0, 0, 0]}}\n"),
+            "s.yaml:4:41: instrument.initial_pose.quaternion: must be a unit quaternion "
+            "[w, x, y, z] (norm is 2)");
+  EXPECT_EQ(sceneError(kHead + "instrument:\n  trajectory:\n"
+                               "    - {t: 1.0, position: [0, 0, 0]}\n"
+                               "    - {t: 1.0, position: [0, 0, 0], gripper: 1.5}\n"),
+            "s.yaml:7:11: instrument.trajectory[1].t: must be greater than the previous key's t "
+            "(1)\n"
+            "s.yaml:7:46: instrument.trajectory[1].gripper: must be in [0, 1] (got 1.5)");
+  EXPECT_EQ(sceneError(kHead + "instrument:\n  trajectory:\n    - {position: [0, 0, 0]}\n"),
+            "s.yaml:6:7: instrument.trajectory[0].t: is required");
+  EXPECT_EQ(sceneError(kHead + "solver: {nsgs_sor: 2}\n"),
+            "s.yaml:4:20: solver.nsgs_sor: must be in (0, 2) (got 2)");
+  EXPECT_EQ(sceneError(kHead + "solver: {max_contacts: 0}\n"),
+            "s.yaml:4:24: solver.max_contacts: must be >= 1 (got 0)");
+  EXPECT_EQ(sceneError(kHead + "haptics: {enabled: maybe}\n"),
+            "s.yaml:4:20: haptics.enabled: must be true or false (got 'maybe')");
+  EXPECT_EQ(sceneError(kHead + "output: {every: 10}\n"), "s.yaml:4:9: output.vtk: is required");
+  EXPECT_EQ(sceneError(kHead + "duration: 1\nduration: 2\n"),
+            "s.yaml:5:1: duration: duplicate key");
+  EXPECT_EQ(sceneError("time_step: 0.01\ntissues:\n  - mesh: ../meshes/nowhere.msh\n"),
+            "s.yaml:3:11: tissues[0].mesh: mesh file not found: " +
+                normal(kData / "meshes" / "nowhere.msh").string() +
+                " (relative paths are resolved against the scene file's folder)");
+}
+
+TEST(Scene, AllProblemsAreReportedAtOnceInDocumentOrder) {
+  const std::string yaml =
+      "time_step: -1\n"
+      "tissues:\n"
+      "  - mesh: ../meshes/liver.msh\n"
+      "    material: {young_modulus: 0, poisson_ratio: 0.7, colour: red}\n"
+      "instrument: {friction: -1}\n";
+  EXPECT_EQ(sceneError(yaml),
+            "s.yaml:1:12: time_step: must be > 0 (got -1)\n"
+            "s.yaml:4:31: tissues[0].material.young_modulus: must be > 0 (got 0)\n"
+            "s.yaml:4:49: tissues[0].material.poisson_ratio: must be in (-1, 0.5) (got 0.7)\n"
+            "s.yaml:4:54: tissues[0].material.colour: unknown key (expected one of: law, "
+            "young_modulus, poisson_ratio, density)\n"
+            "s.yaml:5:24: instrument.friction: must be >= 0 (got -1)");
+}
+
+TEST(Scene, YamlSyntaxErrorsNameFileLineAndColumn) {
+  EXPECT_THAT(sceneError("time_step: 0.01\ntissues: [\n  - a\n"),
+              ::testing::MatchesRegex("s\\.yaml:[0-9]+:[0-9]+: YAML syntax error: .+"));
+  EXPECT_EQ(sceneError("time_step: 0.01\n  bad: indentation\n"),
+            "s.yaml:2:6: YAML syntax error: illegal map value");
+  EXPECT_EQ(sceneError("- 1\n- 2\n"), "s.yaml:1:1: scene: must be a map of settings (got a list)");
+  EXPECT_EQ(sceneError(""), "s.yaml:1:1: scene: must be a map of settings (got nothing)");
+}
+
+TEST(Scene, ReadmeExampleIsValid) {
+  const std::filesystem::path readme = std::filesystem::path(TACTUS_SOURCE_DIR) / "scenes";
+  std::ifstream in(readme / "README.md");
+  std::stringstream text;
+  text << in.rdbuf();
+  const std::string md = text.str();
+  const std::size_t begin = md.find("```yaml\n");
+  ASSERT_NE(begin, std::string::npos);
+  const std::size_t end = md.find("```", begin + 8);
+  ASSERT_NE(end, std::string::npos);
+  const SceneSpec s = parseScene(md.substr(begin + 8, end - begin - 8), "README.md", readme);
+  EXPECT_EQ(s.tissues.at(0).mesh_path, normal(readme / "meshes" / "liver2.msh"));
+  EXPECT_TRUE(s.instrument.present);
+  EXPECT_EQ(s.instrument.trajectory.size(), 2u);
+  EXPECT_TRUE(s.haptics.enabled);
+  EXPECT_TRUE(s.output.enabled);
+}
+
+TEST(Scene, MissingSceneFile) {
+  EXPECT_THROW(loadScene(kScenes / "no_such_scene.yaml"), SceneError);
+}
+
+}  // namespace
+}  // namespace tactus::sim
