@@ -27,7 +27,8 @@ void addDeviceOption(DeviceConfig& config, std::string_view key_equals_value) {
     throw DeviceError("device option '" + std::string(key_equals_value) +
                       "' must look like key=value (e.g. --device-option mass=0.5)");
   }
-  config[std::string(key_equals_value.substr(0, eq))] = std::string(key_equals_value.substr(eq + 1));
+  const std::string key(key_equals_value.substr(0, eq));
+  config[key] = std::string(key_equals_value.substr(eq + 1));
 }
 
 OptionReader::OptionReader(std::string backend, const DeviceConfig& config)

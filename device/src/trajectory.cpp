@@ -42,7 +42,14 @@ Trajectory Trajectory::parseCsv(const std::string& text, const std::string& orig
     const std::string t = trim(line);
     if (t.empty() || t[0] == '#') continue;
     auto where = [&](int col) {
-      return origin + ":" + std::to_string(line_no) + (col > 0 ? ":" + std::to_string(col) : "");
+      std::string w = origin;
+      w += ':';
+      w += std::to_string(line_no);
+      if (col > 0) {
+        w += ':';
+        w += std::to_string(col);
+      }
+      return w;
     };
     // header: exactly the nine column names
     if (!header_seen) {

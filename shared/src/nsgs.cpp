@@ -82,6 +82,64 @@ bool bisectSlip(const Local3& p, double lo, double hi, double g_lo, double h_tol
   return true;
 }
 
+// Degenerate block: projected fixed point f <- P_K(f - rho (a f + b)_hat), from f_old.
+void slipFallback(const Local3& p, const double* f_old, double* f) noexcept {
+  const auto& a = p.a;
+  const double mu = p.mu;
+  double rho = 0.0;
+  for (int k = 0; k < 3; ++k) rho = std::max(rho, a[k][k]);
+  rho = rho > 0.0 ? 1.0 / rho : 1.0;
+  double z[3] = {f_old[0], f_old[1], f_old[2]};
+  projectOnCone(mu, z);
+  for (int it = 0; it < 100; ++it) {
+    double d[3];
+    for (int k = 0; k < 3; ++k) d[k] = a[k][0] * z[0] + a[k][1] * z[1] + a[k][2] * z[2] + p.b[k];
+    d[0] += mu * std::hypot(d[1], d[2]);
+    for (int k = 0; k < 3; ++k) z[k] -= rho * d[k];
+    projectOnCone(mu, z);
+  }
+  f[0] = z[0];
+  f[1] = z[1];
+  f[2] = z[2];
+}
+
+// x . y with four independent partial sums (a single chain is add-latency bound).
+inline double dot(const double* x, const double* y, int n) noexcept {
+  double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0;
+  int k = 0;
+  for (; k + 4 <= n; k += 4) {
+    s0 += x[k] * y[k];
+    s1 += x[k + 1] * y[k + 1];
+    s2 += x[k + 2] * y[k + 2];
+    s3 += x[k + 3] * y[k + 3];
+  }
+  for (; k < n; ++k) s0 += x[k] * y[k];
+  return (s0 + s1) + (s2 + s3);
+}
+
+// (x0 . y, x1 . y, x2 . y) in one pass over y, two partial sums per row.
+inline void dot3(const double* x0, const double* x1, const double* x2, const double* y, int n,
+                 double* out) noexcept {
+  double a0 = 0.0, a1 = 0.0, b0 = 0.0, b1 = 0.0, c0 = 0.0, c1 = 0.0;
+  int k = 0;
+  for (; k + 2 <= n; k += 2) {
+    a0 += x0[k] * y[k];
+    b0 += x1[k] * y[k];
+    c0 += x2[k] * y[k];
+    a1 += x0[k + 1] * y[k + 1];
+    b1 += x1[k + 1] * y[k + 1];
+    c1 += x2[k + 1] * y[k + 1];
+  }
+  if (k < n) {
+    a0 += x0[k] * y[k];
+    b0 += x1[k] * y[k];
+    c0 += x2[k] * y[k];
+  }
+  out[0] = a0 + a1;
+  out[1] = b0 + b1;
+  out[2] = c0 + c1;
+}
+
 // Exact solution of one 3-row contact's local problem (see nsgs.h); f_old is the fallback start.
 void solveLocal3(const Local3& p, const double* f_old, double* f) noexcept {
   const double mu = p.mu;
@@ -144,80 +202,51 @@ void solveLocal3(const Local3& p, const double* f_old, double* f) noexcept {
     }
     theta -= std::clamp(step, -0.5, 0.5);
   }
-  // slip: scan the circle for sign changes of g, nearest to theta0 first
+  // slip: scan for sign changes of g over the angles where f_n > 0, keep the valid root nearest
+  // theta0. den(theta) = a_nn + mu r cos(theta - alpha) > 0 is the whole circle or one arc; on
+  // an arc, samples cluster near its ends, where f_n -> inf and roots can hide.
   constexpr int kScan = 72;
-  constexpr double kStep = 2.0 * std::numbers::pi / kScan;
-  SlipEval prev_fwd = evalSlip(p, theta0);
-  SlipEval prev_bwd = prev_fwd;
-  for (int k = 1; k <= kScan / 2; ++k) {
-    const double tf = theta0 + k * kStep;
-    const SlipEval ef = evalSlip(p, tf);
-    if (ef.valid && prev_fwd.valid && (ef.g < 0.0) != (prev_fwd.g < 0.0) &&
-        (ef.h < 0.0 || prev_fwd.h < 0.0) && bisectSlip(p, tf - kStep, tf, prev_fwd.g, h_tol, f)) {
-      return;
+  const double r_nt = mu * std::hypot(a[0][1], a[0][2]);
+  double lo = theta0 - std::numbers::pi;
+  double span = 2.0 * std::numbers::pi;
+  bool arc = false;
+  if (a[0][0] <= r_nt) {
+    if (!(r_nt > 0.0)) return slipFallback(p, f_old, f);
+    const double alpha = std::atan2(a[0][2], a[0][1]);
+    const double beta = std::acos(std::clamp(-a[0][0] / r_nt, -1.0, 1.0));
+    lo = alpha - beta;
+    span = 2.0 * beta;
+    arc = true;
+  }
+  auto sample = [&](int k) {
+    if (!arc) return lo + span * k / kScan;
+    // Chebyshev-like clustering; the ends themselves (f_n infinite) are nudged inside
+    const double t = std::clamp(static_cast<double>(k) / kScan, 1e-5, 1.0 - 1e-5);
+    return lo + span * 0.5 * (1.0 - std::cos(std::numbers::pi * t));
+  };
+  double best_dist = 1e300;
+  double th_prev = sample(0);
+  SlipEval e_prev = evalSlip(p, th_prev);
+  for (int k = 1; k <= kScan; ++k) {
+    const double th = sample(k);
+    const SlipEval e = evalSlip(p, th);
+    double root[3];
+    if (e.valid && e_prev.valid && (e.g < 0.0) != (e_prev.g < 0.0) &&
+        (e.h < 0.0 || e_prev.h < 0.0) && bisectSlip(p, th_prev, th, e_prev.g, h_tol, root)) {
+      const double th_root = std::atan2(root[2], root[1]);
+      const double dist = std::abs(std::remainder(th_root - theta0, 2.0 * std::numbers::pi));
+      if (dist < best_dist) {
+        best_dist = dist;
+        f[0] = root[0];
+        f[1] = root[1];
+        f[2] = root[2];
+      }
     }
-    prev_fwd = ef;
-    const double tb = theta0 - k * kStep;
-    const SlipEval eb = evalSlip(p, tb);
-    if (eb.valid && prev_bwd.valid && (eb.g < 0.0) != (prev_bwd.g < 0.0) &&
-        (eb.h < 0.0 || prev_bwd.h < 0.0) && bisectSlip(p, tb, tb + kStep, eb.g, h_tol, f)) {
-      return;
-    }
-    prev_bwd = eb;
+    th_prev = th;
+    e_prev = e;
   }
-  // degenerate block: projected fixed point f <- P_K(f - rho (a f + b)_hat)
-  double rho = 0.0;
-  for (int k = 0; k < 3; ++k) rho = std::max(rho, a[k][k]);
-  rho = rho > 0.0 ? 1.0 / rho : 1.0;
-  double z[3] = {f_old[0], f_old[1], f_old[2]};
-  projectOnCone(mu, z);
-  for (int it = 0; it < 100; ++it) {
-    double d[3];
-    for (int k = 0; k < 3; ++k) d[k] = a[k][0] * z[0] + a[k][1] * z[1] + a[k][2] * z[2] + p.b[k];
-    d[0] += mu * std::hypot(d[1], d[2]);
-    for (int k = 0; k < 3; ++k) z[k] -= rho * d[k];
-    projectOnCone(mu, z);
-  }
-  f[0] = z[0];
-  f[1] = z[1];
-  f[2] = z[2];
-}
-
-// x . y with four independent partial sums (a single chain is add-latency bound).
-inline double dot(const double* x, const double* y, int n) noexcept {
-  double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0;
-  int k = 0;
-  for (; k + 4 <= n; k += 4) {
-    s0 += x[k] * y[k];
-    s1 += x[k + 1] * y[k + 1];
-    s2 += x[k + 2] * y[k + 2];
-    s3 += x[k + 3] * y[k + 3];
-  }
-  for (; k < n; ++k) s0 += x[k] * y[k];
-  return (s0 + s1) + (s2 + s3);
-}
-
-// (x0 . y, x1 . y, x2 . y) in one pass over y, two partial sums per row.
-inline void dot3(const double* x0, const double* x1, const double* x2, const double* y, int n,
-                 double* out) noexcept {
-  double a0 = 0.0, a1 = 0.0, b0 = 0.0, b1 = 0.0, c0 = 0.0, c1 = 0.0;
-  int k = 0;
-  for (; k + 2 <= n; k += 2) {
-    a0 += x0[k] * y[k];
-    b0 += x1[k] * y[k];
-    c0 += x2[k] * y[k];
-    a1 += x0[k + 1] * y[k + 1];
-    b1 += x1[k + 1] * y[k + 1];
-    c1 += x2[k + 1] * y[k + 1];
-  }
-  if (k < n) {
-    a0 += x0[k] * y[k];
-    b0 += x1[k] * y[k];
-    c0 += x2[k] * y[k];
-  }
-  out[0] = a0 + a1;
-  out[1] = b0 + b1;
-  out[2] = c0 + c1;
+  if (best_dist < 1e300) return;
+  slipFallback(p, f_old, f);
 }
 
 // delta = W f + q (row pass); returns ||delta||^2.
@@ -386,6 +415,7 @@ NsgsResult solveNsgs(const ContactProblemView& problem, const NsgsSettings& sett
   const int check_every = std::max(settings.check_every, 1);
   const int max_sweeps = std::max(settings.max_sweeps, 1);
   const bool row_gather = settings.coupling == NsgsCoupling::kRowGather;
+  const bool symmetric = settings.coupling == NsgsCoupling::kSymmetricRowUpdate;
 
   auto fail = [&](NsgsStatus status) {
     for (int j = 0; j < m; ++j) f[j] = 0.0;
@@ -454,6 +484,18 @@ NsgsResult solveNsgs(const ContactProblemView& problem, const NsgsSettings& sett
       if (df[0] == 0.0 && df[1] == 0.0 && df[2] == 0.0) continue;
       for (int a = 0; a < k; ++a) fi[a] += df[a];
       if (row_gather) continue;
+      if (symmetric) {
+        // delta += W(rows_i, :)^T df_i (contiguous rows; equal to the columns when W = W^T)
+        const double* w0 = p.W + r * ld;
+        if (k == 1) {
+          for (int j = 0; j < m; ++j) delta[j] += w0[j] * df[0];
+        } else {
+          const double* w1 = w0 + ld;
+          const double* w2 = w1 + ld;
+          for (int j = 0; j < m; ++j) delta[j] += w0[j] * df[0] + w1[j] * df[1] + w2[j] * df[2];
+        }
+        continue;
+      }
       // delta += W(:, rows_i) df_i (strided columns of the row-major W)
       const double* w = p.W + r;
       if (k == 1) {

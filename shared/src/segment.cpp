@@ -70,8 +70,9 @@ std::string secondsText(std::int64_t ns) {
 struct Existing {
   bool live = false;           // refuse
   bool vanished = false;       // gone meanwhile: just retry
-  std::string message;
+  std::string message;         // why it is refused (live) or what was replaced (stale)
   std::uint64_t generation = 0;
+  std::string creator = "unknown";   // "dead process N", "process N, silent for X s", ...
 };
 
 Existing inspectExisting(const std::string& name, std::int64_t stale_after_ns) {
@@ -120,12 +121,17 @@ Existing inspectExisting(const std::string& name, std::int64_t stale_after_ns) {
     return ex;
   }
   ex.generation = h->generation;
+  ex.creator = "dead process " + std::to_string(pid);
   if (!pidAlive(pid)) return ex;
   // relaxed: a timestamp, no data depends on it
   const std::int64_t beat = h->sim_heartbeat_ns.load(std::memory_order_relaxed);
   const std::int64_t last = std::max(beat, h->created_ns);
   const std::int64_t since = monotonicNs() - last;
-  if (since > stale_after_ns) return ex;  // hung creator or a recycled pid
+  if (since > stale_after_ns) {
+    // hung creator or a recycled pid
+    ex.creator = "process " + std::to_string(pid) + ", silent for " + secondsText(since);
+    return ex;
+  }
   ex.live = true;
   ex.message = "segment '" + name + "' is in use by a live simulation (pid " + std::to_string(pid) +
                ", last heartbeat " + secondsText(since) + " ago): stop that sim_server first or "
@@ -172,6 +178,7 @@ struct Segment::Impl {
   SnapshotLayout snapshot_layout;
   dev_t dev = 0;
   ino_t ino = 0;
+  std::string note;
 
   unsigned char* base() const { return static_cast<unsigned char*>(region.get_address()); }
   void recordIdentity() {
@@ -256,6 +263,8 @@ Segment Segment::create(const std::string& name, SegmentCapacity capacity,
     if (ex.live) throw SegmentError(ex.message);
     if (!ex.vanished) {
       generation = ex.generation + 1;
+      impl->note = "replaced a stale segment '" + name + "' (generation " +
+                   std::to_string(ex.generation) + ", creator " + ex.creator + ")";
       remove(name);
     }
   }
@@ -425,6 +434,7 @@ SegmentCapacity Segment::capacity() const noexcept {
 std::uint64_t Segment::generation() const noexcept { return impl_->header->generation; }
 const SnapshotLayout& Segment::snapshotLayout() const noexcept { return impl_->snapshot_layout; }
 const void* Segment::data() const noexcept { return impl_->region.get_address(); }
+const std::string& Segment::creationNote() const noexcept { return impl_->note; }
 SegmentHeader* Segment::mutableHeader() noexcept { return impl_->header; }
 
 unsigned char* Segment::writableBase(const char* what) {

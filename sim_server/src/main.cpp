@@ -29,6 +29,8 @@ int main(int argc, char** argv) {
   app.add_option("--segment", opt.segment, "Shared-memory segment name (haptics)");
   app.add_flag("--no-haptics", opt.no_haptics, "Do not publish to a segment even if enabled");
   app.add_option("--stats-json", opt.stats_json, "Write per-stage statistics as JSON to FILE");
+  app.add_option("--export-trajectory", opt.export_trajectory,
+                 "Write the scene's scripted instrument trajectory as a device CSV and exit");
   app.add_option("--log-level", log_level, "trace, debug, info, warn, error")
       ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error"}));
   CLI11_PARSE(app, argc, argv);

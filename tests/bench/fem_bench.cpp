@@ -105,14 +105,23 @@ void BM_FemStep_Liver23k_PcgRestChol(benchmark::State& s) {
   runStep(s, loadLiver("liver_23k.msh"), LinearSolverKind::kPcg,
           PcgPreconditioner::kRestCholesky);
 }
+void BM_FemStep_Liver2_PcgWarpedChol(benchmark::State& s) {
+  runStep(s, loadLiver("liver2.msh"), LinearSolverKind::kPcg, PcgPreconditioner::kWarpedCholesky);
+}
+void BM_FemStep_Liver23k_PcgWarpedChol(benchmark::State& s) {
+  runStep(s, loadLiver("liver_23k.msh"), LinearSolverKind::kPcg,
+          PcgPreconditioner::kWarpedCholesky);
+}
 BENCHMARK(BM_FemStep_Small)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_FemStep_Small_Pcg)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_FemStep_Liver2_Cholmod)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_FemStep_Liver2_PcgJacobi)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_FemStep_Liver2_PcgRestChol)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_FemStep_Liver2_PcgWarpedChol)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_FemStep_Liver23k_Cholmod)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_FemStep_Liver23k_PcgJacobi)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_FemStep_Liver23k_PcgRestChol)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_FemStep_Liver23k_PcgWarpedChol)->Unit(benchmark::kMillisecond);
 
 // 150 contacts x (n, t1, t2) on random surface triangles around one area (a grasp).
 std::vector<TissueRow> rows450(const FemBody& body) {

@@ -129,8 +129,12 @@ struct Collision::Impl {
   CollisionOptions options;
   int node_count = 0;
   Eigen::VectorXd q;
+  // normals are computed on demand, once per refit (epoch), only where a query needs them
+  int epoch = 1;
   Eigen::Matrix3Xd tri_normal;       // unit outward normals
   Eigen::Matrix3Xd vertex_normal;    // angle-weighted pseudo-normals (unit), per mesh node
+  std::vector<int> tri_normal_epoch, vertex_normal_epoch;
+  std::vector<int> vt_offset, vt_tri;   // node -> incident triangles (CSR)
   std::vector<std::array<int, 3>> tri_neighbor;   // across edge k, -1 on a border
   std::vector<Box> tri_boxes, vertex_boxes;
   detail::AabbTree tri_tree, vertex_tree;
@@ -173,44 +177,75 @@ struct Collision::Impl {
     }
   }
 
-  void updateGeometry() {
-    const int nt = static_cast<int>(surface.triangles.size());
-    vertex_normal.setZero();
-    for (int t = 0; t < nt; ++t) {
-      const auto& tri = surface.triangles[t];
-      const Eigen::Vector3d p[3] = {pos(tri[0]), pos(tri[1]), pos(tri[2])};
-      Eigen::Vector3d nrm = (p[1] - p[0]).cross(p[2] - p[0]);
-      const double len = nrm.norm();
-      nrm = len > 0.0 ? Eigen::Vector3d(nrm / len) : Eigen::Vector3d::Zero();
-      tri_normal.col(t) = nrm;
-      Box box(p[0]);
-      box.extend(p[1]);
-      box.extend(p[2]);
-      tri_boxes[t] = box;
-      // angle-weighted vertex normals
-      for (int k = 0; k < 3; ++k) {
-        const Eigen::Vector3d e1 = p[(k + 1) % 3] - p[k], e2 = p[(k + 2) % 3] - p[k];
-        const double denom = e1.norm() * e2.norm();
-        if (!(denom > 0.0)) continue;
-        const double angle = std::acos(std::clamp(e1.dot(e2) / denom, -1.0, 1.0));
-        vertex_normal.col(tri[k]) += angle * nrm;
-      }
+  void buildVertexTriangles() {
+    vt_offset.assign(node_count + 1, 0);
+    for (const auto& tri : surface.triangles) {
+      for (int node : tri) ++vt_offset[node + 1];
     }
-    for (std::size_t i = 0; i < surface.nodes.size(); ++i) {
-      const int node = surface.nodes[i];
-      const double len = vertex_normal.col(node).norm();
-      if (len > 0.0) vertex_normal.col(node) /= len;
-      vertex_boxes[i] = Box(pos(node), pos(node));
+    for (int i = 0; i < node_count; ++i) vt_offset[i + 1] += vt_offset[i];
+    vt_tri.resize(vt_offset[node_count]);
+    std::vector<int> fill(vt_offset.begin(), vt_offset.end() - 1);
+    for (int t = 0; t < static_cast<int>(surface.triangles.size()); ++t) {
+      for (int node : surface.triangles[t]) vt_tri[fill[node]++] = t;
     }
   }
 
-  Eigen::Vector3d pseudoNormal(const Candidate& cand) const {
+  // Boxes of the current positions; normals become stale (new epoch).
+  void updateGeometry() {
+    ++epoch;
+    const int nt = static_cast<int>(surface.triangles.size());
+    for (int t = 0; t < nt; ++t) {
+      const auto& tri = surface.triangles[t];
+      Box box(pos(tri[0]));
+      box.extend(pos(tri[1]));
+      box.extend(pos(tri[2]));
+      tri_boxes[t] = box;
+    }
+    for (std::size_t i = 0; i < surface.nodes.size(); ++i) {
+      const Eigen::Vector3d p = pos(surface.nodes[i]);
+      vertex_boxes[i] = Box(p, p);
+    }
+  }
+
+  Eigen::Vector3d triNormal(int t) {
+    if (tri_normal_epoch[t] != epoch) {
+      const auto& tri = surface.triangles[t];
+      const Eigen::Vector3d p0 = pos(tri[0]);
+      const Eigen::Vector3d nrm = (pos(tri[1]) - p0).cross(pos(tri[2]) - p0);
+      const double len = nrm.norm();
+      tri_normal.col(t) = len > 0.0 ? Eigen::Vector3d(nrm / len) : Eigen::Vector3d::Zero();
+      tri_normal_epoch[t] = epoch;
+    }
+    return tri_normal.col(t);
+  }
+
+  // Angle-weighted pseudo-normal of a surface node (unit; zero if degenerate).
+  Eigen::Vector3d vertexNormal(int node) {
+    if (vertex_normal_epoch[node] != epoch) {
+      Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+      const Eigen::Vector3d p = pos(node);
+      for (int i = vt_offset[node]; i < vt_offset[node + 1]; ++i) {
+        const int t = vt_tri[i];
+        const auto& tri = surface.triangles[t];
+        const int k = tri[0] == node ? 0 : (tri[1] == node ? 1 : 2);
+        const Eigen::Vector3d e1 = pos(tri[(k + 1) % 3]) - p, e2 = pos(tri[(k + 2) % 3]) - p;
+        const double angle = std::atan2(e1.cross(e2).norm(), e1.dot(e2));
+        sum += angle * triNormal(t);
+      }
+      const double len = sum.norm();
+      vertex_normal.col(node) = len > 0.0 ? Eigen::Vector3d(sum / len) : Eigen::Vector3d::Zero();
+      vertex_normal_epoch[node] = epoch;
+    }
+    return vertex_normal.col(node);
+  }
+
+  Eigen::Vector3d pseudoNormal(const Candidate& cand) {
     const int region = cand.cp.region;
-    if (region == kFace) return tri_normal.col(cand.tri);
-    if (region < kEdge0) return vertex_normal.col(surface.triangles[cand.tri][region - kVertex0]);
+    if (region == kFace) return triNormal(cand.tri);
+    if (region < kEdge0) return vertexNormal(surface.triangles[cand.tri][region - kVertex0]);
     const int nb = tri_neighbor[cand.tri][region - kEdge0];
-    Eigen::Vector3d n = tri_normal.col(cand.tri);
-    if (nb >= 0) n += tri_normal.col(nb);
+    Eigen::Vector3d n = triNormal(cand.tri);
+    if (nb >= 0) n += triNormal(nb);
     return n;
   }
 
@@ -247,7 +282,7 @@ struct Collision::Impl {
       const Eigen::Vector3d diff = axis_point - v;
       const double d = diff.norm();
       if (d > reach) return;
-      const Eigen::Vector3d nv = vertex_normal.col(node);
+      const Eigen::Vector3d nv = vertexNormal(node);
       const Eigen::Vector3d n = d > kTinyDistance_m ? Eigen::Vector3d(diff / d) : nv;
       if (!(n.dot(nv) > 0.0)) return;   // vertex does not face the tool
       const double gap = d - f.radius_m - cd;
@@ -364,6 +399,9 @@ Collision::Collision(const SurfaceMesh& surface, const Eigen::VectorXd& q,
   s.q = q;
   s.tri_normal.setZero(3, nt);
   s.vertex_normal.setZero(3, s.node_count);
+  s.tri_normal_epoch.assign(nt, 0);
+  s.vertex_normal_epoch.assign(s.node_count, 0);
+  s.buildVertexTriangles();
   s.tri_boxes.resize(nt);
   s.vertex_boxes.resize(s.surface.nodes.size());
   s.tri_stamp.assign(nt, 0);
@@ -433,7 +471,6 @@ const std::vector<Contact>& Collision::detect(std::span<const ToolFeature> featu
 const std::vector<Contact>& Collision::contacts() const { return impl_->contacts; }
 const CollisionStats& Collision::stats() const { return impl_->stats; }
 const SurfaceMesh& Collision::surface() const { return impl_->surface; }
-const Eigen::Matrix3Xd& Collision::triangleNormals() const { return impl_->tri_normal; }
 
 void buildContactRows(std::span<const Contact> contacts, double mu,
                       const Eigen::Vector3d& tool_origin_m, ContactRows& out) {

@@ -66,6 +66,7 @@ void Instrument::reset(const shared::Pose& pose, double gripper_opening) {
 
 void Instrument::freeMotion(double h_s, const shared::Pose& target, const Vector6d& target_twist,
                             double gripper_opening) {
+  if (!(h_s > 0.0)) return;   // no time step: nothing moves
   h_s_ = h_s;
   target_ = target;
   target_twist_ = target_twist;

@@ -22,7 +22,7 @@ constexpr std::uint32_t kVersion = 1;
 struct CacheHeader {
   char magic[8];
   std::uint32_t version;
-  std::uint32_t reserved;
+  std::uint32_t scalar_bytes;  // 8: double, 4: float
   std::uint64_t hash;        // FemBody::restHash combined with h
   std::uint64_t node_count;
   std::uint64_t surface_count;
@@ -37,8 +37,41 @@ std::uint64_t cacheHash(const FemBody& body, double h) {
 struct RestBlock {
   std::vector<int> surface;        // sorted surface node indices
   std::vector<int> local;          // node -> surface index, -1 inside the volume
+  bool single = false;             // stored in float (c0f) instead of double (c0)
   Eigen::MatrixXd c0;              // 3s x 3s
+  Eigen::MatrixXf c0f;
+  std::size_t scalarBytes() const { return single ? sizeof(float) : sizeof(double); }
+  void resize(Eigen::Index d) {
+    if (single) c0f.resize(d, d); else c0.resize(d, d);
+  }
+  void* data() { return single ? static_cast<void*>(c0f.data()) : c0.data(); }
+  const void* data() const {
+    return single ? static_cast<const void*>(c0f.data()) : c0.data();
+  }
+  bool allFinite() const { return single ? c0f.allFinite() : c0.allFinite(); }
+  Eigen::Matrix3d block(int a, int b) const {
+    if (single) return c0f.block<3, 3>(3 * a, 3 * b).cast<double>();
+    return c0.block<3, 3>(3 * a, 3 * b);
+  }
+  std::size_t bytes() const {
+    return scalarBytes() * static_cast<std::size_t>(single ? c0f.size() : c0.size());
+  }
+  void release() {
+    c0.resize(0, 0);
+    c0f.resize(0, 0);
+  }
 };
+
+// In-place (A + A^T) / 2 without a full-size temporary.
+template <class Mat>
+void symmetrise(Mat& a) {
+  for (Eigen::Index j = 0; j < a.cols(); ++j)
+    for (Eigen::Index i = j + 1; i < a.rows(); ++i) {
+      const auto v = (a(i, j) + a(j, i)) / 2;
+      a(i, j) = v;
+      a(j, i) = v;
+    }
+}
 
 void progress(bool show, int done, int total) {
   if (!show) return;
@@ -86,25 +119,28 @@ bool readCache(const std::filesystem::path& path, std::uint64_t hash, const FemB
     return false;
   }
   const std::uint64_t s = hdr.surface_count, d = 3 * s;
-  const std::uint64_t expected = sizeof(hdr) + s * sizeof(int) + d * d * sizeof(double) + 8;
+  if (hdr.scalar_bytes != blk.scalarBytes()) {
+    why = "precision differs (" + std::to_string(hdr.scalar_bytes) + "-byte values)";
+    return false;
+  }
+  const std::uint64_t expected = sizeof(hdr) + s * sizeof(int) + d * d * blk.scalarBytes() + 8;
   if (file_size != expected) {
     why = "size " + std::to_string(file_size) + " bytes, expected " + std::to_string(expected) +
           " (truncated or corrupt)";
     return false;
   }
   std::vector<int> nodes(s);
-  blk.c0.resize(static_cast<Eigen::Index>(d), static_cast<Eigen::Index>(d));
+  blk.resize(static_cast<Eigen::Index>(d));
   std::uint64_t checksum = 0;
   in.read(reinterpret_cast<char*>(nodes.data()), static_cast<std::streamsize>(s * sizeof(int)));
-  in.read(reinterpret_cast<char*>(blk.c0.data()),
-          static_cast<std::streamsize>(d * d * sizeof(double)));
+  in.read(static_cast<char*>(blk.data()), static_cast<std::streamsize>(d * d * blk.scalarBytes()));
   in.read(reinterpret_cast<char*>(&checksum), sizeof(checksum));
   if (!in) {
     why = "read error";
     return false;
   }
   std::uint64_t sum = fem_detail::fnv1a(nodes.data(), s * sizeof(int));
-  sum = fem_detail::fnv1a(blk.c0.data(), d * d * sizeof(double), sum);
+  sum = fem_detail::fnv1a(blk.data(), d * d * blk.scalarBytes(), sum);
   if (sum != checksum) {
     why = "checksum mismatch (corrupt)";
     return false;
@@ -113,7 +149,7 @@ bool readCache(const std::filesystem::path& path, std::uint64_t hash, const FemB
     why = "surface nodes differ";
     return false;
   }
-  if (!blk.c0.allFinite()) {
+  if (!blk.allFinite()) {
     why = "non-finite values";
     return false;
   }
@@ -134,17 +170,18 @@ void writeCache(const std::filesystem::path& path, std::uint64_t hash, const Fem
     CacheHeader hdr{};
     std::memcpy(hdr.magic, kMagic, sizeof(kMagic));
     hdr.version = kVersion;
+    hdr.scalar_bytes = static_cast<std::uint32_t>(blk.scalarBytes());
     hdr.hash = hash;
     hdr.node_count = static_cast<std::uint64_t>(body.nodeCount());
     hdr.surface_count = blk.surface.size();
     const std::uint64_t d = 3 * hdr.surface_count;
     std::uint64_t sum = fem_detail::fnv1a(blk.surface.data(), blk.surface.size() * sizeof(int));
-    sum = fem_detail::fnv1a(blk.c0.data(), d * d * sizeof(double), sum);
+    sum = fem_detail::fnv1a(blk.data(), d * d * blk.scalarBytes(), sum);
     out.write(reinterpret_cast<const char*>(&hdr), sizeof(hdr));
     out.write(reinterpret_cast<const char*>(blk.surface.data()),
               static_cast<std::streamsize>(blk.surface.size() * sizeof(int)));
-    out.write(reinterpret_cast<const char*>(blk.c0.data()),
-              static_cast<std::streamsize>(d * d * sizeof(double)));
+    out.write(static_cast<const char*>(blk.data()),
+              static_cast<std::streamsize>(d * d * blk.scalarBytes()));
     out.write(reinterpret_cast<const char*>(&sum), sizeof(sum));
     if (!out) {
       spdlog::warn("compliance cache: write to {} failed (continuing without cache)", tmp);
@@ -162,7 +199,7 @@ void computeRestBlock(FemBody& body, const ComplianceOptions& opt, RestBlock& bl
   const int n = body.nodeCount();
   const int s = static_cast<int>(blk.surface.size());
   const int d = 3 * s;
-  blk.c0.resize(d, d);
+  blk.resize(d);
   const int batch = std::max(1, opt.solve_batch);
   Eigen::MatrixXd rhs, sol;
   progress(opt.show_progress, 0, d);
@@ -175,12 +212,16 @@ void computeRestBlock(FemBody& body, const ComplianceOptions& opt, RestBlock& bl
     }
     body.solveRestComplianceBatch(opt.h_s, rhs, sol);
     for (int j = 0; j < k; ++j)
-      for (int a = 0; a < s; ++a)
-        blk.c0.block<3, 1>(3 * a, c0 + j) = sol.block<3, 1>(3 * blk.surface[a], j);
+      for (int a = 0; a < s; ++a) {
+        if (blk.single)
+          blk.c0f.block<3, 1>(3 * a, c0 + j) = sol.block<3, 1>(3 * blk.surface[a], j).cast<float>();
+        else
+          blk.c0.block<3, 1>(3 * a, c0 + j) = sol.block<3, 1>(3 * blk.surface[a], j);
+      }
     progress(opt.show_progress, c0 + k, d);
   }
   // remove the solver's round-off asymmetry
-  blk.c0 = (0.5 * (blk.c0 + blk.c0.transpose())).eval();
+  if (blk.single) symmetrise(blk.c0f); else symmetrise(blk.c0);
 }
 
 // Row-to-node expansion of H: (local node, 3-vector p) pairs per row.
@@ -227,14 +268,11 @@ class ComplianceModel final : public TissueCompliance {
         for (int t = 0; t < terms_[l].count; ++t)
           g_.col(l).noalias() += cuu_.middleCols<3>(3 * terms_[l].local[t]) * terms_[l].p[t];
     }
-    // W += P^T G
+    // W += P^T G, through G^T so every update is a contiguous axpy of length m
+    gt_ = g_.transpose();
     for (int l = 0; l < m; ++l)
-      for (int k = 0; k < m; ++k) {
-        double acc = 0.0;
-        for (int t = 0; t < terms_[k].count; ++t)
-          acc += terms_[k].p[t].dot(g_.col(l).segment<3>(3 * terms_[k].local[t]));
-        w(k, l) += acc;
-      }
+      for (int t = 0; t < terms_[l].count; ++t)
+        w.col(l).noalias() += gt_.middleCols<3>(3 * terms_[l].local[t]) * terms_[l].p[t];
     release();
   }
 
@@ -273,10 +311,10 @@ class ComplianceModel final : public TissueCompliance {
   }
 
   std::size_t memoryBytes() const override {
-    return sizeof(double) * static_cast<std::size_t>(blk_.c0.size()) +
+    return blk_.bytes() +
            sizeof(int) * (blk_.surface.size() + blk_.local.size() + local_.size()) +
            sizeof(double) * diag_.size() + sizeof(Eigen::Matrix3d) * rot_.size() +
-           sizeof(double) * static_cast<std::size_t>(cuu_.size() + g_.size() + r_.size());
+           sizeof(double) * static_cast<std::size_t>(cuu_.size() + g_.size() + gt_.size() + r_.size());
   }
 
   ComplianceBuildInfo buildInfo() const override { return info_; }
@@ -285,6 +323,7 @@ class ComplianceModel final : public TissueCompliance {
   void buildRest() {
     FemBody& body = *body_;
     blk_.surface = body.surfaceNodes();
+    blk_.single = opt_.c0_single_precision;
     blk_.local.assign(body.nodeCount(), -1);
     for (std::size_t i = 0; i < blk_.surface.size(); ++i)
       blk_.local[blk_.surface[i]] = static_cast<int>(i);
@@ -316,8 +355,8 @@ class ComplianceModel final : public TissueCompliance {
       // isotropic per node: mean of the diagonal of the node's 3x3 block; drop the dense block
       const int s = static_cast<int>(blk_.surface.size());
       diag_.resize(s);
-      for (int a = 0; a < s; ++a) diag_[a] = blk_.c0.block<3, 3>(3 * a, 3 * a).trace() / 3.0;
-      blk_.c0.resize(0, 0);
+      for (int a = 0; a < s; ++a) diag_[a] = blk_.block(a, a).trace() / 3.0;
+      blk_.release();
     }
   }
 
@@ -375,7 +414,7 @@ class ComplianceModel final : public TissueCompliance {
       const int sb = blk_.local[touched_[b]];
       for (int a = 0; a < u; ++a) {
         const int sa = blk_.local[touched_[a]];
-        cuu_.block<3, 3>(3 * a, 3 * b) = blk_.c0.block<3, 3>(3 * sa, 3 * sb);
+        cuu_.block<3, 3>(3 * a, 3 * b) = blk_.block(sa, sb);
       }
     }
   }
@@ -389,7 +428,7 @@ class ComplianceModel final : public TissueCompliance {
   std::vector<int> local_;                   // node -> index in touched_, -1 otherwise
   std::vector<int> touched_;
   std::vector<RowTerms> terms_;
-  Eigen::MatrixXd cuu_, g_, e_, x_;
+  Eigen::MatrixXd cuu_, g_, gt_, e_, x_;
   Eigen::VectorXd r_;
   ComplianceBuildInfo info_;
 };

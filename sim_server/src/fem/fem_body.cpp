@@ -64,7 +64,8 @@ struct FemBody::Impl {
 
   // step buffers (reduced or full)
   Eigen::VectorXd f_int, kv, rhs_full, rhs, dv, dv_prev, x_lin;
-  Eigen::VectorXd cg_r, cg_z, cg_p, cg_ap, jacobi_inv;
+  Eigen::VectorXd cg_r, cg_z, cg_p, cg_ap, cg_t, jacobi_inv;
+  std::vector<Eigen::Matrix3d> node_rot, node_acc;  // warped preconditioner
 
   std::vector<int> surface;
   bool surface_ready = false;
@@ -346,7 +347,21 @@ void FemBody::Impl::ensureCurrentFactor() {
 
 bool FemBody::Impl::pcg(double tol, int max_iter, FemStepStats& stats) {
   const auto sa = a.selfadjointView<Eigen::Lower>();
-  const bool use_rest = options.pcg_preconditioner == PcgPreconditioner::kRestCholesky;
+  const bool warped = options.pcg_preconditioner == PcgPreconditioner::kWarpedCholesky;
+  const bool use_rest =
+      options.pcg_preconditioner == PcgPreconditioner::kRestCholesky || warped;
+  if (warped && corotational) {
+    // per-node rotations from this step's element rotations (volume-weighted, re-orthonormalised)
+    node_acc.assign(n, Eigen::Matrix3d::Zero());
+    node_rot.resize(n);
+    for (int e = 0; e < mesh.tetCount(); ++e)
+      for (int k = 0; k < 4; ++k) node_acc[mesh.tets[e][k]] += volume[e] * rotation[e];
+    for (int i = 0; i < n; ++i)
+      node_rot[i] = dof_base[i] >= 0 && node_acc[i].squaredNorm() > 0.0
+                        ? fem_detail::polarRotation(node_acc[i])
+                        : Eigen::Matrix3d::Identity();
+  }
+  const bool rotate = warped && corotational;
   if (!use_rest) {
     jacobi_inv.resize(n_free);
     const double* vals = a.valuePtr();
@@ -355,7 +370,18 @@ bool FemBody::Impl::pcg(double tol, int max_iter, FemStepStats& stats) {
   auto precond = [&](const Eigen::VectorXd& r, Eigen::VectorXd& z) {
     if (use_rest) {
       z.resize(n_free);
-      chol_rest.solve(r.data(), z.data(), 1);
+      if (rotate) {
+        // z = R A0^-1 R^T r
+        cg_t.resize(n_free);
+        for (int i = 0; i < n; ++i)
+          if (dof_base[i] >= 0)
+            cg_t.segment<3>(dof_base[i]) = node_rot[i].transpose() * r.segment<3>(dof_base[i]);
+        chol_rest.solve(cg_t.data(), cg_t.data(), 1);
+        for (int i = 0; i < n; ++i)
+          if (dof_base[i] >= 0) z.segment<3>(dof_base[i]) = node_rot[i] * cg_t.segment<3>(dof_base[i]);
+      } else {
+        chol_rest.solve(r.data(), z.data(), 1);
+      }
     } else {
       z = jacobi_inv.cwiseProduct(r);
     }
@@ -480,7 +506,7 @@ FemStepStats FemBody::freeMotion(double h, const Eigen::VectorXd* external_force
     stats.solve_s = secondsSince(t2);
   } else {
     const auto t1 = Clock::now();
-    if (m.options.pcg_preconditioner == PcgPreconditioner::kRestCholesky) m.ensureRestFactor(h);
+    if (m.options.pcg_preconditioner != PcgPreconditioner::kJacobi) m.ensureRestFactor(h);
     stats.factorisation_s = secondsSince(t1);
     const auto t2 = Clock::now();
     const bool ok = m.pcg(m.options.cg_tolerance, m.options.cg_max_iterations, stats);

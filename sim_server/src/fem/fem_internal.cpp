@@ -6,6 +6,8 @@
 #include <array>
 #include <cstring>
 
+#include <spdlog/spdlog.h>
+
 #include "tactus/shared/error.h"
 
 namespace tactus::sim::fem_detail {
@@ -81,6 +83,10 @@ void CholmodSolver::analyze(Sparse& lower) {
                          std::to_string(common_.status) + ") for a system of " +
                          std::to_string(lower.rows()) + " unknowns");
   }
+  spdlog::debug("CHOLMOD analysis: n {} nnz(A) {} nnz(L) {:.0f} flops {:.3g} ordering {} {}", lower.rows(),
+                lower.nonZeros(), common_.lnz, common_.fl,
+                common_.method[common_.selected].ordering,
+                factor_->is_super ? "supernodal" : "simplicial");
 }
 
 bool CholmodSolver::factorize(Sparse& lower) {

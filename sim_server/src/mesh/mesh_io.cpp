@@ -56,7 +56,8 @@ void splitTokens(std::string_view line, std::vector<std::string_view>* tokens) {
 
 int lineOf(std::string_view text, std::size_t pos) {
   pos = std::min(pos, text.size());
-  return 1 + static_cast<int>(std::count(text.begin(), text.begin() + static_cast<long>(pos), '\n'));
+  const auto end = text.begin() + static_cast<long>(pos);
+  return 1 + static_cast<int>(std::count(text.begin(), end, '\n'));
 }
 
 namespace {
@@ -159,8 +160,8 @@ TetMesh finalizeMesh(RawMesh&& raw, const std::string& name, MeshReport* report)
   mesh.tets.resize(tets.size());
   for (std::size_t t = 0; t < tets.size(); ++t) {
     std::array<int, 4> tet;
-    for (int k = 0; k < 4; ++k) {
-      tet[static_cast<std::size_t>(k)] = new_index[static_cast<std::size_t>(tets[t][static_cast<std::size_t>(k)])];
+    for (std::size_t k = 0; k < 4; ++k) {
+      tet[k] = new_index[static_cast<std::size_t>(tets[t][k])];
     }
     const double v6 = sixVolume(mesh.nodes.col(tet[0]), mesh.nodes.col(tet[1]),
                                 mesh.nodes.col(tet[2]), mesh.nodes.col(tet[3]));
@@ -205,7 +206,9 @@ namespace {
 bool equalsNoCase(std::string_view a, std::string_view b) {
   if (a.size() != b.size()) return false;
   for (std::size_t i = 0; i < a.size(); ++i) {
-    const auto lower = [](char c) { return (c >= 'A' && c <= 'Z') ? static_cast<char>(c + 32) : c; };
+    const auto lower = [](char c) {
+      return (c >= 'A' && c <= 'Z') ? static_cast<char>(c + 32) : c;
+    };
     if (lower(a[i]) != lower(b[i])) return false;
   }
   return true;
@@ -411,11 +414,11 @@ class GmshReader {
         first = 3 + static_cast<std::size_t>(tags);
         nodes = static_cast<std::int64_t>(tok_.size() - first);
       }
-      if (nodes < 0 || static_cast<std::int64_t>(tok_.size()) - static_cast<std::int64_t>(first) !=
-                           nodes) {
+      const auto listed =
+          static_cast<std::int64_t>(tok_.size()) - static_cast<std::int64_t>(first);
+      if (nodes < 0 || listed != nodes) {
         fail(name_, cur_.line(),
-             fmt::format("element {} declares {} nodes but lists {}", id, nodes,
-                         static_cast<std::int64_t>(tok_.size()) - static_cast<std::int64_t>(first)));
+             fmt::format("element {} declares {} nodes but lists {}", id, nodes, listed));
       }
       if (type == 4) {
         if (nodes != 4) {

@@ -62,6 +62,7 @@ struct TissueState {
   int row_begin = 0;                              ///< first global row
   int contact_begin = 0;                          ///< first global contact
   Eigen::VectorXd dq;                             ///< correction scratch
+  Eigen::VectorXd q_begin;                        ///< positions at the start of the step
 };
 
 struct Simulation::Impl {
@@ -82,10 +83,35 @@ struct Simulation::Impl {
   std::vector<double> vtk_times;
   long frame = 0;
   Eigen::Matrix<double, 6, 1> last_wrench = Eigen::Matrix<double, 6, 1>::Zero();
+  shared::Pose tool_begin;                        ///< god object pose at the start of the step
 
   void buildTissues();
   void solveContacts(StepReport& report);
+  void addTangentialSlip(TissueState& ts, const std::vector<Contact>& found);
 };
+
+// Friction rows: delta_free is the relative tangential displacement of the tool point with respect
+// to the tissue point over the free motion (the normal row's is the gap at the free positions).
+void Simulation::Impl::addTangentialSlip(TissueState& ts, const std::vector<Contact>& found) {
+  const Eigen::VectorXd& q = ts.body->positions();
+  const shared::Pose& tool_free = instrument->pose();
+  for (std::size_t c = 0; c < found.size(); ++c) {
+    const Contact& k = found[c];
+    const int r0 = ts.rows.row_offset[c];
+    if (ts.rows.row_offset[c + 1] - r0 != 3) continue;
+    Eigen::Vector3d tissue_disp = Eigen::Vector3d::Zero();
+    for (int j = 0; j < 3; ++j) {
+      const int n = k.nodes[j];
+      if (n < 0) continue;
+      tissue_disp += k.weights[j] * (q.segment<3>(3 * n) - ts.q_begin.segment<3>(3 * n));
+    }
+    const Eigen::Vector3d tool_disp = (tool_free.pos_m + tool_free.rot * k.tool_local_m) -
+                                      (tool_begin.pos_m + tool_begin.rot * k.tool_local_m);
+    const Eigen::Vector3d rel = tool_disp - tissue_disp;
+    ts.rows.delta_free[r0 + 1] = rel.dot(k.t1);
+    ts.rows.delta_free[r0 + 2] = rel.dot(k.t2);
+  }
+}
 
 void Simulation::Impl::buildTissues() {
   const Eigen::Vector3d* gravity = spec.gravity_mps2 ? &*spec.gravity_mps2 : nullptr;
@@ -248,6 +274,7 @@ void Simulation::Impl::solveContacts(StepReport& report) {
     report.contacts_dropped += ts.collision->stats().overflow;
     ++counters.collision_queries;
     buildContactRows(found, mu, tool_pose.pos_m, ts.rows);
+    if (mu > 0.0) addTangentialSlip(ts, found);
     ts.row_begin = rows;
     ts.contact_begin = contacts;
     rows += ts.rows.rows();
@@ -368,10 +395,12 @@ StepReport Simulation::step() {
   // free motion of every object (no contact forces)
   auto t0 = Clock::now();
   for (TissueState& ts : s.tissues) {
+    if (s.instrument) ts.q_begin = ts.body->positions();
     const FemStepStats st = ts.body->freeMotion(h);
     if (!st.ok) report.finite = false;
   }
   if (s.instrument) {
+    s.tool_begin = s.instrument->pose();
     s.instrument->freeMotion(h, s.target.pose, s.target.twist, s.target.gripper_opening);
     s.problem.device_pose = s.target.pose;
     s.problem.device_gripper = s.target.gripper_opening;

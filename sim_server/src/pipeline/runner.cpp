@@ -109,8 +109,36 @@ std::string RunStatistics::json(const std::string& scene) const {
   return out;
 }
 
+void exportTrajectory(const SceneSpec& spec, const std::filesystem::path& csv, double dt_s) {
+  if (!spec.instrument.present) throw SceneError(spec.source.string() + ": no instrument to export");
+  // a Simulation is not needed: interpolate the keys directly
+  SceneSpec light = spec;
+  light.tissues.clear();
+  Simulation sim(light);
+  const auto& keys = spec.instrument.trajectory;
+  const double end = keys.empty() ? 0.0 : keys.back().t_s;
+  std::FILE* f = std::fopen(csv.c_str(), "w");
+  if (f == nullptr) throw Error("cannot write " + csv.string());
+  std::fprintf(f, "t_s,x,y,z,qw,qx,qy,qz,gripper\n");
+  const long n = static_cast<long>(std::ceil(end / dt_s));
+  for (long k = 0; k <= n; ++k) {
+    const double t = std::min(end, static_cast<double>(k) * dt_s);
+    const DeviceTarget d = sim.scriptedTarget(t);
+    const auto& q = d.pose.rot;
+    std::fprintf(f, "%.6f,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g\n", t, d.pose.pos_m.x(),
+                 d.pose.pos_m.y(), d.pose.pos_m.z(), q.w(), q.x(), q.y(), q.z(),
+                 d.gripper_opening * spec.instrument.max_opening_rad);
+  }
+  std::fclose(f);
+}
+
 int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
   SceneSpec spec = loadScene(options.scene_path);
+  if (!options.export_trajectory.empty()) {
+    exportTrajectory(spec, options.export_trajectory);
+    spdlog::info("trajectory written to {}", options.export_trajectory);
+    return 0;
+  }
   if (!options.output_dir.empty()) {
     spec.output.enabled = true;
     spec.output.directory = options.output_dir;
@@ -129,7 +157,8 @@ int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
   }
 
   const double h = spec.time_step_s;
-  const double duration = options.duration_s > 0.0 ? options.duration_s : spec.duration_s;
+  // a daemon runs until stopped (or --duration); the scene's duration is for offline tools
+  const double duration = options.duration_s;
   RunStatistics stats;
   const std::int64_t t0 = nowNs();
   long late_steps = 0;

@@ -80,7 +80,12 @@ class SceneParser {
       throw SceneError(fmt::format("{}:1:1: scene: must be a map of settings (got {})", name_,
                                    kindOf(root)));
     }
-    readRoot(root, &spec);
+    try {
+      readRoot(root, &spec);
+    } catch (const YAML::Exception& e) {
+      // defensive: accessors above check types first, so this means a yaml-cpp surprise
+      error(root, "scene", std::string("cannot be read: ") + e.what());
+    }
     if (!errors_.empty()) {
       std::stable_sort(errors_.begin(), errors_.end(), [](const Problem& a, const Problem& b) {
         return std::tie(a.line, a.column) < std::tie(b.line, b.column);
@@ -118,8 +123,8 @@ class SceneParser {
   void checkKeys(const YAML::Node& map, const std::string& path,
                  std::initializer_list<const char*> allowed) {
     std::set<std::string> seen;
-    for (auto it = map.begin(); it != map.end(); ++it) {
-      const YAML::Node& key = it->first;
+    for (const auto& entry : map) {
+      const YAML::Node key = entry.first;  // a copy: the iterator's pair is a temporary
       if (!key.IsScalar()) {
         error(key, path, "keys must be plain names");
         continue;

@@ -250,7 +250,8 @@ TEST(Solvers, PcgMatchesCholmod) {
   const auto fixed = nodesAtX(mesh, 0.0);
   FemSolverOptions chol_opt;
   FemBody ref(mesh, mat, fixed, &gravity, chol_opt);
-  for (PcgPreconditioner pre : {PcgPreconditioner::kJacobi, PcgPreconditioner::kRestCholesky}) {
+  for (PcgPreconditioner pre : {PcgPreconditioner::kJacobi, PcgPreconditioner::kRestCholesky,
+                                PcgPreconditioner::kWarpedCholesky}) {
     FemSolverOptions pcg_opt;
     pcg_opt.linear = LinearSolverKind::kPcg;
     pcg_opt.cg_tolerance = 1e-12;

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <random>
 #include <fstream>
 #include <sstream>
 
@@ -312,6 +313,44 @@ TEST(Scene, ReadmeExampleIsValid) {
   EXPECT_EQ(s.instrument.trajectory.size(), 2u);
   EXPECT_TRUE(s.haptics.enabled);
   EXPECT_TRUE(s.output.enabled);
+}
+
+// Random corruption of a valid scene: a SceneSpec or a SceneError, never anything else.
+TEST(Scene, CorruptedInputGivesSceneErrorOnly) {
+  std::ifstream in(kScenes / "full_scene.yaml");
+  std::stringstream text;
+  text << in.rdbuf();
+  const std::string good = text.str();
+  const std::string alphabet = "{}[]:,-#&*!|>'\"%@ \n\t0123456789.eE+abcxyz";
+  std::mt19937 rng(7);
+  int rejected = 0;
+  for (int trial = 0; trial < 400; ++trial) {
+    std::string bad = good;
+    const int edits = 1 + static_cast<int>(rng() % 3);
+    for (int e = 0; e < edits; ++e) {
+      bad[rng() % bad.size()] = alphabet[rng() % alphabet.size()];
+    }
+    try {
+      parseScene(bad, "fuzz.yaml", kScenes);
+    } catch (const SceneError& e) {
+      ++rejected;
+      EXPECT_THAT(e.what(), ::testing::StartsWith("fuzz.yaml:"));
+    }
+  }
+  EXPECT_GT(rejected, 100);
+}
+
+TEST(Scene, ShippedScenesLoad) {
+  int count = 0;
+  for (const auto& entry :
+       std::filesystem::directory_iterator(std::filesystem::path(TACTUS_SOURCE_DIR) / "scenes")) {
+    if (entry.path().extension() != ".yaml") continue;
+    SCOPED_TRACE(entry.path().string());
+    const SceneSpec s = loadScene(entry.path());
+    EXPECT_FALSE(s.tissues.empty());
+    ++count;
+  }
+  EXPECT_GE(count, 1);
 }
 
 TEST(Scene, MissingSceneFile) {

@@ -10,6 +10,7 @@
 #include <sys/mman.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
+#include <csignal>
 #include <unistd.h>
 
 #include <cstring>
@@ -281,12 +282,47 @@ TEST(Segment, StaleSegmentOfADeadCreatorIsReplaced) {
     EXPECT_FALSE(old.creatorAlive());
     Segment fresh = Segment::create(g.name, SegmentCapacity::forContacts(3));
     EXPECT_EQ(fresh.generation(), 2u);
+    EXPECT_THAT(fresh.creationNote(), HasSubstr("replaced a stale segment"));
+    EXPECT_THAT(fresh.creationNote(), HasSubstr("dead process " + std::to_string(child)));
     EXPECT_EQ(fresh.header().creator_pid, ::getpid());
     EXPECT_FALSE(old.stillCurrent());  // an attached side can tell it was re-created
     EXPECT_TRUE(fresh.stillCurrent());
     EXPECT_EQ(Segment::open(g.name).capacity().max_contacts, 3);
   }
   EXPECT_FALSE(Segment::exists(g.name));  // the creator removed it on destruction
+}
+
+TEST(Segment, LiveButSilentCreatorIsReplacedAfterTheStaleThreshold) {
+  NameGuard g(uniqueName("hung"));
+  int ready[2];
+  ASSERT_EQ(::pipe(ready), 0);
+  const pid_t child = ::fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    // a creator that stays alive but stops beating (hung)
+    CreateOptions o;
+    o.remove_on_destroy = false;
+    Segment s = Segment::create(g.name, SegmentCapacity::forContacts(1), o);
+    s.beat(Side::kSim);
+    const char c = 1;
+    if (::write(ready[1], &c, 1) != 1) ::_exit(3);
+    for (;;) ::pause();
+  }
+  char c = 0;
+  ASSERT_EQ(::read(ready[0], &c, 1), 1);
+  ::close(ready[0]);
+  ::close(ready[1]);
+  // fresh heartbeat: refused
+  EXPECT_THROW(Segment::create(g.name, SegmentCapacity::forContacts(1)), SegmentError);
+  ::usleep(100'000);
+  CreateOptions impatient;
+  impatient.stale_after_ns = 50 * kNsPerMs;
+  Segment fresh = Segment::create(g.name, SegmentCapacity::forContacts(1), impatient);
+  EXPECT_EQ(fresh.generation(), 2u);
+  EXPECT_THAT(fresh.creationNote(), HasSubstr("process " + std::to_string(child) +
+                                              ", silent for"));
+  ::kill(child, SIGKILL);
+  ::waitpid(child, nullptr, 0);
 }
 
 TEST(Segment, ReadOnlyAttachCannotWrite) {
@@ -328,6 +364,7 @@ TEST(Segment, CreatorRemovesNameOnDestructionOnlyIfStillItsOwn) {
     o.remove_on_destroy = false;
     Segment b = Segment::create(g.name, SegmentCapacity::forContacts(1), o);
     EXPECT_EQ(b.generation(), 1u);  // the name was free: a new lineage
+    EXPECT_EQ(b.creationNote(), "");
   }
   EXPECT_TRUE(Segment::exists(g.name));  // a's destructor left b's object alone
 }

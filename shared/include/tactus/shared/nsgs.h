@@ -45,14 +45,20 @@ struct ContactProblemView {
   const double* mu = nullptr;        ///< nc friction coefficients (ignored for 1-row contacts)
 };
 
-/// How the solver keeps the coupling between contacts (both give the same iterates up to
-/// rounding). kColumnUpdate keeps delta = W f + q current by adding W(:, rows_i) df_i after each
-/// contact (strided columns of the row-major W; the error check is then O(m), and contacts
-/// whose force does not change cost nothing). kRowGather recomputes b_i from the contiguous rows
-/// W(rows_i, :) f (every contact costs 3m, every error check one more W pass).
-/// Measured (tests/bench/nsgs_bench.cpp, 450 rows): see the README / report; kColumnUpdate is the
-/// default because it is not slower per sweep and its checks are free.
-enum class NsgsCoupling : std::uint8_t { kColumnUpdate, kRowGather };
+/// How the solver keeps the coupling between contacts (all give the same iterates up to
+/// rounding, when W is symmetric for kSymmetricRowUpdate).
+/// - kColumnUpdate (default, any W): keeps delta = W f + q current by adding W(:, rows_i) df_i
+///   after each contact (strided columns of the row-major W). Error checks are then O(m), and a
+///   contact whose force does not change (separated stays separated) costs nothing.
+/// - kRowGather (any W): recomputes b_i from the contiguous rows W(rows_i, :) f. Every contact
+///   costs 3m multiply-adds, and every error check one more W pass.
+/// - kSymmetricRowUpdate: the caller promises W = W^T (the simulation's H C H^T is); as
+///   kColumnUpdate but reads the contiguous rows W(rows_i, :) instead of the columns. Wrong
+///   results if W is not symmetric.
+/// Measured (tests/bench/nsgs_bench.cpp, 150 contacts / 450 rows, 84 in contact, thread CPU time
+/// on the 2-core dev VM, streaming W once = 36 us): one sweep costs 78 us (2.2 W streams) with
+/// kColumnUpdate, 93 us (2.5) with kRowGather, 36 us (1.0) with kSymmetricRowUpdate.
+enum class NsgsCoupling : std::uint8_t { kColumnUpdate, kRowGather, kSymmetricRowUpdate };
 
 struct NsgsSettings {
   double tolerance = 1e-6;           ///< on the normalised natural-map error
@@ -60,6 +66,7 @@ struct NsgsSettings {
   double sor = 1.0;                  ///< over-relaxation in (0, 2); 1 = plain Gauss-Seidel
   std::int64_t time_budget_ns = 0;   ///< 0: none; else stop after the sweep that crosses it
   int check_every = 1;               ///< compute the error every k sweeps (kRowGather: one W pass)
+  /// kSymmetricRowUpdate only when W is exactly symmetric (see NsgsCoupling)
   NsgsCoupling coupling = NsgsCoupling::kColumnUpdate;
 };
 

@@ -165,6 +165,9 @@ class Segment {
   const SnapshotLayout& snapshotLayout() const noexcept;
   /// Base address of the mapping (for tests and tools).
   const void* data() const noexcept;
+  /// For the creator's log: what create() found and replaced under the name, e.g. "replaced a
+  /// stale segment of dead process 1234 (generation 3)"; empty when the name was free.
+  const std::string& creationNote() const noexcept;
 
   // Endpoints. Writers (and the snapshot/device readers, which write the triple-buffer state)
   // need kReadWrite and throw SegmentError on a read-only segment. The stats reader works on

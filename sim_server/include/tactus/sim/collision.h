@@ -120,8 +120,7 @@ class Collision {
 
   const std::vector<Contact>& contacts() const;
   const CollisionStats& stats() const;
-  const SurfaceMesh& surface() const;
-  const Eigen::Matrix3Xd& triangleNormals() const;   ///< unit, outward, at the last refit
+  const SurfaceMesh& surface() const;   ///< triangles as given; nodes = those they use
 
  private:
   struct Impl;

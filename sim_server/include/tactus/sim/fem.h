@@ -42,6 +42,9 @@ enum class PcgPreconditioner {
   kJacobi,        ///< diagonal of A (cheap, many iterations on large meshes)
   kRestCholesky,  ///< CHOLMOD factor of the rest-shape A0 = M/h + B0 + h K0 (factorised once
                   ///< per h; few iterations while the rotations stay moderate)
+  kWarpedCholesky,  ///< R A0^-1 R^T with R the per-node rotations of the step (the warped
+                    ///< rest factor, as in the paper's eq. 12): few iterations even under large
+                    ///< rotations; one CHOLMOD solve per iteration
 };
 
 struct FemSolverOptions {

@@ -37,6 +37,7 @@
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
+#include <cstdint>
 #include <span>
 #include <vector>
 
@@ -85,7 +86,8 @@ class Instrument {
   void reset(const shared::Pose& pose, double gripper_opening = 1.0);
 
   /// Free motion over h_s toward the device target (pose, world twist [v; w]) and gripper
-  /// opening (clamped to [0, 1]). Updates pose, twist and features. No allocation.
+  /// opening (clamped to [0, 1]). Updates pose, twist and features. No allocation. h_s <= 0:
+  /// no-op.
   void freeMotion(double h_s, const shared::Pose& target, const Vector6d& target_twist,
                   double gripper_opening);
 

@@ -21,7 +21,13 @@ struct RunOptions {
   std::string segment = "tactus";
   bool no_haptics = false;
   std::string stats_json;            ///< write per-stage statistics here at the end
+  std::string export_trajectory;     ///< write the scripted trajectory (device CSV) and exit
 };
+
+/// Writes the scene's instrument trajectory in the replay device's CSV format
+/// (`t_s,x,y,z,qw,qx,qy,qz,gripper`, gripper in radians of jaw opening), sampled every
+/// `dt_s`, so the simulated device can follow the same script as the simulation.
+void exportTrajectory(const SceneSpec& spec, const std::filesystem::path& csv, double dt_s = 0.01);
 
 /// Percentile summary of one stage over a run [s].
 struct StageSummary {

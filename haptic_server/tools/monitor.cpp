@@ -1,0 +1,101 @@
+// tactus-monitor: attaches read-only to a running segment and prints one status line per
+// interval (simulation rate, haptic rate, contacts, rendered force, haptic tick p99). Used by
+// scripts/start.sh; costs the haptic loop nothing (it only reads the stats ring).
+#include <CLI/CLI.hpp>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <csignal>
+#include <cstdio>
+#include <thread>
+#include <vector>
+
+#include "tactus/shared/clock.h"
+#include "tactus/shared/segment.h"
+
+namespace {
+std::atomic<bool> g_stop{false};
+void onSignal(int) { g_stop.store(true); }
+
+double p99(std::vector<double>& v) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  return v[static_cast<std::size_t>(0.99 * static_cast<double>(v.size() - 1))];
+}
+}  // namespace
+
+int main(int argc, char** argv) {
+  using namespace tactus::shared;
+  CLI::App app{"Tactus status monitor: one line per interval from a running segment"};
+  std::string name = "tactus";
+  double interval_s = 1.0;
+  double duration_s = 0.0;
+  app.add_option("--segment", name, "Segment name")->capture_default_str();
+  app.add_option("--interval", interval_s, "Seconds between lines")->capture_default_str();
+  app.add_option("--duration", duration_s, "Stop after S seconds (0: until SIGINT)");
+  CLI11_PARSE(app, argc, argv);
+  std::signal(SIGINT, onSignal);
+  std::signal(SIGTERM, onSignal);
+
+  std::optional<Segment> seg;
+  std::optional<StatsRingReader> reader;
+  std::vector<StatsRecord> buf(8192);
+  std::vector<double> ticks_us, period_err_us;
+  const std::int64_t t0 = monotonicNs();
+  std::int64_t last = t0;
+  std::uint64_t last_snapshot = 0;
+  while (!g_stop.load()) {
+    std::this_thread::sleep_for(std::chrono::duration<double>(interval_s));
+    const std::int64_t now = monotonicNs();
+    if (duration_s > 0.0 && now - t0 > static_cast<std::int64_t>(duration_s * 1e9)) break;
+    if (seg && !seg->stillCurrent()) {
+      reader.reset();
+      seg.reset();
+    }
+    if (!seg) {
+      TryOpenResult r = Segment::tryOpen(name, Access::kReadOnly);
+      if (!r.ok()) {
+        std::printf("[status] waiting for segment '%s'\n", name.c_str());
+        std::fflush(stdout);
+        continue;
+      }
+      seg.emplace(std::move(*r.segment));
+      reader.emplace(seg->statsReader(StatsRingReader::Start::kNewest));
+      last = now;
+      last_snapshot = 0;
+      continue;
+    }
+    ticks_us.clear();
+    period_err_us.clear();
+    std::size_t count = 0;
+    StatsRecord newest{};
+    for (std::size_t got; (got = reader->poll(buf.data(), buf.size())) > 0;) {
+      for (std::size_t i = 0; i < got; ++i) {
+        const StatsRecord& r = buf[i];
+        ticks_us.push_back(1e-3 * static_cast<double>(r.finished_ns - r.woken_ns));
+        period_err_us.push_back(1e-3 * static_cast<double>(r.woken_ns - r.scheduled_ns));
+      }
+      count += got;
+      newest = buf[got - 1];
+    }
+    const double dt = 1e-9 * static_cast<double>(now - last);
+    last = now;
+    const std::int64_t sim_age_ms = (now - seg->heartbeatNs(Side::kSim)) / 1'000'000;
+    if (count == 0) {
+      std::printf("[status] sim heartbeat %lld ms ago | haptic: no ticks\n",
+                  static_cast<long long>(sim_age_ms));
+    } else {
+      const double sim_hz =
+          last_snapshot > 0 ? static_cast<double>(newest.snapshot_seq - last_snapshot) / dt : 0.0;
+      last_snapshot = newest.snapshot_seq;
+      std::printf("[status] sim %6.1f Hz | haptic %7.1f Hz | contacts %3lld | force %6.3f N | "
+                  "tick p99 %7.1f us | wake p99 %7.1f us%s\n",
+                  sim_hz, static_cast<double>(count) / dt, static_cast<long long>(newest.contacts),
+                  newest.force_norm_n, p99(ticks_us), p99(period_err_us),
+                  (newest.flags & kStatsSnapshotStale) ? " | STALE" : "");
+    }
+    std::fflush(stdout);
+  }
+  return 0;
+}

@@ -1,0 +1,236 @@
+// The haptic tick on a real shared segment with synthetic contact snapshots: the local model
+// moves delta_free with the device, forces rise with penetration, the safety chain (engage gate,
+// clamp, watchdog fade) holds, bad device data is survived, and a tick allocates nothing.
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <string>
+
+#include "../../support/alloc_counter.h"
+#include "tactus/haptic/haptic_loop.h"
+#include "tactus/shared/clock.h"
+
+namespace tactus::haptic {
+namespace {
+
+// A device whose pose the test sets; it records the last command.
+class ScriptedDevice : public device::Device {
+ public:
+  device::DeviceInfo info() const override { return {"scripted", 20.0, 1e4, 0.2, true, true}; }
+  void open() override {}
+  void calibrate() override {}
+  void enableForces(bool) override {}
+  void close() noexcept override {}
+  device::IoStatus read(device::DeviceState* out) noexcept override {
+    if (fault) return device::IoStatus::kFault;
+    *out = state;
+    return device::IoStatus::kOk;
+  }
+  device::IoStatus write(const device::DeviceCommand& cmd) noexcept override {
+    last = cmd;
+    return device::IoStatus::kOk;
+  }
+  device::DeviceState state{};
+  device::DeviceCommand last{};
+  bool fault = false;
+};
+
+// One frictionless contact below the tool along +z: W = w, delta_free = gap + J dx with
+// J = [0 0 1 0 0 0] (moving the device up opens the gap).
+class HapticLoopTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    name_ = "tactus_haptic_test_" + std::to_string(::getpid());
+    shared::Segment::remove(name_);
+    sim_.emplace(shared::Segment::create(name_, shared::SegmentCapacity::forContacts(50, true)));
+    publisher_ = sim_->snapshotPublisher();
+    settings_.max_force_n = 5.0;
+    settings_.slew_n_per_s = 1e6;
+    settings_.fade_ms = 10.0;
+    loop_.emplace(device_, settings_);
+    link_ = std::make_unique<HapticLink>(shared::Segment::open(name_));
+    loop_->offerLink(link_.get());
+  }
+  void TearDown() override {
+    loop_->offerLink(nullptr);
+    tickFor(1);
+    link_.reset();
+    sim_.reset();
+    shared::Segment::remove(name_);
+  }
+
+  // Publishes the one-contact problem with gap_m at device height z_star.
+  void publish(double gap_m, double w_m_per_n, double z_star, std::int64_t t_ns = 0) {
+    auto slot = publisher_.slot();
+    auto& h = slot.header();
+    ASSERT_TRUE(slot.setSize(1, 1));
+    h.seq = ++seq_;
+    h.t_ns = t_ns != 0 ? t_ns : t_;
+    h.flags = shared::kSnapshotValid | shared::kSnapshotHasJacobian;
+    h.device_pose.pos_m = {0.0, 0.0, z_star};
+    h.tool_pose.pos_m = {0.0, 0.0, z_star};
+    slot.rowOffset()[0] = 0;
+    slot.rowOffset()[1] = 1;
+    slot.contactId()[0] = 7;
+    slot.mu()[0] = 0.0;
+    slot.W()[0] = w_m_per_n;
+    slot.deltaFree()[0] = gap_m;
+    slot.f()[0] = std::max(0.0, -gap_m / w_m_per_n);
+    for (int k = 0; k < 6; ++k) slot.J()[k] = k == 2 ? 1.0 : 0.0;
+    for (int k = 0; k < 3; ++k) {
+      slot.contactPoint()[k] = 0.0;
+      slot.contactNormal()[k] = k == 2 ? 1.0 : 0.0;
+    }
+    publisher_.publish();
+  }
+
+  TickOutput tickFor(int n) {
+    TickOutput out;
+    for (int i = 0; i < n; ++i) {
+      t_ += 1'000'000;
+      out = loop_->tick(t_, t_);
+    }
+    return out;
+  }
+  std::string name_;
+  std::optional<shared::Segment> sim_;
+  shared::SnapshotPublisher publisher_;
+  ScriptedDevice device_;
+  HapticSettings settings_;
+  std::optional<HapticLoop> loop_;
+  std::unique_ptr<HapticLink> link_;
+  std::uint64_t seq_ = 0;
+  std::int64_t t_ = shared::monotonicNs();
+};
+
+TEST_F(HapticLoopTest, ForceRisesWithPenetrationThroughTheLocalModel) {
+  device_.state.pos_m = {0.0, 0.0, 0.0};
+  publish(0.001, 1e-3, 0.0);           // 1 mm gap at the snapshot pose: no force
+  TickOutput out = tickFor(20);
+  EXPECT_EQ(out.contacts, 1);
+  EXPECT_NEAR(out.force_n[2], 0.0, 1e-12);
+  EXPECT_DOUBLE_EQ(out.gain, 1.0);
+  double previous = 0.0;
+  for (double z : {-0.0015, -0.002, -0.003, -0.004}) {   // press down: the gap closes, then -
+    device_.state.pos_m = {0.0, 0.0, z};
+    out = tickFor(3);
+    const double expected = std::max(0.0, -(0.001 + z) / 1e-3);   // f = -delta_free / W
+    EXPECT_NEAR(out.force_n[2], std::min(expected, settings_.max_force_n), 1e-6) << "z = " << z;
+    EXPECT_GT(out.force_n[2], previous);
+    previous = out.force_n[2];
+    // the force pushes the hand out of the tissue (+n), never sideways
+    EXPECT_NEAR(out.force_n[0], 0.0, 1e-12);
+    EXPECT_NEAR(out.force_n[1], 0.0, 1e-12);
+  }
+}
+
+TEST_F(HapticLoopTest, AtTheSnapshotPoseTheHapticSolutionEqualsTheSimulations) {
+  device_.state.pos_m = {0.0, 0.0, 0.01};
+  publish(0.0, 1e-3, 0.01);            // touching: engages at zero force
+  tickFor(5);
+  publish(-0.002, 1e-3, 0.01);         // the simulation's own solution: f = 2 N
+  const TickOutput out = tickFor(30);
+  EXPECT_NEAR(out.force_n[2], 2.0, 1e-9);
+}
+
+TEST_F(HapticLoopTest, ForcesEngageOnlyOnceTheCommandIsSmall) {
+  device_.state.pos_m = {0.0, 0.0, 0.0};
+  publish(-0.003, 1e-3, 0.0);          // starts deep inside: 3 N would kick the hand
+  TickOutput out = tickFor(20);
+  EXPECT_DOUBLE_EQ(out.force_n[2], 0.0);
+  EXPECT_GT(out.unlimited_force_norm_n, 2.9);
+  device_.state.pos_m = {0.0, 0.0, 0.004};   // the hand leaves the tissue
+  tickFor(5);
+  device_.state.pos_m = {0.0, 0.0, 0.0};     // and comes back: now the force is rendered
+  publish(-0.003, 1e-3, 0.0);
+  out = tickFor(30);
+  EXPECT_NEAR(out.force_n[2], 3.0, 1e-6);
+}
+
+TEST_F(HapticLoopTest, ForceNeverExceedsTheClamp) {
+  device_.state.pos_m = {0.0, 0.0, 0.0};
+  publish(0.0, 1e-3, 0.0);
+  tickFor(5);
+  for (double z = 0.0; z > -0.05; z -= 0.001) {
+    device_.state.pos_m = {0.0, 0.0, z};
+    const TickOutput out = tickFor(1);
+    const double norm = std::sqrt(out.force_n[0] * out.force_n[0] +
+                                  out.force_n[1] * out.force_n[1] + out.force_n[2] * out.force_n[2]);
+    EXPECT_LE(norm, settings_.max_force_n + 1e-12);
+  }
+}
+
+TEST_F(HapticLoopTest, StaleSnapshotFadesTheForceAndFreshDataBringsItBack) {
+  device_.state.pos_m = {0.0, 0.0, 0.0};
+  publish(0.0, 1e-3, 0.0);
+  tickFor(20);                         // engaged, fade-in ramp complete
+  publish(-0.002, 1e-3, 0.0, t_);
+  TickOutput out = tickFor(1);
+  EXPECT_NEAR(out.force_n[2], 2.0, 1e-9);
+  // no new snapshot for longer than the watchdog: fade to zero within fade_ms, keep ticking
+  out = tickFor(static_cast<int>(settings_.watchdog_ms) + 1);
+  EXPECT_TRUE(out.stale);
+  out = tickFor(static_cast<int>(settings_.fade_ms) + 1);
+  EXPECT_DOUBLE_EQ(out.force_n[2], 0.0);
+  EXPECT_GT(loop_->counters().stale_ticks.load(), 0u);
+  publish(-0.002, 1e-3, 0.0, t_ + 1'000'000);
+  out = tickFor(static_cast<int>(settings_.fade_ms) + 2);
+  EXPECT_FALSE(out.stale);
+  EXPECT_NEAR(out.force_n[2], 2.0, 1e-9);
+}
+
+TEST_F(HapticLoopTest, DeviceFaultAndNonFiniteDataFadeWithoutPropagatingNaN) {
+  device_.state.pos_m = {0.0, 0.0, 0.0};
+  publish(0.0, 1e-3, 0.0);
+  tickFor(5);
+  publish(-0.002, 1e-3, 0.0);
+  tickFor(5);
+  device_.state.pos_m = {std::nan(""), 0.0, INFINITY};
+  TickOutput out = tickFor(40);
+  EXPECT_TRUE(std::isfinite(out.force_n[0]) && std::isfinite(out.force_n[2]));
+  EXPECT_DOUBLE_EQ(out.force_n[2], 0.0);
+  EXPECT_GT(loop_->counters().non_finite_input.load(), 0u);
+  device_.state.pos_m = {0.0, 0.0, 0.0};
+  device_.fault = true;
+  out = tickFor(5);
+  EXPECT_DOUBLE_EQ(out.force_n[2], 0.0);
+  EXPECT_GT(loop_->counters().device_faults.load(), 0u);
+  device_.fault = false;
+  publish(-0.002, 1e-3, 0.0);
+  out = tickFor(40);
+  EXPECT_NEAR(out.force_n[2], 2.0, 1e-9);
+}
+
+TEST_F(HapticLoopTest, TheSimulationSeesTheDeviceAndEveryTickWritesAStatsRecord) {
+  auto samples = sim_->deviceReader();
+  auto stats = sim_->statsReader(shared::StatsRingReader::Start::kOldest);
+  device_.state.pos_m = {0.01, 0.02, 0.03};
+  device_.state.gripper_rad = 0.25;
+  publish(0.001, 1e-3, 0.0);
+  tickFor(10);
+  const shared::DeviceSample& s = samples.latest();
+  EXPECT_EQ(s.seq, 10u);
+  EXPECT_DOUBLE_EQ(s.pos_m[1], 0.02);
+  EXPECT_DOUBLE_EQ(s.gripper_rad, 0.25);
+  std::vector<shared::StatsRecord> recs(64);
+  EXPECT_EQ(stats.poll(recs.data(), recs.size()), 10u);
+  EXPECT_EQ(recs[9].tick, 9u);
+  EXPECT_EQ(recs[9].contacts, 1);
+}
+
+TEST_F(HapticLoopTest, ATickAllocatesNothing) {
+  device_.state.pos_m = {0.0, 0.0, 0.0};
+  publish(0.0, 1e-3, 0.0);
+  tickFor(10);
+  test::AllocScope scope;
+  for (int i = 0; i < 200; ++i) {
+    if (i % 20 == 0) publish(-0.001 * (i % 3), 1e-3, 0.0);
+    device_.state.pos_m = {0.0, 0.0, -0.0001 * (i % 7)};
+    tickFor(1);
+  }
+  EXPECT_EQ(scope.allocations(), 0);
+}
+
+}  // namespace
+}  // namespace tactus::haptic
