@@ -9,7 +9,11 @@ packages=(
   libcli11-dev libgtest-dev libgmock-dev libbenchmark-dev zlib1g-dev
   python3 python3-matplotlib
   libhdf5-dev
+  libopenblas0-serial
+  chromium
 )
+# node and npm build the live view's page (three.js); from Debian only when no node is installed
+command -v node >/dev/null 2>&1 || packages+=(nodejs npm)
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

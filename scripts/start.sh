@@ -5,7 +5,8 @@
 #
 # Usage: scripts/start.sh [SCENE.yaml] [--device NAME|PATH.so] [--device-option k=v]...
 #                         [--duration S] [--segment NAME] [--run-dir DIR] [--no-haptic]
-#                         [--core N] [--rate HZ]
+#                         [--core N] [--rate HZ] [--view [--view-port N]]
+#        --view: also serve the live view in a browser (scripts/view; http://127.0.0.1:8090/)
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 build="${TACTUS_BUILD_DIR:-$root/build}"
@@ -18,6 +19,8 @@ run_dir=""
 haptic=1
 core=-1
 rate=1000
+view=0
+view_port=8090
 usage() { sed -n '2,9p' "$0" | sed 's/^# \{0,1\}//'; }
 while [[ $# -gt 0 ]]; do
   case "$1" in
@@ -30,6 +33,8 @@ while [[ $# -gt 0 ]]; do
     --no-haptic) haptic=0; shift ;;
     --core) core="$2"; shift 2 ;;
     --rate) rate="$2"; shift 2 ;;
+    --view) view=1; shift ;;
+    --view-port) view_port="$2"; shift 2 ;;
     -*) echo "start.sh: unknown option $1 (see --help)" >&2; exit 2 ;;
     *) scene="$1"; shift ;;
   esac
@@ -46,10 +51,11 @@ mkdir -p "$run_dir"
 ln -sfn "$run_dir" "$root/run/latest" 2>/dev/null || true
 echo "tactus: scene $scene, device $device, segment '$segment', logs in $run_dir"
 
-sim_pid=""; haptic_pid=""; monitor_pid=""
+sim_pid=""; haptic_pid=""; monitor_pid=""; view_pid=""
 stop_all() {
   trap - INT TERM EXIT
   [[ -n "$monitor_pid" ]] && kill "$monitor_pid" 2>/dev/null || true
+  [[ -n "$view_pid" ]] && kill "$view_pid" 2>/dev/null || true
   for pid in $haptic_pid $sim_pid; do kill -TERM "$pid" 2>/dev/null || true; done
   for pid in $haptic_pid $sim_pid; do
     for _ in $(seq 50); do kill -0 "$pid" 2>/dev/null || break; sleep 0.1; done
@@ -80,6 +86,12 @@ if [[ $haptic -eq 1 ]]; then
     "${device_opts[@]}" --core "$core" --rate "$rate" >"$run_dir/haptic.log" 2>&1 &
   haptic_pid=$!
   echo "$haptic_pid" >"$run_dir/haptic.pid"
+fi
+
+if [[ $view -eq 1 ]]; then
+  "$root/scripts/view" --segment "$segment" --port "$view_port" >"$run_dir/view.log" 2>&1 &
+  view_pid=$!
+  echo "tactus: live view at http://127.0.0.1:$view_port/ (log: $run_dir/view.log)"
 fi
 
 mon_args=(--segment "$segment")

@@ -43,11 +43,17 @@ void Supervisor::poll() {
   if (retired_) return;
 
   if (link_) {
-    const bool current = link_->segment.stillCurrent();
-    const bool alive = link_->segment.creatorAlive();
-    if (current && alive) return;
-    spdlog::warn("segment '{}' {}: detaching (forces fade out)", name_,
-                 !current ? "was removed or replaced" : "lost its simulation (stale heartbeat)");
+    // A dead simulation's segment is kept until it is replaced or removed: the loop fades the
+    // force out on stale snapshots and keeps writing stats that tools can read.
+    if (link_->segment.stillCurrent()) {
+      const bool alive = link_->segment.creatorAlive();
+      if (alive != creator_alive_) {
+        if (!alive) spdlog::warn("the simulation of segment '{}' stopped responding", name_);
+        creator_alive_ = alive;
+      }
+      return;
+    }
+    spdlog::warn("segment '{}' was removed or replaced: detaching", name_);
     retire(std::move(link_));
     return;
   }
@@ -67,6 +73,7 @@ void Supervisor::poll() {
   last_open_message_.clear();
   if (!r.segment->creatorAlive()) return;  // a stale segment: wait for the simulation to replace it
   link_ = std::make_unique<HapticLink>(std::move(*r.segment));
+  creator_alive_ = true;
   link_->segment.setHapticPid(static_cast<std::int64_t>(::getpid()));
   spdlog::info("attached to segment '{}' (generation {}, up to {} contacts / {} rows)", name_,
                link_->segment.generation(), link_->segment.capacity().max_contacts,

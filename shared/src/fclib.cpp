@@ -43,7 +43,9 @@ class TokenReader {
     double v = 0.0;
     const char* end = t.text.data() + t.text.size();
     const auto [ptr, ec] = std::from_chars(t.text.data(), end, v);
-    if (ec != std::errc() || ptr != end) fail(t.line, "expected " + field + ", got '" + t.text + "'");
+    if (ec != std::errc() || ptr != end) {
+      fail(t.line, "expected " + field + ", got '" + t.text + "'");
+    }
     if (!std::isfinite(v)) fail(t.line, field + " is not finite ('" + t.text + "')");
     return v;
   }

@@ -63,7 +63,8 @@ void setSlip(const Local3& p, double theta, double fn, double* f) noexcept {
 }
 
 // Bisection on [lo, hi] where g changes sign; true with the root's force in f when valid.
-bool bisectSlip(const Local3& p, double lo, double hi, double g_lo, double h_tol, double* f) {
+bool bisectSlip(const Local3& p, double lo, double hi, double g_lo, double h_tol,
+                double* f) noexcept {
   for (int it = 0; it < 100 && hi - lo > 1e-15; ++it) {
     const double mid = 0.5 * (lo + hi);
     const SlipEval e = evalSlip(p, mid);

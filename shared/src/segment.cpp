@@ -163,6 +163,16 @@ SegmentLayout SegmentLayout::forCapacity(SegmentCapacity capacity) noexcept {
   l.stats_offset = at;
   l.stats_bytes = seqRingBytes<StatsRecord>(kStatsRingCapacity);
   at = roundUpToCacheLine(at + l.stats_bytes);
+  const DisplayCapacity dc = capacity.display();
+  if (dc.enabled() && dc.max_contacts >= 0) {
+    l.display = DisplayLayout::forCapacity(dc);
+    l.display_offset = at;
+    l.display_bytes = tripleBufferBytes(l.display.frame_bytes);
+    at = roundUpToCacheLine(at + l.display_bytes);
+    l.topology_offset = at;
+    l.topology_bytes = l.display.topology_bytes;
+    at = roundUpToCacheLine(at + l.topology_bytes);
+  }
   l.total_bytes = at;
   return l;
 }
@@ -176,6 +186,7 @@ struct Segment::Impl {
   bip::mapped_region region;
   SegmentHeader* header = nullptr;
   SnapshotLayout snapshot_layout;
+  DisplayLayout display_layout;
   dev_t dev = 0;
   ino_t ino = 0;
   std::string note;
@@ -229,10 +240,13 @@ bool Segment::remove(const std::string& name) noexcept {
 Segment Segment::create(const std::string& name, SegmentCapacity capacity,
                         const CreateOptions& options) {
   validateName(name);
-  if (capacity.max_rows < 0 || capacity.max_contacts < 0) {
+  if (capacity.max_rows < 0 || capacity.max_contacts < 0 || capacity.display_vertices < 0 ||
+      capacity.display_triangles < 0) {
     throw SegmentError("segment '" + name + "': negative capacity (max_rows " +
                        std::to_string(capacity.max_rows) + ", max_contacts " +
-                       std::to_string(capacity.max_contacts) + ")");
+                       std::to_string(capacity.max_contacts) + ", display_vertices " +
+                       std::to_string(capacity.display_vertices) + ", display_triangles " +
+                       std::to_string(capacity.display_triangles) + ")");
   }
   const SegmentLayout layout = SegmentLayout::forCapacity(capacity);
   if (layout.total_bytes > kMaxSegmentBytes) {
@@ -301,6 +315,19 @@ Segment Segment::create(const std::string& name, SegmentCapacity capacity,
   h->stats_capacity = kStatsRingCapacity;
   h->stats_record_bytes = sizeof(StatsRecord);
   h->snapshot_header_bytes = sizeof(ContactSnapshotHeader);
+  h->display_max_vertices = layout.display.capacity.max_vertices;
+  h->display_max_triangles = layout.display.capacity.max_triangles;
+  h->display_max_contacts = layout.display.capacity.max_contacts;
+  h->display_frame_header_bytes = sizeof(DisplayFrameHeader);
+  h->display_offset = layout.display_offset;
+  h->display_bytes = layout.display_bytes;
+  h->display_slot_bytes = layout.display.frame_bytes;
+  h->topology_offset = layout.topology_offset;
+  h->topology_bytes = layout.topology_bytes;
+  if (layout.display_bytes > 0) {
+    initTripleBuffer(base + layout.display_offset, layout.display.frame_bytes);
+    std::memset(base + layout.topology_offset, 0, layout.topology_bytes);
+  }
   initTripleBuffer(base + layout.snapshot_offset, layout.snapshot.total_bytes);
   initTripleBuffer(base + layout.device_offset, sizeof(DeviceSample));
   initSeqRing<StatsRecord>(base + layout.stats_offset, kStatsRingCapacity);
@@ -308,6 +335,7 @@ Segment Segment::create(const std::string& name, SegmentCapacity capacity,
   __atomic_store_n(&h->magic, kSegmentMagic, __ATOMIC_RELEASE);
   impl->header = h;
   impl->snapshot_layout = layout.snapshot;
+  impl->display_layout = layout.display;
   return Segment(std::move(impl));
 }
 
@@ -383,12 +411,18 @@ TryOpenResult Segment::tryOpen(const std::string& name, Access access) {
                 " bytes: it is corrupt or being re-created; restart sim_server, or remove " + path;
     return r;
   }
-  if (h->max_rows < 0 || h->max_contacts < 0) {
+  if (h->max_rows < 0 || h->max_contacts < 0 || h->display_max_vertices < 0 ||
+      h->display_max_triangles < 0) {
     r.message = "segment '" + name + "' has a negative capacity: " + fix;
     return r;
   }
   // every part must sit where this build would put it for the stored capacity
-  const SegmentLayout l = SegmentLayout::forCapacity({h->max_rows, h->max_contacts});
+  SegmentCapacity stored;
+  stored.max_rows = h->max_rows;
+  stored.max_contacts = h->max_contacts;
+  stored.display_vertices = h->display_max_vertices;
+  stored.display_triangles = h->display_max_triangles;
+  const SegmentLayout l = SegmentLayout::forCapacity(stored);
   std::ostringstream diff;
   bool any = false;
   describeDiff(diff, any, "total_bytes", h->total_bytes, l.total_bytes);
@@ -404,6 +438,15 @@ TryOpenResult Segment::tryOpen(const std::string& name, Access access) {
   describeDiff(diff, any, "stats_bytes", h->stats_bytes, l.stats_bytes);
   describeDiff(diff, any, "stats_capacity", h->stats_capacity, kStatsRingCapacity);
   describeDiff(diff, any, "stats_record_bytes", h->stats_record_bytes, sizeof(StatsRecord));
+  describeDiff(diff, any, "display_max_contacts", static_cast<std::uint64_t>(h->display_max_contacts),
+               static_cast<std::uint64_t>(l.display.capacity.max_contacts));
+  describeDiff(diff, any, "display_frame_header_bytes", h->display_frame_header_bytes,
+               sizeof(DisplayFrameHeader));
+  describeDiff(diff, any, "display_offset", h->display_offset, l.display_offset);
+  describeDiff(diff, any, "display_bytes", h->display_bytes, l.display_bytes);
+  describeDiff(diff, any, "display_slot_bytes", h->display_slot_bytes, l.display.frame_bytes);
+  describeDiff(diff, any, "topology_offset", h->topology_offset, l.topology_offset);
+  describeDiff(diff, any, "topology_bytes", h->topology_bytes, l.topology_bytes);
   if (any) {
     r.message = "segment '" + name + "' layout differs from this " + programName() + "'s (" +
                 diff.str() + "): " + fix;
@@ -412,6 +455,7 @@ TryOpenResult Segment::tryOpen(const std::string& name, Access access) {
   impl->recordIdentity();
   impl->header = const_cast<SegmentHeader*>(h);
   impl->snapshot_layout = l.snapshot;
+  impl->display_layout = l.display;
   r.status = OpenStatus::kOpened;
   r.segment.emplace(Segment(std::move(impl)));
   return r;
@@ -429,7 +473,12 @@ bool Segment::isCreator() const noexcept { return impl_->creator; }
 std::size_t Segment::sizeBytes() const noexcept { return impl_->region.get_size(); }
 const SegmentHeader& Segment::header() const noexcept { return *impl_->header; }
 SegmentCapacity Segment::capacity() const noexcept {
-  return {impl_->header->max_rows, impl_->header->max_contacts};
+  SegmentCapacity c;
+  c.max_rows = impl_->header->max_rows;
+  c.max_contacts = impl_->header->max_contacts;
+  c.display_vertices = impl_->header->display_max_vertices;
+  c.display_triangles = impl_->header->display_max_triangles;
+  return c;
 }
 std::uint64_t Segment::generation() const noexcept { return impl_->header->generation; }
 const SnapshotLayout& Segment::snapshotLayout() const noexcept { return impl_->snapshot_layout; }
@@ -480,6 +529,22 @@ StatsRingReader Segment::statsReader(StatsRingReader::Start start) const {
   const unsigned char* b = static_cast<const unsigned char*>(impl_->region.get_address());
   return StatsRingReader(reinterpret_cast<const SeqRingControl*>(b + impl_->header->stats_offset),
                          start);
+}
+
+DisplayPublisher Segment::displayPublisher() {
+  unsigned char* b = writableBase("the display publisher");
+  if (impl_->header->display_bytes == 0) return {};
+  return DisplayPublisher(
+      reinterpret_cast<TripleBufferControl*>(b + impl_->header->display_offset),
+      b + impl_->header->topology_offset, impl_->display_layout);
+}
+
+DisplaySubscriber Segment::displaySubscriber() const {
+  const unsigned char* b = static_cast<const unsigned char*>(impl_->region.get_address());
+  if (impl_->header->display_bytes == 0) return {};
+  return DisplaySubscriber(
+      reinterpret_cast<const TripleBufferControl*>(b + impl_->header->display_offset),
+      b + impl_->header->topology_offset, impl_->display_layout);
 }
 
 void Segment::beat(Side side, std::int64_t now_ns) noexcept {

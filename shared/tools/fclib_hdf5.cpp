@@ -36,7 +36,8 @@ class H5File {
     const hssize_t n = H5Sget_simple_extent_npoints(space);
     std::vector<T> out(n > 0 ? static_cast<std::size_t>(n) : 0);
     const hid_t type = std::is_same_v<T, double> ? H5T_NATIVE_DOUBLE : H5T_NATIVE_INT;
-    const herr_t st = out.empty() ? 0 : H5Dread(ds, type, H5S_ALL, H5S_ALL, H5P_DEFAULT, out.data());
+    const herr_t st =
+        out.empty() ? 0 : H5Dread(ds, type, H5S_ALL, H5S_ALL, H5P_DEFAULT, out.data());
     H5Sclose(space);
     H5Dclose(ds);
     if (n < 0 || st < 0) throw Error(name_ + ": cannot read dataset " + dataset);
@@ -86,7 +87,8 @@ FclibProblem readFclibHdf5(const std::filesystem::path& path) {
                   " entries, expected " + std::to_string(outer + 1));
     }
     for (int o = 0; o < outer; ++o) {
-      if (p[o] < 0 || p[o] > p[o + 1] || p[o + 1] > static_cast<int>(std::min(i.size(), x.size()))) {
+      const int stored = static_cast<int>(std::min(i.size(), x.size()));
+      if (p[o] < 0 || p[o] > p[o + 1] || p[o + 1] > stored) {
         throw Error(file + ": /fclib_local/W/p is not a valid pointer array at " +
                     std::to_string(o));
       }

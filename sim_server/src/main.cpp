@@ -28,6 +28,7 @@ int main(int argc, char** argv) {
   app.add_option("--output-every", opt.output_every, "Write every N steps (with --output)");
   app.add_option("--segment", opt.segment, "Shared-memory segment name (haptics)");
   app.add_flag("--no-haptics", opt.no_haptics, "Do not publish to a segment even if enabled");
+  app.add_flag("--status", opt.status, "Log a status line every second (daemon mode)");
   app.add_option("--stats-json", opt.stats_json, "Write per-stage statistics as JSON to FILE");
   app.add_option("--export-trajectory", opt.export_trajectory,
                  "Write the scene's scripted instrument trajectory as a device CSV and exit");

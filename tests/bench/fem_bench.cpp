@@ -1,6 +1,8 @@
 // FEM free motion (one implicit Euler step) on the livers, CHOLMOD vs PCG, with the per-stage
 // breakdown as counters; warped-compliance precompute and W build for 450 rows.
-//   build-*/tests/bench/fem_bench --benchmark_filter=Liver2
+//   build-*/tests/bench/fem_bench --benchmark_filter=Liver2_
+// OpenBLAS 0.3.21 does not recognise this VM's CPU and falls back to SSE3 kernels: export
+// OPENBLAS_CORETYPE=SkylakeX (or Haswell) for the large factorisations.
 #include <benchmark/benchmark.h>
 
 #include <Eigen/Geometry>
@@ -162,6 +164,8 @@ void precompute(benchmark::State& state, const char* name) {
   state.counters["surface_nodes"] = surface;
   state.counters["memory_MB"] = static_cast<double>(bytes) / 1e6;
 }
+// liver_23k: 4795 surface nodes, 14385 solves; C0 takes 1.66 GB in double (0.83 GB in float,
+// ComplianceOptions::c0_single_precision). Minutes: not part of the smoke run.
 void BM_WarpedPrecompute_Liver2(benchmark::State& s) { precompute(s, "liver2.msh"); }
 void BM_WarpedPrecompute_Liver23k(benchmark::State& s) { precompute(s, "liver_23k.msh"); }
 BENCHMARK(BM_WarpedPrecompute_Liver2)->Unit(benchmark::kMillisecond)->Iterations(1);
@@ -194,14 +198,10 @@ void BM_W450_Liver2_Uncoupled(benchmark::State& s) {
 void BM_W450_Liver2_Exact(benchmark::State& s) {
   buildW(s, loadLiver("liver2.msh"), ComplianceKind::kExact);
 }
-void BM_W450_Liver23k_Warped(benchmark::State& s) {
-  buildW(s, loadLiver("liver_23k.msh"), ComplianceKind::kWarped);
-}
 BENCHMARK(BM_W450_Small_Warped)->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_W450_Liver2_Warped)->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_W450_Liver2_Uncoupled)->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_W450_Liver2_Exact)->Unit(benchmark::kMicrosecond);
-BENCHMARK(BM_W450_Liver23k_Warped)->Unit(benchmark::kMicrosecond)->Iterations(20);
 
 }  // namespace
 }  // namespace tactus::sim

@@ -2,6 +2,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <cstring>
@@ -22,39 +23,46 @@ constexpr std::uint32_t kVersion = 1;
 struct CacheHeader {
   char magic[8];
   std::uint32_t version;
-  std::uint32_t scalar_bytes;  // 8: double, 4: float
-  std::uint64_t hash;        // FemBody::restHash combined with h
+  std::uint32_t scalar_bytes; // 8: double, 4: float
+  std::uint64_t hash;         // FemBody::restHash combined with h
   std::uint64_t node_count;
   std::uint64_t surface_count;
 };
 
-std::uint64_t cacheHash(const FemBody& body, double h) {
+std::uint64_t cacheHash(const FemBody &body, double h) {
   const std::uint64_t base = body.restHash();
   return fem_detail::fnv1a(&h, sizeof(h), base);
 }
 
 // Rest compliance block on the surface DOFs, with the surface numbering.
 struct RestBlock {
-  std::vector<int> surface;        // sorted surface node indices
-  std::vector<int> local;          // node -> surface index, -1 inside the volume
-  bool single = false;             // stored in float (c0f) instead of double (c0)
-  Eigen::MatrixXd c0;              // 3s x 3s
+  std::vector<int> surface; // sorted surface node indices
+  std::vector<int> local;   // node -> surface index, -1 inside the volume
+  bool single = false;      // stored in float (c0f) instead of double (c0)
+  Eigen::MatrixXd c0;       // 3s x 3s
   Eigen::MatrixXf c0f;
-  std::size_t scalarBytes() const { return single ? sizeof(float) : sizeof(double); }
-  void resize(Eigen::Index d) {
-    if (single) c0f.resize(d, d); else c0.resize(d, d);
+  std::size_t scalarBytes() const {
+    return single ? sizeof(float) : sizeof(double);
   }
-  void* data() { return single ? static_cast<void*>(c0f.data()) : c0.data(); }
-  const void* data() const {
-    return single ? static_cast<const void*>(c0f.data()) : c0.data();
+  void resize(Eigen::Index d) {
+    if (single)
+      c0f.resize(d, d);
+    else
+      c0.resize(d, d);
+  }
+  void *data() { return single ? static_cast<void *>(c0f.data()) : c0.data(); }
+  const void *data() const {
+    return single ? static_cast<const void *>(c0f.data()) : c0.data();
   }
   bool allFinite() const { return single ? c0f.allFinite() : c0.allFinite(); }
   Eigen::Matrix3d block(int a, int b) const {
-    if (single) return c0f.block<3, 3>(3 * a, 3 * b).cast<double>();
+    if (single)
+      return c0f.block<3, 3>(3 * a, 3 * b).cast<double>();
     return c0.block<3, 3>(3 * a, 3 * b);
   }
   std::size_t bytes() const {
-    return scalarBytes() * static_cast<std::size_t>(single ? c0f.size() : c0.size());
+    return scalarBytes() *
+           static_cast<std::size_t>(single ? c0f.size() : c0.size());
   }
   void release() {
     c0.resize(0, 0);
@@ -63,8 +71,7 @@ struct RestBlock {
 };
 
 // In-place (A + A^T) / 2 without a full-size temporary.
-template <class Mat>
-void symmetrise(Mat& a) {
+template <class Mat> void symmetrise(Mat &a) {
   for (Eigen::Index j = 0; j < a.cols(); ++j)
     for (Eigen::Index i = j + 1; i < a.rows(); ++i) {
       const auto v = (a(i, j) + a(j, i)) / 2;
@@ -74,19 +81,23 @@ void symmetrise(Mat& a) {
 }
 
 void progress(bool show, int done, int total) {
-  if (!show) return;
+  if (!show)
+    return;
   const int width = 40;
   const int filled = total > 0 ? width * done / total : width;
   std::fprintf(stderr, "\r[tactus] C0 precompute [%s%s] %3d%% (%d/%d DOFs)",
-               std::string(filled, '#').c_str(), std::string(width - filled, ' ').c_str(),
+               std::string(filled, '#').c_str(),
+               std::string(width - filled, ' ').c_str(),
                total > 0 ? 100 * done / total : 100, done, total);
-  if (done == total) std::fprintf(stderr, "\n");
+  if (done == total)
+    std::fprintf(stderr, "\n");
   std::fflush(stderr);
 }
 
-// Reads and validates a cache file; returns false (with a reason) unless every check passes.
-bool readCache(const std::filesystem::path& path, std::uint64_t hash, const FemBody& body,
-               RestBlock& blk, std::string& why) {
+// Reads and validates a cache file; returns false (with a reason) unless every
+// check passes.
+bool readCache(const std::filesystem::path &path, std::uint64_t hash,
+               const FemBody &body, RestBlock &blk, std::string &why) {
   std::ifstream in(path, std::ios::binary);
   if (!in) {
     why = "cannot open";
@@ -96,7 +107,8 @@ bool readCache(const std::filesystem::path& path, std::uint64_t hash, const FemB
   const auto file_size = static_cast<std::uint64_t>(in.tellg());
   in.seekg(0);
   CacheHeader hdr{};
-  if (file_size < sizeof(hdr) || !in.read(reinterpret_cast<char*>(&hdr), sizeof(hdr))) {
+  if (file_size < sizeof(hdr) ||
+      !in.read(reinterpret_cast<char *>(&hdr), sizeof(hdr))) {
     why = "truncated header";
     return false;
   }
@@ -105,14 +117,15 @@ bool readCache(const std::filesystem::path& path, std::uint64_t hash, const FemB
     return false;
   }
   if (hdr.version != kVersion) {
-    why = "version " + std::to_string(hdr.version) + " != " + std::to_string(kVersion);
+    why = "version " + std::to_string(hdr.version) +
+          " != " + std::to_string(kVersion);
     return false;
   }
   if (hdr.hash != hash) {
     why = "stale (mesh, material, fixed nodes or h changed)";
     return false;
   }
-  const auto& surface = body.surfaceNodes();
+  const auto &surface = body.surfaceNodes();
   if (hdr.node_count != static_cast<std::uint64_t>(body.nodeCount()) ||
       hdr.surface_count != surface.size()) {
     why = "sizes do not match the mesh";
@@ -120,21 +133,25 @@ bool readCache(const std::filesystem::path& path, std::uint64_t hash, const FemB
   }
   const std::uint64_t s = hdr.surface_count, d = 3 * s;
   if (hdr.scalar_bytes != blk.scalarBytes()) {
-    why = "precision differs (" + std::to_string(hdr.scalar_bytes) + "-byte values)";
+    why = "precision differs (" + std::to_string(hdr.scalar_bytes) +
+          "-byte values)";
     return false;
   }
-  const std::uint64_t expected = sizeof(hdr) + s * sizeof(int) + d * d * blk.scalarBytes() + 8;
+  const std::uint64_t expected =
+      sizeof(hdr) + s * sizeof(int) + d * d * blk.scalarBytes() + 8;
   if (file_size != expected) {
-    why = "size " + std::to_string(file_size) + " bytes, expected " + std::to_string(expected) +
-          " (truncated or corrupt)";
+    why = "size " + std::to_string(file_size) + " bytes, expected " +
+          std::to_string(expected) + " (truncated or corrupt)";
     return false;
   }
   std::vector<int> nodes(s);
   blk.resize(static_cast<Eigen::Index>(d));
   std::uint64_t checksum = 0;
-  in.read(reinterpret_cast<char*>(nodes.data()), static_cast<std::streamsize>(s * sizeof(int)));
-  in.read(static_cast<char*>(blk.data()), static_cast<std::streamsize>(d * d * blk.scalarBytes()));
-  in.read(reinterpret_cast<char*>(&checksum), sizeof(checksum));
+  in.read(reinterpret_cast<char *>(nodes.data()),
+          static_cast<std::streamsize>(s * sizeof(int)));
+  in.read(static_cast<char *>(blk.data()),
+          static_cast<std::streamsize>(d * d * blk.scalarBytes()));
+  in.read(reinterpret_cast<char *>(&checksum), sizeof(checksum));
   if (!in) {
     why = "read error";
     return false;
@@ -156,15 +173,16 @@ bool readCache(const std::filesystem::path& path, std::uint64_t hash, const FemB
   return true;
 }
 
-void writeCache(const std::filesystem::path& path, std::uint64_t hash, const FemBody& body,
-                const RestBlock& blk) {
+void writeCache(const std::filesystem::path &path, std::uint64_t hash,
+                const FemBody &body, const RestBlock &blk) {
   std::error_code ec;
   std::filesystem::create_directories(path.parent_path(), ec);
   const auto tmp = path.string() + ".tmp";
   {
     std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
     if (!out) {
-      spdlog::warn("compliance cache: cannot write {} (continuing without cache)", tmp);
+      spdlog::warn(
+          "compliance cache: cannot write {} (continuing without cache)", tmp);
       return;
     }
     CacheHeader hdr{};
@@ -175,27 +193,34 @@ void writeCache(const std::filesystem::path& path, std::uint64_t hash, const Fem
     hdr.node_count = static_cast<std::uint64_t>(body.nodeCount());
     hdr.surface_count = blk.surface.size();
     const std::uint64_t d = 3 * hdr.surface_count;
-    std::uint64_t sum = fem_detail::fnv1a(blk.surface.data(), blk.surface.size() * sizeof(int));
+    std::uint64_t sum =
+        fem_detail::fnv1a(blk.surface.data(), blk.surface.size() * sizeof(int));
     sum = fem_detail::fnv1a(blk.data(), d * d * blk.scalarBytes(), sum);
-    out.write(reinterpret_cast<const char*>(&hdr), sizeof(hdr));
-    out.write(reinterpret_cast<const char*>(blk.surface.data()),
+    out.write(reinterpret_cast<const char *>(&hdr), sizeof(hdr));
+    out.write(reinterpret_cast<const char *>(blk.surface.data()),
               static_cast<std::streamsize>(blk.surface.size() * sizeof(int)));
-    out.write(static_cast<const char*>(blk.data()),
+    out.write(static_cast<const char *>(blk.data()),
               static_cast<std::streamsize>(d * d * blk.scalarBytes()));
-    out.write(reinterpret_cast<const char*>(&sum), sizeof(sum));
+    out.write(reinterpret_cast<const char *>(&sum), sizeof(sum));
     if (!out) {
-      spdlog::warn("compliance cache: write to {} failed (continuing without cache)", tmp);
+      spdlog::warn(
+          "compliance cache: write to {} failed (continuing without cache)",
+          tmp);
       return;
     }
   }
-  // atomic replace: a reader never sees a half-written file under the final name
+  // atomic replace: a reader never sees a half-written file under the final
+  // name
   std::filesystem::rename(tmp, path, ec);
-  if (ec) spdlog::warn("compliance cache: cannot rename {} to {}: {}", tmp, path.string(),
-                       ec.message());
+  if (ec)
+    spdlog::warn("compliance cache: cannot rename {} to {}: {}", tmp,
+                 path.string(), ec.message());
 }
 
-// C0 on the surface DOFs: one rest factorisation, one (batched) solve per surface DOF.
-void computeRestBlock(FemBody& body, const ComplianceOptions& opt, RestBlock& blk) {
+// C0 on the surface DOFs: one rest factorisation, one (batched) solve per
+// surface DOF.
+void computeRestBlock(FemBody &body, const ComplianceOptions &opt,
+                      RestBlock &blk) {
   const int n = body.nodeCount();
   const int s = static_cast<int>(blk.surface.size());
   const int d = 3 * s;
@@ -214,14 +239,19 @@ void computeRestBlock(FemBody& body, const ComplianceOptions& opt, RestBlock& bl
     for (int j = 0; j < k; ++j)
       for (int a = 0; a < s; ++a) {
         if (blk.single)
-          blk.c0f.block<3, 1>(3 * a, c0 + j) = sol.block<3, 1>(3 * blk.surface[a], j).cast<float>();
+          blk.c0f.block<3, 1>(3 * a, c0 + j) =
+              sol.block<3, 1>(3 * blk.surface[a], j).cast<float>();
         else
-          blk.c0.block<3, 1>(3 * a, c0 + j) = sol.block<3, 1>(3 * blk.surface[a], j);
+          blk.c0.block<3, 1>(3 * a, c0 + j) =
+              sol.block<3, 1>(3 * blk.surface[a], j);
       }
     progress(opt.show_progress, c0 + k, d);
   }
   // remove the solver's round-off asymmetry
-  if (blk.single) symmetrise(blk.c0f); else symmetrise(blk.c0);
+  if (blk.single)
+    symmetrise(blk.c0f);
+  else
+    symmetrise(blk.c0);
 }
 
 // Row-to-node expansion of H: (local node, 3-vector p) pairs per row.
@@ -232,52 +262,77 @@ struct RowTerms {
 };
 
 class ComplianceModel final : public TissueCompliance {
- public:
-  ComplianceModel(ComplianceKind kind, FemBody& body, const ComplianceOptions& opt)
+public:
+  ComplianceModel(ComplianceKind kind, FemBody &body,
+                  const ComplianceOptions &opt)
       : kind_(kind), body_(&body), opt_(opt) {
-    if (!(opt.h_s > 0.0)) throw Error("makeCompliance: h_s must be > 0");
+    if (!(opt.h_s > 0.0))
+      throw Error("makeCompliance: h_s must be > 0");
     const int n = body.nodeCount();
     rot_.assign(n, Eigen::Matrix3d::Identity());
     local_.assign(n, -1);
-    if (kind_ != ComplianceKind::kExact) buildRest();
+    if (kind_ != ComplianceKind::kExact)
+      buildRest();
   }
 
   ComplianceKind kind() const override { return kind_; }
 
-  void update(FemBody& body) override {
+  void update(FemBody &body) override {
     body_ = &body;
-    if (kind_ == ComplianceKind::kWarped) body.nodeRotations(rot_);
+    if (kind_ == ComplianceKind::kWarped)
+      body.nodeRotations(rot_);
   }
 
-  void addW(std::span<const TissueRow> rows, Eigen::Ref<Eigen::MatrixXd> w) override {
+  void addW(std::span<const TissueRow> rows,
+            Eigen::Ref<Eigen::MatrixXd> w) override {
     const int m = static_cast<int>(rows.size());
-    if (m == 0) return;
+    if (m == 0)
+      return;
     const int u = collect(rows);
     const int du = 3 * u;
     // G = C_UU P, column by column from 3x3 blocks
-    g_.setZero(du, m);
+    g_.resize(du, m);
     if (kind_ == ComplianceKind::kUncoupled) {
+      g_.setZero();
       for (int l = 0; l < m; ++l)
         for (int t = 0; t < terms_[l].count; ++t) {
           const int b = terms_[l].local[t];
-          g_.col(l).segment<3>(3 * b) += diag_[blk_.local[touched_[b]]] * terms_[l].p[t];
+          g_.col(l).segment<3>(3 * b) +=
+              diag_[blk_.local[touched_[b]]] * terms_[l].p[t];
         }
     } else {
       gatherCuu(u);
-      for (int l = 0; l < m; ++l)
-        for (int t = 0; t < terms_[l].count; ++t)
-          g_.col(l).noalias() += cuu_.middleCols<3>(3 * terms_[l].local[t]) * terms_[l].p[t];
+      for (int l = 0; l < m;) {
+        const int g = sameNodeRun(l, m);
+        double *out[3] = {g_.col(l).data(), nullptr, nullptr};
+        for (int r = 1; r < g; ++r)
+          out[r] = g_.col(l + r).data();
+        combineRun(cuu_, l, g, 0, du, out);
+        l += g;
+      }
     }
-    // W += P^T G, through G^T so every update is a contiguous axpy of length m
+    // W = G^T P (symmetric): lower triangle only, through G^T so every column
+    // is one fused pass over contiguous memory, then added to both triangles of
+    // w
     gt_ = g_.transpose();
-    for (int l = 0; l < m; ++l)
-      for (int t = 0; t < terms_[l].count; ++t)
-        w.col(l).noalias() += gt_.middleCols<3>(3 * terms_[l].local[t]) * terms_[l].p[t];
+    wd_.resize(m, m);
+    // (a run of rows shares the start row l; entries above the diagonal are
+    // overwritten below)
+    for (int l = 0; l < m;) {
+      const int g = sameNodeRun(l, m);
+      double *out[3] = {wd_.col(l).data() + l, nullptr, nullptr};
+      for (int r = 1; r < g; ++r)
+        out[r] = wd_.col(l + r).data() + l;
+      combineRun(gt_, l, g, l, m - l, out);
+      l += g;
+    }
+    wd_.triangularView<Eigen::StrictlyUpper>() = wd_.transpose();
+    w += wd_;
     release();
   }
 
-  void correction(FemBody& body, std::span<const TissueRow> rows, const double* f,
-                  Eigen::VectorXd& dq) override {
+  void correction(FemBody &body, std::span<const TissueRow> rows,
+                  const double *f, Eigen::VectorXd &dq) override {
     body_ = &body;
     const int n = body.nodeCount();
     const int m = static_cast<int>(rows.size());
@@ -286,42 +341,51 @@ class ComplianceModel final : public TissueCompliance {
     r_.setZero(3 * n);
     for (int k = 0; k < m; ++k)
       for (int t = 0; t < terms_[k].count; ++t)
-        r_.segment<3>(3 * touched_[terms_[k].local[t]]) += f[k] * terms_[k].p[t];
+        r_.segment<3>(3 * touched_[terms_[k].local[t]]) +=
+            f[k] * terms_[k].p[t];
     switch (kind_) {
-      case ComplianceKind::kExact:
-        body.solveCompliance(r_, dq);
-        break;
-      case ComplianceKind::kRest:
-        body.solveRestCompliance(opt_.h_s, r_, dq);
-        break;
-      case ComplianceKind::kWarped:
-        body.solveRestCompliance(opt_.h_s, r_, dq);
-        for (int i = 0; i < n; ++i) dq.segment<3>(3 * i) = rot_[i] * dq.segment<3>(3 * i).eval();
-        break;
-      case ComplianceKind::kUncoupled:
-        dq.setZero(3 * n);
-        for (int node : touched_) dq.segment<3>(3 * node) = diag_[blk_.local[node]] * r_.segment<3>(3 * node);
-        break;
+    case ComplianceKind::kExact:
+      body.solveCompliance(r_, dq);
+      break;
+    case ComplianceKind::kRest:
+      body.solveRestCompliance(opt_.h_s, r_, dq);
+      break;
+    case ComplianceKind::kWarped:
+      body.solveRestCompliance(opt_.h_s, r_, dq);
+      for (int i = 0; i < n; ++i)
+        dq.segment<3>(3 * i) = rot_[i] * dq.segment<3>(3 * i).eval();
+      break;
+    case ComplianceKind::kUncoupled:
+      dq.setZero(3 * n);
+      for (int node : touched_)
+        dq.segment<3>(3 * node) =
+            diag_[blk_.local[node]] * r_.segment<3>(3 * node);
+      break;
     }
     // fixed DOFs stay at rest
-    const auto& fixed = body.fixedMask();
+    const auto &fixed = body.fixedMask();
     for (int i = 0; i < n; ++i)
-      if (fixed[i]) dq.segment<3>(3 * i).setZero();
+      if (fixed[i])
+        dq.segment<3>(3 * i).setZero();
     release();
   }
 
   std::size_t memoryBytes() const override {
     return blk_.bytes() +
-           sizeof(int) * (blk_.surface.size() + blk_.local.size() + local_.size()) +
-           sizeof(double) * diag_.size() + sizeof(Eigen::Matrix3d) * rot_.size() +
-           sizeof(double) * static_cast<std::size_t>(cuu_.size() + g_.size() + gt_.size() + r_.size());
+           sizeof(int) *
+               (blk_.surface.size() + blk_.local.size() + local_.size()) +
+           sizeof(double) * diag_.size() +
+           sizeof(Eigen::Matrix3d) * rot_.size() +
+           sizeof(double) *
+               static_cast<std::size_t>(cuu_.size() + g_.size() + gt_.size() +
+                                        wd_.size() + r_.size());
   }
 
   ComplianceBuildInfo buildInfo() const override { return info_; }
 
- private:
+private:
   void buildRest() {
-    FemBody& body = *body_;
+    FemBody &body = *body_;
     blk_.surface = body.surfaceNodes();
     blk_.single = opt_.c0_single_precision;
     blk_.local.assign(body.nodeCount(), -1);
@@ -337,44 +401,131 @@ class ComplianceModel final : public TissueCompliance {
       if (!loaded) {
         info_.cache_rejected = true;
         info_.cache_message = why;
-        spdlog::warn("compliance cache {} rejected: {}; rebuilding", path.string(), why);
+        spdlog::warn("compliance cache {} rejected: {}; rebuilding",
+                     path.string(), why);
       }
     }
     if (loaded) {
       info_.loaded_from_cache = true;
-      spdlog::info("compliance cache {} loaded ({} surface nodes)", path.string(),
-                   blk_.surface.size());
+      spdlog::info("compliance cache {} loaded ({} surface nodes)",
+                   path.string(), blk_.surface.size());
     } else {
       const auto t0 = std::chrono::steady_clock::now();
       computeRestBlock(body, opt_, blk_);
       info_.precompute_s =
-          std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-      if (!path.empty()) writeCache(path, hash, body, blk_);
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - t0)
+              .count();
+      if (!path.empty())
+        writeCache(path, hash, body, blk_);
     }
     if (kind_ == ComplianceKind::kUncoupled) {
-      // isotropic per node: mean of the diagonal of the node's 3x3 block; drop the dense block
+      // isotropic per node: mean of the diagonal of the node's 3x3 block; drop
+      // the dense block
       const int s = static_cast<int>(blk_.surface.size());
       diag_.resize(s);
-      for (int a = 0; a < s; ++a) diag_[a] = blk_.block(a, a).trace() / 3.0;
+      for (int a = 0; a < s; ++a)
+        diag_[a] = blk_.block(a, a).trace() / 3.0;
       blk_.release();
     }
   }
 
-  // Fills touched_ / terms_ for the rows; returns |U|. Warped/rest/uncoupled keep only
-  // surface nodes (others are counted and skipped).
+  // Rows l .. l + g - 1 (g <= 3) that touch the same nodes (a contact's n, t1,
+  // t2 rows): returns g, the size of the run starting at l.
+  int sameNodeRun(int l, int m) const {
+    int g = 1;
+    while (g < 3 && l + g < m && terms_[l + g].count == terms_[l].count &&
+           terms_[l + g].local == terms_[l].local)
+      ++g;
+    return g;
+  }
+
+  // For each row r of the run starting at l (size g): out_r[0..len) = sum over
+  // r's terms t and components j of p_t[j] * src(first + ., 3 a_t + j). One
+  // fused pass reads each of the (up to 9) source columns once for the whole
+  // run; vectorisable over the output.
+  void combineRun(const Eigen::MatrixXd &src, int l, int g, int first, int len,
+                  double *const *out) const {
+    const double *col[9];
+    double coef[3][9];
+    int nc = 0;
+    for (int t = 0; t < terms_[l].count; ++t)
+      for (int j = 0; j < 3; ++j) {
+        col[nc] =
+            src.data() + (3 * terms_[l].local[t] + j) * src.rows() + first;
+        for (int r = 0; r < g; ++r)
+          coef[r][nc] = terms_[l + r].p[t][j];
+        ++nc;
+      }
+    if (nc == 0) {
+      for (int r = 0; r < g; ++r)
+        std::fill(out[r], out[r] + len, 0.0);
+      return;
+    }
+    const int key = 10 * g + nc / 3;
+    switch (key) {
+    case 11:
+      combine<1, 3>(col, coef, len, out);
+      break;
+    case 12:
+      combine<1, 6>(col, coef, len, out);
+      break;
+    case 13:
+      combine<1, 9>(col, coef, len, out);
+      break;
+    case 21:
+      combine<2, 3>(col, coef, len, out);
+      break;
+    case 22:
+      combine<2, 6>(col, coef, len, out);
+      break;
+    case 23:
+      combine<2, 9>(col, coef, len, out);
+      break;
+    case 31:
+      combine<3, 3>(col, coef, len, out);
+      break;
+    case 32:
+      combine<3, 6>(col, coef, len, out);
+      break;
+    case 33:
+      combine<3, 9>(col, coef, len, out);
+      break;
+    default:
+      break;
+    }
+  }
+  template <int G, int N>
+  static void combine(const double *const *col, const double (*coef)[9],
+                      int len, double *const *out) {
+    for (int i = 0; i < len; ++i) {
+      double acc[G] = {};
+      for (int q = 0; q < N; ++q) {
+        const double x = col[q][i];
+        for (int r = 0; r < G; ++r)
+          acc[r] += coef[r][q] * x;
+      }
+      for (int r = 0; r < G; ++r)
+        out[r][i] = acc[r];
+    }
+  }
+
+  // Fills touched_ / terms_ for the rows; returns |U|. Warped/rest/uncoupled
+  // keep only surface nodes (others are counted and skipped).
   int collect(std::span<const TissueRow> rows) {
     touched_.clear();
     terms_.resize(rows.size());
     const bool surface_only = kind_ != ComplianceKind::kExact;
     const int n = body_->nodeCount();
     for (std::size_t k = 0; k < rows.size(); ++k) {
-      RowTerms& rt = terms_[k];
+      RowTerms &rt = terms_[k];
       rt.count = 0;
       for (int t = 0; t < 3; ++t) {
         const int node = rows[k].node[t];
-        if (node < 0 || rows[k].weight[t] == 0.0) continue;
-        if (node >= n) throw Error("TissueCompliance: row node " + std::to_string(node) +
-                                   " out of range");
+        if (node < 0 || rows[k].weight[t] == 0.0)
+          continue;
+        if (node >= n)
+          throw Error("TissueCompliance: row node " + std::to_string(node) +
+                      " out of range");
         if (surface_only && blk_.local[node] < 0) {
           ++info_.skipped_row_nodes;
           continue;
@@ -384,7 +535,8 @@ class ComplianceModel final : public TissueCompliance {
           touched_.push_back(node);
         }
         Eigen::Vector3d p = rows[k].weight[t] * rows[k].dir;
-        if (kind_ == ComplianceKind::kWarped) p = rot_[node].transpose() * p;
+        if (kind_ == ComplianceKind::kWarped)
+          p = rot_[node].transpose() * p;
         rt.local[rt.count] = local_[node];
         rt.p[rt.count] = p;
         ++rt.count;
@@ -394,10 +546,12 @@ class ComplianceModel final : public TissueCompliance {
   }
 
   void release() {
-    for (int node : touched_) local_[node] = -1;
+    for (int node : touched_)
+      local_[node] = -1;
   }
 
-  // C_UU: from C0 (warped/rest) or from 3|U| solves with the current factorisation (exact).
+  // C_UU: from C0 (warped/rest) or from 3|U| solves with the current
+  // factorisation (exact).
   void gatherCuu(int u) {
     const int du = 3 * u;
     cuu_.resize(du, du);
@@ -405,9 +559,11 @@ class ComplianceModel final : public TissueCompliance {
       const int n = body_->nodeCount();
       e_.setZero(3 * n, du);
       for (int a = 0; a < u; ++a)
-        for (int c = 0; c < 3; ++c) e_(3 * touched_[a] + c, 3 * a + c) = 1.0;
+        for (int c = 0; c < 3; ++c)
+          e_(3 * touched_[a] + c, 3 * a + c) = 1.0;
       body_->solveComplianceBatch(e_, x_);
-      for (int b = 0; b < u; ++b) cuu_.middleRows<3>(3 * b) = x_.middleRows<3>(3 * touched_[b]);
+      for (int b = 0; b < u; ++b)
+        cuu_.middleRows<3>(3 * b) = x_.middleRows<3>(3 * touched_[b]);
       return;
     }
     for (int b = 0; b < u; ++b) {
@@ -420,32 +576,37 @@ class ComplianceModel final : public TissueCompliance {
   }
 
   ComplianceKind kind_;
-  FemBody* body_;
+  FemBody *body_;
   ComplianceOptions opt_;
   RestBlock blk_;
-  std::vector<double> diag_;                 // uncoupled: per surface node
-  std::vector<Eigen::Matrix3d> rot_;         // warped: node rotations rest -> current
-  std::vector<int> local_;                   // node -> index in touched_, -1 otherwise
+  std::vector<double> diag_;         // uncoupled: per surface node
+  std::vector<Eigen::Matrix3d> rot_; // warped: node rotations rest -> current
+  std::vector<int> local_;           // node -> index in touched_, -1 otherwise
   std::vector<int> touched_;
   std::vector<RowTerms> terms_;
-  Eigen::MatrixXd cuu_, g_, gt_, e_, x_;
+  Eigen::MatrixXd cuu_, g_, gt_, wd_, e_, x_;
   Eigen::VectorXd r_;
   ComplianceBuildInfo info_;
 };
 
-}  // namespace
+} // namespace
 
-std::filesystem::path complianceCachePath(const FemBody& body, const ComplianceOptions& options) {
-  if (options.cache_dir.empty()) return {};
+std::filesystem::path complianceCachePath(const FemBody &body,
+                                          const ComplianceOptions &options) {
+  if (options.cache_dir.empty())
+    return {};
   std::string name = options.cache_name;
-  if (name.empty()) name = std::filesystem::path(body.mesh().source).stem().string();
-  if (name.empty()) name = "tissue";
+  if (name.empty())
+    name = std::filesystem::path(body.mesh().source).stem().string();
+  if (name.empty())
+    name = "tissue";
   return options.cache_dir / (name + ".c0.bin");
 }
 
-std::unique_ptr<TissueCompliance> makeCompliance(ComplianceKind kind, FemBody& body,
-                                                 const ComplianceOptions& options) {
+std::unique_ptr<TissueCompliance>
+makeCompliance(ComplianceKind kind, FemBody &body,
+               const ComplianceOptions &options) {
   return std::make_unique<ComplianceModel>(kind, body, options);
 }
 
-}  // namespace tactus::sim
+} // namespace tactus::sim

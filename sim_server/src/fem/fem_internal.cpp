@@ -2,6 +2,8 @@
 
 #include <Eigen/LU>
 #include <Eigen/SVD>
+#include <dlfcn.h>
+
 #include <algorithm>
 #include <array>
 #include <cstring>
@@ -39,7 +41,26 @@ Eigen::Matrix3d polarRotation(const Eigen::Matrix3d& F) {
 
 // ---- CHOLMOD ----
 
+namespace {
+
+// CHOLMOD (Debian's build) runs parts of the supernodal factorisation in OpenMP parallel regions
+// of up to 4 threads. On our 2-core machine, where the haptic loop owns one core, those threads
+// only contend (measured: liver2 factorisation 5 ms -> 2.8 ms serial). Serialise every OpenMP
+// region of the process once, through libgomp if CHOLMOD loaded it (no link dependency).
+void serialiseOpenMp() {
+  static const bool done = [] {
+    using SetLevels = void (*)(int);
+    if (auto* fn = reinterpret_cast<SetLevels>(dlsym(RTLD_DEFAULT, "omp_set_max_active_levels")))
+      fn(0);
+    return true;
+  }();
+  (void)done;
+}
+
+}  // namespace
+
 CholmodSolver::CholmodSolver() {
+  serialiseOpenMp();
   cholmod_start(&common_);
   common_.print = 0;
   common_.error_handler = nullptr;

@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <limits>
 #include <cmath>
 #include <unordered_map>
 
@@ -443,6 +444,16 @@ TissueCompliance* Simulation::compliance(int i) { return impl_->tissues.at(i).co
 Instrument* Simulation::instrument() { return impl_->instrument.get(); }
 const ContactProblemData& Simulation::lastProblem() const { return impl_->problem; }
 const PipelineCounters& Simulation::counters() const { return impl_->counters; }
+
+double Simulation::geometricMinGap() {
+  double gap = std::numeric_limits<double>::infinity();
+  if (!impl_->instrument) return gap;
+  for (TissueState& ts : impl_->tissues) {
+    ts.collision->refit(ts.body->positions());
+    for (const Contact& c : ts.collision->detect(*impl_->instrument)) gap = std::min(gap, c.gap_m);
+  }
+  return gap;
+}
 
 double Simulation::totalEnergy() const {
   double e = 0.0;

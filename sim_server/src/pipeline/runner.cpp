@@ -9,7 +9,9 @@
 #include <fmt/format.h>
 #include <sstream>
 
+#include "display_publisher.h"
 #include "haptic_link.h"
+#include "tactus/sim/instrument.h"
 #include "tactus/shared/error.h"
 
 namespace tactus::sim {
@@ -155,6 +157,7 @@ int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
   if (spec.haptics.enabled && sim.hasInstrument()) {
     link = std::make_unique<HapticLink>(options.segment, spec);
   }
+  auto display = link ? std::make_unique<DisplayLink>(options.segment, sim) : nullptr;
 
   const double h = spec.time_step_s;
   // a daemon runs until stopped (or --duration); the scene's duration is for offline tools
@@ -163,6 +166,7 @@ int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
   const std::int64_t t0 = nowNs();
   long late_steps = 0;
   std::int64_t last_report_ns = t0;
+  std::int64_t last_status_ns = t0;
   int exit_code = 0;
   for (long k = 0; !stop.load(std::memory_order_relaxed); ++k) {
     if (offline && k >= options.steps) break;
@@ -176,6 +180,7 @@ int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
     const StepReport report = sim.step();
     stats.add(report);
     if (link) link->publish(sim);
+    if (display) display->publish(sim, report);
     sim.writeOutputIfDue();
     if (!report.finite) {
       spdlog::error("step {}: the state became non-finite; stopping", k);
@@ -183,6 +188,17 @@ int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
       break;
     }
     if (offline) continue;
+    if (options.status && nowNs() - last_status_ns >= 1'000'000'000LL) {
+      last_status_ns = nowNs();
+      if (sim.hasInstrument()) {
+        const Eigen::Vector3d p = sim.instrument()->pose().pos_m;
+        spdlog::info("status t={:.2f} s tool=({:.4f}, {:.4f}, {:.4f}) m contacts={} |F|={:.3f} N",
+                     sim.time(), p.x(), p.y(), p.z(), report.contacts,
+                     sim.renderedWrench().head<3>().norm());
+      } else {
+        spdlog::info("status t={:.2f} s", sim.time());
+      }
+    }
     // pace to real time; report when the step cannot keep up
     const std::int64_t deadline = t0 + static_cast<std::int64_t>(std::llround((k + 1) * h * 1e9));
     const std::int64_t now = nowNs();

@@ -344,6 +344,28 @@ TEST_F(LiverCompliance, CacheRoundTripStaleCorruptTruncated) {
   EXPECT_EQ(buildW(*last, rows), w_ref);
 }
 
+TEST_F(LiverCompliance, SinglePrecisionC0MatchesDouble) {
+  TempDir dir;
+  auto body = makeBody();
+  for (int s = 0; s < 3; ++s) ASSERT_TRUE(body->freeMotion(h_).ok);
+  const auto rows = randomRows(*body, 30, 6);
+  ComplianceOptions opt{h_, dir.path, false, "liver", 64};
+  auto dbl = makeCompliance(ComplianceKind::kWarped, *body, opt);
+  opt.c0_single_precision = true;
+  auto flt = makeCompliance(ComplianceKind::kWarped, *body, opt);
+  // the double cache is not trusted for a float model (and vice versa)
+  EXPECT_TRUE(flt->buildInfo().cache_rejected);
+  dbl->update(*body);
+  flt->update(*body);
+  const Eigen::MatrixXd w_d = buildW(*dbl, rows);
+  const double err = relErr(buildW(*flt, rows), w_d);
+  EXPECT_LT(err, 1e-6);
+  EXPECT_GT(err, 0.0);
+  EXPECT_LT(flt->memoryBytes(), dbl->memoryBytes() * 0.6);
+  auto flt2 = makeCompliance(ComplianceKind::kWarped, *body, opt);
+  EXPECT_TRUE(flt2->buildInfo().loaded_from_cache);
+}
+
 TEST_F(LiverCompliance, UncoupledCouplesOnlyRowsSharingNodes) {
   auto body = makeBody();
   auto model = makeCompliance(ComplianceKind::kUncoupled, *body, {h_, {}, false});

@@ -34,6 +34,7 @@ class Supervisor {
   std::unique_ptr<HapticLink> link_;
   std::unique_ptr<HapticLink> retired_;     ///< detached, waiting for the loop's ack
   std::string last_open_message_;
+  bool creator_alive_ = true;
 };
 
 }  // namespace tactus::haptic

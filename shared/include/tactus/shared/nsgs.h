@@ -56,14 +56,18 @@ struct ContactProblemView {
 ///   kColumnUpdate but reads the contiguous rows W(rows_i, :) instead of the columns. Wrong
 ///   results if W is not symmetric.
 /// Measured (tests/bench/nsgs_bench.cpp, 150 contacts / 450 rows, 84 in contact, thread CPU time
-/// on the 2-core dev VM, streaming W once = 36 us): one sweep costs 78 us (2.2 W streams) with
-/// kColumnUpdate, 93 us (2.5) with kRowGather, 36 us (1.0) with kSymmetricRowUpdate.
+/// on the loaded 2-core dev VM, streaming W once = 36-40 us): one sweep costs 66-78 us (1.8-2.2
+/// W streams) with kColumnUpdate, 87-93 us (2.4-2.5) with kRowGather and 36-41 us (1.0-1.15)
+/// with kSymmetricRowUpdate.
 enum class NsgsCoupling : std::uint8_t { kColumnUpdate, kRowGather, kSymmetricRowUpdate };
 
 struct NsgsSettings {
   double tolerance = 1e-6;           ///< on the normalised natural-map error
   int max_sweeps = 500;
-  double sor = 1.0;                  ///< over-relaxation in (0, 2); 1 = plain Gauss-Seidel
+  /// Over-relaxation in (0, 2); 1 = plain Gauss-Seidel. Problem dependent: on the bench's
+  /// dense FEM-like W, 0.6 needs 46 sweeps against 73 at 1.0; on the rigid FCLIB stacks 1.3 is
+  /// best (Box_Stacks 82 contacts: 15 against 22).
+  double sor = 1.0;
   std::int64_t time_budget_ns = 0;   ///< 0: none; else stop after the sweep that crosses it
   int check_every = 1;               ///< compute the error every k sweeps (kRowGather: one W pass)
   /// kSymmetricRowUpdate only when W is exactly symmetric (see NsgsCoupling)

@@ -5,7 +5,9 @@
 // Layout (fixed POD, offsets only, every part 64-byte aligned):
 //
 //   [ SegmentHeader | snapshot triple buffer (ContactSnapshot, runtime size)
-//                   | device triple buffer (DeviceSample) | stats ring (StatsRecord) ]
+//                   | device triple buffer (DeviceSample) | stats ring (StatsRecord)
+//                   | display frame triple buffer | display topology ]   (display.h; the
+//                   display part is absent when its capacity is zero)
 //
 // The creator (the simulation) chooses the capacity (max rows, max contacts) from the scene,
 // initialises every part, and writes `magic` last (release), so an attacher that sees the magic
@@ -31,6 +33,7 @@
 #include <string_view>
 
 #include "tactus/shared/clock.h"
+#include "tactus/shared/display.h"
 #include "tactus/shared/messages.h"
 #include "tactus/shared/stats_ring.h"
 #include "tactus/shared/triple_buffer.h"
@@ -39,7 +42,7 @@ namespace tactus::shared {
 
 inline constexpr std::uint64_t kSegmentMagic = 0x3147'4553'5554'4354ULL;  // "TCTUSEG1" (LE)
 /// Bump on any change of SegmentHeader, the messages or the part layout.
-inline constexpr std::uint32_t kSegmentAbiVersion = 1;
+inline constexpr std::uint32_t kSegmentAbiVersion = 2;
 /// Stats ring capacity: 8192 records (8 s at 1 kHz).
 inline constexpr std::uint64_t kStatsRingCapacity = 8192;
 /// A creator whose heartbeat (or creation time) is older than this is considered gone.
@@ -49,9 +52,19 @@ inline constexpr std::int64_t kDefaultStaleAfterNs = 3 * kNsPerS;
 struct SegmentCapacity {
   std::int32_t max_rows = 0;         ///< rows of W (3 per frictional contact, 1 frictionless)
   std::int32_t max_contacts = 0;
+  /// Display part (display.h): surface vertices and triangles a frame can carry; its contacts
+  /// are max_contacts. 0 vertices or triangles: no display part.
+  std::int32_t display_vertices = kDefaultDisplayVertices;
+  std::int32_t display_triangles = kDefaultDisplayTriangles;
+  DisplayCapacity display() const noexcept {
+    return {display_vertices, display_triangles, max_contacts};
+  }
   /// Rows for `contacts` frictional (3 rows) or frictionless (1 row) contacts.
   static constexpr SegmentCapacity forContacts(std::int32_t contacts, bool friction = true) {
-    return {friction ? 3 * contacts : contacts, contacts};
+    SegmentCapacity c;
+    c.max_rows = friction ? 3 * contacts : contacts;
+    c.max_contacts = contacts;
+    return c;
   }
 };
 
@@ -89,6 +102,16 @@ struct SegmentHeader {
   std::atomic<std::uint32_t> sim_shutdown{0};     ///< 1: the simulation is asked to stop
   std::atomic<std::uint32_t> haptic_shutdown{0};  ///< 1: the haptic loop is asked to stop
   std::atomic<std::int64_t> haptic_pid{0};        ///< set by the haptic side on attach
+  // display part (since ABI 2; all zero when absent)
+  std::int32_t display_max_vertices = 0;
+  std::int32_t display_max_triangles = 0;
+  std::int32_t display_max_contacts = 0;          ///< = max_contacts
+  std::uint32_t display_frame_header_bytes = 0;   ///< sizeof(DisplayFrameHeader)
+  std::uint64_t display_offset = 0;               ///< TripleBufferControl of the display frames
+  std::uint64_t display_bytes = 0;                ///< whole triple buffer
+  std::uint64_t display_slot_bytes = 0;           ///< DisplayLayout::frame_bytes
+  std::uint64_t topology_offset = 0;              ///< DisplayTopologyHeader
+  std::uint64_t topology_bytes = 0;
 };
 static_assert(std::is_standard_layout_v<SegmentHeader>);
 static_assert(offsetof(SegmentHeader, sim_heartbeat_ns) == 48);
@@ -102,6 +125,9 @@ struct SegmentLayout {
   std::size_t snapshot_offset = 0, snapshot_bytes = 0;
   std::size_t device_offset = 0, device_bytes = 0;
   std::size_t stats_offset = 0, stats_bytes = 0;
+  DisplayLayout display;
+  std::size_t display_offset = 0, display_bytes = 0;     ///< 0, 0 when the display is absent
+  std::size_t topology_offset = 0, topology_bytes = 0;
   std::size_t total_bytes = 0;
   static SegmentLayout forCapacity(SegmentCapacity capacity) noexcept;
 };
@@ -178,6 +204,11 @@ class Segment {
   TripleReader<DeviceSample> deviceReader();         ///< sim
   StatsRingWriter statsWriter();                     ///< haptic
   StatsRingReader statsReader(StatsRingReader::Start start = StatsRingReader::Start::kNewest) const;
+  /// Display frames and topology (display.h). The publisher needs kReadWrite; the subscriber
+  /// works on a read-only mapping and any number may read. Both are detached (attached() false)
+  /// when the segment has no display part.
+  DisplayPublisher displayPublisher();               ///< sim
+  DisplaySubscriber displaySubscriber() const;       ///< viewers
 
   // Liveness and shutdown (real-time safe; heartbeat and flag writers need kReadWrite).
   void beat(Side side, std::int64_t now_ns) noexcept;

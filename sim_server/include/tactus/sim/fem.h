@@ -54,13 +54,16 @@ struct FemSolverOptions {
   PcgPreconditioner pcg_preconditioner = PcgPreconditioner::kJacobi;
 };
 
-/// Per-stage wall times of the last step [s] and solver figures.
+/// Per-stage wall times of the last step [s] and solver figures. freeMotion allocates nothing
+/// in our code after the first step (CHOLMOD allocates internally during factorisation).
 struct FemStepStats {
   double assembly_s = 0.0;
   double factorisation_s = 0.0;                 ///< CHOLMOD numeric factorisation (0 for CG)
   double solve_s = 0.0;
   int cg_iterations = 0;                        ///< 0 for CHOLMOD
-  bool ok = true;                               ///< false: factorisation/CG failed, state kept
+  /// false: the factorisation failed or dv was not finite (state kept), or CG stopped above its
+  /// tolerance (its last finite iterate is applied; cg_residual says how far it got).
+  bool ok = true;
   double cg_residual = 0.0;                     ///< final relative residual (CG only)
 };
 
@@ -90,7 +93,9 @@ class FemBody {
 
   /// Implicit Euler free motion over `h` seconds with optional external force p (3n, may be null).
   /// Updates positions/velocities to the free state. Leaves the factorisation of
-  /// A = M/h + B + hK at the linearisation point available for solveCompliance().
+  /// A = M/h + B + hK at the linearisation point available for solveCompliance(). The
+  /// linearisation point is q + h v: element rotations, elastic force and tangent K are taken
+  /// there, and the damping force is B v with the same K (eq. 7 with F(q + h v, v)).
   FemStepStats freeMotion(double h, const Eigen::VectorXd* external_force_n = nullptr);
 
   /// Elastic force the material applies to the nodes at positions q (3n): the restoring force,

@@ -121,6 +121,11 @@ class Simulation {
   const ContactProblemData& lastProblem() const;
   const PipelineCounters& counters() const;
 
+  /// Smallest gap [m] between the instrument and the tissues at the current (corrected) state,
+  /// by a fresh collision query (negative: penetration; +inf when nothing is within the alarm
+  /// distance). For tests and diagnostics: costs a refit and a query per tissue.
+  double geometricMinGap();
+
   /// Sum over tissues and the instrument of kinetic + elastic + gravity energy [J].
   double totalEnergy() const;
   /// Force the god object's coupling applies to the hand (what a device renders) [N, N m].

@@ -20,6 +20,7 @@ struct RunOptions {
   int output_every = 0;              ///< overrides the scene's output period (steps)
   std::string segment = "tactus";
   bool no_haptics = false;
+  bool status = false;               ///< log a status line every second
   std::string stats_json;            ///< write per-stage statistics here at the end
   std::string export_trajectory;     ///< write the scripted trajectory (device CSV) and exit
 };

@@ -1,0 +1,339 @@
+// tactus-jitter: timing of the haptic tick. Attach mode follows a running haptic_server's stats
+// ring read-only; synthetic mode runs the real haptic loop in-process on synthetic snapshots.
+// Prints a line per second and a percentile table at the end; optional CSV, plot and a bare-loop
+// baseline (same core, priority, timer method and period) for ratios.
+#include <CLI/CLI.hpp>
+#include <fmt/format.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <chrono>
+#include <csignal>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <memory>
+#include <optional>
+#include <thread>
+
+#include "jitter_core.h"
+#include "jitter_synthetic.h"
+#include "tactus/shared/clock.h"
+#include "tactus/shared/error.h"
+#include "tactus/shared/rt.h"
+
+#ifndef TACTUS_SOURCE_DIR
+#define TACTUS_SOURCE_DIR "."
+#endif
+
+namespace {
+
+using namespace tactus;
+using namespace tactus::haptic::jitter;
+
+std::atomic<bool> g_stop{false};
+void onSignal(int) { g_stop.store(true); }
+
+struct Options {
+  std::string segment = "tactus";
+  double duration_s = 10.0;
+  std::string csv;
+  std::string plot;
+  bool baseline = false;
+  std::string baseline_mode = "interleaved";
+  int synthetic_rows = 0;
+  double rate_hz = 1000.0;
+  double sim_rate_hz = 100.0;
+  int core = -1;
+  int priority = 80;
+  int sweeps = 50;
+  double period_us = 0.0;
+  std::string reader = "live";
+  double wait_s = 10.0;
+  unsigned seed = 1;
+  bool quiet = false;
+};
+
+// The baseline thread: real-time set-up on the haptic core, then the bare loop.
+struct Baseline {
+  std::unique_ptr<BareLoop> bare;
+  std::thread thread;
+  std::atomic<bool> stop{false};
+  std::string rt_summary;
+  void start(int core, int priority, std::int64_t period_ns, std::size_t max_ticks,
+             std::int64_t start_ns) {
+    bare = std::make_unique<BareLoop>(period_ns, max_ticks);
+    thread = std::thread([this, core, priority, start_ns] {
+      rt_summary = shared::setupRealtimeThread(core, priority, shared::RealtimeConfig::kIgnore);
+      bare->run(stop, start_ns);
+      shared::setNormalPriority();
+    });
+  }
+  void finish() {
+    stop.store(true);
+    if (thread.joinable()) thread.join();
+  }
+};
+
+std::optional<shared::Segment> waitForSegment(const std::string& name, double wait_s) {
+  const std::int64_t t0 = shared::monotonicNs();
+  bool said = false;
+  for (;;) {
+    shared::TryOpenResult r = shared::Segment::tryOpen(name, shared::Access::kReadOnly);
+    if (r.ok()) return std::move(r.segment);
+    if (r.status == shared::OpenStatus::kMismatch || r.status == shared::OpenStatus::kError) {
+      throw SegmentError(r.message);
+    }
+    if (g_stop.load() || shared::monotonicNs() - t0 > shared::secondsToNs(wait_s)) {
+      throw SegmentError(fmt::format(
+          "segment '{}' not found after {:.0f} s ({}); start the daemons first "
+          "(scripts/start.sh) or use --synthetic ROWS",
+          name, wait_s, r.message));
+    }
+    if (!said) {
+      std::printf("waiting for segment '%s'...\n", name.c_str());
+      std::fflush(stdout);
+      said = true;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+}
+
+// The loop period: given (synthetic, --period-us) or estimated from the records read so far.
+std::int64_t knownPeriodNs(const JitterCollector& c, std::int64_t given) {
+  return given > 0 ? given : c.periodNs();
+}
+
+std::string plotScript() {
+  if (const char* env = std::getenv("TACTUS_JITTER_PLOT")) return env;
+  return std::string(TACTUS_SOURCE_DIR) + "/scripts/jitter_plot.py";
+}
+
+int run(const Options& o) {
+  const bool synthetic = o.synthetic_rows > 0;
+  const int core = o.core >= 0 ? o.core : shared::availableCpuCount() - 1;
+  if (!synthetic && o.reader == "none") {
+    throw Error("--reader none needs --synthetic (attach mode is the reader)");
+  }
+  if (!synthetic && o.baseline && o.baseline_mode == "after") {
+    throw Error("--baseline-mode after needs --synthetic: in attach mode the daemon keeps its core "
+                "busy, so the bare loop is interleaved half a period after its ticks");
+  }
+
+  // the measured loop: a running daemon's segment, or the in-process synthetic rig
+  std::unique_ptr<SyntheticRig> rig;
+  std::optional<shared::Segment> attached;
+  std::int64_t period_ns = o.period_us > 0.0 ? static_cast<std::int64_t>(o.period_us * 1e3) : 0;
+  if (synthetic) {
+    SyntheticOptions so;
+    so.problem.rows = o.synthetic_rows;
+    so.problem.seed = o.seed;
+    so.rate_hz = o.rate_hz;
+    so.sim_rate_hz = o.sim_rate_hz;
+    so.core = core;
+    so.priority = o.priority;
+    so.max_sweeps = o.sweeps;
+    rig = std::make_unique<SyntheticRig>(so);
+    period_ns = rig->periodNs();
+    const auto& p = rig->problem();
+    std::printf("synthetic: %d rows (%d contacts), cold solve %d sweeps, error %.2e; "
+                "loop %.0f Hz on core %d, SCHED_FIFO %d, %d sweeps max, budget %.0f us; "
+                "snapshots at %.0f Hz; reader: %s\n",
+                p.rows, p.contacts, p.solve_sweeps, p.solve_error, o.rate_hz, core, o.priority,
+                o.sweeps, 0.4 * 1e-3 * static_cast<double>(period_ns), o.sim_rate_hz,
+                o.reader.c_str());
+  } else {
+    attached = waitForSegment(o.segment, o.wait_s);
+    std::printf("attached read-only to '%s' (generation %llu)\n", o.segment.c_str(),
+                static_cast<unsigned long long>(attached->generation()));
+  }
+  const shared::Segment& seg = synthetic ? rig->segment() : *attached;
+  // synthetic: read everything from the first tick; attach: from now on
+  RingFollower follower(seg, synthetic ? shared::StatsRingReader::Start::kOldest
+                                       : shared::StatsRingReader::Start::kNewest);
+  JitterCollector total(period_ns);
+  JitterCollector interval(period_ns);
+  std::unique_ptr<CsvWriter> csv;
+  std::string csv_path = o.csv;
+  bool temp_csv = false;
+  if (csv_path.empty() && !o.plot.empty()) {
+    csv_path = fmt::format("/tmp/tactus-jitter-{}.csv", static_cast<long>(::getpid()));
+    temp_csv = true;
+  }
+  if (!csv_path.empty()) csv = std::make_unique<CsvWriter>(csv_path);
+
+  if (rig) {
+    rig->start();
+    if (!rig->rtSummary().empty()) {
+      std::printf("real-time set-up incomplete: %s\n", rig->rtSummary().c_str());
+    }
+  }
+
+  Baseline baseline;
+  bool baseline_started = false;
+  const bool interleaved = o.baseline && o.baseline_mode == "interleaved";
+  const std::int64_t t0 = shared::monotonicNs();
+  const std::int64_t end = t0 + shared::secondsToNs(o.duration_s);
+  std::int64_t last_line = t0;
+  const bool busy = o.reader == "busy";
+  const bool live = o.reader != "none";
+  while (!g_stop.load() && shared::monotonicNs() < end) {
+    if (busy) {
+      shared::cpuRelax();
+    } else {
+      std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    }
+    // the baseline starts once the haptic loop's deadline grid is known
+    shared::StatsRecord newest;
+    if (interleaved && !baseline_started && knownPeriodNs(total, period_ns) > 0 &&
+        follower.peekNewest(&newest)) {
+      const std::int64_t p = knownPeriodNs(total, period_ns);
+      const double left_s = 1e-9 * static_cast<double>(end - shared::monotonicNs());
+      baseline.start(core, o.priority, p,
+                     static_cast<std::size_t>(std::max(1.0, left_s * 1e9 / p + 16.0)),
+                     halfPeriodPhase(newest.scheduled_ns, p, shared::monotonicNs()));
+      baseline_started = true;
+    }
+    if (!live) continue;
+    follower.drain({&total, &interval}, csv.get());
+    if (!synthetic && !follower.stillCurrent()) {
+      std::printf("the segment was removed or re-created: stopping (the table covers the old "
+                  "one)\n");
+      break;
+    }
+    const std::int64_t now = shared::monotonicNs();
+    if (now - last_line >= shared::kNsPerS) {
+      interval.setLost(follower.lost());
+      if (!o.quiet) {
+        std::printf("%s\n",
+                    formatLine(1e-9 * static_cast<double>(now - t0), interval.report(),
+                               follower.lost())
+                        .c_str());
+        std::fflush(stdout);
+      }
+      interval.clear();
+      last_line = now;
+    }
+  }
+  if (baseline_started) baseline.finish();
+  if (rig) rig->stop();
+  follower.drain({&total}, csv.get());
+  total.setLost(follower.lost());
+  const JitterReport report = total.report();
+
+  // "after": the bare loop alone on the (now idle) haptic core for as many ticks
+  if (o.baseline && o.baseline_mode == "after") {
+    baseline.start(core, o.priority, period_ns, std::max<std::size_t>(report.records, 1), 0);
+    baseline_started = true;
+    baseline.thread.join();  // it stops by itself after that many ticks
+  }
+
+  std::string title;
+  if (synthetic) {
+    title = fmt::format("synthetic {} rows ({} contacts), {:.0f} Hz, core {}, priority {}",
+                        rig->problem().rows, rig->problem().contacts, o.rate_hz, core, o.priority);
+  } else {
+    title = fmt::format("segment '{}'", o.segment);
+  }
+  std::printf("\n%s\n", title.c_str());
+  Percentiles bare;
+  std::string bare_note;
+  if (baseline_started) {
+    bare = summarize(baseline.bare->latenessUs());
+    bare_note = fmt::format(
+        "{} ticks, {} overruns, {} on core {}, SCHED_FIFO {}, same PeriodicTimer and period{}",
+        baseline.bare->ticks(), baseline.bare->overruns(),
+        interleaved ? "interleaved half a period after the haptic ticks" : "after the measurement",
+        core, o.priority,
+        baseline.rt_summary.empty() ? "" : " (real-time set-up incomplete: " +
+                                               baseline.rt_summary + ")");
+  }
+  std::printf("%s", formatTable(report, baseline_started ? &bare : nullptr, bare_note).c_str());
+
+  if (csv) csv->close();
+  if (!o.plot.empty()) {
+    std::string bare_csv;
+    if (baseline_started) {
+      bare_csv = fmt::format("/tmp/tactus-jitter-bare-{}.csv", static_cast<long>(::getpid()));
+      writeBareCsv(bare_csv, baseline.bare->latenessUs());
+    }
+    const std::string cmd =
+        fmt::format("/usr/bin/python3 '{}' '{}' '{}' --title '{}'{}", plotScript(), csv_path,
+                    o.plot, title, bare_csv.empty() ? "" : " --baseline '" + bare_csv + "'");
+    const int rc = std::system(cmd.c_str());
+    if (!bare_csv.empty()) std::filesystem::remove(bare_csv);
+    if (rc != 0) {
+      std::fprintf(stderr, "plot failed (%s); Debian: apt-get install python3-matplotlib\n",
+                   cmd.c_str());
+    } else {
+      std::printf("plot written to %s\n", o.plot.c_str());
+    }
+  }
+  if (temp_csv) std::filesystem::remove(csv_path);
+  if (!o.csv.empty()) std::printf("CSV written to %s\n", o.csv.c_str());
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{
+      "tactus-jitter: haptic tick timing (period error, tick duration, solve time, sweeps) from "
+      "a running haptic_server's stats ring (attach, read-only) or an in-process synthetic run"};
+  Options o;
+  app.add_option("--segment", o.segment, "Segment to attach to (attach mode)")
+      ->capture_default_str();
+  app.add_option("--duration", o.duration_s, "Seconds to measure")->capture_default_str();
+  app.add_option("--csv", o.csv, "Write one row per tick record to FILE");
+  app.add_option("--plot", o.plot,
+                 "Write a PNG (period-error histogram, log scale, and time series) via "
+                 "scripts/jitter_plot.py and /usr/bin/python3 (python3-matplotlib)");
+  app.add_flag("--baseline", o.baseline,
+               "Also run a bare timer loop on the haptic core (same priority, PeriodicTimer and "
+               "period) and print the ratios");
+  app.add_option("--baseline-mode", o.baseline_mode,
+                 "interleaved: during the measurement, deadlines half a period after the haptic "
+                 "loop's; after: once the synthetic loop has stopped")
+      ->check(CLI::IsMember({"interleaved", "after"}))
+      ->capture_default_str();
+  app.add_option("--synthetic", o.synthetic_rows,
+                 "Synthetic mode: run the haptic loop in-process on snapshots of ROWS rows "
+                 "(150, 450, 900 typical)")
+      ->check(CLI::Range(3, 3000));
+  app.add_option("--rate", o.rate_hz, "Synthetic: haptic loop rate [Hz]")
+      ->check(CLI::Range(50.0, 4000.0))
+      ->capture_default_str();
+  app.add_option("--sim-rate", o.sim_rate_hz, "Synthetic: snapshot rate [Hz]")
+      ->check(CLI::Range(1.0, 1000.0))
+      ->capture_default_str();
+  app.add_option("--core", o.core,
+                 "CPU of the haptic loop (synthetic) and of the baseline (-1: the last CPU, as "
+                 "haptic_server)")
+      ->capture_default_str();
+  app.add_option("--priority", o.priority, "SCHED_FIFO priority (0: do not ask)")
+      ->check(CLI::Range(0, 99))
+      ->capture_default_str();
+  app.add_option("--sweeps", o.sweeps, "Synthetic: NSGS sweeps per tick")
+      ->check(CLI::Range(1, 10000))
+      ->capture_default_str();
+  app.add_option("--period-us", o.period_us,
+                 "Attach: the loop period (default: estimated from the records)");
+  app.add_option("--reader", o.reader,
+                 "live: poll the ring every 100 ms; busy: poll it continuously; none: read it "
+                 "only at the end (synthetic, <= 8192 records)")
+      ->check(CLI::IsMember({"live", "busy", "none"}))
+      ->capture_default_str();
+  app.add_option("--wait", o.wait_s, "Attach: seconds to wait for the segment")
+      ->capture_default_str();
+  app.add_option("--seed", o.seed, "Synthetic: problem seed")->capture_default_str();
+  app.add_flag("--quiet", o.quiet, "No per-second lines");
+  CLI11_PARSE(app, argc, argv);
+  std::signal(SIGINT, onSignal);
+  std::signal(SIGTERM, onSignal);
+  try {
+    return run(o);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "tactus-jitter: %s\n", e.what());
+    return 1;
+  }
+}

@@ -1,0 +1,299 @@
+// Synthetic snapshots, the scripted device and the in-process haptic loop of the jitter tool.
+#include "jitter_synthetic.h"
+
+#include <fmt/format.h>
+#include <unistd.h>
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <random>
+
+#include "tactus/shared/clock.h"
+#include "tactus/shared/error.h"
+#include "tactus/shared/nsgs.h"
+#include "tactus/shared/rt.h"
+
+namespace tactus::haptic::jitter {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+// god-object compliance seen through the contacts: (m/h^2 + b/h + k)^-1 for the liver scene's
+// grasper (0.05 kg, 8 N s/m, 800 N/m, h = 10 ms) and its rotational counterpart
+constexpr double kToolCompliance = 4.8e-4;     // m/N
+constexpr double kToolRotCompliance = 0.24;    // rad/(N m)
+// share of a device displacement the god object follows within one step: k / (m/h^2 + b/h + k)
+constexpr double kTransmission = 0.38;
+
+std::atomic<int> g_rig_counter{0};
+
+}  // namespace
+
+SyntheticProblem makeSyntheticProblem(const SyntheticProblemOptions& o) {
+  const int nc = o.rows / 3;
+  if (nc < 1) throw Error(fmt::format("synthetic problem: rows = {} (need at least 3)", o.rows));
+  const int m = 3 * nc;
+  SyntheticProblem p;
+  p.contacts = nc;
+  p.rows = m;
+  std::mt19937_64 rng(o.seed);
+  std::uniform_real_distribution<double> uni(0.0, 1.0);
+
+  // contact points on a sphere cap (radius 6 cm, top at the origin), frames n (outward), t1, t2
+  const double sphere_r = 0.06;
+  const Eigen::Vector3d centre(0.0, 0.0, -sphere_r);
+  const Eigen::Vector3d tool_origin(0.0, 0.0, 0.01);
+  std::vector<Eigen::Vector3d> pts(nc);
+  std::vector<Eigen::Matrix3d> frames(nc);   // columns n, t1, t2
+  p.point_m.resize(3 * nc);
+  p.normal.resize(3 * nc);
+  p.tangent.resize(6 * nc);
+  p.drift_phase.resize(nc);
+  for (int c = 0; c < nc; ++c) {
+    const double rad = o.patch_radius_m * std::sqrt(uni(rng));
+    const double th = 2.0 * kPi * uni(rng);
+    const double x = rad * std::cos(th);
+    const double y = rad * std::sin(th);
+    const double z = std::sqrt(sphere_r * sphere_r - x * x - y * y) - sphere_r;
+    pts[c] = Eigen::Vector3d(x, y, z);
+    const Eigen::Vector3d n = (pts[c] - centre).normalized();
+    const Eigen::Vector3d a = std::abs(n.x()) < 0.9 ? Eigen::Vector3d::UnitX()
+                                                    : Eigen::Vector3d::UnitY();
+    const Eigen::Vector3d t1 = n.cross(a).normalized();
+    const Eigen::Vector3d t2 = n.cross(t1);
+    frames[c].col(0) = n;
+    frames[c].col(1) = t1;
+    frames[c].col(2) = t2;
+    for (int k = 0; k < 3; ++k) {
+      p.point_m[3 * c + k] = pts[c][k];
+      p.normal[3 * c + k] = n[k];
+      p.tangent[6 * c + k] = t1[k];
+      p.tangent[6 * c + 3 + k] = t2[k];
+    }
+    p.drift_phase[c] = 2.0 * kPi * uni(rng);
+  }
+
+  // per row: direction e and the tool twist sensitivity g = [e; r x e]
+  std::vector<Eigen::Matrix<double, 6, 1>> g(m);
+  for (int c = 0; c < nc; ++c) {
+    const Eigen::Vector3d r = pts[c] - tool_origin;
+    for (int k = 0; k < 3; ++k) {
+      const Eigen::Vector3d e = frames[c].col(k);
+      g[3 * c + k].head<3>() = e;
+      g[3 * c + k].tail<3>() = r.cross(e);
+    }
+  }
+  Eigen::Matrix<double, 6, 1> tool_c;
+  tool_c << kToolCompliance, kToolCompliance, kToolCompliance, kToolRotCompliance,
+      kToolRotCompliance, kToolRotCompliance;
+
+  // W = F^T (c_t K (x) I3) F + c_l I + G C_tool G^T
+  p.W.assign(static_cast<std::size_t>(m) * m, 0.0);
+  for (int i = 0; i < nc; ++i) {
+    for (int j = 0; j < nc; ++j) {
+      const double kij = o.compliance_m_per_n * std::exp(-(pts[i] - pts[j]).norm() /
+                                                         o.kernel_length_m);
+      const Eigen::Matrix3d block = kij * frames[i].transpose() * frames[j];
+      for (int a = 0; a < 3; ++a) {
+        for (int b = 0; b < 3; ++b) {
+          const int r = 3 * i + a;
+          const int s = 3 * j + b;
+          double w = block(a, b) + g[r].cwiseProduct(tool_c).dot(g[s]);
+          if (r == s) w += o.local_compliance_m_per_n;
+          p.W[static_cast<std::size_t>(r) * m + s] = w;
+        }
+      }
+    }
+  }
+
+  // friction, identities, gaps: ~65 % penetrating (to -1 mm), the rest open (to +0.5 mm)
+  p.row_offset.resize(nc + 1);
+  p.contact_id.resize(nc);
+  p.mu.resize(nc);
+  p.delta_free.resize(m);
+  p.J.resize(static_cast<std::size_t>(m) * 6);
+  for (int c = 0; c < nc; ++c) {
+    p.row_offset[c] = 3 * c;
+    p.contact_id[c] = 1000 + static_cast<std::uint64_t>(c);
+    p.mu[c] = o.mu + 0.2 * (uni(rng) - 0.5);
+    p.delta_free[3 * c] = uni(rng) < 0.65 ? -1e-3 * uni(rng) : 5e-4 * uni(rng);
+    p.delta_free[3 * c + 1] = 2e-4 * (uni(rng) - 0.5);
+    p.delta_free[3 * c + 2] = 2e-4 * (uni(rng) - 0.5);
+  }
+  p.row_offset[nc] = m;
+  for (int r = 0; r < m; ++r) {
+    for (int k = 0; k < 6; ++k) p.J[6 * r + k] = kTransmission * g[r][k];
+  }
+  p.device_pose.pos_m = {tool_origin.x(), tool_origin.y(), tool_origin.z()};
+  p.tool_pose = p.device_pose;
+
+  // the simulation's solution: cold NSGS to 1e-8
+  shared::ContactProblemView view;
+  view.contacts = nc;
+  view.rows = m;
+  view.row_offset = p.row_offset.data();
+  view.W = p.W.data();
+  view.ld = m;
+  view.delta_free = p.delta_free.data();
+  view.mu = p.mu.data();
+  shared::NsgsWorkspace ws(m, nc);
+  shared::NsgsSettings ns;
+  ns.tolerance = 1e-8;
+  ns.max_sweeps = 2000;
+  ns.time_budget_ns = 5 * shared::kNsPerS;
+  p.f.assign(m, 0.0);
+  const shared::NsgsResult res = shared::solveNsgs(view, ns, ws, p.f.data());
+  p.solve_sweeps = res.sweeps;
+  p.solve_error = res.error;
+  return p;
+}
+
+void writeSnapshot(const SyntheticProblem& p, shared::SnapshotWriter slot, std::uint64_t seq,
+                   double t_s, double drift_m) {
+  auto& h = slot.header();
+  slot.setSize(p.rows, p.contacts);
+  h.seq = seq;
+  h.t_ns = shared::monotonicNs();
+  h.step = seq;
+  h.h_s = 0.01;
+  h.flags = shared::kSnapshotValid | shared::kSnapshotConverged | shared::kSnapshotHasJacobian;
+  h.solver_sweeps = p.solve_sweeps;
+  h.solver_error = p.solve_error;
+  h.device_seq = 0;
+  h.device_pose = p.device_pose;
+  h.tool_pose = p.tool_pose;
+  const int m = p.rows;
+  const int ld = slot.ld();
+  std::copy(p.row_offset.begin(), p.row_offset.end(), slot.rowOffset());
+  std::copy(p.contact_id.begin(), p.contact_id.end(), slot.contactId());
+  std::copy(p.mu.begin(), p.mu.end(), slot.mu());
+  std::copy(p.point_m.begin(), p.point_m.end(), slot.contactPoint());
+  std::copy(p.normal.begin(), p.normal.end(), slot.contactNormal());
+  std::copy(p.tangent.begin(), p.tangent.end(), slot.contactTangent());
+  double* W = slot.W();
+  for (int r = 0; r < m; ++r) {
+    std::copy_n(p.W.data() + static_cast<std::ptrdiff_t>(r) * m, m,
+                W + static_cast<std::ptrdiff_t>(r) * ld);
+  }
+  // the gaps drift slowly between publications (0.5 Hz), as a moving organ's would
+  double* df = slot.deltaFree();
+  std::copy(p.delta_free.begin(), p.delta_free.end(), df);
+  for (int c = 0; c < p.contacts; ++c) {
+    df[3 * c] += drift_m * std::sin(p.drift_phase[c] + 2.0 * kPi * 0.5 * t_s);
+  }
+  std::copy(p.f.begin(), p.f.end(), slot.f());
+  std::copy(p.J.begin(), p.J.end(), slot.J());
+}
+
+ScriptedDevice::ScriptedDevice(const shared::PoseSample& centre, double radius_m, double freq_hz)
+    : centre_(centre), radius_m_(radius_m), omega_(2.0 * kPi * freq_hz),
+      t0_ns_(shared::monotonicNs()) {}
+
+device::DeviceInfo ScriptedDevice::info() const {
+  device::DeviceInfo i;
+  i.model = "jitter scripted device";
+  i.max_force_n = 8.0;
+  i.max_stiffness_npm = 2000.0;
+  i.workspace_radius_m = 0.1;
+  return i;
+}
+
+device::IoStatus ScriptedDevice::read(device::DeviceState* out) noexcept {
+  const std::int64_t now = shared::monotonicNs();
+  const double t = 1e-9 * static_cast<double>(now - t0_ns_);
+  const double c = std::cos(omega_ * t);
+  const double s = std::sin(omega_ * t);
+  // a small circle starting at the centre, pressing in by up to one radius
+  out->t_ns = now;
+  out->pos_m = {centre_.pos_m[0] + radius_m_ * (c - 1.0), centre_.pos_m[1] + radius_m_ * s,
+                centre_.pos_m[2] - 0.5 * radius_m_ * (1.0 - c)};
+  out->vel_mps = {-radius_m_ * omega_ * s, radius_m_ * omega_ * c,
+                  -0.5 * radius_m_ * omega_ * s};
+  out->quat_wxyz = centre_.quat_wxyz;
+  out->angvel_radps = {0.0, 0.0, 0.0};
+  out->gripper_rad = centre_.gripper_rad;
+  out->buttons = 0;
+  return device::IoStatus::kOk;
+}
+
+device::IoStatus ScriptedDevice::write(const device::DeviceCommand&) noexcept {
+  // relaxed: a counter read after the threads stop
+  writes_.fetch_add(1, std::memory_order_relaxed);
+  return device::IoStatus::kOk;
+}
+
+SyntheticRig::SyntheticRig(const SyntheticOptions& options)
+    : options_(options),
+      problem_(makeSyntheticProblem(options.problem)),
+      segment_(shared::Segment::create(
+          fmt::format("tactus-jitter-{}-{}", static_cast<long>(::getpid()), g_rig_counter++),
+          shared::SegmentCapacity{problem_.rows, problem_.contacts})),
+      publisher_(segment_.snapshotPublisher()) {
+  settings_.period_ns = static_cast<std::int64_t>(std::llround(1e9 / options.rate_hz));
+  settings_.solve_budget_ns = static_cast<std::int64_t>(
+      options.solve_budget_fraction * static_cast<double>(settings_.period_ns));
+  settings_.max_sweeps = options.max_sweeps;
+  // engage at once: the whole safety chain runs on every tick, as in a session in contact
+  settings_.engage_threshold_n = 1e9;
+  settings_.watchdog_ms = std::max(50.0, 3e3 / options.sim_rate_hz);
+  device_ = std::make_unique<ScriptedDevice>(problem_.device_pose);
+  loop_ = std::make_unique<HapticLoop>(*device_, settings_);
+  link_ = std::make_unique<HapticLink>(
+      shared::Segment::open(segment_.name(), shared::Access::kReadWrite));
+  core_ = options.core >= 0 ? options.core : shared::availableCpuCount() - 1;
+  t0_ns_ = shared::monotonicNs();
+  publish(0.0);
+}
+
+SyntheticRig::~SyntheticRig() { stop(); }
+
+void SyntheticRig::publish(double t_s) {
+  writeSnapshot(problem_, publisher_.slot(), published_.load(std::memory_order_relaxed) + 1, t_s,
+                options_.drift_m);
+  publisher_.publish();
+  // relaxed: an informational counter
+  published_.fetch_add(1, std::memory_order_relaxed);
+  segment_.beat(shared::Side::kSim);
+}
+
+void SyntheticRig::start() {
+  if (running_) return;
+  running_ = true;
+  stop_.store(false);
+  loop_->offerLink(link_.get());
+  std::atomic<bool> ready{false};
+  haptic_thread_ = std::thread([this, &ready] {
+    rt_summary_ = shared::setupRealtimeThread(core_, options_.priority,
+                                              shared::RealtimeConfig::kIgnore);
+    ready.store(true);
+    shared::PeriodicTimer timer(settings_.period_ns);
+    // relaxed: the stop request only needs to be seen eventually
+    while (!stop_.load(std::memory_order_relaxed)) {
+      const shared::TimerTick t = timer.wait();
+      loop_->tick(t.scheduled_ns, t.woken_ns);
+    }
+    (void)device_->write(device::DeviceCommand{});
+  });
+  while (!ready.load()) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  publisher_thread_ = std::thread([this] {
+    const auto period = static_cast<std::int64_t>(std::llround(1e9 / options_.sim_rate_hz));
+    std::int64_t next = shared::monotonicNs() + period;
+    while (!stop_.load(std::memory_order_relaxed)) {
+      shared::sleepUntilNs(next);
+      next += period;
+      publish(1e-9 * static_cast<double>(shared::monotonicNs() - t0_ns_));
+    }
+  });
+}
+
+void SyntheticRig::stop() {
+  if (!running_) return;
+  stop_.store(true);
+  if (haptic_thread_.joinable()) haptic_thread_.join();
+  if (publisher_thread_.joinable()) publisher_thread_.join();
+  running_ = false;
+}
+
+}  // namespace tactus::haptic::jitter

@@ -1,0 +1,280 @@
+// tactus-bench: end-to-end benchmark of a scene, headless. Runs N steps (default: the scene's
+// duration / time step) following the scene's scripted instrument, and reports per-stage medians
+// (free motion, collision, W build, solve, correction, publish), contacts, sweeps, and the haptic
+// tick's solve for the same snapshots: each step's problem, published into a private segment's
+// snapshot slot exactly as sim_server does, is re-solved from the slot as the haptic loop would
+// (delta_free moved by J times a small device displacement, warm-started NSGS from the
+// simulation's f, the loop's sweep and time budget). --json writes everything for comparison
+// between commits.
+#include <CLI/CLI.hpp>
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <string>
+#include <vector>
+
+#include "tactus/shared/clock.h"
+#include "tactus/shared/error.h"
+#include "tactus/shared/nsgs.h"
+#include "tactus/shared/pose.h"
+#include "tactus/shared/segment.h"
+#include "tactus/sim/pipeline.h"
+#include "tactus/sim/scene.h"
+
+namespace {
+
+using namespace tactus;
+
+// Nearest-rank percentile (q in [0, 1]) of unsorted values.
+double pct(std::vector<double> v, double q) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  const double rank = std::clamp(std::ceil(q * static_cast<double>(v.size()) - 1e-9), 1.0,
+                                 static_cast<double>(v.size()));
+  return v[static_cast<std::size_t>(rank) - 1];
+}
+
+struct Series {
+  std::string name;
+  std::vector<double> v;
+};
+
+// Writes the step's problem into the slot and publishes it, as sim_server's HapticLink does.
+void publishProblem(const sim::Simulation& sim, shared::SnapshotPublisher& pub, std::uint64_t seq,
+                    double max_opening_rad) {
+  const sim::ContactProblemData& p = sim.lastProblem();
+  shared::SnapshotWriter slot = pub.slot();
+  auto& h = slot.header();
+  int contacts = p.contacts;
+  int rows = p.rows;
+  if (!slot.setSize(rows, contacts)) {
+    contacts = 0;
+    rows = 0;
+    slot.setSize(0, 0);
+  }
+  h.seq = seq;
+  h.t_ns = shared::monotonicNs();
+  h.step = static_cast<std::uint64_t>(sim.stepIndex());
+  h.h_s = sim.spec().time_step_s;
+  h.flags = shared::kSnapshotValid | shared::kSnapshotHasJacobian;
+  auto put = [](shared::PoseSample& out, const shared::Pose& pose, double gripper) {
+    for (int i = 0; i < 3; ++i) out.pos_m[i] = pose.pos_m[i];
+    out.quat_wxyz = {pose.rot.w(), pose.rot.x(), pose.rot.y(), pose.rot.z()};
+    out.gripper_rad = gripper;
+  };
+  put(h.device_pose, p.device_pose, p.device_gripper * max_opening_rad);
+  put(h.tool_pose, p.tool_pose, p.device_gripper * max_opening_rad);
+  for (int c = 0; c <= contacts; ++c) slot.rowOffset()[c] = p.row_offset[c];
+  for (int c = 0; c < contacts; ++c) {
+    slot.contactId()[c] = p.contact_id[c];
+    slot.mu()[c] = p.mu[c];
+    for (int k = 0; k < 3; ++k) {
+      slot.contactPoint()[3 * c + k] = p.point_m[c][k];
+      slot.contactNormal()[3 * c + k] = p.normal[c][k];
+      slot.contactTangent()[6 * c + k] = p.tangent1[c][k];
+      slot.contactTangent()[6 * c + 3 + k] = p.tangent2[c][k];
+    }
+  }
+  const int ld = slot.ld();
+  for (int i = 0; i < rows; ++i) {
+    std::copy_n(p.W.data() + static_cast<std::ptrdiff_t>(i) * rows, rows,
+                slot.W() + static_cast<std::ptrdiff_t>(i) * ld);
+    slot.deltaFree()[i] = p.delta_free[i];
+    slot.f()[i] = p.f[i];
+    for (int k = 0; k < 6; ++k) slot.J()[6 * i + k] = p.J(i, k);
+  }
+  pub.publish();
+}
+
+struct BenchOptions {
+  std::string scene;
+  long steps = 0;
+  std::string json;
+  std::string trace;
+  double budget_us = 0.0;
+  int tick_sweeps = 0;
+  double displacement_mm = 0.2;
+  std::string log_level = "warn";
+};
+
+int run(const BenchOptions& o) {
+  sim::SceneSpec spec = sim::loadScene(o.scene);
+  spec.haptics.enabled = false;
+  spec.output.enabled = false;
+  const double h = spec.time_step_s;
+  const long steps =
+      o.steps > 0 ? o.steps : static_cast<long>(std::llround(spec.duration_s / h));
+  if (steps <= 0) throw Error(o.scene + ": no duration in the scene; pass --steps N");
+  const double rate_hz = spec.haptics.rate_hz > 0.0 ? spec.haptics.rate_hz : 1000.0;
+  const double budget_us = o.budget_us > 0.0 ? o.budget_us : 0.4 * 1e6 / rate_hz;
+  const int tick_sweeps = o.tick_sweeps > 0 ? o.tick_sweeps : spec.haptics.max_sweeps_per_tick;
+
+  const std::int64_t t_build = shared::monotonicNs();
+  sim::Simulation sim(spec);
+  const double build_s = 1e-9 * static_cast<double>(shared::monotonicNs() - t_build);
+  if (!sim.hasInstrument()) throw Error(o.scene + ": no instrument: nothing to benchmark");
+
+  // a private segment with the capacity sim_server would create for this scene
+  const std::string seg_name = fmt::format("tactus-bench-{}", static_cast<long>(::getpid()));
+  shared::Segment seg = shared::Segment::create(
+      seg_name, shared::SegmentCapacity::forContacts(spec.solver.max_contacts,
+                                                     spec.instrument.friction_mu > 0.0));
+  shared::SnapshotPublisher pub = seg.snapshotPublisher();
+  shared::SnapshotSubscriber sub = seg.snapshotSubscriber();
+  shared::NsgsWorkspace ws(seg.capacity().max_rows, seg.capacity().max_contacts);
+  std::vector<double> df(static_cast<std::size_t>(seg.capacity().max_rows));
+  std::vector<double> f(df.size());
+  // the device displacement: a fixed small translation (mm) along (1, -1, -1) / sqrt(3)
+  shared::Vector6d dx = shared::Vector6d::Zero();
+  const double d_m = 1e-3 * o.displacement_mm / std::sqrt(3.0);
+  dx << d_m, -d_m, -d_m, 0.0, 0.0, 0.0;
+
+  std::vector<Series> stages = {{"free motion", {}}, {"collision", {}}, {"W build", {}},
+                                {"solve", {}},       {"correction", {}}, {"publish", {}},
+                                {"total step", {}}};
+  std::vector<double> contacts, rows, sim_sweeps, tick_us, tick_sweeps_v, tick_err;
+  long tick_converged = 0;
+  std::FILE* trace = nullptr;
+  if (!o.trace.empty()) {
+    trace = std::fopen(o.trace.c_str(), "w");
+    if (trace == nullptr) throw Error("cannot write " + o.trace);
+    std::fprintf(trace, "step,t_s,contacts,rows,sim_sweeps,step_ms,tick_solve_us,tick_sweeps\n");
+  }
+  const std::int64_t t0 = shared::monotonicNs();
+  for (long k = 0; k < steps; ++k) {
+    sim.setDeviceTarget(sim.scriptedTarget(sim.time()));
+    const sim::StepReport r = sim.step();
+    if (!r.finite) throw NumericalError(fmt::format("step {}: the state became non-finite", k));
+    const std::int64_t tp = shared::monotonicNs();
+    publishProblem(sim, pub, static_cast<std::uint64_t>(k + 1), spec.instrument.max_opening_rad);
+    seg.beat(shared::Side::kSim);
+    const double publish_s = 1e-9 * static_cast<double>(shared::monotonicNs() - tp);
+    stages[0].v.push_back(r.times.free_motion_s);
+    stages[1].v.push_back(r.times.collision_s);
+    stages[2].v.push_back(r.times.w_build_s);
+    stages[3].v.push_back(r.times.solve_s);
+    stages[4].v.push_back(r.times.correction_s);
+    stages[5].v.push_back(publish_s);
+    stages[6].v.push_back(r.times.total_s + publish_s);
+    // contact figures over the steps in contact
+    if (r.contacts > 0) {
+      contacts.push_back(r.contacts);
+      rows.push_back(r.rows);
+      sim_sweeps.push_back(r.nsgs.sweeps);
+    }
+    if (trace != nullptr && r.contacts <= 0) {
+      std::fprintf(trace, "%ld,%.4f,0,0,0,%.4f,0,0\n", k, sim.time(), 1e3 * stages[6].v.back());
+    }
+
+    // the haptic side's tick on this snapshot, read back from the slot
+    const shared::SnapshotView snap = sub.latest();
+    const int m = snap.rows();
+    if (snap.contacts() <= 0) continue;
+    const double* J = snap.J();
+    for (int i = 0; i < m; ++i) {
+      double d = snap.deltaFree()[i];
+      for (int c = 0; c < 6; ++c) d += J[6 * i + c] * dx[c];
+      df[i] = d;
+    }
+    std::copy_n(snap.f(), m, f.begin());
+    shared::NsgsSettings ns;
+    ns.tolerance = spec.haptics.nsgs_tolerance;
+    ns.max_sweeps = tick_sweeps;
+    ns.time_budget_ns = static_cast<std::int64_t>(budget_us * 1e3);
+    const shared::NsgsResult res = shared::solveNsgs(snap.problem(df.data()), ns, ws, f.data());
+    tick_us.push_back(1e-3 * static_cast<double>(res.elapsed_ns));
+    tick_sweeps_v.push_back(res.sweeps);
+    tick_err.push_back(res.error);
+    if (res.status == shared::NsgsStatus::kConverged) ++tick_converged;
+    if (trace != nullptr) {
+      std::fprintf(trace, "%ld,%.4f,%d,%d,%d,%.4f,%.3f,%d\n", k, sim.time(), r.contacts, r.rows,
+                   r.nsgs.sweeps, 1e3 * stages[6].v.back(), 1e-3 * static_cast<double>(res.elapsed_ns),
+                   res.sweeps);
+    }
+  }
+  if (trace != nullptr) std::fclose(trace);
+  const double wall_s = 1e-9 * static_cast<double>(shared::monotonicNs() - t0);
+
+  // table
+  std::printf("%s: %ld steps of %.1f ms (%.1f s simulated) in %.1f s wall; set-up %.1f s\n",
+              o.scene.c_str(), steps, 1e3 * h, static_cast<double>(steps) * h, wall_s, build_s);
+  std::printf("%-14s %10s %10s %10s %10s\n", "stage [ms]", "median", "p90", "p99", "max");
+  for (const auto& s : stages) {
+    std::printf("%-14s %10.3f %10.3f %10.3f %10.3f\n", s.name.c_str(), 1e3 * pct(s.v, 0.5),
+                1e3 * pct(s.v, 0.9), 1e3 * pct(s.v, 0.99), 1e3 * pct(s.v, 1.0));
+  }
+  std::printf("steps in contact: %zu of %ld; over those: contacts median %.0f, max %.0f (rows "
+              "median %.0f, max %.0f); sim NSGS sweeps median %.0f\n",
+              contacts.size(), steps, pct(contacts, 0.5), pct(contacts, 1.0), pct(rows, 0.5),
+              pct(rows, 1.0), pct(sim_sweeps, 0.5));
+  std::printf("haptic tick solve (%.2f mm device displacement, warm start, <= %d sweeps, budget "
+              "%.0f us): median %.1f us, p99 %.1f us, max %.1f us; sweeps median %.0f, p99 %.0f; "
+              "error median %.2e; converged %ld / %zu\n",
+              o.displacement_mm, tick_sweeps, budget_us, pct(tick_us, 0.5), pct(tick_us, 0.99),
+              pct(tick_us, 1.0), pct(tick_sweeps_v, 0.5), pct(tick_sweeps_v, 0.99),
+              pct(tick_err, 0.5), tick_converged, tick_us.size());
+
+  if (!o.json.empty()) {
+    std::string js = fmt::format("{{\n  \"scene\": \"{}\",\n  \"steps\": {},\n  \"h_ms\": {},\n"
+                                 "  \"wall_s\": {:.3f},\n  \"setup_s\": {:.3f},\n  \"stages_ms\": {{\n",
+                                 o.scene, steps, 1e3 * h, wall_s, build_s);
+    for (std::size_t i = 0; i < stages.size(); ++i) {
+      const auto& v = stages[i].v;
+      js += fmt::format("    \"{}\": {{\"median\": {:.6f}, \"p90\": {:.6f}, \"p99\": {:.6f}, "
+                        "\"max\": {:.6f}}}{}\n",
+                        stages[i].name, 1e3 * pct(v, 0.5), 1e3 * pct(v, 0.9), 1e3 * pct(v, 0.99),
+                        1e3 * pct(v, 1.0), i + 1 < stages.size() ? "," : "");
+    }
+    js += fmt::format(
+        "  }},\n  \"steps_in_contact\": {},\n  \"contacts\": {{\"median\": {}, \"max\": {}}},\n"
+        "  \"rows\": {{\"median\": {}, \"max\": {}}},\n  \"sim_sweeps_median\": {},\n"
+        "  \"haptic_tick\": {{\"displacement_mm\": {}, \"max_sweeps\": {}, \"budget_us\": {}, "
+        "\"solve_us_median\": {:.3f}, \"solve_us_p99\": {:.3f}, \"solve_us_max\": {:.3f}, "
+        "\"sweeps_median\": {}, \"sweeps_p99\": {}, \"error_median\": {:.3e}, "
+        "\"converged\": {}, \"solves\": {}}}\n}}\n",
+        contacts.size(), pct(contacts, 0.5), pct(contacts, 1.0), pct(rows, 0.5), pct(rows, 1.0),
+        pct(sim_sweeps, 0.5), o.displacement_mm, tick_sweeps, budget_us, pct(tick_us, 0.5),
+        pct(tick_us, 0.99), pct(tick_us, 1.0), pct(tick_sweeps_v, 0.5), pct(tick_sweeps_v, 0.99),
+        pct(tick_err, 0.5), tick_converged, tick_us.size());
+    std::FILE* fj = std::fopen(o.json.c_str(), "w");
+    if (fj == nullptr) throw Error("cannot write " + o.json);
+    std::fwrite(js.data(), 1, js.size(), fj);
+    std::fclose(fj);
+    std::printf("JSON written to %s\n", o.json.c_str());
+  }
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"tactus-bench: per-stage timing of a scene and the haptic tick's solve on its "
+               "snapshots (headless, scripted instrument)"};
+  BenchOptions o;
+  app.add_option("scene", o.scene, "Scene YAML file")->required()->check(CLI::ExistingFile);
+  app.add_option("--steps", o.steps, "Steps to run (default: the scene's duration / time step)");
+  app.add_option("--json", o.json, "Write the results as JSON");
+  app.add_option("--trace", o.trace, "Write one CSV row per step (contacts, sweeps, timings)");
+  app.add_option("--budget-us", o.budget_us,
+                 "Haptic solve time budget [us] (default: 40 % of the scene's haptic period)");
+  app.add_option("--tick-sweeps", o.tick_sweeps,
+                 "Haptic sweeps per tick (default: the scene's haptics.max_sweeps_per_tick)");
+  app.add_option("--displacement-mm", o.displacement_mm,
+                 "Device displacement applied to each snapshot before the haptic re-solve")
+      ->capture_default_str();
+  app.add_option("--log-level", o.log_level, "spdlog level of the simulation library")
+      ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error"}))
+      ->capture_default_str();
+  CLI11_PARSE(app, argc, argv);
+  spdlog::set_level(spdlog::level::from_str(o.log_level));
+  try {
+    return run(o);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "tactus-bench: %s\n", e.what());
+    return 1;
+  }
+}
