@@ -60,13 +60,13 @@ def main():
     ax_h.legend()
     ax_h.set_title(a.title)
 
-    ax_t.plot(t_s, tick_us, ",", label="tick duration", alpha=0.6)
-    ax_t.plot(t_s, solve_us, ",", label="solve time", alpha=0.6)
-    ax_t.plot(t_s, err_us, ",", label="period error", alpha=0.8)
+    ax_t.plot(t_s, tick_us, ".", markersize=1.5, label="tick duration", alpha=0.6)
+    ax_t.plot(t_s, solve_us, ".", markersize=1.5, label="solve time", alpha=0.6)
+    ax_t.plot(t_s, err_us, ".", markersize=1.5, label="period error", alpha=0.8)
     ax_t.set_yscale("symlog", linthresh=1.0)
     ax_t.set_xlabel("time [s]")
     ax_t.set_ylabel("[us] (symlog)")
-    ax_t.legend(markerscale=20)
+    ax_t.legend(markerscale=8)
     fig.tight_layout()
     fig.savefig(a.out, dpi=110)
 

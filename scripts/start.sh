@@ -9,6 +9,7 @@
 #        --view: also serve the live view in a browser (scripts/view; http://127.0.0.1:8090/)
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+source "$root/scripts/env.sh"
 build="${TACTUS_BUILD_DIR:-$root/build}"
 scene="$root/scenes/liver_grasp.yaml"
 device="simulated"

@@ -3,6 +3,7 @@
 # Usage: scripts/test.sh [extra ctest arguments, e.g. -L unit or -R nsgs]
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+source "$root/scripts/env.sh"
 build="${TACTUS_BUILD_DIR:-$root/build}"
 "$root/scripts/build.sh"
 cd "$build"

@@ -107,9 +107,6 @@ void JitterCollector::clear() {
   *this = JitterCollector(period);
 }
 
-}  // namespace tactus::haptic::jitter
-
-namespace tactus::haptic::jitter {
 namespace {
 
 std::string row(const char* name, const Percentiles& p, int digits) {

@@ -1,5 +1,7 @@
 #include "tactus/sim/compliance.h"
 
+#include <unistd.h>
+
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
@@ -83,12 +85,22 @@ template <class Mat> void symmetrise(Mat &a) {
 void progress(bool show, int done, int total) {
   if (!show)
     return;
+  const int percent = total > 0 ? 100 * done / total : 100;
+  if (!isatty(fileno(stderr))) {
+    // logs and pipes: one line per quarter instead of a redrawn bar
+    static int last_quarter = -1;
+    const int quarter = percent / 25;
+    if (done == 0) last_quarter = -1;
+    if (quarter == last_quarter) return;
+    last_quarter = quarter;
+    std::fprintf(stderr, "[tactus] C0 precompute %3d%% (%d/%d DOFs)\n", percent, done, total);
+    return;
+  }
   const int width = 40;
   const int filled = total > 0 ? width * done / total : width;
   std::fprintf(stderr, "\r[tactus] C0 precompute [%s%s] %3d%% (%d/%d DOFs)",
                std::string(filled, '#').c_str(),
-               std::string(width - filled, ' ').c_str(),
-               total > 0 ? 100 * done / total : 100, done, total);
+               std::string(width - filled, ' ').c_str(), percent, done, total);
   if (done == total)
     std::fprintf(stderr, "\n");
   std::fflush(stderr);

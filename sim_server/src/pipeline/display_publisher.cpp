@@ -55,6 +55,19 @@ DisplayLink::DisplayLink(const std::string& segment_name, const Simulation& sim,
         if (local[node] >= 0) map.tets[fill[local[node]]++] = static_cast<int>(e);
       }
     }
+    // rest edge matrices and the shear modulus for the vertex stress
+    const Eigen::VectorXd& x0 = body.restPositions();
+    map.dm_inv.resize(tets.size());
+    for (std::size_t e = 0; e < tets.size(); ++e) {
+      Eigen::Matrix3d dm;
+      for (int k = 0; k < 3; ++k) {
+        dm.col(k) = x0.segment<3>(3 * tets[e][k + 1]) - x0.segment<3>(3 * tets[e][0]);
+      }
+      map.dm_inv[e] = dm.inverse();
+    }
+    const auto& material = sim.spec().tissues[static_cast<std::size_t>(t)];
+    map.mu = material.young_pa / (2.0 * (1.0 + material.poisson));
+    map.corotational = material.law == MaterialLaw::kCorotational;
     vertex_count_ += static_cast<int>(map.nodes.size());
     tissues_.push_back(std::move(map));
   }
@@ -102,8 +115,24 @@ void DisplayLink::fillStress(const Simulation& sim) {
   float* out = stress_cache_.data();
   double max_s = 0.0;
   for (int t = 0; t < sim.tissueCount(); ++t) {
-    sim.tissue(t).vonMises(von_mises_);
+    const FemBody& body = sim.tissue(t);
     const TissueMap& map = tissues_[static_cast<std::size_t>(t)];
+    const auto& tets = body.mesh().tets;
+    const Eigen::VectorXd& q = body.positions();
+    const std::vector<Eigen::Matrix3d>& rot = body.elementRotations();
+    const bool use_rot = map.corotational && rot.size() == tets.size();
+    von_mises_.resize(tets.size());
+    for (std::size_t e = 0; e < tets.size(); ++e) {
+      Eigen::Matrix3d ds;
+      for (int k = 0; k < 3; ++k) {
+        ds.col(k) = q.segment<3>(3 * tets[e][k + 1]) - q.segment<3>(3 * tets[e][0]);
+      }
+      const Eigen::Matrix3d f = ds * map.dm_inv[e];
+      const Eigen::Matrix3d fl = use_rot ? Eigen::Matrix3d(rot[e].transpose() * f) : f;
+      const Eigen::Matrix3d eps = 0.5 * (fl + fl.transpose()) - Eigen::Matrix3d::Identity();
+      const Eigen::Matrix3d dev = eps - eps.trace() / 3.0 * Eigen::Matrix3d::Identity();
+      von_mises_[e] = 2.0 * map.mu * std::sqrt(1.5 * dev.squaredNorm());
+    }
     for (std::size_t i = 0; i < map.nodes.size(); ++i) {
       const int b = map.tet_begin[i], e = map.tet_begin[i + 1];
       double sum = 0.0;

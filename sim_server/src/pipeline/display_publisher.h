@@ -5,9 +5,11 @@
 // area at construction.
 //
 // Cost: a publish copies the surface vertex positions (float), their displacement magnitude, the
-// von Mises stress averaged onto the surface vertices (every `stress_every`-th frame, as it
-// evaluates every element), the contacts and the tool primitives; nothing happens on the steps in
-// between (one clock read). It never waits for a viewer and does not know whether one is
+// von Mises stress averaged onto the surface vertices (every `stress_every`-th frame), the
+// contacts and the tool primitives; nothing happens on the steps in between (one clock read).
+// The stress reuses the element rotations of the last step (no polar decomposition):
+// eps = sym(R^T F) - I, von Mises = 2 mu sqrt(3/2) |dev eps|, the corotated linear law of the FEM
+// (FemBody::vonMises, which re-extracts R, costs ~10x more). It never waits for a viewer and does not know whether one is
 // attached.
 //
 // Use (runner.cpp), after the HapticLink has created the segment:
@@ -28,7 +30,7 @@ namespace tactus::sim {
 
 struct DisplayOptions {
   double max_rate_hz = 60.0;         ///< frames per second at most
-  int stress_every = 4;              ///< recompute the vertex stress every n-th frame (0: never)
+  int stress_every = 2;              ///< recompute the vertex stress every n-th frame (0: never)
 };
 
 class DisplayLink {
@@ -61,6 +63,9 @@ class DisplayLink {
     std::vector<int> nodes;          ///< surface vertex -> tissue node
     std::vector<int> tet_begin;      ///< CSR: tets incident to surface vertex i
     std::vector<int> tets;
+    std::vector<Eigen::Matrix3d> dm_inv;   ///< per tet: inverse rest edge matrix
+    double mu = 0.0;                       ///< Lame shear modulus [Pa]
+    bool corotational = true;
   };
   void fillStress(const Simulation& sim);
 
@@ -74,7 +79,7 @@ class DisplayLink {
   std::vector<TissueMap> tissues_;
   std::vector<std::uint64_t> staging_;     ///< the frame being composed (8-aligned)
   shared::DisplayFrameRef frame_;
-  Eigen::VectorXd von_mises_;              ///< per element scratch
+  std::vector<double> von_mises_;          ///< per element scratch
   std::vector<float> stress_cache_;        ///< last vertex stresses (between recomputations)
   double max_stress_pa_ = 0.0;
   std::uint64_t seq_ = 0;

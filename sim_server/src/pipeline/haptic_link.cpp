@@ -62,24 +62,24 @@ bool HapticLink::deviceTarget(DeviceTarget& target) {
   return true;
 }
 
-void HapticLink::publish(const Simulation& sim) {
+bool writeSnapshot(const Simulation& sim, double max_opening_rad, std::uint64_t seq,
+                   std::int64_t t_ns, std::uint64_t device_seq, shared::SnapshotWriter& slot) {
   const ContactProblemData& p = sim.lastProblem();
-  auto slot = publisher_.slot();
   auto& hdr = slot.header();
   int contacts = p.contacts;
   int rows = p.rows;
-  if (!slot.setSize(rows, contacts)) {
-    // cannot happen with the scene's capacity; publish an empty problem rather than a wrong one
-    ++truncated_;
+  bool fits = slot.setSize(rows, contacts);
+  if (!fits) {
+    // publish an empty problem rather than a wrong one
     contacts = 0;
     rows = 0;
     slot.setSize(0, 0);
   }
-  hdr.seq = ++published_;
-  hdr.t_ns = shared::monotonicNs();
+  hdr.seq = seq;
+  hdr.t_ns = t_ns;
   hdr.step = static_cast<std::uint64_t>(sim.stepIndex());
   hdr.h_s = sim.spec().time_step_s;
-  hdr.device_seq = device_seq_;
+  hdr.device_seq = device_seq;
   hdr.solver_sweeps = 0;
   hdr.solver_error = 0.0;
   hdr.flags = shared::kSnapshotValid | shared::kSnapshotHasJacobian;
@@ -88,9 +88,10 @@ void HapticLink::publish(const Simulation& sim) {
     out.quat_wxyz = {pose.rot.w(), pose.rot.x(), pose.rot.y(), pose.rot.z()};
     out.gripper_rad = gripper;
   };
-  put_pose(hdr.device_pose, p.device_pose, p.device_gripper * max_opening_rad_);
-  put_pose(hdr.tool_pose, p.tool_pose, p.device_gripper * max_opening_rad_);
+  put_pose(hdr.device_pose, p.device_pose, p.device_gripper * max_opening_rad);
+  put_pose(hdr.tool_pose, p.tool_pose, p.device_gripper * max_opening_rad);
   const int ld = slot.ld();
+  slot.rowOffset()[0] = 0;
   for (int c = 0; c <= contacts; ++c) slot.rowOffset()[c] = p.row_offset[c];
   for (int c = 0; c < contacts; ++c) {
     slot.contactId()[c] = p.contact_id[c];
@@ -104,10 +105,20 @@ void HapticLink::publish(const Simulation& sim) {
   }
   double* W = slot.W();
   for (int i = 0; i < rows; ++i) {
-    std::copy_n(p.W.data() + static_cast<std::ptrdiff_t>(i) * rows, rows, W + static_cast<std::ptrdiff_t>(i) * ld);
+    std::copy_n(p.W.data() + static_cast<std::ptrdiff_t>(i) * rows, rows,
+                W + static_cast<std::ptrdiff_t>(i) * ld);
     slot.deltaFree()[i] = p.delta_free[i];
     slot.f()[i] = p.f[i];
     for (int k = 0; k < 6; ++k) slot.J()[6 * i + k] = p.J(i, k);
+  }
+  return fits;
+}
+
+void HapticLink::publish(const Simulation& sim) {
+  auto slot = publisher_.slot();
+  if (!writeSnapshot(sim, max_opening_rad_, ++published_, shared::monotonicNs(), device_seq_,
+                     slot)) {
+    ++truncated_;
   }
   publisher_.publish();
   segment_.beat(shared::Side::kSim);

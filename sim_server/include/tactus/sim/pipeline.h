@@ -15,6 +15,7 @@
 #include <string>
 #include <vector>
 
+#include "tactus/shared/messages.h"
 #include "tactus/shared/nsgs.h"
 #include "tactus/shared/pose.h"
 #include "tactus/sim/scene.h"
@@ -139,5 +140,12 @@ class Simulation {
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };
+
+/// Writes the last step's contact problem into a snapshot slot (what sim_server publishes each
+/// step; also used by tests and tools that run the haptic loop beside an in-process simulation).
+/// `max_opening_rad` maps the jaw opening to the gripper angle reported in the poses. Returns
+/// false (and writes an empty problem) when the problem exceeds the slot's capacity.
+bool writeSnapshot(const Simulation& sim, double max_opening_rad, std::uint64_t seq,
+                   std::int64_t t_ns, std::uint64_t device_seq, shared::SnapshotWriter& slot);
 
 }  // namespace tactus::sim
