@@ -2,10 +2,10 @@
 // ring read-only; synthetic mode runs the real haptic loop in-process on synthetic snapshots.
 // Prints a line per second and a percentile table at the end; optional CSV, plot and a bare-loop
 // baseline (same core, priority, timer method and period) for ratios.
-#include <CLI/CLI.hpp>
 #include <fmt/format.h>
 #include <unistd.h>
 
+#include <CLI/CLI.hpp>
 #include <atomic>
 #include <chrono>
 #include <csignal>
@@ -85,10 +85,10 @@ std::optional<shared::Segment> waitForSegment(const std::string& name, double wa
       throw SegmentError(r.message);
     }
     if (g_stop.load() || shared::monotonicNs() - t0 > shared::secondsToNs(wait_s)) {
-      throw SegmentError(fmt::format(
-          "segment '{}' not found after {:.0f} s ({}); start the daemons first "
-          "(scripts/start.sh) or use --synthetic ROWS",
-          name, wait_s, r.message));
+      throw SegmentError(
+          fmt::format("segment '{}' not found after {:.0f} s ({}); start the daemons first "
+                      "(scripts/start.sh) or use --synthetic ROWS",
+                      name, wait_s, r.message));
     }
     if (!said) {
       std::printf("waiting for segment '%s'...\n", name.c_str());
@@ -116,8 +116,9 @@ int run(const Options& o) {
     throw Error("--reader none needs --synthetic (attach mode is the reader)");
   }
   if (!synthetic && o.baseline && o.baseline_mode == "after") {
-    throw Error("--baseline-mode after needs --synthetic: in attach mode the daemon keeps its core "
-                "busy, so the bare loop is interleaved half a period after its ticks");
+    throw Error(
+        "--baseline-mode after needs --synthetic: in attach mode the daemon keeps its core "
+        "busy, so the bare loop is interleaved half a period after its ticks");
   }
 
   // the measured loop: a running daemon's segment, or the in-process synthetic rig
@@ -136,12 +137,12 @@ int run(const Options& o) {
     rig = std::make_unique<SyntheticRig>(so);
     period_ns = rig->periodNs();
     const auto& p = rig->problem();
-    std::printf("synthetic: %d rows (%d contacts), cold solve %d sweeps, error %.2e; "
-                "loop %.0f Hz on core %d, SCHED_FIFO %d, %d sweeps max, budget %.0f us; "
-                "snapshots at %.0f Hz; reader: %s\n",
-                p.rows, p.contacts, p.solve_sweeps, p.solve_error, o.rate_hz, core, o.priority,
-                o.sweeps, 0.4 * 1e-3 * static_cast<double>(period_ns), o.sim_rate_hz,
-                o.reader.c_str());
+    std::printf(
+        "synthetic: %d rows (%d contacts), cold solve %d sweeps, error %.2e; "
+        "loop %.0f Hz on core %d, SCHED_FIFO %d, %d sweeps max, budget %.0f us; "
+        "snapshots at %.0f Hz; reader: %s\n",
+        p.rows, p.contacts, p.solve_sweeps, p.solve_error, o.rate_hz, core, o.priority, o.sweeps,
+        0.4 * 1e-3 * static_cast<double>(period_ns), o.sim_rate_hz, o.reader.c_str());
   } else {
     attached = waitForSegment(o.segment, o.wait_s);
     std::printf("attached read-only to '%s' (generation %llu)\n", o.segment.c_str(),
@@ -197,18 +198,18 @@ int run(const Options& o) {
     if (!live) continue;
     follower.drain({&total, &interval}, csv.get());
     if (!synthetic && !follower.stillCurrent()) {
-      std::printf("the segment was removed or re-created: stopping (the table covers the old "
-                  "one)\n");
+      std::printf(
+          "the segment was removed or re-created: stopping (the table covers the old "
+          "one)\n");
       break;
     }
     const std::int64_t now = shared::monotonicNs();
     if (now - last_line >= shared::kNsPerS) {
       interval.setLost(follower.lost());
       if (!o.quiet) {
-        std::printf("%s\n",
-                    formatLine(1e-9 * static_cast<double>(now - t0), interval.report(),
-                               follower.lost())
-                        .c_str());
+        std::printf("%s\n", formatLine(1e-9 * static_cast<double>(now - t0), interval.report(),
+                                       follower.lost())
+                                .c_str());
         std::fflush(stdout);
       }
       interval.clear();
@@ -245,8 +246,9 @@ int run(const Options& o) {
         baseline.bare->ticks(), baseline.bare->overruns(),
         interleaved ? "interleaved half a period after the haptic ticks" : "after the measurement",
         core, o.priority,
-        baseline.rt_summary.empty() ? "" : " (real-time set-up incomplete: " +
-                                               baseline.rt_summary + ")");
+        baseline.rt_summary.empty()
+            ? ""
+            : " (real-time set-up incomplete: " + baseline.rt_summary + ")");
   }
   std::printf("%s", formatTable(report, baseline_started ? &bare : nullptr, bare_note).c_str());
 

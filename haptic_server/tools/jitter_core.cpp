@@ -132,25 +132,24 @@ std::string formatTable(const JitterReport& r, const Percentiles* bare,
   out += row("sweeps [count]", r.sweeps, 0);
   if (bare != nullptr) {
     out += row("bare loop period err", *bare, 2);
-    out += fmt::format("{:<22}{}{}{}{}{}\n", "ratio period err/bare",
-                       ratio(r.period_error_us.p50, bare->p50),
-                       ratio(r.period_error_us.p90, bare->p90),
-                       ratio(r.period_error_us.p99, bare->p99),
-                       ratio(r.period_error_us.p999, bare->p999),
-                       ratio(r.period_error_us.max, bare->max));
+    out += fmt::format(
+        "{:<22}{}{}{}{}{}\n", "ratio period err/bare", ratio(r.period_error_us.p50, bare->p50),
+        ratio(r.period_error_us.p90, bare->p90), ratio(r.period_error_us.p99, bare->p99),
+        ratio(r.period_error_us.p999, bare->p999), ratio(r.period_error_us.max, bare->max));
     if (!bare_note.empty()) out += fmt::format("  bare loop: {}\n", bare_note);
   }
   out += fmt::format(
       "records {} over {:.2f} s ({:.1f} Hz, period {:.1f} us); overruns {} ({:.3f} %, {} flagged "
       "by the loop); lost {}\n",
       r.records, r.span_s, r.rate_hz, 1e-3 * static_cast<double>(r.period_ns), r.overruns,
-      r.records > 0 ? 100.0 * static_cast<double>(r.overruns) / static_cast<double>(r.records) : 0.0,
+      r.records > 0 ? 100.0 * static_cast<double>(r.overruns) / static_cast<double>(r.records)
+                    : 0.0,
       r.overrun_flags, r.lost);
   if (r.solved > 0) {
-    out += fmt::format("ticks with contacts {} (median {:.0f} contacts), residual p50 {:.2e}, "
-                       "not converged {}, non-finite residuals {}\n",
-                       r.solved, r.contacts_p50, r.residual_p50, r.not_converged,
-                       r.non_finite_residuals);
+    out += fmt::format(
+        "ticks with contacts {} (median {:.0f} contacts), residual p50 {:.2e}, "
+        "not converged {}, non-finite residuals {}\n",
+        r.solved, r.contacts_p50, r.residual_p50, r.not_converged, r.non_finite_residuals);
   }
   return out;
 }
@@ -171,9 +170,10 @@ const char* CsvWriter::header() {
 CsvWriter::CsvWriter(const std::string& path) : path_(path) {
   file_ = std::fopen(path.c_str(), "w");
   if (file_ == nullptr) {
-    throw Error(fmt::format("cannot write the CSV file '{}': {} (check the directory exists and "
-                            "is writable)",
-                            path, std::strerror(errno)));
+    throw Error(
+        fmt::format("cannot write the CSV file '{}': {} (check the directory exists and "
+                    "is writable)",
+                    path, std::strerror(errno)));
   }
   std::fprintf(file_, "%s\n", header());
 }
@@ -199,7 +199,8 @@ void CsvWriter::close() {
   const bool bad = std::ferror(file_) != 0;
   const int rc = std::fclose(file_);
   file_ = nullptr;
-  if (bad || rc != 0) throw Error(fmt::format("error writing the CSV file '{}' (disk full?)", path_));
+  if (bad || rc != 0)
+    throw Error(fmt::format("error writing the CSV file '{}' (disk full?)", path_));
 }
 
 RingFollower::RingFollower(const std::string& name, shared::StatsRingReader::Start start)

@@ -45,22 +45,22 @@ Percentiles summarize(std::vector<double> values);
 
 /// Aggregate of a run (all durations in microseconds).
 struct JitterReport {
-  std::uint64_t records = 0;          ///< records read
-  std::uint64_t lost = 0;             ///< records the reader missed (writer lapped it)
-  std::uint64_t overruns = 0;         ///< kStatsOverrun flag or tick duration > period
-  std::uint64_t overrun_flags = 0;    ///< records with the loop's own kStatsOverrun flag
-  std::uint64_t solved = 0;           ///< records with contacts > 0
-  std::uint64_t not_converged = 0;    ///< records flagged kStatsSolverNotConverged
+  std::uint64_t records = 0;        ///< records read
+  std::uint64_t lost = 0;           ///< records the reader missed (writer lapped it)
+  std::uint64_t overruns = 0;       ///< kStatsOverrun flag or tick duration > period
+  std::uint64_t overrun_flags = 0;  ///< records with the loop's own kStatsOverrun flag
+  std::uint64_t solved = 0;         ///< records with contacts > 0
+  std::uint64_t not_converged = 0;  ///< records flagged kStatsSolverNotConverged
   std::uint64_t non_finite_residuals = 0;
-  std::int64_t period_ns = 0;         ///< given, or the median scheduled-time step
-  double span_s = 0.0;                ///< last woken - first woken
-  double rate_hz = 0.0;               ///< (records - 1) / span
+  std::int64_t period_ns = 0;  ///< given, or the median scheduled-time step
+  double span_s = 0.0;         ///< last woken - first woken
+  double rate_hz = 0.0;        ///< (records - 1) / span
   double contacts_p50 = 0.0;
   double residual_p50 = 0.0;
-  Percentiles period_error_us;        ///< woken - scheduled
-  Percentiles tick_us;                ///< finished - woken
-  Percentiles solve_us;               ///< solve_ns (ticks with contacts only)
-  Percentiles sweeps;                 ///< sweeps (ticks with contacts only)
+  Percentiles period_error_us;  ///< woken - scheduled
+  Percentiles tick_us;          ///< finished - woken
+  Percentiles solve_us;         ///< solve_ns (ticks with contacts only)
+  Percentiles sweeps;           ///< sweeps (ticks with contacts only)
 };
 
 /// Accumulates StatsRecords (in order, as a reader returns them).
@@ -127,11 +127,12 @@ class CsvWriter {
 class RingFollower {
  public:
   /// Opens `name` read-only (throws tactus::SegmentError with the reason).
-  explicit RingFollower(const std::string& name,
-                        shared::StatsRingReader::Start start = shared::StatsRingReader::Start::kNewest);
+  explicit RingFollower(const std::string& name, shared::StatsRingReader::Start start =
+                                                     shared::StatsRingReader::Start::kNewest);
   /// Attaches to an already opened segment (not owned; must outlive the follower).
-  explicit RingFollower(const shared::Segment& segment,
-                        shared::StatsRingReader::Start start = shared::StatsRingReader::Start::kNewest);
+  explicit RingFollower(
+      const shared::Segment& segment,
+      shared::StatsRingReader::Start start = shared::StatsRingReader::Start::kNewest);
 
   /// Reads every record available now into `collectors` (each gets every record) and `csv`.
   /// Returns the number read.

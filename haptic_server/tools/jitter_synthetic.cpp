@@ -22,8 +22,8 @@ namespace {
 constexpr double kPi = 3.14159265358979323846;
 // god-object compliance seen through the contacts: (m/h^2 + b/h + k)^-1 for the liver scene's
 // grasper (0.05 kg, 8 N s/m, 800 N/m, h = 10 ms) and its rotational counterpart
-constexpr double kToolCompliance = 4.8e-4;     // m/N
-constexpr double kToolRotCompliance = 0.24;    // rad/(N m)
+constexpr double kToolCompliance = 4.8e-4;   // m/N
+constexpr double kToolRotCompliance = 0.24;  // rad/(N m)
 // share of a device displacement the god object follows within one step: k / (m/h^2 + b/h + k)
 constexpr double kTransmission = 0.38;
 
@@ -46,7 +46,7 @@ SyntheticProblem makeSyntheticProblem(const SyntheticProblemOptions& o) {
   const Eigen::Vector3d centre(0.0, 0.0, -sphere_r);
   const Eigen::Vector3d tool_origin(0.0, 0.0, 0.01);
   std::vector<Eigen::Vector3d> pts(nc);
-  std::vector<Eigen::Matrix3d> frames(nc);   // columns n, t1, t2
+  std::vector<Eigen::Matrix3d> frames(nc);  // columns n, t1, t2
   p.point_m.resize(3 * nc);
   p.normal.resize(3 * nc);
   p.tangent.resize(6 * nc);
@@ -59,8 +59,8 @@ SyntheticProblem makeSyntheticProblem(const SyntheticProblemOptions& o) {
     const double z = std::sqrt(sphere_r * sphere_r - x * x - y * y) - sphere_r;
     pts[c] = Eigen::Vector3d(x, y, z);
     const Eigen::Vector3d n = (pts[c] - centre).normalized();
-    const Eigen::Vector3d a = std::abs(n.x()) < 0.9 ? Eigen::Vector3d::UnitX()
-                                                    : Eigen::Vector3d::UnitY();
+    const Eigen::Vector3d a =
+        std::abs(n.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
     const Eigen::Vector3d t1 = n.cross(a).normalized();
     const Eigen::Vector3d t2 = n.cross(t1);
     frames[c].col(0) = n;
@@ -93,8 +93,8 @@ SyntheticProblem makeSyntheticProblem(const SyntheticProblemOptions& o) {
   p.W.assign(static_cast<std::size_t>(m) * m, 0.0);
   for (int i = 0; i < nc; ++i) {
     for (int j = 0; j < nc; ++j) {
-      const double kij = o.compliance_m_per_n * std::exp(-(pts[i] - pts[j]).norm() /
-                                                         o.kernel_length_m);
+      const double kij =
+          o.compliance_m_per_n * std::exp(-(pts[i] - pts[j]).norm() / o.kernel_length_m);
       const Eigen::Matrix3d block = kij * frames[i].transpose() * frames[j];
       for (int a = 0; a < 3; ++a) {
         for (int b = 0; b < 3; ++b) {
@@ -188,7 +188,9 @@ void writeSnapshot(const SyntheticProblem& p, shared::SnapshotWriter slot, std::
 }
 
 ScriptedDevice::ScriptedDevice(const shared::PoseSample& centre, double radius_m, double freq_hz)
-    : centre_(centre), radius_m_(radius_m), omega_(2.0 * kPi * freq_hz),
+    : centre_(centre),
+      radius_m_(radius_m),
+      omega_(2.0 * kPi * freq_hz),
       t0_ns_(shared::monotonicNs()) {}
 
 device::DeviceInfo ScriptedDevice::info() const {
@@ -209,8 +211,7 @@ device::IoStatus ScriptedDevice::read(device::DeviceState* out) noexcept {
   out->t_ns = now;
   out->pos_m = {centre_.pos_m[0] + radius_m_ * (c - 1.0), centre_.pos_m[1] + radius_m_ * s,
                 centre_.pos_m[2] - 0.5 * radius_m_ * (1.0 - c)};
-  out->vel_mps = {-radius_m_ * omega_ * s, radius_m_ * omega_ * c,
-                  -0.5 * radius_m_ * omega_ * s};
+  out->vel_mps = {-radius_m_ * omega_ * s, radius_m_ * omega_ * c, -0.5 * radius_m_ * omega_ * s};
   out->quat_wxyz = centre_.quat_wxyz;
   out->angvel_radps = {0.0, 0.0, 0.0};
   out->gripper_rad = centre_.gripper_rad;
@@ -232,8 +233,8 @@ SyntheticRig::SyntheticRig(const SyntheticOptions& options)
           shared::SegmentCapacity{problem_.rows, problem_.contacts})),
       publisher_(segment_.snapshotPublisher()) {
   settings_.period_ns = static_cast<std::int64_t>(std::llround(1e9 / options.rate_hz));
-  settings_.solve_budget_ns = static_cast<std::int64_t>(
-      options.solve_budget_fraction * static_cast<double>(settings_.period_ns));
+  settings_.solve_budget_ns = static_cast<std::int64_t>(options.solve_budget_fraction *
+                                                        static_cast<double>(settings_.period_ns));
   settings_.max_sweeps = options.max_sweeps;
   // engage at once: the whole safety chain runs on every tick, as in a session in contact
   settings_.engage_threshold_n = 1e9;
@@ -265,8 +266,8 @@ void SyntheticRig::start() {
   loop_->offerLink(link_.get());
   std::atomic<bool> ready{false};
   haptic_thread_ = std::thread([this, &ready] {
-    rt_summary_ = shared::setupRealtimeThread(core_, options_.priority,
-                                              shared::RealtimeConfig::kIgnore);
+    rt_summary_ =
+        shared::setupRealtimeThread(core_, options_.priority, shared::RealtimeConfig::kIgnore);
     ready.store(true);
     shared::PeriodicTimer timer(settings_.period_ns);
     // relaxed: the stop request only needs to be seen eventually

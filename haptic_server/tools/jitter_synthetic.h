@@ -30,10 +30,10 @@
 namespace tactus::haptic::jitter {
 
 struct SyntheticProblemOptions {
-  int rows = 450;                        ///< m; rounded down to a multiple of 3 (>= 3)
-  double mu = 0.5;                       ///< mean friction coefficient (+-0.1 per contact)
-  double compliance_m_per_n = 1e-3;      ///< c_t: tissue compliance scale
-  double kernel_length_m = 0.008;        ///< l
+  int rows = 450;                          ///< m; rounded down to a multiple of 3 (>= 3)
+  double mu = 0.5;                         ///< mean friction coefficient (+-0.1 per contact)
+  double compliance_m_per_n = 1e-3;        ///< c_t: tissue compliance scale
+  double kernel_length_m = 0.008;          ///< l
   double local_compliance_m_per_n = 2e-4;  ///< c_l
   double patch_radius_m = 0.02;
   unsigned seed = 1;
@@ -46,15 +46,15 @@ struct SyntheticProblem {
   std::vector<std::int32_t> row_offset;
   std::vector<std::uint64_t> contact_id;
   std::vector<double> mu;
-  std::vector<double> W;                 ///< rows x rows, row-major
+  std::vector<double> W;  ///< rows x rows, row-major
   std::vector<double> delta_free;
-  std::vector<double> f;                 ///< converged solution for delta_free
-  std::vector<double> J;                 ///< rows x 6, row-major
+  std::vector<double> f;                         ///< converged solution for delta_free
+  std::vector<double> J;                         ///< rows x 6, row-major
   std::vector<double> point_m, normal, tangent;  ///< 3, 3 and 6 per contact
-  std::vector<double> drift_phase;       ///< per contact, for the publication drift
-  shared::PoseSample device_pose;        ///< x_h*
+  std::vector<double> drift_phase;               ///< per contact, for the publication drift
+  shared::PoseSample device_pose;                ///< x_h*
   shared::PoseSample tool_pose;
-  int solve_sweeps = 0;                  ///< sweeps the cold solve took
+  int solve_sweeps = 0;  ///< sweeps the cold solve took
   double solve_error = 0.0;
 };
 
@@ -63,8 +63,8 @@ struct SyntheticProblem {
 SyntheticProblem makeSyntheticProblem(const SyntheticProblemOptions& options);
 
 /// Fills a snapshot slot with the problem, normal gaps shifted by drift_m * sin(phase_i + t).
-void writeSnapshot(const SyntheticProblem& problem, shared::SnapshotWriter slot,
-                   std::uint64_t seq, double t_s, double drift_m);
+void writeSnapshot(const SyntheticProblem& problem, shared::SnapshotWriter slot, std::uint64_t seq,
+                   double t_s, double drift_m);
 
 /// A scripted in-process device: a slow small circle (radius_m at freq_hz) about a centre pose,
 /// sampled from the monotonic clock on every read. Real-time safe.
@@ -91,13 +91,13 @@ class ScriptedDevice : public device::Device {
 
 struct SyntheticOptions {
   SyntheticProblemOptions problem;
-  double sim_rate_hz = 100.0;            ///< snapshot publication rate
-  double drift_m = 2e-5;                 ///< amplitude of the gap drift between publications
-  double rate_hz = 1000.0;               ///< haptic loop rate
-  int core = -1;                         ///< -1: the last CPU
-  int priority = 80;                     ///< SCHED_FIFO priority (0: none)
-  int max_sweeps = 50;                   ///< NSGS sweeps per tick
-  double solve_budget_fraction = 0.4;    ///< NSGS time budget as a fraction of the period
+  double sim_rate_hz = 100.0;          ///< snapshot publication rate
+  double drift_m = 2e-5;               ///< amplitude of the gap drift between publications
+  double rate_hz = 1000.0;             ///< haptic loop rate
+  int core = -1;                       ///< -1: the last CPU
+  int priority = 80;                   ///< SCHED_FIFO priority (0: none)
+  int max_sweeps = 50;                 ///< NSGS sweeps per tick
+  double solve_budget_fraction = 0.4;  ///< NSGS time budget as a fraction of the period
 };
 
 /// The synthetic set-up: private segment, snapshot publisher thread, haptic loop thread.

@@ -6,14 +6,15 @@
 // (delta_free moved by J times a small device displacement, warm-started NSGS from the
 // simulation's f, the loop's sweep and time budget). --json writes everything for comparison
 // between commits.
-#include <CLI/CLI.hpp>
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 #include <unistd.h>
 
+#include <CLI/CLI.hpp>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <ctime>
 #include <string>
 #include <vector>
 
@@ -36,6 +37,13 @@ double pct(std::vector<double> v, double q) {
   const double rank = std::clamp(std::ceil(q * static_cast<double>(v.size()) - 1e-9), 1.0,
                                  static_cast<double>(v.size()));
   return v[static_cast<std::size_t>(rank) - 1];
+}
+
+// CPU time of the calling thread (excludes time the benchmark was preempted on a busy machine).
+std::int64_t threadCpuNs() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
 }
 
 struct Series {
@@ -106,8 +114,7 @@ int run(const BenchOptions& o) {
   spec.haptics.enabled = false;
   spec.output.enabled = false;
   const double h = spec.time_step_s;
-  const long steps =
-      o.steps > 0 ? o.steps : static_cast<long>(std::llround(spec.duration_s / h));
+  const long steps = o.steps > 0 ? o.steps : static_cast<long>(std::llround(spec.duration_s / h));
   if (steps <= 0) throw Error(o.scene + ": no duration in the scene; pass --steps N");
   const double rate_hz = spec.haptics.rate_hz > 0.0 ? spec.haptics.rate_hz : 1000.0;
   const double budget_us = o.budget_us > 0.0 ? o.budget_us : 0.4 * 1e6 / rate_hz;
@@ -133,10 +140,10 @@ int run(const BenchOptions& o) {
   const double d_m = 1e-3 * o.displacement_mm / std::sqrt(3.0);
   dx << d_m, -d_m, -d_m, 0.0, 0.0, 0.0;
 
-  std::vector<Series> stages = {{"free motion", {}}, {"collision", {}}, {"W build", {}},
+  std::vector<Series> stages = {{"free motion", {}}, {"collision", {}},  {"W build", {}},
                                 {"solve", {}},       {"correction", {}}, {"publish", {}},
                                 {"total step", {}}};
-  std::vector<double> contacts, rows, sim_sweeps, tick_us, tick_sweeps_v, tick_err;
+  std::vector<double> contacts, rows, sim_sweeps, tick_us, tick_cpu_us, tick_sweeps_v, tick_err;
   long tick_converged = 0;
   std::FILE* trace = nullptr;
   if (!o.trace.empty()) {
@@ -185,15 +192,17 @@ int run(const BenchOptions& o) {
     ns.tolerance = spec.haptics.nsgs_tolerance;
     ns.max_sweeps = tick_sweeps;
     ns.time_budget_ns = static_cast<std::int64_t>(budget_us * 1e3);
+    const std::int64_t cpu0 = threadCpuNs();
     const shared::NsgsResult res = shared::solveNsgs(snap.problem(df.data()), ns, ws, f.data());
+    tick_cpu_us.push_back(1e-3 * static_cast<double>(threadCpuNs() - cpu0));
     tick_us.push_back(1e-3 * static_cast<double>(res.elapsed_ns));
     tick_sweeps_v.push_back(res.sweeps);
     tick_err.push_back(res.error);
     if (res.status == shared::NsgsStatus::kConverged) ++tick_converged;
     if (trace != nullptr) {
       std::fprintf(trace, "%ld,%.4f,%d,%d,%d,%.4f,%.3f,%d\n", k, sim.time(), r.contacts, r.rows,
-                   r.nsgs.sweeps, 1e3 * stages[6].v.back(), 1e-3 * static_cast<double>(res.elapsed_ns),
-                   res.sweeps);
+                   r.nsgs.sweeps, 1e3 * stages[6].v.back(),
+                   1e-3 * static_cast<double>(res.elapsed_ns), res.sweeps);
     }
   }
   if (trace != nullptr) std::fclose(trace);
@@ -207,39 +216,45 @@ int run(const BenchOptions& o) {
     std::printf("%-14s %10.3f %10.3f %10.3f %10.3f\n", s.name.c_str(), 1e3 * pct(s.v, 0.5),
                 1e3 * pct(s.v, 0.9), 1e3 * pct(s.v, 0.99), 1e3 * pct(s.v, 1.0));
   }
-  std::printf("steps in contact: %zu of %ld; over those: contacts median %.0f, max %.0f (rows "
-              "median %.0f, max %.0f); sim NSGS sweeps median %.0f\n",
-              contacts.size(), steps, pct(contacts, 0.5), pct(contacts, 1.0), pct(rows, 0.5),
-              pct(rows, 1.0), pct(sim_sweeps, 0.5));
-  std::printf("haptic tick solve (%.2f mm device displacement, warm start, <= %d sweeps, budget "
-              "%.0f us): median %.1f us, p99 %.1f us, max %.1f us; sweeps median %.0f, p99 %.0f; "
-              "error median %.2e; converged %ld / %zu\n",
-              o.displacement_mm, tick_sweeps, budget_us, pct(tick_us, 0.5), pct(tick_us, 0.99),
-              pct(tick_us, 1.0), pct(tick_sweeps_v, 0.5), pct(tick_sweeps_v, 0.99),
-              pct(tick_err, 0.5), tick_converged, tick_us.size());
+  std::printf(
+      "steps in contact: %zu of %ld; over those: contacts median %.0f, max %.0f (rows "
+      "median %.0f, max %.0f); sim NSGS sweeps median %.0f\n",
+      contacts.size(), steps, pct(contacts, 0.5), pct(contacts, 1.0), pct(rows, 0.5),
+      pct(rows, 1.0), pct(sim_sweeps, 0.5));
+  std::printf(
+      "haptic tick solve (%.2f mm device displacement, warm start, <= %d sweeps, budget "
+      "%.0f us): wall median %.1f us, p99 %.1f us, max %.1f us; thread CPU median %.1f us, "
+      "p99 %.1f us; sweeps median %.0f, p99 %.0f; error median %.2e; converged %ld / %zu\n",
+      o.displacement_mm, tick_sweeps, budget_us, pct(tick_us, 0.5), pct(tick_us, 0.99),
+      pct(tick_us, 1.0), pct(tick_cpu_us, 0.5), pct(tick_cpu_us, 0.99), pct(tick_sweeps_v, 0.5),
+      pct(tick_sweeps_v, 0.99), pct(tick_err, 0.5), tick_converged, tick_us.size());
 
   if (!o.json.empty()) {
-    std::string js = fmt::format("{{\n  \"scene\": \"{}\",\n  \"steps\": {},\n  \"h_ms\": {},\n"
-                                 "  \"wall_s\": {:.3f},\n  \"setup_s\": {:.3f},\n  \"stages_ms\": {{\n",
-                                 o.scene, steps, 1e3 * h, wall_s, build_s);
+    std::string js = fmt::format(
+        "{{\n  \"scene\": \"{}\",\n  \"steps\": {},\n  \"h_ms\": {},\n"
+        "  \"wall_s\": {:.3f},\n  \"setup_s\": {:.3f},\n  \"stages_ms\": {{\n",
+        o.scene, steps, 1e3 * h, wall_s, build_s);
     for (std::size_t i = 0; i < stages.size(); ++i) {
       const auto& v = stages[i].v;
-      js += fmt::format("    \"{}\": {{\"median\": {:.6f}, \"p90\": {:.6f}, \"p99\": {:.6f}, "
-                        "\"max\": {:.6f}}}{}\n",
-                        stages[i].name, 1e3 * pct(v, 0.5), 1e3 * pct(v, 0.9), 1e3 * pct(v, 0.99),
-                        1e3 * pct(v, 1.0), i + 1 < stages.size() ? "," : "");
+      js += fmt::format(
+          "    \"{}\": {{\"median\": {:.6f}, \"p90\": {:.6f}, \"p99\": {:.6f}, "
+          "\"max\": {:.6f}}}{}\n",
+          stages[i].name, 1e3 * pct(v, 0.5), 1e3 * pct(v, 0.9), 1e3 * pct(v, 0.99),
+          1e3 * pct(v, 1.0), i + 1 < stages.size() ? "," : "");
     }
     js += fmt::format(
         "  }},\n  \"steps_in_contact\": {},\n  \"contacts\": {{\"median\": {}, \"max\": {}}},\n"
         "  \"rows\": {{\"median\": {}, \"max\": {}}},\n  \"sim_sweeps_median\": {},\n"
         "  \"haptic_tick\": {{\"displacement_mm\": {}, \"max_sweeps\": {}, \"budget_us\": {}, "
         "\"solve_us_median\": {:.3f}, \"solve_us_p99\": {:.3f}, \"solve_us_max\": {:.3f}, "
+        "\"cpu_us_median\": {:.3f}, \"cpu_us_p99\": {:.3f}, "
         "\"sweeps_median\": {}, \"sweeps_p99\": {}, \"error_median\": {:.3e}, "
         "\"converged\": {}, \"solves\": {}}}\n}}\n",
         contacts.size(), pct(contacts, 0.5), pct(contacts, 1.0), pct(rows, 0.5), pct(rows, 1.0),
         pct(sim_sweeps, 0.5), o.displacement_mm, tick_sweeps, budget_us, pct(tick_us, 0.5),
-        pct(tick_us, 0.99), pct(tick_us, 1.0), pct(tick_sweeps_v, 0.5), pct(tick_sweeps_v, 0.99),
-        pct(tick_err, 0.5), tick_converged, tick_us.size());
+        pct(tick_us, 0.99), pct(tick_us, 1.0), pct(tick_cpu_us, 0.5), pct(tick_cpu_us, 0.99),
+        pct(tick_sweeps_v, 0.5), pct(tick_sweeps_v, 0.99), pct(tick_err, 0.5), tick_converged,
+        tick_us.size());
     std::FILE* fj = std::fopen(o.json.c_str(), "w");
     if (fj == nullptr) throw Error("cannot write " + o.json);
     std::fwrite(js.data(), 1, js.size(), fj);
@@ -252,8 +267,9 @@ int run(const BenchOptions& o) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"tactus-bench: per-stage timing of a scene and the haptic tick's solve on its "
-               "snapshots (headless, scripted instrument)"};
+  CLI::App app{
+      "tactus-bench: per-stage timing of a scene and the haptic tick's solve on its "
+      "snapshots (headless, scripted instrument)"};
   BenchOptions o;
   app.add_option("scene", o.scene, "Scene YAML file")->required()->check(CLI::ExistingFile);
   app.add_option("--steps", o.steps, "Steps to run (default: the scene's duration / time step)");

@@ -6,9 +6,9 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <optional>
 #include <fstream>
 #include <numeric>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -87,8 +87,8 @@ TEST(JitterCollector, PeriodOverrunsAndSolvedTicks) {
   for (std::uint64_t i = 0; i < 100; ++i) {
     // late i us, duration 100 us, except ticks 10 and 20 which last longer than the period
     const std::int64_t duration = (i == 10 || i == 20) ? 1'500'000 : 100'000;
-    shared::StatsRecord r = record(i, 1'000'000, static_cast<std::int64_t>(i) * 1000, duration,
-                                   i < 50 ? 5 : 0);
+    shared::StatsRecord r =
+        record(i, 1'000'000, static_cast<std::int64_t>(i) * 1000, duration, i < 50 ? 5 : 0);
     if (i == 30) r.flags |= shared::kStatsOverrun;
     if (i == 40) r.flags |= shared::kStatsSolverNotConverged;
     c.add(r);
@@ -207,7 +207,8 @@ TEST_F(JitterAttach, LappedReaderCountsExactlyTheLostRecords) {
   ASSERT_EQ(cap, shared::kStatsRingCapacity);
   const std::uint64_t n = cap + 500;
   // record i is i ns late; the reader sleeps through n records: the oldest 500 are gone
-  for (std::uint64_t i = 0; i < n; ++i) writer.push(record(i, 1'000'000, static_cast<std::int64_t>(i), 10));
+  for (std::uint64_t i = 0; i < n; ++i)
+    writer.push(record(i, 1'000'000, static_cast<std::int64_t>(i), 10));
   EXPECT_EQ(follower.drain({&c}), cap);
   EXPECT_EQ(follower.lost(), 500u);
   c.setLost(follower.lost());

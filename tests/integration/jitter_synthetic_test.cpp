@@ -1,6 +1,8 @@
 // The jitter tool's synthetic mode: the synthetic problem is a valid, solved contact problem, and
 // a 0.3 s run of the real haptic loop on it writes records that solve all of its contacts. Also
 // the bare-loop baseline. Real-time threads: RUN_SERIAL; no timing thresholds.
+#include "jitter_synthetic.h"
+
 #include <gtest/gtest.h>
 
 #include <chrono>
@@ -8,7 +10,6 @@
 #include <thread>
 
 #include "jitter_core.h"
-#include "jitter_synthetic.h"
 #include "tactus/shared/nsgs.h"
 #include "tactus/shared/rt.h"
 
@@ -80,7 +81,8 @@ TEST(JitterSynthetic, EveryRecordCarriesAllContacts) {
   rig.start();
   std::this_thread::sleep_for(std::chrono::milliseconds(300));
   rig.stop();
-  shared::StatsRingReader reader = rig.segment().statsReader(shared::StatsRingReader::Start::kOldest);
+  shared::StatsRingReader reader =
+      rig.segment().statsReader(shared::StatsRingReader::Start::kOldest);
   std::vector<shared::StatsRecord> buf(shared::kStatsRingCapacity);
   const std::size_t n = reader.poll(buf.data(), buf.size());
   ASSERT_GT(n, 10u);

@@ -10,6 +10,7 @@
 // Single-threaded (one Asio io_context): a timer polls the segment at --rate Hz and broadcasts.
 // A client that cannot keep up loses frames, never the topology, and never slows the others.
 #include <CLI/CLI.hpp>
+#include <sys/resource.h>
 
 #include <boost/asio.hpp>
 #include <boost/beast/core.hpp>
@@ -341,6 +342,7 @@ int main(int argc, char** argv) {
   bool allow_remote = false;
   double rate = 60.0;
   std::string web = TACTUS_VIEWER_WEB_DIR;
+  int nice_level = 10;
   app.add_option("--segment", segment, "Segment name of the running simulation")
       ->capture_default_str();
   app.add_option("--port", port, "TCP port (0: any free port; the URL is printed)")
@@ -355,7 +357,15 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1.0, 240.0));
   app.add_option("--web-dir", web, "Directory of the built page (index.html, app.js)")
       ->capture_default_str();
+  app.add_option("--nice", nice_level, "Scheduling niceness of the viewer (it yields the CPU to "
+                 "the simulation)")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 19));
   CLI11_PARSE(app, argc, argv);
+  // the view is best effort: never compete with the simulation for a core
+  if (nice_level > 0 && ::setpriority(PRIO_PROCESS, 0, nice_level) != 0) {
+    std::fprintf(stderr, "tactus-viewer: could not lower the priority (nice %d)\n", nice_level);
+  }
 
   boost::system::error_code ec;
   const net::ip::address address = net::ip::make_address(bind, ec);

@@ -85,6 +85,7 @@ struct Simulation::Impl {
   long frame = 0;
   Eigen::Matrix<double, 6, 1> last_wrench = Eigen::Matrix<double, 6, 1>::Zero();
   shared::Pose tool_begin;                        ///< god object pose at the start of the step
+  bool target_rejected = false;                   ///< the last setDeviceTarget was non-finite
 
   void buildTissues();
   void solveContacts(StepReport& report);
@@ -224,7 +225,36 @@ std::vector<std::string> Simulation::stages() const {
   return out;
 }
 
-void Simulation::setDeviceTarget(const DeviceTarget& target) { impl_->target = target; }
+// A non-finite or degenerate device target (NaN/Inf from a device or a caller) never reaches the
+// god object: the pose is held at the last valid target (at rest), a bad twist is zeroed and a
+// bad gripper value keeps the last opening. Without this guard one NaN sample made the
+// instrument's pose NaN for good (hard_cases: NonFiniteDeviceTargetsDoNotCorruptTheSimulation).
+void Simulation::setDeviceTarget(const DeviceTarget& target) {
+  Impl& s = *impl_;
+  const double qn = target.pose.rot.norm();
+  const bool pose_ok = target.pose.pos_m.allFinite() && target.pose.rot.coeffs().allFinite() &&
+                       std::isfinite(qn) && qn > 1e-9;
+  const bool twist_ok = target.twist.allFinite();
+  const bool gripper_ok = std::isfinite(target.gripper_opening);
+  if (pose_ok && twist_ok && gripper_ok) {
+    if (s.target_rejected) spdlog::info("device target finite again");
+    s.target_rejected = false;
+    s.target = target;
+    return;
+  }
+  if (!s.target_rejected) {
+    spdlog::warn("non-finite device target ({}{}{}) ignored: holding the last valid target",
+                 pose_ok ? "" : "pose ", twist_ok ? "" : "twist ", gripper_ok ? "" : "gripper");
+  }
+  s.target_rejected = true;
+  if (pose_ok) {
+    s.target.pose = target.pose;
+    s.target.twist = twist_ok ? target.twist : Eigen::Matrix<double, 6, 1>::Zero();
+  } else {
+    s.target.twist.setZero();
+  }
+  if (gripper_ok) s.target.gripper_opening = target.gripper_opening;
+}
 
 DeviceTarget Simulation::scriptedTarget(double t_s) const {
   const InstrumentSpec& in = impl_->spec.instrument;

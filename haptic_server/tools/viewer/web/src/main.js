@@ -166,7 +166,8 @@ scene.add(arrowGroup);
 const arrows = [];
 const toolArrow = new THREE.ArrowHelper(new THREE.Vector3(0, 0, 1), new THREE.Vector3(), 0.01, 0xffb347);
 scene.add(toolArrow);
-let arrowScale = 0.1;   // N for the longest arrow (smoothed)
+let arrowScale = 0.1;   // N for the longest contact arrow (smoothed)
+let toolArrowScale = 0.1;
 
 function updateContacts(fr, sceneSize) {
   const n = Math.min(fr.contactCount, MAX_CONTACTS_DRAWN);
@@ -178,7 +179,8 @@ function updateContacts(fr, sceneSize) {
     fmax = Math.max(fmax, Math.hypot(f[3 * i], f[3 * i + 1], f[3 * i + 2]));
   }
   const toolF = Math.hypot(...fr.toolForce);
-  arrowScale = Math.max(1e-3, fmax, toolF, arrowScale * 0.99);
+  arrowScale = Math.max(1e-3, fmax, arrowScale * 0.99);
+  toolArrowScale = Math.max(1e-3, toolF, toolArrowScale * 0.99);
   const longest = sceneSize * 0.25;
   const show = $('arrows').checked;
   const o = new THREE.Vector3(), d = new THREE.Vector3();
@@ -214,7 +216,7 @@ function updateContacts(fr, sceneSize) {
     d.set(...fr.toolForce).normalize();
     toolArrow.position.set(...fr.toolPos);
     toolArrow.setDirection(d);
-    const len = longest * toolF / arrowScale;
+    const len = longest * toolF / toolArrowScale;
     toolArrow.setLength(len, len * 0.25, len * 0.12);
   }
 }
