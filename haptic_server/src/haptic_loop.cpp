@@ -181,7 +181,13 @@ TickOutput HapticLoop::tick(std::int64_t scheduled_ns, std::int64_t woken_ns) no
   }
 
   // device
-  const device::IoStatus io = device_.read(&state_);
+  device::IoStatus io = device_.read(&state_);
+  if (io == device::IoStatus::kOk && state_.t_ns > 0 &&
+      now - state_.t_ns > static_cast<std::int64_t>(settings_.watchdog_ms * 1e6)) {
+    // a sample stamped long ago: the device stopped updating (disconnected, stuck driver)
+    counters_.stale_device_samples.fetch_add(1, std::memory_order_relaxed);
+    io = device::IoStatus::kFault;
+  }
   if (io == device::IoStatus::kOk) {
     if (finite(state_.pos_m) && std::isfinite(state_.quat_wxyz[0]) &&
         std::isfinite(state_.quat_wxyz[1]) && std::isfinite(state_.quat_wxyz[2]) &&

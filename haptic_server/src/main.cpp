@@ -128,8 +128,14 @@ int main(int argc, char** argv) {
     const std::int64_t t0 = shared::monotonicNs();
     std::int64_t last_status = t0;
     std::uint64_t last_ticks = 0;
+    std::exception_ptr fatal;
     while (!g_stop.load()) {
-      supervisor.poll();
+      try {
+        supervisor.poll();
+      } catch (...) {
+        fatal = std::current_exception();
+        break;
+      }
       supervisor.drainEvents();
       const std::int64_t now = shared::monotonicNs();
       if (duration_s > 0.0 && now - t0 > static_cast<std::int64_t>(duration_s * 1e9)) break;
@@ -152,6 +158,7 @@ int main(int argc, char** argv) {
     supervisor.drainEvents();
     dev->enableForces(false);
     dev->close();
+    if (fatal) std::rethrow_exception(fatal);
     return 0;
   } catch (const std::exception& e) {
     spdlog::error("{}", e.what());

@@ -6,7 +6,10 @@
 #include <chrono>
 #include <thread>
 
+#include <signal.h>
 #include <unistd.h>
+
+#include "tactus/shared/error.h"
 
 namespace tactus::haptic {
 
@@ -72,6 +75,14 @@ void Supervisor::poll() {
   }
   last_open_message_.clear();
   if (!r.segment->creatorAlive()) return;  // a stale segment: wait for the simulation to replace it
+  // one haptic process per segment: a second one would fight over the device samples
+  const std::int64_t other = r.segment->header().haptic_pid.load(std::memory_order_relaxed);
+  if (other > 0 && other != static_cast<std::int64_t>(::getpid()) &&
+      ::kill(static_cast<pid_t>(other), 0) == 0) {
+    throw SegmentError("segment '" + name_ + "' is already served by haptic_server pid " +
+                       std::to_string(other) + ": stop it first (scripts/stop.sh) or start this "
+                       "one with another --segment");
+  }
   link_ = std::make_unique<HapticLink>(std::move(*r.segment));
   creator_alive_ = true;
   link_->segment.setHapticPid(static_cast<std::int64_t>(::getpid()));

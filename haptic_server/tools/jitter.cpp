@@ -2,9 +2,18 @@
 // ring read-only; synthetic mode runs the real haptic loop in-process on synthetic snapshots.
 // Prints a line per second and a percentile table at the end; optional CSV, plot and a bare-loop
 // baseline (same core, priority, timer method and period) for ratios.
-#include <fmt/format.h>
-#include <unistd.h>
-
+//
+// The baseline on a 2-core machine. The haptic loop owns one core; the other carries the
+// simulation, the OS and this tool. A bare loop on the other core would measure a different,
+// busier core; one on the haptic core competes with the loop it measures. So by default the bare
+// loop runs on the haptic core, at the same SCHED_FIFO priority, during the measurement, with
+// its deadlines placed half a period after the haptic loop's (read from the ring): both see the
+// same core, the same moment and the same host noise, and while the haptic tick lasts less than
+// half a period minus the 80 us spin margin neither delays the other (at equal FIFO priority
+// neither preempts; the bare loop adds one 80 us spin per period to the core). When ticks are
+// longer (e.g. 900-row problems) the bare loop's wake-ups queue behind them and its figures are
+// inflated: use --baseline-mode after (synthetic only), which runs the bare loop alone on the
+// same core for as many ticks once the haptic loop has stopped (same core, different moment).
 #include <CLI/CLI.hpp>
 #include <atomic>
 #include <chrono>
@@ -282,6 +291,12 @@ int main(int argc, char** argv) {
   CLI::App app{
       "tactus-jitter: haptic tick timing (period error, tick duration, solve time, sweeps) from "
       "a running haptic_server's stats ring (attach, read-only) or an in-process synthetic run"};
+  app.footer(
+      "Examples:\n"
+      "  tactus-jitter --segment tactus --duration 10 --baseline --plot jitter.png\n"
+      "  tactus-jitter --synthetic 450 --duration 10 --baseline\n"
+      "  tactus-jitter --synthetic 900 --baseline --baseline-mode after\n"
+      "  tactus-jitter --synthetic 450 --duration 7 --reader none   (vs --reader live / busy)");
   Options o;
   app.add_option("--segment", o.segment, "Segment to attach to (attach mode)")
       ->capture_default_str();

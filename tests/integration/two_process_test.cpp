@@ -218,3 +218,37 @@ TEST_F(TwoProcessTest, ForcesFollowPenetrationAndSurviveSimulationRestarts) {
 }
 
 }  // namespace
+
+namespace {
+
+TEST_F(TwoProcessTest, SignalsStopCleanlyAndASecondSimulationIsRefused) {
+  sim_ = startSim();
+  std::optional<Segment> seg = attach();
+  ASSERT_TRUE(seg);
+  // a second simulation on the same segment name is refused with a clear message
+  const pid_t second = spawn({kBin + "/sim_server/sim_server", kData + "/scenes/press_cube.yaml",
+                              "--segment", name_},
+                             dir_ + "/second.log");
+  int status = 0;
+  waitpid(second, &status, 0);
+  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) != 0);
+  EXPECT_NE(slurp(dir_ + "/second.log").find("in use by a live simulation"), std::string::npos)
+      << slurp(dir_ + "/second.log");
+  EXPECT_TRUE(alive(sim_));
+  // SIGTERM: the owner removes its segment and exits 0
+  seg.reset();
+  kill(sim_, SIGTERM);
+  waitpid(sim_, &status, 0);
+  sim_ = -1;
+  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << slurp(dir_ + "/sim.log");
+  EXPECT_FALSE(Segment::exists(name_));
+  // the haptic side stops on SIGINT with exit code 0 too
+  haptic_ = startHaptic();
+  std::this_thread::sleep_for(500ms);
+  kill(haptic_, SIGINT);
+  waitpid(haptic_, &status, 0);
+  haptic_ = -1;
+  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << slurp(dir_ + "/haptic.log");
+}
+
+}  // namespace

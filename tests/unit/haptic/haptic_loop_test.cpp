@@ -9,6 +9,7 @@
 
 #include "../../support/alloc_counter.h"
 #include "tactus/haptic/haptic_loop.h"
+#include "tactus/haptic/supervisor.h"
 #include "tactus/shared/clock.h"
 
 namespace tactus::haptic {
@@ -200,6 +201,36 @@ TEST_F(HapticLoopTest, DeviceFaultAndNonFiniteDataFadeWithoutPropagatingNaN) {
   publish(-0.002, 1e-3, 0.0);
   out = tickFor(40);
   EXPECT_NEAR(out.force_n[2], 2.0, 1e-9);
+}
+
+TEST_F(HapticLoopTest, StaleDeviceTimestampsFadeTheForceLikeAFault) {
+  device_.state.pos_m = {0.0, 0.0, 0.0};
+  publish(0.0, 1e-3, 0.0);
+  tickFor(20);
+  publish(-0.002, 1e-3, 0.0);
+  device_.state.t_ns = t_;                      // fresh samples: force rendered
+  TickOutput out = tickFor(1);
+  EXPECT_NEAR(out.force_n[2], 2.0, 1e-9);
+  publish(-0.002, 1e-3, 0.0);
+  device_.state.t_ns = t_ - 1'000'000'000;      // the driver keeps returning a 1 s old sample
+  out = tickFor(static_cast<int>(settings_.fade_ms) + 2);
+  EXPECT_DOUBLE_EQ(out.force_n[2], 0.0);
+  EXPECT_GT(loop_->counters().stale_device_samples.load(), 0u);
+}
+
+TEST_F(HapticLoopTest, ASecondHapticProcessOnTheSameSegmentIsRefused) {
+  // the segment records a live haptic process (our parent stands in for it)
+  link_->segment.setHapticPid(static_cast<std::int64_t>(::getppid()));
+  ScriptedDevice other_device;
+  HapticLoop other(other_device, settings_);
+  Supervisor supervisor(other, name_);
+  try {
+    supervisor.poll();
+    FAIL() << "a second haptic process was accepted";
+  } catch (const SegmentError& e) {
+    EXPECT_NE(std::string(e.what()).find("already served by haptic_server pid"), std::string::npos)
+        << e.what();
+  }
 }
 
 TEST_F(HapticLoopTest, TheSimulationSeesTheDeviceAndEveryTickWritesAStatsRecord) {

@@ -49,6 +49,7 @@ struct HapticCounters {
   std::atomic<std::uint64_t> device_no_data{0};
   std::atomic<std::uint64_t> device_faults{0};
   std::atomic<std::uint64_t> write_faults{0};
+  std::atomic<std::uint64_t> stale_device_samples{0};  ///< samples older than the watchdog
   std::atomic<std::uint64_t> stale_ticks{0};
   std::atomic<std::uint64_t> snapshots_taken{0};
   std::atomic<std::uint64_t> solver_not_converged{0};
