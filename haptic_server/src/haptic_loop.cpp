@@ -121,6 +121,8 @@ void HapticLoop::solveLocalModel(HapticLink& link, const shared::SnapshotView& s
   ns.tolerance = settings_.tolerance;
   ns.max_sweeps = settings_.max_sweeps;
   ns.time_budget_ns = settings_.solve_budget_ns;
+  // the simulation publishes an exactly symmetric W (see pipeline.cpp)
+  ns.coupling = shared::NsgsCoupling::kSymmetricRowUpdate;
   const shared::NsgsResult res =
       shared::solveNsgs(snap.problem(delta_free.data()), ns, workspace, f.data());
   out.sweeps = res.sweeps;

@@ -15,6 +15,9 @@
 // inflated: use --baseline-mode after (synthetic only), which runs the bare loop alone on the
 // same core for as many ticks once the haptic loop has stopped (same core, different moment).
 #include <CLI/CLI.hpp>
+#include <fmt/format.h>
+#include <unistd.h>
+
 #include <atomic>
 #include <chrono>
 #include <csignal>

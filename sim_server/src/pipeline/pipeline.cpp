@@ -181,6 +181,7 @@ Simulation::Simulation(const SceneSpec& spec) : impl_(std::make_unique<Impl>()) 
     s.nsgs.tolerance = spec.solver.nsgs_tolerance;
     s.nsgs.max_sweeps = spec.solver.nsgs_max_sweeps;
     s.nsgs.sor = spec.solver.nsgs_sor;
+    s.nsgs.coupling = shared::NsgsCoupling::kSymmetricRowUpdate;   // W is symmetrised above
   }
   s.problem.row_offset.assign(1, 0);
 }
@@ -354,6 +355,14 @@ void Simulation::Impl::solveContacts(StepReport& report) {
   if (rows > 0) {
     const shared::Matrix6d c6 = instrument->compliance6(h);
     p.W.noalias() += h_tool * c6 * h_tool.transpose();
+    // W = H C H^T is symmetric; make it so to the bit, so NSGS may use its symmetric sweep
+    for (int i = 0; i < rows; ++i) {
+      for (int j = i + 1; j < rows; ++j) {
+        const double w = 0.5 * (p.W(i, j) + p.W(j, i));
+        p.W(i, j) = w;
+        p.W(j, i) = w;
+      }
+    }
     p.J.noalias() = h_tool * instrument->freeMotionSensitivity(h);
   }
   if (mu > 0.0) counters.tangential_rows += rows - contacts;
