@@ -81,6 +81,19 @@ def sim_table(rows, early):
     return "\n".join(out)
 
 
+def w_table(rows):
+    out = [
+        "| mesh (tets) | compliance | W error median [%] | W error max [%] | states |",
+        "|---|---|---|---|---|",
+    ]
+    order = {"warped": 0, "rest": 1, "uncoupled": 2}
+    for r in sorted(rows, key=lambda r: (int(r["tets"]), order.get(r["compliance"], 9))):
+        out.append(f"| {r['mesh']} ({r['tets']}) | {r['compliance']} "
+                   f"| {pct(num(r, 'w_rel_err_median'))} | {pct(num(r, 'w_rel_err_max'))} "
+                   f"| {r['samples']} |")
+    return "\n".join(out)
+
+
 def haptic_table(rows):
     out = [
         "| rate [kHz] | model | sim step [ms] | sweeps / tick | force error RMS [%] "
@@ -233,6 +246,7 @@ def main():
     sim_rows = read_csv(os.path.join(d, "sim_accuracy.csv"))
     hap_rows = read_csv(os.path.join(d, "haptic_accuracy.csv"))
     meta = {r["key"]: r["value"] for r in read_csv(os.path.join(d, "meta.csv"))}
+    w_rows = read_csv(os.path.join(d, "w_accuracy.csv"))
     plot_pareto(sim_rows, hap_rows, meta, os.path.join(d, "accuracy_pareto.png"))
     plot_forces(read_csv(os.path.join(d, "sim_timeseries.csv")),
                 read_csv(os.path.join(d, "haptic_timeseries.csv")), meta,
@@ -255,7 +269,8 @@ scene's time step; the time-step rows use the exact reference at the finest step
 contact force on the instrument, `sqrt(sum |F - F_ref|^2 / sum |F_ref|^2)` over the reference's
 samples, for the whole script and for t <= {meta['early_until_s']} s (approach, closing, start of
 the lift: before a run's grasp may slip, which makes the whole-script error a yes/no on the
-slip), and the peak `max |F - F_ref|` (whole script). The plot uses the second window. Max penetration: `-geometricMinGap()` after each step
+slip), and the peak `max |F - F_ref|` (whole script). The plot uses the second window.
+Max penetration: `-geometricMinGap()` after each step
 (a fresh collision query). Complementarity residual: `max |f_n delta_n|` after the correction.
 Energy deviation: `max |E - E_ref|` over the range of `E_ref` (kinetic + elastic + gravity).
 Variants use the scene's tolerance {float(meta['scene_tolerance']):.0e} and
@@ -263,6 +278,13 @@ Variants use the scene's tolerance {float(meta['scene_tolerance']):.0e} and
 so that the budget binds.
 
 {sim_table(sim_rows, float(meta['early_until_s']))}
+
+Compliance alone, free of trajectory divergence: along each mesh's exact reference run (every
+0.1 s in contact), W = H C H^T of each approximate model on the same rows (x, y, z at the 24
+free surface nodes nearest the instrument) against the exact W, `||W - W_exact||_F /
+||W_exact||_F`.
+
+{w_table(w_rows)}
 
 ### Haptic local model
 

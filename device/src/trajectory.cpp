@@ -85,9 +85,13 @@ Trajectory Trajectory::parseCsv(const std::string& text, const std::string& orig
     TrajectoryPoint p;
     p.t_s = v[0];
     p.pos_m = {v[1], v[2], v[3]};
-    const double n = std::sqrt(v[4] * v[4] + v[5] * v[5] + v[6] * v[6] + v[7] * v[7]);
-    if (n < 1e-9) throw DeviceError(where(0) + ": quaternion qw,qx,qy,qz is zero");
-    p.quat_wxyz = {v[4] / n, v[5] / n, v[6] / n, v[7] / n};
+    // norm scaled by the largest component, so that huge finite values do not overflow to inf
+    const double big = std::max({std::abs(v[4]), std::abs(v[5]), std::abs(v[6]), std::abs(v[7])});
+    double q[4] = {0.0, 0.0, 0.0, 0.0};
+    for (int k = 0; k < 4 && big > 0.0; ++k) q[k] = v[4 + k] / big;
+    const double n = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+    if (big * n < 1e-9) throw DeviceError(where(0) + ": quaternion qw,qx,qy,qz is zero");
+    p.quat_wxyz = {q[0] / n, q[1] / n, q[2] / n, q[3] / n};
     p.gripper_rad = v[8];
     if (!pts.empty() && p.t_s <= pts.back().t_s) {
       throw DeviceError(where(1) + ": t_s " + std::to_string(p.t_s) +

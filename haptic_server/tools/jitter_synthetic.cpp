@@ -90,9 +90,10 @@ SyntheticProblem makeSyntheticProblem(const SyntheticProblemOptions& o) {
       kToolRotCompliance, kToolRotCompliance;
 
   // W = F^T (c_t K (x) I3) F + c_l I + G C_tool G^T
+  // (the upper triangle is computed and mirrored: W is exactly symmetric, as the simulation's)
   p.W.assign(static_cast<std::size_t>(m) * m, 0.0);
   for (int i = 0; i < nc; ++i) {
-    for (int j = 0; j < nc; ++j) {
+    for (int j = i; j < nc; ++j) {
       const double kij =
           o.compliance_m_per_n * std::exp(-(pts[i] - pts[j]).norm() / o.kernel_length_m);
       const Eigen::Matrix3d block = kij * frames[i].transpose() * frames[j];
@@ -100,9 +101,11 @@ SyntheticProblem makeSyntheticProblem(const SyntheticProblemOptions& o) {
         for (int b = 0; b < 3; ++b) {
           const int r = 3 * i + a;
           const int s = 3 * j + b;
+          if (s < r) continue;
           double w = block(a, b) + g[r].cwiseProduct(tool_c).dot(g[s]);
           if (r == s) w += o.local_compliance_m_per_n;
           p.W[static_cast<std::size_t>(r) * m + s] = w;
+          p.W[static_cast<std::size_t>(s) * m + r] = w;
         }
       }
     }

@@ -1,5 +1,6 @@
 #include "tactus/shared/fclib.h"
 
+#include <algorithm>
 #include <charconv>
 #include <cmath>
 #include <fstream>
@@ -35,6 +36,7 @@ class TokenReader {
   }
 
   bool done() const { return next_ >= tokens_.size(); }
+  std::size_t remaining() const { return tokens_.size() - next_; }
   int line() const { return done() ? last_line_ : tokens_[next_].line; }
 
   double number(const std::string& field) {
@@ -133,26 +135,36 @@ FclibProblem readFclibText(const std::filesystem::path& path) {
   const int nc_line = in.line();
   const int nc = in.integer("nc (number of contacts)");
   if (nc < 1) in.fail(nc_line, "nc must be >= 1, got " + std::to_string(nc));
-  std::vector<double> mu(nc);
+  // counts come from the file: reserve no more than the values left (a short file claiming
+  // nc = 10^9 fails at its end instead of allocating gigabytes first)
+  std::vector<double> mu;
+  mu.reserve(std::min(static_cast<std::size_t>(nc), in.remaining()));
   for (int i = 0; i < nc; ++i) {
     const int line_no = in.line();
-    mu[i] = in.number("mu[" + std::to_string(i) + "]");
+    mu.push_back(in.number("mu[" + std::to_string(i) + "]"));
     if (mu[i] < 0.0) in.fail(line_no, "mu[" + std::to_string(i) + "] is negative");
   }
-  std::vector<double> q(3 * static_cast<std::size_t>(nc));
-  for (std::size_t j = 0; j < q.size(); ++j) q[j] = in.number("q[" + std::to_string(j) + "]");
+  std::vector<double> q;
+  q.reserve(std::min(3 * static_cast<std::size_t>(nc), in.remaining()));
+  for (std::size_t j = 0; j < 3 * static_cast<std::size_t>(nc); ++j) {
+    q.push_back(in.number("q[" + std::to_string(j) + "]"));
+  }
   const int nnz_line = in.line();
   const int nnz = in.integer("nnz (number of W entries)");
   if (nnz < 0) in.fail(nnz_line, "nnz must be >= 0, got " + std::to_string(nnz));
   const int m = 3 * nc;
-  std::vector<int> rows(nnz), cols(nnz);
-  std::vector<double> values(nnz);
+  std::vector<int> rows, cols;
+  std::vector<double> values;
+  const std::size_t nnz_fits = std::min(static_cast<std::size_t>(nnz), in.remaining() / 3);
+  rows.reserve(nnz_fits);
+  cols.reserve(nnz_fits);
+  values.reserve(nnz_fits);
   for (int k = 0; k < nnz; ++k) {
     const int line_no = in.line();
     const std::string entry = "W entry " + std::to_string(k);
-    rows[k] = in.integer(entry + " row");
-    cols[k] = in.integer(entry + " column");
-    values[k] = in.number(entry + " value");
+    rows.push_back(in.integer(entry + " row"));
+    cols.push_back(in.integer(entry + " column"));
+    values.push_back(in.number(entry + " value"));
     if (rows[k] < 0 || rows[k] >= m || cols[k] < 0 || cols[k] >= m) {
       in.fail(line_no, entry + " (" + std::to_string(rows[k]) + ", " + std::to_string(cols[k]) +
                            ") is outside the " + std::to_string(m) + " x " + std::to_string(m) +

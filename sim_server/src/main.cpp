@@ -23,7 +23,7 @@ int main(int argc, char** argv) {
   std::string log_level = "info";
   app.add_option("scene", opt.scene_path, "Scene file (YAML)")->required()->check(CLI::ExistingFile);
   app.add_option("--steps", opt.steps, "Run N steps offline as fast as possible, then exit");
-  app.add_option("--duration", opt.duration_s, "Stop after this simulated time [s] (0: scene's)");
+  app.add_option("--duration", opt.duration_s, "Stop after this simulated time [s] (0: run until SIGINT/SIGTERM)");
   app.add_option("--output", opt.output_dir, "Write a VTK series (.vtu + .pvd) into DIR");
   app.add_option("--output-every", opt.output_every, "Write every N steps (with --output)");
   app.add_option("--segment", opt.segment, "Shared-memory segment name (haptics)");

@@ -43,6 +43,7 @@
 #include "tactus/shared/error.h"
 #include "tactus/shared/nsgs.h"
 #include "tactus/shared/pose.h"
+#include "tactus/sim/compliance.h"
 #include "tactus/sim/fem.h"
 #include "tactus/sim/instrument.h"
 #include "tactus/sim/pipeline.h"
@@ -193,10 +194,60 @@ struct SimRun {
   std::vector<Eigen::Vector3d> force;      // contact force on the instrument [N]
   std::vector<double> energy, penetration, complementarity;
   std::vector<double> step_s, solve_s, wbuild_s, nsgs_error, contacts, sweeps;
+  // W = H C H^T of each approximate model against the exact one, on the same rows, at states
+  // of this (exact) run: relative Frobenius error per sample, by model name
+  std::map<std::string, std::vector<double>> w_error;
 };
 
+// Probes the compliance models at the run's current state: rows = the x, y, z directions at
+// the (up to 24) surface nodes nearest the instrument; W of each model against the exact W.
+void probeCompliance(const Options& o, sim::Simulation& sim, const SimConfig& cfg,
+                     std::vector<std::unique_ptr<sim::TissueCompliance>>& models,
+                     SimRun& run) {
+  sim::FemBody& body = sim.tissue(0);
+  const Eigen::Vector3d tool = sim.instrument()->pose().pos_m;
+  std::vector<std::pair<double, int>> near;
+  for (const int n : body.surfaceNodes()) {
+    if (body.fixedMask()[static_cast<std::size_t>(n)]) continue;
+    near.emplace_back((body.positions().segment<3>(3 * n) - tool).norm(), n);
+  }
+  const std::size_t k = std::min<std::size_t>(24, near.size());
+  std::partial_sort(near.begin(), near.begin() + static_cast<std::ptrdiff_t>(k), near.end());
+  std::vector<sim::TissueRow> rows;
+  for (std::size_t i = 0; i < k; ++i) {
+    for (int d = 0; d < 3; ++d) {
+      sim::TissueRow r;
+      r.node = {near[i].second, -1, -1};
+      r.weight = {1.0, 0.0, 0.0};
+      r.dir = Eigen::Vector3d::Unit(d);
+      rows.push_back(r);
+    }
+  }
+  const int m = static_cast<int>(rows.size());
+  Eigen::MatrixXd w_exact = Eigen::MatrixXd::Zero(m, m);
+  sim.compliance(0)->addW(rows, w_exact);   // the run's own (exact) model, current factor
+  if (models.empty()) {
+    sim::ComplianceOptions co;
+    co.h_s = cfg.h_s;
+    co.cache_dir = o.cache_dir;
+    co.cache_name = fmt::format("{}_h{:.3f}ms", cfg.mesh, 1e3 * cfg.h_s);
+    co.show_progress = false;
+    for (const auto kind : {sim::ComplianceKind::kWarped, sim::ComplianceKind::kRest,
+                            sim::ComplianceKind::kUncoupled}) {
+      models.push_back(sim::makeCompliance(kind, body, co));
+    }
+  }
+  for (auto& model : models) {
+    model->update(body);
+    Eigen::MatrixXd w = Eigen::MatrixXd::Zero(m, m);
+    model->addW(rows, w);
+    run.w_error[complianceName(model->kind())].push_back((w - w_exact).norm() /
+                                                         w_exact.norm());
+  }
+}
+
 SimRun runSim(const Options& o, const sim::SceneSpec& base, const SimConfig& cfg,
-              double duration_s) {
+              double duration_s, bool probe_w = false) {
   const sim::SceneSpec spec =
       configure(o, base, cfg.mesh, cfg.h_s, cfg.compliance, cfg.tol, cfg.sweeps);
   SimRun run;
@@ -207,6 +258,9 @@ SimRun runSim(const Options& o, const sim::SceneSpec& base, const SimConfig& cfg
   run.tets = static_cast<int>(sim.tissue(0).mesh().tets.size());
   run.nodes = sim.tissue(0).nodeCount();
   const long steps = std::lround(duration_s / cfg.h_s);
+  std::vector<std::unique_ptr<sim::TissueCompliance>> probe_models;
+  double probe_s = 0.0;
+  const long probe_every = std::max(1L, std::lround(0.1 / cfg.h_s));
   const auto t_run = SteadyClock::now();
   for (long k = 0; k < steps; ++k) {
     sim.setDeviceTarget(sim.scriptedTarget(sim.time()));
@@ -228,9 +282,14 @@ SimRun runSim(const Options& o, const sim::SceneSpec& base, const SimConfig& cfg
       run.nsgs_error.push_back(r.nsgs.error);
       run.contacts.push_back(r.contacts);
       run.sweeps.push_back(r.nsgs.sweeps);
+      if (probe_w && k % probe_every == 0) {
+        const auto tp = SteadyClock::now();
+        probeCompliance(o, sim, cfg, probe_models, run);
+        probe_s += secondsSince(tp);
+      }
     }
   }
-  run.wall_s = secondsSince(t_run);
+  run.wall_s = secondsSince(t_run) - probe_s;
   return run;
 }
 
@@ -428,8 +487,10 @@ std::vector<HapticRow> runHaptic(const Options& o, const HapticPlan& plan) {
     sim::Simulation sim(configure(o, base, plan.mesh, h_scene, scene_kind,
                                   base.solver.nsgs_tolerance, base.solver.nsgs_max_sweeps));
     const long steps = std::lround(plan.t0_s / h_scene);
+    Tremor still;
+    still.amp_m = 0.0;
     for (long k = 0; k < steps; ++k) {
-      sim.setDeviceTarget(deviceAt(sim, Tremor{0.0, 1.0, {}}, sim.time()));
+      sim.setDeviceTarget(deviceAt(sim, still, sim.time()));
       sim.step();
     }
     for (int i = 0; i < sim.tissueCount(); ++i) {
@@ -639,7 +700,8 @@ void writeHapticCsv(const fs::path& file, const std::vector<HapticRow>& rows,
         << ',' << r.sweeps << ',' << (is_ref ? 1 : 0) << ',' << compared << ','
         << fmtG(den > 0.0 ? std::sqrt(num / den) : 0.0) << ',' << fmtG(peak) << ','
         << fmtG(ref_peak) << ',' << fmtG(1e3 * pen) << ',' << fmtG(comp) << ','
-        << fmtG(median(resid)) << ',' << fmtG(1e3 * work_ref) << ',' << fmtG(1e3 * (work - work_ref))
+        << fmtG(median(resid)) << ',' << fmtG(1e3 * work_ref) << ','
+        << fmtG(1e3 * (work - work_ref))
         << ',' << fmtG(1e6 * median(times)) << ',' << fmtG(median(sweeps)) << '\n';
   }
 }
@@ -667,14 +729,15 @@ struct SimPlan {
 class RunCache {
  public:
   RunCache(const Options& o, double duration_s) : o_(o), duration_s_(duration_s) {}
-  const SimRun& get(const sim::SceneSpec& base, const SimConfig& cfg, double duration_s = 0.0) {
+  const SimRun& get(const sim::SceneSpec& base, const SimConfig& cfg, double duration_s = 0.0,
+                    bool probe_w = false) {
     auto it = runs_.find(cfg.key());
     if (it != runs_.end()) return *it->second;
     fmt::print("  run {:<10} h {:>5.1f} ms  {:<9}  tol {:.0e}  sweeps {:>5} ... ", cfg.mesh,
                1e3 * cfg.h_s, complianceName(cfg.compliance), cfg.tol, cfg.sweeps);
     std::fflush(stdout);
     auto run = std::make_unique<SimRun>(
-        runSim(o_, base, cfg, duration_s > 0.0 ? duration_s : duration_s_));
+        runSim(o_, base, cfg, duration_s > 0.0 ? duration_s : duration_s_, probe_w));
     fmt::print("{:.1f} s (set-up {:.1f} s), step median {:.2f} ms\n", run->wall_s, run->setup_s,
                1e3 * median(run->step_s));
     std::fflush(stdout);
@@ -721,13 +784,13 @@ int run(Options& o) {
                       sim::ComplianceKind::kRest, sim::ComplianceKind::kUncoupled};
     sp.tolerances = {1e-2, 1e-3, 1e-4, 1e-6, 1e-8};
     sp.budgets = {3, 10, 30, 100};
-    sp.time_steps_s = {0.005, 0.02};
+    sp.time_steps_s = {0.0025, 0.005, 0.02};
     hp.mesh = "liver2";
     hp.rates_hz = {500.0, 1000.0, 2000.0, 4000.0};
     hp.budgets = {0, 1, 3, 10, 40};
     hp.sim_h_s = {0.01, 0.02};
     hp.t0_s = 2.0;
-    hp.window_s = 1.5;
+    hp.window_s = 2.5;
   }
   if (o.duration_s > 0.0) sp.duration_s = o.duration_s;
   if (o.haptic_t0_s > 0.0) hp.t0_s = o.haptic_t0_s;
@@ -746,13 +809,15 @@ int run(Options& o) {
   const double scene_tol = main_base.solver.nsgs_tolerance;
   const int scene_sweeps = main_base.solver.nsgs_max_sweeps;
   const SimRun* main_ref = nullptr;
+  std::vector<const SimRun*> w_probes;
   for (const std::string& m : sp.meshes) {
     const sim::SceneSpec& base = bases.at(m);
     // liver_23k (opt-in): ~0.4 s per step here, so a shorter span and no second exact run
     const bool big = m == "liver_23k";
     const double dur = big ? o.duration_23k_s : 0.0;
     const SimRun& ref = cache.get(base, {m, h_main, sim::ComplianceKind::kExact, o.ref_tolerance,
-                                         o.ref_sweeps}, dur);
+                                         o.ref_sweeps}, dur, true);
+    w_probes.push_back(&ref);
     if (m == sp.main_mesh) main_ref = &ref;
     rows.push_back({"compliance", "reference", &ref, &ref});
     for (const sim::ComplianceKind k : sp.compliances) {
@@ -791,6 +856,18 @@ int run(Options& o) {
     }
   }
   writeSimCsv(o.out / "sim_accuracy.csv", rows, o.early_until_s);
+  {
+    std::ofstream w(o.out / "w_accuracy.csv");
+    w << "mesh,tets,compliance,samples,w_rel_err_median,w_rel_err_max\n";
+    for (const SimRun* r : w_probes) {
+      for (const auto& [name, v] : r->w_error) {
+        w << r->cfg.mesh << ',' << r->tets << ',' << name << ',' << v.size() << ','
+          << fmtG(median(v)) << ',' << fmtG(v.empty() ? 0.0 : *std::max_element(v.begin(),
+                                                                                 v.end()))
+          << '\n';
+      }
+    }
+  }
   {
     std::ofstream ts(o.out / "sim_timeseries.csv");
     ts << "series,t_s,fx_n,fy_n,fz_n\n";
@@ -900,7 +977,7 @@ int main(int argc, char** argv) {
   app.add_option("--haptic-t0", o.haptic_t0_s, "Start of the haptic window [s] (default: 2 full, "
                                                "2.6 quick)");
   app.add_option("--haptic-window", o.haptic_window_s,
-                 "Length of the haptic window [s] (default: 1.5 full, 0.3 quick)");
+                 "Length of the haptic window [s] (default: 2.5 full, 0.3 quick)");
   app.add_option("--latency-steps", o.latency_steps,
                  "Simulation periods between a step's device sample and its snapshot's use")
       ->capture_default_str()

@@ -5,6 +5,8 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/Cholesky>
+#include <Eigen/Core>
 #include <chrono>
 #include <cmath>
 #include <thread>
@@ -26,7 +28,7 @@ TEST(JitterSyntheticProblem, SymmetricSolvedAndMixedGaps) {
   int penetrating = 0, open = 0;
   for (int i = 0; i < m; ++i) {
     EXPECT_GT(p.W[i * m + i], 0.0);
-    for (int j = 0; j < i; ++j) EXPECT_NEAR(p.W[i * m + j], p.W[j * m + i], 1e-18);
+    for (int j = 0; j < i; ++j) ASSERT_EQ(p.W[i * m + j], p.W[j * m + i]);  // exactly
   }
   for (int c = 0; c < p.contacts; ++c) {
     (p.delta_free[3 * c] < 0.0 ? penetrating : open) += 1;
@@ -35,6 +37,12 @@ TEST(JitterSyntheticProblem, SymmetricSolvedAndMixedGaps) {
   }
   EXPECT_GT(penetrating, 0);
   EXPECT_GT(open, 0);
+  // positive definite: a Cholesky factorisation exists
+  {
+    Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>> W(
+        p.W.data(), m, m);
+    EXPECT_EQ(Eigen::LLT<Eigen::MatrixXd>(W).info(), Eigen::Success);
+  }
   // f is a solution of the published problem (natural-map error at the solver's tolerance)
   shared::ContactProblemView v;
   v.contacts = p.contacts;

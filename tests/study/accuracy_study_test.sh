@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # ctest `study`: runs scripts/accuracy-study --quick into a temporary directory and checks its
 # outputs: every file present and non-empty, reference rows with zero error, every error finite,
-# the grasp producing contact forces, and the exact compliance close to its own reference.
+# the grasp producing contact forces, the exact compliance close to its own reference, and the
+# W error ordering warped < rest < uncoupled.
 # Usage: accuracy_study_test.sh TACTUS_ACCURACY_BINARY REPO_ROOT
 set -euo pipefail
 bin="$1"
@@ -11,7 +12,7 @@ trap 'rm -rf "$tmp"' EXIT
 TACTUS_ACCURACY_BIN="$bin" "$root/scripts/accuracy-study" --quick --out "$tmp/out" \
   --cache-dir "$tmp/cache"
 for f in sim_accuracy.csv haptic_accuracy.csv sim_timeseries.csv haptic_timeseries.csv meta.csv \
-         accuracy.md accuracy_pareto.png accuracy_forces.png; do
+         w_accuracy.csv accuracy.md accuracy_pareto.png accuracy_forces.png; do
   if [[ ! -s "$tmp/out/$f" ]]; then
     echo "FAIL: $f is missing or empty" >&2
     exit 1
@@ -50,6 +51,10 @@ for name, table, cols in [("sim", sim, err_cols + ["energy_dev_rel", "nsgs_error
 exact = [r for r in sim if r["study"] == "compliance" and r["label"] == "exact"]
 if not exact or float(exact[0]["force_rel_rms"]) > 0.01:
     fails.append("exact compliance at tolerance 1e-6 is not within 1 % of its reference")
+# the paper's claim (eq. 12): warping C0 by the nodal rotations beats C0 alone
+w = {r["compliance"]: float(r["w_rel_err_median"]) for r in rows("w_accuracy.csv")}
+if not all(math.isfinite(v) for v in w.values()) or not (w["warped"] < w["rest"] < w["uncoupled"]):
+    fails.append(f"W error ordering warped < rest < uncoupled violated: {w}")
 if any(int(r["ticks_compared"]) <= 0 for r in hap):
     fails.append("haptic: a row compared no ticks")
 md = open(os.path.join(d, "accuracy.md")).read()

@@ -444,8 +444,9 @@ const std::vector<Contact>& Collision::detect(std::span<const ToolFeature> featu
   for (const ToolFeature& f : features) {
     if (f.shape == FeatureShape::kCapsule) {
       if (s.options.vertex_vs_capsule) s.vertexCapsule(f, tool_pose);
-    } else if (s.options.sphere_vs_triangle) {
-      s.sphereTriangles(f, tool_pose);
+    } else {
+      if (s.options.sphere_vs_triangle) s.sphereTriangles(f, tool_pose);
+      if (f.query_vertices && s.options.vertex_vs_capsule) s.vertexCapsule(f, tool_pose);
     }
   }
   // cap: keep the smallest gaps (ties: smaller id), count the rest

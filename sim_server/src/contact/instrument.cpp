@@ -160,6 +160,7 @@ void Instrument::updateFeatures() {
     tip.a_m = o;
     tip.b_m = o;
     tip.radius_m = spec_.tip_radius_m;
+    tip.query_vertices = true;
     if (features_.size() > 1) {
       ToolFeature& shaft = features_[1];
       shaft.id = 1;

@@ -93,10 +93,17 @@ double hertzForce(double d) {
 
 struct HertzResult {
   std::vector<double> d_m, f_n;
+  std::vector<double> min_gap_m;   ///< geometric, by a fresh collision query
+  std::vector<int> contacts;
   int nodes = 0;
 };
 
-HertzResult pressSphere(double h_cell, const std::vector<double>& depths) {
+// The sphere: the probe's tip sphere (sphere/triangle contacts), or, with `vertex_contacts`, the
+// far end cap of its shaft (capsule/vertex contacts: one contact per surface node under it),
+// obtained by turning the probe upside down so that the shaft points down from the tool origin.
+HertzResult pressSphere(double h_cell, const std::vector<double>& depths, bool vertex_contacts) {
+  const bool flip = vertex_contacts;
+  const double shaft = vertex_contacts ? 0.005 : 0.0;
   const auto dir = std::filesystem::temp_directory_path() /
                    ("tactus_hertz_" + std::to_string(::getpid()));
   std::filesystem::create_directories(dir);
@@ -121,10 +128,10 @@ HertzResult pressSphere(double h_cell, const std::vector<double>& depths) {
                 " rotational_damping: 0}\n"
                 "  friction: 0\n"
                 "  alarm_distance: 0.0002\n"
-                "  probe: {tip_radius: %g}\n"
-                "  initial_pose: {position: [0, 0, %g]}\n"
+                "  probe: {tip_radius: %g, shaft_length: %g}\n"
+                "  initial_pose: {position: [0, 0, %g], rotation_deg: [%g, 0, 0]}\n"
                 "solver: {nsgs_tolerance: 1.0e-8, nsgs_max_sweeps: 2000, max_contacts: 400}\n",
-                kE, kNu, -depth + 1e-6, kR, kR + 1e-4);
+                kE, kNu, -depth + 1e-6, kR, shaft, kR + 1e-4 + shaft, flip ? 180.0 : 0.0);
   Simulation sim(parseScene(yaml, "hertz.yaml", dir));
   std::filesystem::remove_all(dir);
   HertzResult out;
@@ -139,7 +146,7 @@ HertzResult pressSphere(double h_cell, const std::vector<double>& depths) {
   for (double d : depths) {
     // ramp to the depth in a few steps, then hold until the force is steady
     const double z_from = target.pose.pos_m.z();
-    const double z_to = kR - d;
+    const double z_to = kR - d + shaft;
     for (int k = 1; k <= 5; ++k) {
       target.pose.pos_m.z() = z_from + (z_to - z_from) * k / 5.0;
       sim.setDeviceTarget(target);
@@ -150,10 +157,12 @@ HertzResult pressSphere(double h_cell, const std::vector<double>& depths) {
       sim.setDeviceTarget(target);
       EXPECT_TRUE(sim.step().finite);
       const double f = force();
-      if (std::abs(f - last) < 2e-4 * std::abs(f) && k > 3) break;
+      if (std::abs(f - last) < 5e-4 * std::abs(f) && k > 2) break;
       last = f;
     }
-    out.d_m.push_back(kR - sim.instrument()->pose().pos_m.z());
+    out.contacts.push_back(sim.lastProblem().contacts);
+    out.min_gap_m.push_back(sim.geometricMinGap());
+    out.d_m.push_back(kR + shaft - sim.instrument()->pose().pos_m.z());
     out.f_n.push_back(force());
   }
   return out;
@@ -176,17 +185,19 @@ double fittedExponent(const HertzResult& r) {
 
 TEST(HertzTest, ForceGrowsLikeTheIndentationToTheThreeHalvesAndConvergesWithRefinement) {
   const std::vector<double> depths = {0.02 * kR, 0.035 * kR, 0.05 * kR};
-  const std::vector<double> cells = {0.8e-3, 0.55e-3, 0.4e-3};
+  const std::vector<double> cells = {1.1e-3, 0.85e-3, 0.65e-3};
   std::vector<double> errors;
   std::vector<double> exponents;
   for (double h : cells) {
-    const HertzResult r = pressSphere(h, depths);
+    const HertzResult r = pressSphere(h, depths, /*vertex_contacts=*/true);
     double worst = 0.0;
     for (std::size_t i = 0; i < r.d_m.size(); ++i) {
       const double rel = r.f_n[i] / hertzForce(r.d_m[i]) - 1.0;
       std::printf("[hertz] cell %.2f mm (%d nodes): d = %.4f mm  F = %.5g N  Hertz %.5g N  "
-                  "error %+.1f%%\n",
-                  1e3 * h, r.nodes, 1e3 * r.d_m[i], r.f_n[i], hertzForce(r.d_m[i]), 100 * rel);
+                  "error %+.1f%%  contacts %d  min gap %.2g m\n",
+                  1e3 * h, r.nodes, 1e3 * r.d_m[i], r.f_n[i], hertzForce(r.d_m[i]), 100 * rel,
+                  r.contacts[i], r.min_gap_m[i]);
+      EXPECT_GT(r.min_gap_m[i], -0.02 * r.d_m[i]) << "the sphere sank into the surface";
       worst = std::max(worst, std::abs(rel));
     }
     errors.push_back(worst);
@@ -199,6 +210,22 @@ TEST(HertzTest, ForceGrowsLikeTheIndentationToTheThreeHalvesAndConvergesWithRefi
   // refinement improves the force (finest better than coarsest, never much worse step to step)
   EXPECT_LT(errors.back(), errors.front());
   EXPECT_LE(std::abs(exponents.back() - 1.5), std::abs(exponents.front() - 1.5) + 0.02);
+}
+
+// The same press with the probe's tip sphere itself (the brief's "large tip radius"): its
+// contacts are sphere/surface-triangle pairs, one per local minimum of the distance, so a sphere
+// flattening a fine surface gets a handful of contacts and the nodes between them sink into it
+// (measured on the 0.8 mm mesh at d = 0.5 mm: 6 contacts, 0.33 mm geometric penetration, force
+// 71% below Hertz, exponent 1.05). Kept as the reproduction of that collision limitation.
+TEST(HertzTest, TipSphereContactsKeepTheSurfaceOutOfTheSphere) {
+  const HertzResult r = pressSphere(0.8e-3, {0.05 * kR}, /*vertex_contacts=*/false);
+  const double rel = r.f_n[0] / hertzForce(r.d_m[0]) - 1.0;
+  std::printf("[hertz] tip sphere, cell 0.80 mm: d = %.4f mm  F = %.5g N  Hertz %.5g N  error "
+              "%+.1f%%  contacts %d  min gap %.2g m\n",
+              1e3 * r.d_m[0], r.f_n[0], hertzForce(r.d_m[0]), 100 * rel, r.contacts[0],
+              r.min_gap_m[0]);
+  EXPECT_GT(r.min_gap_m[0], -0.1 * r.d_m[0]) << "the sphere sank into the surface";
+  EXPECT_LT(std::abs(rel), 0.15);
 }
 
 }  // namespace

@@ -20,6 +20,9 @@
 //     angle-weighted vertex normal) is skipped (far side of a thin part, or pushed through the
 //     axis); with skip_cap_a, vertices whose closest axis point is the end a are skipped.
 //     If v lies on the axis, n = the vertex normal.
+//     A sphere feature with query_vertices (the probe tip) is also queried as a degenerate
+//     capsule (a == b), so every surface vertex near it is held out, not only the local minima
+//     of (b).
 // (b) kSphereTriangle: tool sphere (centre c, radius r) vs surface triangles. Per sphere:
 //     1. candidates: triangles within r + contact_distance + alarm of c; closest point s
 //        (barycentric weights), its region (face interior, edge, vertex) and distance d.

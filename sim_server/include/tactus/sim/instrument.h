@@ -63,6 +63,10 @@ struct ToolFeature {
   Eigen::Vector3d b_m = Eigen::Vector3d::Zero();
   double radius_m = 0.0;
   bool skip_cap_a = false;           ///< capsule: ignore vertices whose closest axis point is a
+  /// sphere: also query tissue vertices against it (a sphere not covered by a capsule, such as
+  /// the probe tip: on a fine surface the triangle query's local minima leave the nodes between
+  /// them free to sink into the sphere)
+  bool query_vertices = false;
 };
 
 /// PoseSpec (scene file) -> Pose.
