@@ -28,7 +28,10 @@ while [[ $# -gt 0 ]]; do
     *) echo "fuzz.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
   esac
 done
-[[ "$seconds" =~ ^[0-9]+$ && "$seconds" -gt 0 ]] || { echo "fuzz.sh: --seconds needs a positive integer" >&2; exit 2; }
+if ! [[ "$seconds" =~ ^[0-9]+$ && "$seconds" -gt 0 ]]; then
+  echo "fuzz.sh: --seconds needs a positive integer" >&2
+  exit 2
+fi
 
 parsers=(mesh scene trajectory fclib compliance_cache)
 if [[ -n "$only" ]]; then IFS=, read -r -a parsers <<< "$only"; fi
@@ -87,7 +90,8 @@ for p in "${parsers[@]}"; do
     -artifact_prefix="$artifacts/" >"$log" 2>&1
   rc=$?
   set -e
-  runs=$(grep -Eo 'stat::number_of_executed_units: *[0-9]+' "$log" | grep -Eo '[0-9]+$' | tail -1 || true)
+  runs=$(grep -Eo 'stat::number_of_executed_units: *[0-9]+' "$log" | grep -Eo '[0-9]+$' |
+         tail -1 || true)
   [[ -z "$runs" ]] && runs=$(grep -Eo '^#[0-9]+' "$log" | tail -1 | tr -d '#' || true)
   crashes=("$artifacts"/*)
   if [[ -e "${crashes[0]}" ]]; then
@@ -97,7 +101,8 @@ for p in "${parsers[@]}"; do
       cp "$c" "$dest/"
       echo "fuzz.sh: $p: FOUND $(basename "$c") -> tests/data/fuzz_regressions/$p/"
     done
-    grep -E 'ERROR: |SUMMARY: |terminate called|what\(\)' "$log" | head -8 | sed "s/^/  $p: /" || true
+    grep -E 'ERROR: |SUMMARY: |terminate called|what\(\)' "$log" | head -8 |
+      sed "s/^/  $p: /" || true
     found=1
     summary+=("$p: ${runs:-?} executions, FOUND ${#crashes[@]} (rc $rc)")
   elif [[ $rc -ne 0 ]]; then

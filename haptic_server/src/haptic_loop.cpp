@@ -68,7 +68,8 @@ HapticLink::HapticLink(shared::Segment&& s)
       stats(segment.statsWriter()),
       workspace(segment.capacity().max_rows, segment.capacity().max_contacts),
       delta_free(static_cast<std::size_t>(segment.capacity().max_rows), 0.0),
-      f(static_cast<std::size_t>(segment.capacity().max_rows), 0.0) {}
+      f(static_cast<std::size_t>(segment.capacity().max_rows), 0.0),
+      last_delta_free(static_cast<std::size_t>(segment.capacity().max_rows), 0.0) {}
 
 HapticLoop::HapticLoop(device::Device& device, const HapticSettings& settings)
     : device_(device), settings_(settings) {}
@@ -123,8 +124,17 @@ void HapticLoop::solveLocalModel(HapticLink& link, const shared::SnapshotView& s
   ns.time_budget_ns = settings_.solve_budget_ns;
   // the simulation publishes an exactly symmetric W (see pipeline.cpp)
   ns.coupling = shared::NsgsCoupling::kSymmetricRowUpdate;
+  // same snapshot as the last solve: W and f are unchanged, so W f + delta_free only shifts by
+  // the change of delta_free (saves a pass over W)
+  if (link.delta_seq == hdr.seq) {
+    double* delta = workspace.delta.data();
+    for (int r = 0; r < m; ++r) delta[r] += delta_free[r] - link.last_delta_free[r];
+    ns.delta_is_current = true;
+  }
   const shared::NsgsResult res =
       shared::solveNsgs(snap.problem(delta_free.data()), ns, workspace, f.data());
+  link.delta_seq = res.status == shared::NsgsStatus::kEmpty ? 0 : hdr.seq;
+  std::copy_n(delta_free.begin(), m, link.last_delta_free.begin());
   out.sweeps = res.sweeps;
   out.residual = res.error;
   out.solve_ns = res.elapsed_ns;

@@ -435,7 +435,13 @@ NsgsResult solveNsgs(const ContactProblemView& problem, const NsgsSettings& sett
       return fail(NsgsStatus::kNonFinite);
     }
   }
-  if (!std::isfinite(computeDelta(p, f, delta)) || !std::isfinite(q2)) {
+  double delta2 = 0.0;
+  if (settings.delta_is_current) {
+    for (int j = 0; j < m; ++j) delta2 += delta[j] * delta[j];
+  } else {
+    delta2 = computeDelta(p, f, delta);
+  }
+  if (!std::isfinite(delta2) || !std::isfinite(q2)) {
     return fail(NsgsStatus::kNonFinite);
   }
 

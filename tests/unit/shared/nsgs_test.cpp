@@ -529,6 +529,33 @@ FclibProblem boxStacks() {
   return readFclibText(kFclibDir / "problems/Box_Stacks-i0122-82-5.local.fc3d.txt");
 }
 
+TEST(NsgsSettingsTest, ACurrentDeltaSkipsTheEntryPassAndGivesTheSameSolution) {
+  // the haptic loop's pattern: solve, shift delta_free, solve again with the exit delta shifted
+  FclibProblem p = boxStacks();
+  NsgsWorkspace ws(p.rows(), p.contacts);
+  NsgsSettings s;
+  s.tolerance = 1e-10;
+  s.max_sweeps = 2000;
+  std::vector<double> f(p.rows(), 0.0);
+  ASSERT_EQ(solveNsgs(p.view(), s, ws, f.data()).status, NsgsStatus::kConverged);
+  std::vector<double> shifted = p.q;
+  for (std::size_t j = 0; j < shifted.size(); ++j) shifted[j] += 1e-3 * std::sin(0.7 * j);
+  // reference: a fresh solve from the same warm start
+  std::vector<double> f_ref = f;
+  NsgsWorkspace ws_ref(p.rows(), p.contacts);
+  ContactProblemView v = p.view();
+  v.delta_free = shifted.data();
+  ASSERT_EQ(solveNsgs(v, s, ws_ref, f_ref.data()).status, NsgsStatus::kConverged);
+  // incremental: delta += shift, no entry pass
+  for (std::size_t j = 0; j < shifted.size(); ++j) ws.delta[j] += shifted[j] - p.q[j];
+  s.delta_is_current = true;
+  ASSERT_EQ(solveNsgs(v, s, ws, f.data()).status, NsgsStatus::kConverged);
+  for (std::size_t j = 0; j < f.size(); ++j) EXPECT_NEAR(f[j], f_ref[j], 1e-9);
+  EXPECT_LE(naturalMapError(v, f.data()), 1e-10);
+  // a wrong promise is not silently "converged" on the true problem: the exit error is that of
+  // the delta it was given, so callers must keep the invariant (documented)
+}
+
 TEST(NsgsSettingsTest, MaxSweepsTimeBudgetAndCheckEvery) {
   const FclibProblem p = boxStacks();
   NsgsWorkspace ws(p.rows(), p.contacts);

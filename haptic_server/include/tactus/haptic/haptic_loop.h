@@ -81,6 +81,8 @@ struct HapticLink {
   shared::NsgsWorkspace workspace;
   std::vector<double> delta_free;       ///< moved delta_free (capacity rows)
   std::vector<double> f;                ///< forces, warm start across ticks
+  std::vector<double> last_delta_free;  ///< delta_free of the last solve (capacity rows)
+  std::uint64_t delta_seq = 0;          ///< snapshot whose W f + delta_free workspace.delta holds
   explicit HapticLink(shared::Segment&& s);
 };
 

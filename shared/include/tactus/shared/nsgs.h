@@ -72,6 +72,10 @@ struct NsgsSettings {
   int check_every = 1;               ///< compute the error every k sweeps (kRowGather: one W pass)
   /// kSymmetricRowUpdate only when W is exactly symmetric (see NsgsCoupling)
   NsgsCoupling coupling = NsgsCoupling::kColumnUpdate;
+  /// The caller promises workspace.delta already holds W f + delta_free for the f passed in
+  /// (e.g. the previous exit's delta shifted by the change of delta_free, W unchanged): the entry
+  /// pass over W is skipped. The haptic loop uses it between ticks on the same snapshot.
+  bool delta_is_current = false;
 };
 
 /// kConverged: error <= tolerance. kMaxSweeps / kTimeBudget: stopped first (f is the last
