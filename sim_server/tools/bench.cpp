@@ -54,47 +54,8 @@ struct Series {
 // Writes the step's problem into the slot and publishes it, as sim_server's HapticLink does.
 void publishProblem(const sim::Simulation& sim, shared::SnapshotPublisher& pub, std::uint64_t seq,
                     double max_opening_rad) {
-  const sim::ContactProblemData& p = sim.lastProblem();
   shared::SnapshotWriter slot = pub.slot();
-  auto& h = slot.header();
-  int contacts = p.contacts;
-  int rows = p.rows;
-  if (!slot.setSize(rows, contacts)) {
-    contacts = 0;
-    rows = 0;
-    slot.setSize(0, 0);
-  }
-  h.seq = seq;
-  h.t_ns = shared::monotonicNs();
-  h.step = static_cast<std::uint64_t>(sim.stepIndex());
-  h.h_s = sim.spec().time_step_s;
-  h.flags = shared::kSnapshotValid | shared::kSnapshotHasJacobian;
-  auto put = [](shared::PoseSample& out, const shared::Pose& pose, double gripper) {
-    for (int i = 0; i < 3; ++i) out.pos_m[i] = pose.pos_m[i];
-    out.quat_wxyz = {pose.rot.w(), pose.rot.x(), pose.rot.y(), pose.rot.z()};
-    out.gripper_rad = gripper;
-  };
-  put(h.device_pose, p.device_pose, p.device_gripper * max_opening_rad);
-  put(h.tool_pose, p.tool_pose, p.device_gripper * max_opening_rad);
-  for (int c = 0; c <= contacts; ++c) slot.rowOffset()[c] = p.row_offset[c];
-  for (int c = 0; c < contacts; ++c) {
-    slot.contactId()[c] = p.contact_id[c];
-    slot.mu()[c] = p.mu[c];
-    for (int k = 0; k < 3; ++k) {
-      slot.contactPoint()[3 * c + k] = p.point_m[c][k];
-      slot.contactNormal()[3 * c + k] = p.normal[c][k];
-      slot.contactTangent()[6 * c + k] = p.tangent1[c][k];
-      slot.contactTangent()[6 * c + 3 + k] = p.tangent2[c][k];
-    }
-  }
-  const int ld = slot.ld();
-  for (int i = 0; i < rows; ++i) {
-    std::copy_n(p.W.data() + static_cast<std::ptrdiff_t>(i) * rows, rows,
-                slot.W() + static_cast<std::ptrdiff_t>(i) * ld);
-    slot.deltaFree()[i] = p.delta_free[i];
-    slot.f()[i] = p.f[i];
-    for (int k = 0; k < 6; ++k) slot.J()[6 * i + k] = p.J(i, k);
-  }
+  sim::writeSnapshot(sim, max_opening_rad, seq, shared::monotonicNs(), 0, slot);
   pub.publish();
 }
 
