@@ -154,7 +154,6 @@ void FemBody::Impl::init(const TetMesh& m, const FemMaterial& mat,
   grad.resize(ne);
   volume.resize(ne);
   rotation.assign(ne, Eigen::Matrix3d::Identity());
-  double mean_edge = 0.0;
   for (int e = 0; e < ne; ++e) {
     const auto& t = mesh.tets[e];
     for (int k = 0; k < 4; ++k)
@@ -167,7 +166,6 @@ void FemBody::Impl::init(const TetMesh& m, const FemMaterial& mat,
         rest.segment<3>(3 * t[3]) - rest.segment<3>(3 * t[0]);
     const double det = dm.determinant();
     const double edge = dm.colwise().norm().mean();
-    mean_edge += edge;
     if (!(std::abs(det) > 1e-12 * edge * edge * edge))
       throw NumericalError(where + "tet " + std::to_string(e) +
                            " is degenerate (zero volume): fix the mesh");
