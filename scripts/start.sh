@@ -81,7 +81,8 @@ if [[ $haptic -eq 1 ]]; then
   if [[ "$device" == "simulated" && ${#device_opts[@]} -eq 0 ]]; then
     # the simulated hand follows the scene's scripted trajectory
     "$build/sim_server/sim_server" "$scene" --export-trajectory "$run_dir/trajectory.csv" \
-      >>"$run_dir/sim_export.log" 2>&1 && device_opts=(--device-option "trajectory=$run_dir/trajectory.csv")
+      >>"$run_dir/sim_export.log" 2>&1 &&
+      device_opts=(--device-option "trajectory=$run_dir/trajectory.csv" --device-option loop=true)
   fi
   "$build/haptic_server/haptic_server" --segment "$segment" --device "$device" \
     "${device_opts[@]}" --core "$core" --rate "$rate" >"$run_dir/haptic.log" 2>&1 &
