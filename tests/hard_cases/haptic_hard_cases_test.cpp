@@ -15,6 +15,7 @@
 #include <limits>
 #include <optional>
 
+#include "../support/scripted_device.h"
 #include "hard_case_support.h"
 #include "tactus/haptic/haptic_loop.h"
 #include "tactus/shared/segment.h"
@@ -22,25 +23,7 @@
 namespace tactus::hard_cases {
 namespace {
 
-// A device whose pose the test sets (position, velocity, orientation), with faults on request.
-class ScriptedDevice : public device::Device {
- public:
-  device::DeviceInfo info() const override { return {"scripted", 20.0, 1e4, 0.2, true, true}; }
-  void open() override {}
-  void calibrate() override {}
-  void enableForces(bool) override {}
-  void close() noexcept override {}
-  device::IoStatus read(device::DeviceState* out) noexcept override {
-    *out = state;
-    return device::IoStatus::kOk;
-  }
-  device::IoStatus write(const device::DeviceCommand& cmd) noexcept override {
-    last = cmd;
-    return device::IoStatus::kOk;
-  }
-  device::DeviceState state{};
-  device::DeviceCommand last{};
-};
+using test::ScriptedDevice;
 
 constexpr std::int64_t kTickNs = 1'000'000;
 

@@ -8,6 +8,7 @@
 #include <string>
 
 #include "../../support/alloc_counter.h"
+#include "../../support/scripted_device.h"
 #include "tactus/haptic/haptic_loop.h"
 #include "tactus/haptic/supervisor.h"
 #include "tactus/shared/clock.h"
@@ -15,27 +16,7 @@
 namespace tactus::haptic {
 namespace {
 
-// A device whose pose the test sets; it records the last command.
-class ScriptedDevice : public device::Device {
- public:
-  device::DeviceInfo info() const override { return {"scripted", 20.0, 1e4, 0.2, true, true}; }
-  void open() override {}
-  void calibrate() override {}
-  void enableForces(bool) override {}
-  void close() noexcept override {}
-  device::IoStatus read(device::DeviceState* out) noexcept override {
-    if (fault) return device::IoStatus::kFault;
-    *out = state;
-    return device::IoStatus::kOk;
-  }
-  device::IoStatus write(const device::DeviceCommand& cmd) noexcept override {
-    last = cmd;
-    return device::IoStatus::kOk;
-  }
-  device::DeviceState state{};
-  device::DeviceCommand last{};
-  bool fault = false;
-};
+using test::ScriptedDevice;
 
 // One frictionless contact below the tool along +z: W = w, delta_free = gap + J dx with
 // J = [0 0 1 0 0 0] (moving the device up opens the gap).
