@@ -138,8 +138,7 @@ void HapticLoop::solveLocalModel(HapticLink& link, const shared::SnapshotView& s
   out.sweeps = res.sweeps;
   out.residual = res.error;
   out.solve_ns = res.elapsed_ns;
-  if (res.status == shared::NsgsStatus::kNonFinite) {
-    std::fill(f.begin(), f.begin() + m, 0.0);
+  if (res.status == shared::NsgsStatus::kNonFinite) {   // NSGS has zeroed f
     counters_.non_finite_input.fetch_add(1, std::memory_order_relaxed);
     return;
   }

@@ -381,9 +381,8 @@ void Simulation::Impl::solveContacts(StepReport& report) {
     for (int k = 0; k < nr; ++k) p.f[r0 + k] = it->second[k];
   }
   if (rows > 0) {
-    report.nsgs = shared::solveNsgs(p.view(), nsgs, workspace, p.f.data());
+    report.nsgs = shared::solveNsgs(p.view(), nsgs, workspace, p.f.data());  // zeroes f on NaN
     ++counters.solves;
-    if (report.nsgs.status == shared::NsgsStatus::kNonFinite) p.f.setZero();
   } else {
     report.nsgs = shared::NsgsResult{};
   }
@@ -409,8 +408,14 @@ void Simulation::Impl::solveContacts(StepReport& report) {
     const shared::Vector6d wrench = h_tool.transpose() * p.f;
     last_wrench = wrench;
     instrument->applyCorrection(wrench);
-    // linearised gaps after the correction: delta = W f + delta_free
-    Eigen::VectorXd delta = p.W * p.f + p.delta_free;
+    // linearised gaps after the correction: delta = W f + delta_free, left by NSGS on exit
+    // (not when it refused the problem as larger than its workspace: then computed here)
+    Eigen::VectorXd unsolved_delta;
+    const double* delta = workspace.delta.data();
+    if (report.nsgs.status == shared::NsgsStatus::kEmpty) {
+      unsolved_delta = p.W * p.f + p.delta_free;
+      delta = unsolved_delta.data();
+    }
     double pen = 0.0;
     double comp = 0.0;
     for (int c = 0; c < contacts; ++c) {
