@@ -143,6 +143,19 @@ struct Collision::Impl {
   std::vector<Candidate> candidates;
   std::vector<Contact> contacts;
   CollisionStats stats;
+  // side memory: the normal of each sphere feature's closest contact at the previous detect()
+  struct FeatureSide {
+    int feature;
+    Eigen::Vector3d n;
+  };
+  std::vector<FeatureSide> side_prev, side_next;
+
+  const Eigen::Vector3d* previousSide(int feature) const {
+    for (const FeatureSide& fs : side_prev) {
+      if (fs.feature == feature) return &fs.n;
+    }
+    return nullptr;
+  }
 
   Eigen::Vector3d pos(int node) const { return q.segment<3>(3 * node); }
 
@@ -323,9 +336,24 @@ struct Collision::Impl {
       return a.dist < b.dist || (a.dist == b.dist && a.tri < b.tri);
     });
     // 3. inside/outside from the nearest candidate's pseudo-normal
-    const Eigen::Vector3d n0 = pseudoNormal(candidates.front());
-    const bool inside = (c - candidates.front().cp.p).dot(n0) < 0.0;
+    Eigen::Vector3d n0 = pseudoNormal(candidates.front());
+    bool inside = (c - candidates.front().cp.p).dot(n0) < 0.0;
+    // Inside a thin part the nearest face may be the far one, and a surface folded under the
+    // tool may put a flipped face nearest: keep the side the sphere touched at the previous
+    // query (the nearest candidate facing that way decides inside/outside).
+    const Eigen::Vector3d* prev = previousSide(f.id);
+    if (inside && prev != nullptr && n0.dot(*prev) < 0.0) {
+      for (const Candidate& cand : candidates) {
+        const Eigen::Vector3d pn = pseudoNormal(cand);
+        if (pn.dot(*prev) > 0.0) {
+          n0 = pn;
+          inside = (c - cand.cp.p).dot(pn) < 0.0;
+          break;
+        }
+      }
+    }
     const Eigen::Vector3d n0_unit = n0.normalized();
+    const std::size_t first_contact = contacts.size();
     ++stamp;
     for (const Candidate& cand : candidates) {
       const auto& tri = surface.triangles[cand.tri];
@@ -365,6 +393,12 @@ struct Collision::Impl {
       emit(ContactKind::kSphereTriangle, f, cand.tri, tri, cand.cp.bary, cand.cp.p,
            c - f.radius_m * n, n, gap, tool_pose);
     }
+    // remember the side of the closest contact for the next query
+    const Contact* closest = nullptr;
+    for (std::size_t i = first_contact; i < contacts.size(); ++i) {
+      if (closest == nullptr || contacts[i].gap_m < closest->gap_m) closest = &contacts[i];
+    }
+    if (closest != nullptr) side_next.push_back({f.id, closest->n});
   }
 };
 
@@ -411,6 +445,8 @@ Collision::Collision(const SurfaceMesh& surface, const Eigen::VectorXd& q,
   s.tri_tree.build(s.tri_boxes);
   s.vertex_tree.build(s.vertex_boxes);
   s.contacts.reserve(static_cast<std::size_t>(options.max_contacts) + 64);
+  s.side_prev.reserve(256);
+  s.side_next.reserve(256);
 }
 
 Collision::~Collision() = default;
@@ -441,6 +477,7 @@ const std::vector<Contact>& Collision::detect(std::span<const ToolFeature> featu
   Impl& s = *impl_;
   s.contacts.clear();
   s.stats.candidates = 0;
+  s.side_next.clear();
   for (const ToolFeature& f : features) {
     if (f.shape == FeatureShape::kCapsule) {
       if (s.options.vertex_vs_capsule) s.vertexCapsule(f, tool_pose);
@@ -449,6 +486,7 @@ const std::vector<Contact>& Collision::detect(std::span<const ToolFeature> featu
       if (f.query_vertices && s.options.vertex_vs_capsule) s.vertexCapsule(f, tool_pose);
     }
   }
+  std::swap(s.side_prev, s.side_next);
   // cap: keep the smallest gaps (ties: smaller id), count the rest
   const int found = static_cast<int>(s.contacts.size());
   s.stats.max_contacts_seen = std::max(s.stats.max_contacts_seen, found);

@@ -64,6 +64,8 @@ struct TissueState {
   int contact_begin = 0;                          ///< first global contact
   Eigen::VectorXd dq;                             ///< correction scratch
   Eigen::VectorXd q_begin;                        ///< positions at the start of the step
+  Eigen::VectorXd q_free, v_free;                 ///< after the free motion
+  const std::vector<Contact>* found = nullptr;    ///< contacts of the last detection
 };
 
 struct Simulation::Impl {
@@ -86,34 +88,16 @@ struct Simulation::Impl {
   Eigen::Matrix<double, 6, 1> last_wrench = Eigen::Matrix<double, 6, 1>::Zero();
   shared::Pose tool_begin;                        ///< god object pose at the start of the step
   bool target_rejected = false;                   ///< the last setDeviceTarget was non-finite
+  std::unique_ptr<Instrument> tool_free;          ///< god object after its free motion
+  Eigen::Matrix<double, Eigen::Dynamic, 6, Eigen::RowMajor> h_tool;   ///< H_tool, rows x 6
+  Eigen::MatrixXd w_tissue;                       ///< one tissue's block of W
 
   void buildTissues();
   void solveContacts(StepReport& report);
-  void addTangentialSlip(TissueState& ts, const std::vector<Contact>& found);
+  void detectContacts(StepReport& report);
+  void assembleProblem(StepReport& report, bool relinearise);
+  void solveAndCorrect(StepReport& report, bool restore_free);
 };
-
-// Friction rows: delta_free is the relative tangential displacement of the tool point with respect
-// to the tissue point over the free motion (the normal row's is the gap at the free positions).
-void Simulation::Impl::addTangentialSlip(TissueState& ts, const std::vector<Contact>& found) {
-  const Eigen::VectorXd& q = ts.body->positions();
-  const shared::Pose& tool_free = instrument->pose();
-  for (std::size_t c = 0; c < found.size(); ++c) {
-    const Contact& k = found[c];
-    const int r0 = ts.rows.row_offset[c];
-    if (ts.rows.row_offset[c + 1] - r0 != 3) continue;
-    Eigen::Vector3d tissue_disp = Eigen::Vector3d::Zero();
-    for (int j = 0; j < 3; ++j) {
-      const int n = k.nodes[j];
-      if (n < 0) continue;
-      tissue_disp += k.weights[j] * (q.segment<3>(3 * n) - ts.q_begin.segment<3>(3 * n));
-    }
-    const Eigen::Vector3d tool_disp = (tool_free.pos_m + tool_free.rot * k.tool_local_m) -
-                                      (tool_begin.pos_m + tool_begin.rot * k.tool_local_m);
-    const Eigen::Vector3d rel = tool_disp - tissue_disp;
-    ts.rows.delta_free[r0 + 1] = rel.dot(k.t1);
-    ts.rows.delta_free[r0 + 2] = rel.dot(k.t2);
-  }
-}
 
 void Simulation::Impl::buildTissues() {
   const Eigen::Vector3d* gravity = spec.gravity_mps2 ? &*spec.gravity_mps2 : nullptr;
@@ -290,31 +274,99 @@ DeviceTarget Simulation::scriptedTarget(double t_s) const {
 
 bool Simulation::hasInstrument() const { return impl_->instrument != nullptr; }
 
+void Simulation::Impl::detectContacts(StepReport& report) {
+  const auto t0 = Clock::now();
+  for (TissueState& ts : tissues) {
+    ts.collision->refit(ts.body->positions());
+    ts.found = &ts.collision->detect(*instrument);
+    ++counters.collision_queries;
+  }
+  report.times.collision_s += secondsSince(t0);
+}
+
 void Simulation::Impl::solveContacts(StepReport& report) {
+  const int passes = std::max(1, spec.solver.contact_iterations);
+  // the free state, which every pass corrects
+  for (TissueState& ts : tissues) {
+    ts.q_free = ts.body->positions();
+    ts.v_free = ts.body->velocities();
+  }
+  if (!tool_free) {
+    tool_free = std::make_unique<Instrument>(*instrument);
+  } else {
+    *tool_free = *instrument;
+  }
+  detectContacts(report);
+  for (int pass = 0;; ++pass) {
+    assembleProblem(report, pass > 0);
+    solveAndCorrect(report, pass > 0);
+    report.contact_passes = pass + 1;
+    if (passes == 1) break;
+    // the nonlinear gaps at the corrected state
+    detectContacts(report);
+    double min_gap = std::numeric_limits<double>::infinity();
+    for (const TissueState& ts : tissues) {
+      for (const Contact& c : *ts.found) min_gap = std::min(min_gap, c.gap_m);
+    }
+    report.geometric_penetration_m = std::isfinite(min_gap) ? std::max(0.0, -min_gap) : 0.0;
+    if (!(min_gap < -spec.solver.penetration_tolerance_m) || pass + 1 >= passes) break;
+  }
+}
+
+// Contact rows of every tissue from the contacts last detected, and W = sum H C H^T + H_tool C6
+// H_tool^T. delta_free is the gap at the free state: on the first pass the contacts were
+// detected there; on later passes they were detected at the corrected state and their gaps are
+// carried back to the free state along the rows (gap - H (x - x_free)). Friction rows: the
+// relative tangential displacement of the tool point over the free motion.
+void Simulation::Impl::assembleProblem(StepReport& report, bool relinearise) {
   const double h = spec.time_step_s;
   const double mu = spec.instrument.friction_mu;
   const shared::Pose& tool_pose = instrument->pose();
-
-  // collision against every tissue, rows per tissue
+  const shared::Pose& free_pose = tool_free->pose();
   auto t0 = Clock::now();
   int rows = 0;
   int contacts = 0;
   all_contacts.clear();
+  report.contacts_dropped = 0;
   for (TissueState& ts : tissues) {
-    ts.collision->refit(ts.body->positions());
-    const std::vector<Contact>& found = ts.collision->detect(*instrument);
+    const std::vector<Contact>& found = *ts.found;
     report.contacts_dropped += ts.collision->stats().overflow;
-    ++counters.collision_queries;
     buildContactRows(found, mu, tool_pose.pos_m, ts.rows);
-    if (mu > 0.0) addTangentialSlip(ts, found);
+    const Eigen::VectorXd& q = ts.body->positions();
+    for (std::size_t c = 0; c < found.size(); ++c) {
+      const Contact& k = found[c];
+      const int r0 = ts.rows.row_offset[c];
+      Eigen::Vector3d tissue_free = Eigen::Vector3d::Zero();
+      Eigen::Vector3d tissue_now = Eigen::Vector3d::Zero();
+      Eigen::Vector3d tissue_begin = Eigen::Vector3d::Zero();
+      for (int j = 0; j < 3; ++j) {
+        const int n = k.nodes[j];
+        if (n < 0) continue;
+        tissue_free += k.weights[j] * ts.q_free.segment<3>(3 * n);
+        tissue_now += k.weights[j] * q.segment<3>(3 * n);
+        tissue_begin += k.weights[j] * ts.q_begin.segment<3>(3 * n);
+      }
+      const Eigen::Vector3d tool_free_point = free_pose.pos_m + free_pose.rot * k.tool_local_m;
+      if (relinearise) {
+        const Eigen::Vector3d moved =
+            (k.tool_point_m - tool_free_point) - (tissue_now - tissue_free);
+        ts.rows.delta_free[r0] = k.gap_m - k.n.dot(moved);
+      }
+      if (ts.rows.row_offset[c + 1] - r0 == 3) {
+        const Eigen::Vector3d slip = (tool_free_point - (tool_begin.pos_m + tool_begin.rot *
+                                                                              k.tool_local_m)) -
+                                     (tissue_free - tissue_begin);
+        ts.rows.delta_free[r0 + 1] = slip.dot(k.t1);
+        ts.rows.delta_free[r0 + 2] = slip.dot(k.t2);
+      }
+    }
     ts.row_begin = rows;
     ts.contact_begin = contacts;
     rows += ts.rows.rows();
     contacts += static_cast<int>(found.size());
     all_contacts.insert(all_contacts.end(), found.begin(), found.end());
   }
-  // the scene's capacity is per scene: with several tissues keep it globally
-  report.times.collision_s = secondsSince(t0);
+  report.times.collision_s += secondsSince(t0);
 
   // assemble the problem: W = sum_tissue H C H^T + H_tool C6 H_tool^T
   t0 = Clock::now();
@@ -331,8 +383,7 @@ void Simulation::Impl::solveContacts(StepReport& report) {
   p.W.setZero(rows, rows);
   p.delta_free.resize(rows);
   p.J.resize(rows, 6);
-  Eigen::Matrix<double, Eigen::Dynamic, 6, Eigen::RowMajor> h_tool(rows, 6);
-  Eigen::MatrixXd w_tissue;
+  h_tool.resize(rows, 6);
   for (TissueState& ts : tissues) {
     const int m = ts.rows.rows();
     const int nc = static_cast<int>(ts.rows.row_offset.size()) - 1;
@@ -363,15 +414,22 @@ void Simulation::Impl::solveContacts(StepReport& report) {
         p.W(j, i) = w;
       }
     }
-    p.J.noalias() = h_tool * instrument->freeMotionSensitivity(h);
+    p.J.noalias() = h_tool * tool_free->freeMotionSensitivity(h);
   }
   if (mu > 0.0) counters.tangential_rows += rows - contacts;
   report.contacts = contacts;
   report.rows = rows;
   report.times.w_build_s += secondsSince(t0);
+}
 
-  // warm start by contact identity, then NSGS
-  t0 = Clock::now();
+// Warm start by contact identity, NSGS, then the constrained motion from the free state:
+// tissue dq = C H^T f (per model), tool dx = C6 H_tool^T f.
+void Simulation::Impl::solveAndCorrect(StepReport& report, bool restore_free) {
+  const double h = spec.time_step_s;
+  ContactProblemData& p = problem;
+  const int rows = p.rows;
+  const int contacts = p.contacts;
+  auto t0 = Clock::now();
   p.f.setZero(rows);
   for (int c = 0; c < contacts; ++c) {
     auto it = previous_f.find(p.contact_id[c]);
@@ -394,10 +452,18 @@ void Simulation::Impl::solveContacts(StepReport& report) {
     for (int k = 0; k < nr; ++k) fc[k] = p.f[r0 + k];
     previous_f.emplace(p.contact_id[c], fc);
   }
-  report.times.solve_s = secondsSince(t0);
+  report.times.solve_s += secondsSince(t0);
 
-  // constrained motion: tissue dq = C H^T f (per model), tool dx = C6 H_tool^T f
   t0 = Clock::now();
+  if (restore_free) {
+    for (TissueState& ts : tissues) {
+      ts.body->positions() = ts.q_free;
+      ts.body->velocities() = ts.v_free;
+    }
+    *instrument = *tool_free;
+  }
+  report.max_penetration_m = 0.0;
+  report.complementarity = 0.0;
   if (rows > 0) {
     for (TissueState& ts : tissues) {
       if (ts.rows.rows() == 0) continue;
@@ -428,7 +494,7 @@ void Simulation::Impl::solveContacts(StepReport& report) {
   } else {
     last_wrench.setZero();
   }
-  report.times.correction_s = secondsSince(t0);
+  report.times.correction_s += secondsSince(t0);
 }
 
 StepReport Simulation::step() {

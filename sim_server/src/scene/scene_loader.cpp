@@ -530,7 +530,8 @@ class SceneParser {
   void readSolver(const YAML::Node& n, SolverSpec* s) {
     const std::string p = "solver";
     checkKeys(n, p, {"linear", "cg_tolerance", "cg_max_iterations", "nsgs_tolerance",
-                     "nsgs_max_sweeps", "nsgs_sor", "max_contacts"});
+                     "nsgs_max_sweeps", "nsgs_sor", "max_contacts", "contact_iterations",
+                     "penetration_tolerance"});
     choice(n, p, "linear", &s->linear,
            {{"cholmod", LinearSolverKind::kCholmod}, {"pcg", LinearSolverKind::kPcg}});
     number(n, p, "cg_tolerance", &s->cg_tolerance, kPositive);
@@ -539,6 +540,8 @@ class SceneParser {
     integer(n, p, "nsgs_max_sweeps", &s->nsgs_max_sweeps, 1);
     number(n, p, "nsgs_sor", &s->nsgs_sor, Range{0.0, 2.0, true, true});
     integer(n, p, "max_contacts", &s->max_contacts, 1);
+    integer(n, p, "contact_iterations", &s->contact_iterations, 1);
+    number(n, p, "penetration_tolerance", &s->penetration_tolerance_m, kPositive);
   }
 
   void readHaptics(const YAML::Node& n, HapticsSpec* h) {

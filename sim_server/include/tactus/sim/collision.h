@@ -38,6 +38,10 @@
 //        Inside:  keep back-facing candidates whose N is not opposed to the nearest one's
 //                 (N . N0 > -0.1, so the far side of a thin slab is ignored); n = N,
 //                 gap = (c - s) . N - r - contact_distance (signed distance to the plane).
+//        Side memory: when the nearest candidate says inside but its N opposes the normal of
+//        the feature's closest contact at the previous detect() (the sphere entered from the
+//        other side of a thin part, or the surface folded under it), the nearest candidate
+//        whose N agrees with that normal decides inside/outside and N0 instead.
 //     Tissue point s, tool point c - r n.
 // Every contact gets a stable id: (kind << 56) | (feature id << 32) | (vertex or triangle
 // index); it does not change while the same feature touches the same vertex/triangle, so warm

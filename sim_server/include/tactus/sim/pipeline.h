@@ -45,6 +45,10 @@ struct StepReport {
   shared::NsgsResult nsgs;
   double max_penetration_m = 0.0;    ///< max(-gap) after the constrained motion, >= 0
   double complementarity = 0.0;      ///< max_i |f_n,i * delta_n,i| after the correction [N m]
+  int contact_passes = 0;            ///< contact passes run (solver.contact_iterations caps it)
+  /// max(-gap) by a fresh collision query at the corrected state, >= 0; measured only when
+  /// solver.contact_iterations > 1 (else 0)
+  double geometric_penetration_m = 0.0;
   bool finite = true;                ///< every state value finite
   StageTimes times;
 };

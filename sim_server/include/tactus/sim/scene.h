@@ -96,6 +96,11 @@ struct SolverSpec {
   int nsgs_max_sweeps = 500;
   double nsgs_sor = 1.0;                        ///< over-relaxation factor in (0, 2)
   int max_contacts = 300;
+  /// Contact passes per step: after the constrained motion, contacts are detected again at the
+  /// corrected state and, while some gap is below -penetration_tolerance_m, the contact problem
+  /// is linearised there and solved again from the free motion (1: the paper's single pass).
+  int contact_iterations = 1;
+  double penetration_tolerance_m = 1e-4;        ///< geometric gap accepted by the passes [m]
 };
 
 struct HapticsSpec {
