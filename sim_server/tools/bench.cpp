@@ -68,12 +68,14 @@ struct BenchOptions {
   int tick_sweeps = 0;
   double displacement_mm = 0.2;
   std::string log_level = "warn";
+  int jaw_samples = 0;                 ///< > 0: overrides instrument.grasper.samples
 };
 
 int run(const BenchOptions& o) {
   sim::SceneSpec spec = sim::loadScene(o.scene);
   spec.haptics.enabled = false;
   spec.output.enabled = false;
+  if (o.jaw_samples > 0) spec.instrument.jaw_samples = o.jaw_samples;
   const double h = spec.time_step_s;
   const long steps = o.steps > 0 ? o.steps : static_cast<long>(std::llround(spec.duration_s / h));
   if (steps <= 0) throw Error(o.scene + ": no duration in the scene; pass --steps N");
@@ -104,7 +106,8 @@ int run(const BenchOptions& o) {
   std::vector<Series> stages = {{"free motion", {}}, {"collision", {}},  {"W build", {}},
                                 {"solve", {}},       {"correction", {}}, {"publish", {}},
                                 {"total step", {}}};
-  std::vector<double> contacts, rows, sim_sweeps, tick_us, tick_cpu_us, tick_sweeps_v, tick_err;
+  std::vector<double> contacts, rows, sim_sweeps, tick_us, tick_cpu_us, tick_sweeps_v, tick_err, passes,
+      geometric_pen_mm;
   long tick_converged = 0;
   std::FILE* trace = nullptr;
   if (!o.trace.empty()) {
@@ -133,6 +136,8 @@ int run(const BenchOptions& o) {
       contacts.push_back(r.contacts);
       rows.push_back(r.rows);
       sim_sweeps.push_back(r.nsgs.sweeps);
+      passes.push_back(r.contact_passes);
+      geometric_pen_mm.push_back(1e3 * r.geometric_penetration_m);
     }
     if (trace != nullptr && r.contacts <= 0) {
       std::fprintf(trace, "%ld,%.4f,0,0,0,%.4f,0,0\n", k, sim.time(), 1e3 * stages[6].v.back());
@@ -182,6 +187,15 @@ int run(const BenchOptions& o) {
       "median %.0f, max %.0f); sim NSGS sweeps median %.0f\n",
       contacts.size(), steps, pct(contacts, 0.5), pct(contacts, 1.0), pct(rows, 0.5),
       pct(rows, 1.0), pct(sim_sweeps, 0.5));
+  if (spec.solver.contact_iterations > 1) {
+    const auto extra = std::count_if(passes.begin(), passes.end(), [](double p) { return p > 1; });
+    std::printf(
+        "contact passes (at most %d): median %.0f, max %.0f, steps with more than one %ld; "
+        "geometric penetration after the step: median %.3f mm, max %.3f mm (tolerance %.3f mm)\n",
+        spec.solver.contact_iterations, pct(passes, 0.5), pct(passes, 1.0),
+        static_cast<long>(extra), pct(geometric_pen_mm, 0.5), pct(geometric_pen_mm, 1.0),
+        1e3 * spec.solver.penetration_tolerance_m);
+  }
   std::printf(
       "haptic tick solve (%.2f mm device displacement, warm start, <= %d sweeps, budget "
       "%.0f us): wall median %.1f us, p99 %.1f us, max %.1f us; thread CPU median %.1f us, "
@@ -206,13 +220,16 @@ int run(const BenchOptions& o) {
     js += fmt::format(
         "  }},\n  \"steps_in_contact\": {},\n  \"contacts\": {{\"median\": {}, \"max\": {}}},\n"
         "  \"rows\": {{\"median\": {}, \"max\": {}}},\n  \"sim_sweeps_median\": {},\n"
+        "  \"contact_passes\": {{\"median\": {}, \"max\": {}}},\n"
+        "  \"geometric_penetration_mm_max\": {:.4f},\n"
         "  \"haptic_tick\": {{\"displacement_mm\": {}, \"max_sweeps\": {}, \"budget_us\": {}, "
         "\"solve_us_median\": {:.3f}, \"solve_us_p99\": {:.3f}, \"solve_us_max\": {:.3f}, "
         "\"cpu_us_median\": {:.3f}, \"cpu_us_p99\": {:.3f}, "
         "\"sweeps_median\": {}, \"sweeps_p99\": {}, \"error_median\": {:.3e}, "
         "\"converged\": {}, \"solves\": {}}}\n}}\n",
         contacts.size(), pct(contacts, 0.5), pct(contacts, 1.0), pct(rows, 0.5), pct(rows, 1.0),
-        pct(sim_sweeps, 0.5), o.displacement_mm, tick_sweeps, budget_us, pct(tick_us, 0.5),
+        pct(sim_sweeps, 0.5), pct(passes, 0.5), pct(passes, 1.0), pct(geometric_pen_mm, 1.0),
+        o.displacement_mm, tick_sweeps, budget_us, pct(tick_us, 0.5),
         pct(tick_us, 0.99), pct(tick_us, 1.0), pct(tick_cpu_us, 0.5), pct(tick_cpu_us, 0.99),
         pct(tick_sweeps_v, 0.5), pct(tick_sweeps_v, 0.99), pct(tick_err, 0.5), tick_converged,
         tick_us.size());
@@ -243,6 +260,8 @@ int main(int argc, char** argv) {
   app.add_option("--displacement-mm", o.displacement_mm,
                  "Device displacement applied to each snapshot before the haptic re-solve")
       ->capture_default_str();
+  app.add_option("--jaw-samples", o.jaw_samples,
+                 "Override the grasper's samples per jaw (denser jaws: more contacts)");
   app.add_option("--log-level", o.log_level, "spdlog level of the simulation library")
       ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error"}))
       ->capture_default_str();
