@@ -486,7 +486,7 @@ DragResult runDrag(const std::string& file, StepWatch* watch_out) {
   return out;
 }
 
-// KNOWN FAILURE (engine, not the test): with mu = 2 NSGS stops at its 500-sweep budget (residual up to 0.04) and leaves 0.085 mm of linearised penetration; mu = 0 gains ~5% energy while holding.
+// KNOWN FAILURE (engine, not the test): with mu = 2 NSGS stops at its 500-sweep budget (residual up to 0.04) and leaves 0.085 mm of linearised penetration (the mu = 0 half passes).
 // Disabled so the suite stays green; run it with --gtest_also_run_disabled_tests. See README.
 TEST(HardCases, DISABLED_FrictionlessAndMuTwo) {
   StepWatch w0(loadCase("drag_mu0.yaml"));
