@@ -94,7 +94,8 @@ struct Simulation::Impl {
 
   void buildTissues();
   void solveContacts(StepReport& report);
-  void detectContacts(StepReport& report);
+  double queryContacts();
+  double detectContacts(StepReport& report);
   void assembleProblem(StepReport& report, bool relinearise);
   void solveAndCorrect(StepReport& report, bool restore_free);
 };
@@ -274,14 +275,23 @@ DeviceTarget Simulation::scriptedTarget(double t_s) const {
 
 bool Simulation::hasInstrument() const { return impl_->instrument != nullptr; }
 
-void Simulation::Impl::detectContacts(StepReport& report) {
-  const auto t0 = Clock::now();
+// Refits and queries every tissue at the current state; the smallest gap (+inf if none).
+double Simulation::Impl::queryContacts() {
+  double min_gap = std::numeric_limits<double>::infinity();
   for (TissueState& ts : tissues) {
     ts.collision->refit(ts.body->positions());
     ts.found = &ts.collision->detect(*instrument);
-    ++counters.collision_queries;
+    for (const Contact& c : *ts.found) min_gap = std::min(min_gap, c.gap_m);
   }
+  return min_gap;
+}
+
+double Simulation::Impl::detectContacts(StepReport& report) {
+  const auto t0 = Clock::now();
+  const double min_gap = queryContacts();
+  counters.collision_queries += static_cast<long>(tissues.size());
   report.times.collision_s += secondsSince(t0);
+  return min_gap;
 }
 
 void Simulation::Impl::solveContacts(StepReport& report) {
@@ -303,11 +313,7 @@ void Simulation::Impl::solveContacts(StepReport& report) {
     report.contact_passes = pass + 1;
     if (passes == 1) break;
     // the nonlinear gaps at the corrected state
-    detectContacts(report);
-    double min_gap = std::numeric_limits<double>::infinity();
-    for (const TissueState& ts : tissues) {
-      for (const Contact& c : *ts.found) min_gap = std::min(min_gap, c.gap_m);
-    }
+    const double min_gap = detectContacts(report);
     report.geometric_penetration_m = std::isfinite(min_gap) ? std::max(0.0, -min_gap) : 0.0;
     if (!(min_gap < -spec.solver.penetration_tolerance_m) || pass + 1 >= passes) break;
   }
@@ -556,13 +562,8 @@ const ContactProblemData& Simulation::lastProblem() const { return impl_->proble
 const PipelineCounters& Simulation::counters() const { return impl_->counters; }
 
 double Simulation::geometricMinGap() {
-  double gap = std::numeric_limits<double>::infinity();
-  if (!impl_->instrument) return gap;
-  for (TissueState& ts : impl_->tissues) {
-    ts.collision->refit(ts.body->positions());
-    for (const Contact& c : ts.collision->detect(*impl_->instrument)) gap = std::min(gap, c.gap_m);
-  }
-  return gap;
+  if (!impl_->instrument) return std::numeric_limits<double>::infinity();
+  return impl_->queryContacts();
 }
 
 double Simulation::totalEnergy() const {
