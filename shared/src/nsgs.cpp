@@ -412,7 +412,7 @@ NsgsResult solveNsgs(const ContactProblemView& problem, const NsgsSettings& sett
   const int m = p.rows;
   const std::ptrdiff_t ld = p.ld;
   double* delta = workspace.delta.data();
-  const double sor = settings.sor;
+  double sor = settings.sor;
   const int check_every = std::max(settings.check_every, 1);
   const int max_sweeps = std::max(settings.max_sweeps, 1);
   const bool row_gather = settings.coupling == NsgsCoupling::kRowGather;
@@ -445,6 +445,11 @@ NsgsResult solveNsgs(const ContactProblemView& problem, const NsgsSettings& sett
     return fail(NsgsStatus::kNonFinite);
   }
 
+  // stagnation watch (see NsgsSettings::stall_sweeps)
+  double best_error = std::numeric_limits<double>::infinity();
+  double window_best = best_error;   // best error when the current window opened
+  int window_start = 0;
+  result.sor = sor;
   Local3 loc{};
   for (int sweep = 1; sweep <= max_sweeps; ++sweep) {
     for (int i = 0; i < nc; ++i) {
@@ -530,7 +535,17 @@ NsgsResult solveNsgs(const ContactProblemView& problem, const NsgsSettings& sett
       result.status = over_budget ? NsgsStatus::kTimeBudget : NsgsStatus::kMaxSweeps;
       break;
     }
+    best_error = std::min(best_error, result.error);
+    if (settings.stall_sweeps > 0 && sweep - window_start >= settings.stall_sweeps) {
+      if (best_error > settings.stall_ratio * window_best && sor > settings.min_sor) {
+        sor = std::max(settings.min_sor, sor * settings.stall_sor_factor);
+        ++result.relaxations;
+      }
+      window_start = sweep;
+      window_best = best_error;
+    }
   }
+  result.sor = sor;
   result.elapsed_ns = nowNs() - t0;
   return result;
 }

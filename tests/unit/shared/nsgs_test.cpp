@@ -716,5 +716,53 @@ TEST(NsgsRealtime, SolveAndErrorNeverAllocate) {
   EXPECT_NEAR(e1, e2, 1e-15);
 }
 
+
+// Plain Gauss-Seidel can cycle on redundant frictional contacts: this problem (mu = 2, from the
+// drag_mu2 hard case) keeps an error ~3e-2 at sor 1 however many sweeps it gets. The stagnation
+// rule lowers the relaxation and then converges; the result is a genuine solution.
+TEST(NsgsStagnation, UnderRelaxationBreaksALimitCycle) {
+  const FclibProblem p =
+      readFclibText(fs::path(TACTUS_TEST_DATA_DIR) / "nsgs/drag_mu2_cycle.fc3d.txt");
+  ASSERT_EQ(p.contacts, 65);
+  NsgsWorkspace ws(p.rows(), p.contacts);
+  NsgsSettings plain;
+  plain.stall_sweeps = 0;
+  plain.max_sweeps = 2000;
+  std::vector<double> f(p.rows(), 0.0);
+  const NsgsResult cycling = solveNsgs(p.view(), plain, ws, f.data());
+  EXPECT_EQ(cycling.status, NsgsStatus::kMaxSweeps);
+  EXPECT_GT(cycling.error, 1e-3);
+  EXPECT_EQ(cycling.relaxations, 0);
+  EXPECT_EQ(cycling.sor, 1.0);
+
+  NsgsSettings rule;   // the defaults: the rule is on
+  rule.max_sweeps = 500;
+  std::fill(f.begin(), f.end(), 0.0);
+  const NsgsResult res = solveNsgs(p.view(), rule, ws, f.data());
+  EXPECT_EQ(res.status, NsgsStatus::kConverged) << "error " << res.error;
+  EXPECT_GE(res.relaxations, 1);
+  EXPECT_LT(res.sor, 1.0);
+  EXPECT_GE(res.sor, rule.min_sor);
+  EXPECT_LE(naturalMapError(p.view(), f.data()), rule.tolerance);
+  // the solution is a fixed point of the unrelaxed iteration too: plain NSGS warm-started from it
+  // stops after its first sweep
+  const NsgsResult again = solveNsgs(p.view(), plain, ws, f.data());
+  EXPECT_EQ(again.status, NsgsStatus::kConverged);
+  EXPECT_EQ(again.sweeps, 1);
+}
+
+// A problem that converges steadily never triggers the rule (the relaxation is left alone).
+TEST(NsgsStagnation, SteadyConvergenceKeepsTheRelaxation) {
+  const FclibProblem p = boxStacks();
+  NsgsWorkspace ws(p.rows(), p.contacts);
+  NsgsSettings s;
+  s.stall_sweeps = 5;
+  std::vector<double> f(p.rows(), 0.0);
+  const NsgsResult res = solveNsgs(p.view(), s, ws, f.data());
+  EXPECT_EQ(res.status, NsgsStatus::kConverged);
+  EXPECT_EQ(res.relaxations, 0);
+  EXPECT_EQ(res.sor, 1.0);
+}
+
 }  // namespace
 }  // namespace tactus::shared
