@@ -69,6 +69,9 @@ struct BenchOptions {
   double displacement_mm = 0.2;
   std::string log_level = "warn";
   int jaw_samples = 0;                 ///< > 0: overrides instrument.grasper.samples
+  int jaw_rows = 0;                    ///< > 0: overrides instrument.grasper.width_samples
+  double jaw_width_mm = -1.0;          ///< >= 0: overrides instrument.grasper.width
+  int min_contacts = 0;                ///< > 0: a second table over the steps with this many
 };
 
 int run(const BenchOptions& o) {
@@ -76,6 +79,8 @@ int run(const BenchOptions& o) {
   spec.haptics.enabled = false;
   spec.output.enabled = false;
   if (o.jaw_samples > 0) spec.instrument.jaw_samples = o.jaw_samples;
+  if (o.jaw_rows > 0) spec.instrument.jaw_rows = o.jaw_rows;
+  if (o.jaw_width_mm >= 0.0) spec.instrument.jaw_width_m = 1e-3 * o.jaw_width_mm;
   const double h = spec.time_step_s;
   const long steps = o.steps > 0 ? o.steps : static_cast<long>(std::llround(spec.duration_s / h));
   if (steps <= 0) throw Error(o.scene + ": no duration in the scene; pass --steps N");
@@ -106,6 +111,8 @@ int run(const BenchOptions& o) {
   std::vector<Series> stages = {{"free motion", {}}, {"collision", {}},  {"W build", {}},
                                 {"solve", {}},       {"correction", {}}, {"publish", {}},
                                 {"total step", {}}};
+  std::vector<Series> busy = stages;   // the steps with at least o.min_contacts contacts
+  std::vector<double> busy_contacts;
   std::vector<double> contacts, rows, sim_sweeps, tick_us, tick_cpu_us, tick_sweeps_v, tick_err, passes,
       geometric_pen_mm;
   long tick_converged = 0;
@@ -131,6 +138,10 @@ int run(const BenchOptions& o) {
     stages[4].v.push_back(r.times.correction_s);
     stages[5].v.push_back(publish_s);
     stages[6].v.push_back(r.times.total_s + publish_s);
+    if (o.min_contacts > 0 && r.contacts >= o.min_contacts) {
+      for (std::size_t i = 0; i < stages.size(); ++i) busy[i].v.push_back(stages[i].v.back());
+      busy_contacts.push_back(r.contacts);
+    }
     // contact figures over the steps in contact
     if (r.contacts > 0) {
       contacts.push_back(r.contacts);
@@ -181,6 +192,17 @@ int run(const BenchOptions& o) {
   for (const auto& s : stages) {
     std::printf("%-14s %10.3f %10.3f %10.3f %10.3f\n", s.name.c_str(), 1e3 * pct(s.v, 0.5),
                 1e3 * pct(s.v, 0.9), 1e3 * pct(s.v, 0.99), 1e3 * pct(s.v, 1.0));
+  }
+  if (o.min_contacts > 0 && !busy_contacts.empty()) {
+    std::printf("over the %zu steps with >= %d contacts (contacts median %.0f, max %.0f):\n",
+                busy_contacts.size(), o.min_contacts, pct(busy_contacts, 0.5),
+                pct(busy_contacts, 1.0));
+    for (const auto& s : busy) {
+      std::printf("  %-12s %10.3f %10.3f %10.3f %10.3f\n", s.name.c_str(), 1e3 * pct(s.v, 0.5),
+                  1e3 * pct(s.v, 0.9), 1e3 * pct(s.v, 0.99), 1e3 * pct(s.v, 1.0));
+    }
+  } else if (o.min_contacts > 0) {
+    std::printf("no step had >= %d contacts\n", o.min_contacts);
   }
   std::printf(
       "steps in contact: %zu of %ld; over those: contacts median %.0f, max %.0f (rows "
@@ -262,6 +284,12 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--jaw-samples", o.jaw_samples,
                  "Override the grasper's samples per jaw (denser jaws: more contacts)");
+  app.add_option("--jaw-rows", o.jaw_rows,
+                 "Override the grasper's rows of samples across each jaw pad");
+  app.add_option("--jaw-width-mm", o.jaw_width_mm,
+                 "Override the grasper's pad width (span of the sample rows) [mm]");
+  app.add_option("--min-contacts", o.min_contacts,
+                 "Also report the stages over the steps with at least this many contacts");
   app.add_option("--log-level", o.log_level, "spdlog level of the simulation library")
       ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error"}))
       ->capture_default_str();

@@ -46,7 +46,16 @@ Instrument::Instrument(const InstrumentSpec& spec) : spec_(spec) {
       throw SceneError("instrument.jaw_samples: must be >= 1 (got " +
                        std::to_string(spec.jaw_samples) + ")");
     }
-    features_.resize(2 * (spec.jaw_samples + 1));
+    if (spec.jaw_rows < 1) {
+      throw SceneError("instrument.jaw_rows: must be >= 1 (got " + std::to_string(spec.jaw_rows) +
+                       ")");
+    }
+    requireNonNegative(spec.jaw_width_m, "jaw_width_m");
+    if (spec.jaw_rows > 1 && !(spec.jaw_width_m > 0.0)) {
+      throw SceneError("instrument.jaw_width_m: " + std::to_string(spec.jaw_rows) +
+                       " rows of jaw samples need a width > 0");
+    }
+    features_.resize(static_cast<std::size_t>(2 * spec.jaw_rows * (spec.jaw_samples + 1)));
   }
   const double opening = spec.trajectory.empty() ? 1.0 : spec.trajectory.front().gripper_opening;
   reset(toPose(spec.initial_pose), opening);
@@ -173,19 +182,23 @@ void Instrument::updateFeatures() {
     }
     return;
   }
-  // grasper: per jaw one capsule then its sample spheres
+  // grasper: per jaw and row one capsule then its sample spheres
   const int n = spec_.jaw_samples;
+  const int rows = spec_.jaw_rows;
   const double phi = opening_ * spec_.max_opening_rad;
   const double r = spec_.jaw_radius_m;
-  for (int j = 0; j < 2; ++j) {
+  for (int jr = 0; jr < 2 * rows; ++jr) {
+    const int j = jr / rows;
+    const int row = jr % rows;
     const double side = j == 0 ? 1.0 : -1.0;
     const double angle = side * phi;
-    const Eigen::Vector3d a_local(0.0, side * r, 0.0);
+    const double x = rows == 1 ? 0.0 : spec_.jaw_width_m * (static_cast<double>(row) / (rows - 1) - 0.5);
+    const Eigen::Vector3d a_local(x, side * r, 0.0);
     // Rx(angle) * (0, 0, -1) = (0, sin(angle), -cos(angle))
     const Eigen::Vector3d dir_local(0.0, std::sin(angle), -std::cos(angle));
     const Eigen::Vector3d a = o + rot * a_local;
     const Eigen::Vector3d b = a + rot * (spec_.jaw_length_m * dir_local);
-    const int base = j * (n + 1);
+    const int base = jr * (n + 1);
     ToolFeature& cap = features_[base];
     cap.id = base;
     cap.shape = FeatureShape::kCapsule;

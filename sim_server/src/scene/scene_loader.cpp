@@ -478,7 +478,8 @@ class SceneParser {
     }
     if (section(n, p, "grasper", &s)) {
       const std::string q = join(p, "grasper");
-      checkKeys(s, q, {"jaw_length", "jaw_radius", "max_opening_deg", "samples"});
+      checkKeys(s, q, {"jaw_length", "jaw_radius", "max_opening_deg", "samples", "width",
+                       "width_samples"});
       number(s, q, "jaw_length", &in->jaw_length_m, kPositive);
       number(s, q, "jaw_radius", &in->jaw_radius_m, kPositive);
       double deg = 0.0;
@@ -486,6 +487,8 @@ class SceneParser {
         in->max_opening_rad = deg * kDegToRad;
       }
       integer(s, q, "samples", &in->jaw_samples, 1);
+      number(s, q, "width", &in->jaw_width_m, kNonNegative);
+      integer(s, q, "width_samples", &in->jaw_rows, 1);
     }
     if (section(n, p, "initial_pose", &s)) {
       const std::string q = join(p, "initial_pose");

@@ -250,6 +250,46 @@ TEST(Instrument, GrasperGeometryPinchesWhenClosed) {
   EXPECT_DOUBLE_EQ(tool.gripperOpening(), 1.0);
 }
 
+// Jaw pads: rows of samples side by side along the hinge axis; the rows of one jaw are copies
+// of the round jaw shifted along tool x, and the ids stay dense and jaw-major.
+TEST(Instrument, GrasperPadRowsSpanTheWidthAlongTheHingeAxis) {
+  InstrumentSpec round = grasperSpec();
+  InstrumentSpec pad = grasperSpec();
+  pad.jaw_rows = 3;
+  pad.jaw_width_m = 0.006;
+  Instrument a(round);
+  Instrument b(pad);
+  Pose pose = targetPose();
+  a.reset(pose, 0.4);
+  b.reset(pose, 0.4);
+  a.freeMotion(0.01, pose, Vector6d::Zero(), 0.4);
+  b.freeMotion(0.01, pose, Vector6d::Zero(), 0.4);
+  const int n = pad.jaw_samples;
+  ASSERT_EQ(b.features().size(), static_cast<std::size_t>(2 * 3 * (n + 1)));
+  for (std::size_t i = 0; i < b.features().size(); ++i) {
+    EXPECT_EQ(b.features()[i].id, static_cast<int>(i));
+  }
+  const Eigen::Vector3d hinge_axis = b.pose().rot * Eigen::Vector3d::UnitX();
+  for (int j = 0; j < 2; ++j) {
+    for (int row = 0; row < 3; ++row) {
+      const double shift = 0.006 * (row / 2.0 - 0.5);
+      for (int k = 0; k <= n; ++k) {
+        const tactus::sim::ToolFeature& f = b.features()[(j * 3 + row) * (n + 1) + k];
+        const tactus::sim::ToolFeature& g = a.features()[j * (n + 1) + k];
+        EXPECT_EQ(f.part, j);
+        EXPECT_EQ(f.shape, g.shape);
+        EXPECT_LT((f.a_m - (g.a_m + shift * hinge_axis)).norm(), 1e-12);
+        EXPECT_LT((f.b_m - (g.b_m + shift * hinge_axis)).norm(), 1e-12);
+      }
+    }
+  }
+  pad.jaw_width_m = 0.0;
+  EXPECT_THROW(Instrument{pad}, tactus::SceneError);
+  pad.jaw_rows = 0;
+  pad.jaw_width_m = 0.006;
+  EXPECT_THROW(Instrument{pad}, tactus::SceneError);
+}
+
 TEST(Instrument, RejectsBadSpec) {
   InstrumentSpec spec = probeSpec();
   spec.mass_kg = 0.0;

@@ -246,6 +246,10 @@ TEST(Scene, EachKindOfErrorHasItsExactMessage) {
             "s.yaml:4:20: instrument.type: must be one of probe, grasper (got 'scalpel')");
   EXPECT_EQ(sceneError(kHead + "instrument: {grasper: {samples: 2.5}}\n"),
             "s.yaml:4:33: instrument.grasper.samples: must be an integer (got '2.5')");
+  EXPECT_EQ(sceneError(kHead + "instrument: {grasper: {width: -0.001}}\n"),
+            "s.yaml:4:31: instrument.grasper.width: must be >= 0 (got -0.001)");
+  EXPECT_EQ(sceneError(kHead + "instrument: {grasper: {width_samples: 0}}\n"),
+            "s.yaml:4:39: instrument.grasper.width_samples: must be >= 1 (got 0)");
   EXPECT_EQ(sceneError(kHead + "instrument: {initial_pose: {quaternion: [2, 0, 0, 0]}}\n"),
             "s.yaml:4:41: instrument.initial_pose.quaternion: must be a unit quaternion "
             "[w, x, y, z] (norm is 2)");

@@ -33,6 +33,9 @@
 //             jaw_radius centred on its axis at t = i/(n-1), i = 0..n-1 (t = 1 when n = 1), t
 //             measured from the hinge end (triangle queries).
 //             Ids: jaw 0 capsule 0, its samples 1..n; jaw 1 capsule n+1, samples n+2..2n+1.
+//             Jaw pads (jaw_rows k > 1): each jaw is k such rows, row i's axis shifted along the
+//             tool x axis (the hinge axis) by jaw_width (i/(k-1) - 1/2); ids run jaw-major,
+//             then row: jaw j row i has capsule (j k + i)(n + 1) and samples after it.
 //  The jaws are kinematic: the opening follows the gripper value given to freeMotion.
 
 #include <Eigen/Core>

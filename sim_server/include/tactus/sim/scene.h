@@ -84,6 +84,10 @@ struct InstrumentSpec {
   double jaw_radius_m = 0.002;
   double max_opening_rad = 0.6;                 ///< half-angle of each jaw when fully open
   int jaw_samples = 8;                          ///< capsules (segments) per jaw
+  /// Jaw pads: `jaw_rows` parallel rows of samples spread over `jaw_width_m` along the hinge
+  /// axis (tool x), each row a capsule plus jaw_samples spheres. 1 row: a round jaw (default).
+  int jaw_rows = 1;
+  double jaw_width_m = 0.0;                     ///< centre-to-centre span of the rows
   PoseSpec initial_pose;
   std::vector<TrajectoryKey> trajectory;        ///< scripted device target when no device drives it
 };
