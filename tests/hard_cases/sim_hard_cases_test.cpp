@@ -183,7 +183,12 @@ TEST(HardCases, BigSphereOnAFineSurface) {
 
 // --- E = 1 kPa against a 1e5 N/m coupling -------------------------------------------------------
 
-// KNOWN FAILURE (engine, not the test): energy grows ~1% (7.6e-8 J) in the first hold step even with converged solves; cause not found.
+// KNOWN FAILURE (engine, not the test): the elastic energy creeps up 7.6e-8 J (~1 %) over the
+// first hold steps (0.51-0.58 s) while the target is still and kinetic energy is < 1e-10 J.
+// Measured causes: the warped correction differs from the exact compliance of the free motion
+// (~75 %: exact compliance leaves 1.8e-8 J), sphere/triangle contacts linearised at the sprung-back
+// free state (-0.19 mm geometric gap), and vertex tangent planes that shift as the tissue settles
+// (7.5e-9 J with exact compliance and vertex contacts only). Contact passes make it worse.
 // Disabled so the suite stays green; run it with --gtest_also_run_disabled_tests. See README.
 TEST(HardCases, DISABLED_SoftTissueUnderAVeryStiffCoupling) {
   const SceneSpec spec = loadCase("stiff_coupling.yaml");
@@ -517,8 +522,12 @@ TEST(HardCases, FrictionlessAndMuTwo) {
 
 // --- the tool pressed through the organ ---------------------------------------------------------
 
-// KNOWN FAILURE (engine, not the test): the probe tunnels through the thin rim-held disc: sphere-vs-triangle contacts deep in a thin part switch to the far face.
-// Disabled so the suite stays green; run it with --gtest_also_run_disabled_tests. See README.
+// KNOWN FAILURE (engine, not the test): the tip crushes the 4 mm disc under it. From 0.12 s
+// tets under the tip invert (20 at 0.12 s, 70 at 0.20 s, J down to -200): the linear corotational
+// law's compressive stress stays ~E, so a few hundredths of a newton (3 kPa over the tip) push the
+// top-centre node through its column; once the surface is inside out the inside/outside test of
+// the sphere contacts flips and the tool passes (tunnel from 0.29 s). Needs an inversion-resistant
+// material law. Disabled so the suite stays green; run it with --gtest_also_run_disabled_tests.
 TEST(HardCases, DISABLED_ToolPressedThroughTheOrganDoesNotTunnel) {
   const SceneSpec spec = loadCase("press_through.yaml");
   Simulation sim(spec);
