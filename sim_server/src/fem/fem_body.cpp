@@ -5,6 +5,8 @@
 #include <cmath>
 #include <string>
 
+#include <spdlog/spdlog.h>
+
 #include "fem_internal.h"
 #include "tactus/shared/error.h"
 #include "tactus/sim/fem.h"
@@ -24,6 +26,18 @@ double secondsSince(Clock::time_point t0) {
 // Entries of one element's lower-triangular contribution: blocks (a, b) with a >= b, and only
 // i >= j inside diagonal blocks: 4 * 6 + 6 * 9.
 constexpr int kEntriesPerElement = 78;
+
+// An edge shorter than this fraction of its element's longest edge ties its two nodes into one
+// rotation group (see FemBody::nodeRotations).
+constexpr double kShortEdgeRatio = 0.05;
+
+int findRoot(std::vector<int>& parent, int i) {
+  while (parent[i] != i) {
+    parent[i] = parent[parent[i]];
+    i = parent[i];
+  }
+  return i;
+}
 
 }  // namespace
 
@@ -67,6 +81,11 @@ struct FemBody::Impl {
   Eigen::VectorXd cg_r, cg_z, cg_p, cg_ap, cg_t, jacobi_inv;
   std::vector<Eigen::Matrix3d> node_rot, node_acc;  // warped preconditioner
 
+  // rotation groups: nodes tied by short edges share one node rotation
+  std::vector<int> rot_group;   // node -> group index (empty: every node on its own)
+  int rot_group_count = 0;
+  std::vector<Eigen::Matrix3d> group_acc;
+
   std::vector<int> surface;
   bool surface_ready = false;
   std::uint64_t hash = 0;
@@ -100,6 +119,11 @@ struct FemBody::Impl {
       for (int c = 0; c < 3; ++c)
         out[3 * i + c] = dof_base[i] >= 0 ? scale * red[dof_base[i] + c] : 0.0;
   }
+  void buildRotationGroups();
+  // Node rotations from element rotations: volume-weighted sum over the adjacent elements,
+  // summed over the node's rotation group, polar factor. Nodes with no weight get identity.
+  void averageRotations(const std::vector<Eigen::Matrix3d>& element_rot,
+                        std::vector<Eigen::Matrix3d>& acc, std::vector<Eigen::Matrix3d>& out);
   void ensureRestFactor(double h);
   void ensureCurrentFactor();
   bool pcg(double tol, int max_iter, FemStepStats& stats);
@@ -179,6 +203,7 @@ void FemBody::Impl::init(const TetMesh& m, const FemMaterial& mat,
   }
 
   buildPattern();
+  buildRotationGroups();
   f_int.resize(3 * n);
   kv.resize(3 * n);
   rhs_full.resize(3 * n);
@@ -201,6 +226,68 @@ void FemBody::Impl::init(const TetMesh& m, const FemMaterial& mat,
     if (fixed[i]) fixed_sorted.push_back(i);
   hsh = fnv1a(fixed_sorted.data(), sizeof(int) * fixed_sorted.size(), hsh);
   hash = hsh;
+}
+
+void FemBody::Impl::buildRotationGroups() {
+  static constexpr int kEdges[6][2] = {{0, 1}, {0, 2}, {0, 3}, {1, 2}, {1, 3}, {2, 3}};
+  std::vector<int> parent(n);
+  for (int i = 0; i < n; ++i) parent[i] = i;
+  bool any = false;
+  for (const auto& t : mesh.tets) {
+    double len[6];
+    double longest = 0.0;
+    for (int k = 0; k < 6; ++k) {
+      len[k] = (rest.segment<3>(3 * t[kEdges[k][0]]) - rest.segment<3>(3 * t[kEdges[k][1]])).norm();
+      longest = std::max(longest, len[k]);
+    }
+    for (int k = 0; k < 6; ++k) {
+      if (len[k] >= kShortEdgeRatio * longest) continue;
+      const int a = findRoot(parent, t[kEdges[k][0]]), b = findRoot(parent, t[kEdges[k][1]]);
+      if (a != b) {
+        parent[std::max(a, b)] = std::min(a, b);
+        any = true;
+      }
+    }
+  }
+  rot_group.clear();
+  rot_group_count = 0;
+  if (!any) return;
+  rot_group.assign(n, -1);
+  std::vector<int> index(n, -1);
+  for (int i = 0; i < n; ++i) {
+    const int root = findRoot(parent, i);
+    if (index[root] < 0) index[root] = rot_group_count++;
+    rot_group[i] = index[root];
+  }
+  std::vector<int> size(rot_group_count, 0);
+  for (int g : rot_group) ++size[g];
+  int tied = 0, groups = 0;
+  for (int c : size)
+    if (c > 1) {
+      tied += c;
+      ++groups;
+    }
+  spdlog::info("FemBody({}): {} nodes tied into {} rotation groups by edges shorter than {} of "
+               "their element's longest edge",
+               mesh.source.empty() ? "mesh" : mesh.source, tied, groups, kShortEdgeRatio);
+}
+
+void FemBody::Impl::averageRotations(const std::vector<Eigen::Matrix3d>& element_rot,
+                                     std::vector<Eigen::Matrix3d>& acc,
+                                     std::vector<Eigen::Matrix3d>& out) {
+  acc.assign(n, Eigen::Matrix3d::Zero());
+  for (int e = 0; e < mesh.tetCount(); ++e)
+    for (int k = 0; k < 4; ++k) acc[mesh.tets[e][k]] += volume[e] * element_rot[e];
+  if (!rot_group.empty()) {
+    // every member of a group gets the group's sum
+    group_acc.assign(rot_group_count, Eigen::Matrix3d::Zero());
+    for (int i = 0; i < n; ++i) group_acc[rot_group[i]] += acc[i];
+    for (int i = 0; i < n; ++i) acc[i] = group_acc[rot_group[i]];
+  }
+  out.resize(n);
+  for (int i = 0; i < n; ++i)
+    out[i] = acc[i].squaredNorm() > 0.0 ? fem_detail::polarRotation(acc[i])
+                                        : Eigen::Matrix3d::Identity();
 }
 
 void FemBody::Impl::buildPattern() {
@@ -350,14 +437,7 @@ bool FemBody::Impl::pcg(double tol, int max_iter, FemStepStats& stats) {
       options.pcg_preconditioner == PcgPreconditioner::kRestCholesky || warped;
   if (warped && corotational) {
     // per-node rotations from this step's element rotations (volume-weighted, re-orthonormalised)
-    node_acc.assign(n, Eigen::Matrix3d::Zero());
-    node_rot.resize(n);
-    for (int e = 0; e < mesh.tetCount(); ++e)
-      for (int k = 0; k < 4; ++k) node_acc[mesh.tets[e][k]] += volume[e] * rotation[e];
-    for (int i = 0; i < n; ++i)
-      node_rot[i] = dof_base[i] >= 0 && node_acc[i].squaredNorm() > 0.0
-                        ? fem_detail::polarRotation(node_acc[i])
-                        : Eigen::Matrix3d::Identity();
+    averageRotations(rotation, node_acc, node_rot);
   }
   const bool rotate = warped && corotational;
   if (!use_rest) {
@@ -618,14 +698,11 @@ void FemBody::nodeRotations(std::vector<Eigen::Matrix3d>& out) const {
   Impl& m = *impl_;
   out.assign(m.n, Eigen::Matrix3d::Identity());
   if (!m.corotational) return;
-  std::vector<Eigen::Matrix3d> acc(m.n, Eigen::Matrix3d::Zero());
-  for (int e = 0; e < m.mesh.tetCount(); ++e) {
-    const Eigen::Matrix3d r = fem_detail::polarRotation(m.elementF(e, m.q));
-    for (int k = 0; k < 4; ++k) acc[m.mesh.tets[e][k]] += m.volume[e] * r;
-  }
+  std::vector<Eigen::Matrix3d> element_rot(m.mesh.tetCount()), acc;
+  for (int e = 0; e < m.mesh.tetCount(); ++e)
+    element_rot[e] = fem_detail::polarRotation(m.elementF(e, m.q));
   m.counters.rotation_extractions += m.mesh.tetCount();
-  for (int i = 0; i < m.n; ++i)
-    if (acc[i].squaredNorm() > 0.0) out[i] = fem_detail::polarRotation(acc[i]);
+  m.averageRotations(element_rot, acc, out);
 }
 
 void FemBody::stresses(std::vector<Eigen::Matrix3d>& out) const {

@@ -11,7 +11,8 @@
 //  * warped    : C ~ R C0 R^T (eq. 12) with C0 precomputed for the surface DOFs (dense block,
 //                CHOLMOD: one factorisation, one solve per surface DOF, progress shown),
 //                cached on disk (header: magic, version, hash of mesh+material+h, sizes; a stale
-//                or corrupt file is rebuilt, never trusted). R: per-node rotations.
+//                or corrupt file is rebuilt, never trusted). R: per-node rotations
+//                (FemBody::nodeRotations; nodes tied by very short edges share one).
 //  * rest      : C0 without rotation.
 //  * uncoupled : diagonal per-node compliance (diag of C0, isotropic 3x3 per node).
 // Constrained motion (paper 3.3): r0 = (H R)^T f, dq0 = C0 r0 (all DOFs, one solve with the
