@@ -355,7 +355,11 @@ public:
       for (int t = 0; t < terms_[k].count; ++t)
         r_.segment<3>(3 * touched_[terms_[k].local[t]]) +=
             f[k] * terms_[k].p[t];
-    switch (kind_) {
+    // exact correction of a warped model: back to world axes, r = H^T f
+    if (opt_.exact_correction && kind_ == ComplianceKind::kWarped)
+      for (int node : touched_)
+        r_.segment<3>(3 * node) = rot_[node] * r_.segment<3>(3 * node).eval();
+    switch (opt_.exact_correction ? ComplianceKind::kExact : kind_) {
     case ComplianceKind::kExact:
       body.solveCompliance(r_, dq);
       break;

@@ -261,6 +261,37 @@ TEST_F(LiverCompliance, CorrectionIsConsistentWithW) {
   }
 }
 
+// exact_correction: whatever model builds W, the constrained motion is the exact model's
+// dq = C H^T f (and it is not what the approximate W predicts, so the option is observable).
+TEST_F(LiverCompliance, ExactCorrectionUsesTheFreeMotionCompliance) {
+  auto body = makeBody();
+  Eigen::VectorXd load = Eigen::VectorXd::Zero(body->dofCount());
+  for (int i = 0; i < body->nodeCount(); ++i) load[3 * i + 2] = -0.02;
+  for (int s = 0; s < 10; ++s) ASSERT_TRUE(body->freeMotion(h_, &load).ok);
+  const auto rows = randomRows(*body, 30, 3);
+  const Eigen::MatrixXd hm = denseH(*body, rows);
+  Eigen::VectorXd f(static_cast<Eigen::Index>(rows.size()));
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (auto& x : f) x = u(rng);
+  auto exact = makeCompliance(ComplianceKind::kExact, *body, {h_, {}, false});
+  exact->update(*body);
+  Eigen::VectorXd dq_exact;
+  exact->correction(*body, rows, f.data(), dq_exact);
+  for (ComplianceKind kind : {ComplianceKind::kWarped, ComplianceKind::kRest}) {
+    ComplianceOptions opt{h_, {}, false};
+    opt.exact_correction = true;
+    auto model = makeCompliance(kind, *body, opt);
+    model->update(*body);
+    Eigen::VectorXd dq;
+    model->correction(*body, rows, f.data(), dq);
+    EXPECT_LT((dq - dq_exact).norm(), 1e-10 * dq_exact.norm()) << "kind " << static_cast<int>(kind);
+    const Eigen::VectorXd predicted = buildW(*model, rows) * f;
+    EXPECT_GT((hm * dq - predicted).norm(), 1e-4 * predicted.norm())
+        << "the model's W predicts the exact motion: the case cannot tell the options apart";
+  }
+}
+
 TEST_F(LiverCompliance, CacheRoundTripStaleCorruptTruncated) {
   TempDir dir;
   ComplianceOptions opt{h_, dir.path, false, "liver", 64};

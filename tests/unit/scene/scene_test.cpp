@@ -238,6 +238,9 @@ TEST(Scene, EachKindOfErrorHasItsExactMessage) {
   EXPECT_EQ(sceneError(kHead + "    compliance: {model: fast}\n"),
             "s.yaml:4:25: tissues[0].compliance.model: must be one of exact, warped, rest, "
             "uncoupled (got 'fast')");
+  EXPECT_EQ(sceneError(kHead + "    compliance: {correction: fast}\n"),
+            "s.yaml:4:30: tissues[0].compliance.correction: must be one of model, exact (got "
+            "'fast')");
   EXPECT_EQ(sceneError(kHead + "    transform: 0.1\n"),
             "s.yaml:4:16: tissues[0].transform: must be a map (got '0.1')");
   EXPECT_EQ(sceneError(kHead + "instrument: {friction: -0.5}\n"),

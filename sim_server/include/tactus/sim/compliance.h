@@ -57,6 +57,15 @@ struct ComplianceOptions {
   /// correction differ from the double model by ~1e-7 relative, far below the warping error
   /// itself (~1e-3 under large rotations). Double (default) is preferred for small meshes.
   bool c0_single_precision = false;
+  /// Constrained motion with the exact compliance of the free motion (dq = C H^T f, one solve
+  /// with the factorisation freeMotion left) whatever the model used for W. With it the
+  /// corrected state is exactly the implicit Euler step under the contact force f, so a held
+  /// contact cannot feed energy in through the model's error (measured on the slivers hard case:
+  /// warped correction +1.05e-5 J while holding, exact correction 0 J); the price is one
+  /// back-substitution per solve, and the linearised gap after the correction is no longer
+  /// exactly what W predicted (it differs by H (C - C_model) H^T f; contact passes re-solve
+  /// it). Off by default: the paper's scheme corrects with the model itself (R C0 R^T).
+  bool exact_correction = false;
 };
 
 /// How the model was built (for logs and tests).

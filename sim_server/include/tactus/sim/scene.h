@@ -48,6 +48,8 @@ struct TissueSpec {
   std::vector<BoxSpec> fixed_boxes;                ///< nodes inside any box are fixed too
   ComplianceKind compliance = ComplianceKind::kWarped;
   std::filesystem::path compliance_cache_dir;      ///< empty: no on-disk cache
+  /// compliance.correction: exact -> ComplianceOptions::exact_correction
+  bool exact_correction = false;
 };
 
 /// A pose: position [m] and orientation (unit quaternion), world frame.
