@@ -175,6 +175,22 @@ class LiverCompliance : public ::testing::Test {
   std::unique_ptr<FemBody> makeBody(const FemMaterial& mat = liverMaterial()) {
     return std::make_unique<FemBody>(mesh_, mat, fixed_, nullptr);
   }
+  /// A body after ten steps under a downward load, so its rotations are not trivial.
+  std::unique_ptr<FemBody> deformedBody() {
+    auto body = makeBody();
+    Eigen::VectorXd load = Eigen::VectorXd::Zero(body->dofCount());
+    for (int i = 0; i < body->nodeCount(); ++i) load[3 * i + 2] = -0.02;
+    for (int s = 0; s < 10; ++s) EXPECT_TRUE(body->freeMotion(h_, &load).ok);
+    return body;
+  }
+  /// Row forces uniform in [-1, 1].
+  static Eigen::VectorXd randomForces(std::size_t count, unsigned seed) {
+    Eigen::VectorXd f(static_cast<Eigen::Index>(count));
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<double> u(-1.0, 1.0);
+    for (auto& x : f) x = u(rng);
+    return f;
+  }
   TetMesh mesh_;
   std::vector<int> fixed_;
   double h_ = 0.01;
@@ -236,17 +252,10 @@ TEST_F(LiverCompliance, WarpedBeatsRestUnderLargeRotation) {
 }
 
 TEST_F(LiverCompliance, CorrectionIsConsistentWithW) {
-  auto body = makeBody();
-  // deform: a few steps under gravity-like load so rotations are non-trivial
-  Eigen::VectorXd load = Eigen::VectorXd::Zero(body->dofCount());
-  for (int i = 0; i < body->nodeCount(); ++i) load[3 * i + 2] = -0.02;
-  for (int s = 0; s < 10; ++s) ASSERT_TRUE(body->freeMotion(h_, &load).ok);
+  auto body = deformedBody();
   const auto rows = randomRows(*body, 30, 3);
   const Eigen::MatrixXd hm = denseH(*body, rows);
-  Eigen::VectorXd f(static_cast<Eigen::Index>(rows.size()));
-  std::mt19937 rng(4);
-  std::uniform_real_distribution<double> u(-1.0, 1.0);
-  for (auto& x : f) x = u(rng);
+  const Eigen::VectorXd f = randomForces(rows.size(), 4);
   for (ComplianceKind kind : {ComplianceKind::kExact, ComplianceKind::kWarped,
                               ComplianceKind::kRest, ComplianceKind::kUncoupled}) {
     auto model = makeCompliance(kind, *body, {h_, {}, false});
@@ -264,16 +273,10 @@ TEST_F(LiverCompliance, CorrectionIsConsistentWithW) {
 // exact_correction: whatever model builds W, the constrained motion is the exact model's
 // dq = C H^T f (and it is not what the approximate W predicts, so the option is observable).
 TEST_F(LiverCompliance, ExactCorrectionUsesTheFreeMotionCompliance) {
-  auto body = makeBody();
-  Eigen::VectorXd load = Eigen::VectorXd::Zero(body->dofCount());
-  for (int i = 0; i < body->nodeCount(); ++i) load[3 * i + 2] = -0.02;
-  for (int s = 0; s < 10; ++s) ASSERT_TRUE(body->freeMotion(h_, &load).ok);
+  auto body = deformedBody();
   const auto rows = randomRows(*body, 30, 3);
   const Eigen::MatrixXd hm = denseH(*body, rows);
-  Eigen::VectorXd f(static_cast<Eigen::Index>(rows.size()));
-  std::mt19937 rng(5);
-  std::uniform_real_distribution<double> u(-1.0, 1.0);
-  for (auto& x : f) x = u(rng);
+  const Eigen::VectorXd f = randomForces(rows.size(), 5);
   auto exact = makeCompliance(ComplianceKind::kExact, *body, {h_, {}, false});
   exact->update(*body);
   Eigen::VectorXd dq_exact;
