@@ -1,10 +1,12 @@
 #include "fem_internal.h"
 
+#include <Eigen/Geometry>
 #include <Eigen/LU>
 #include <Eigen/SVD>
 #include <dlfcn.h>
 
 #include <algorithm>
+#include <cmath>
 #include <array>
 #include <cstring>
 
@@ -14,9 +16,77 @@
 
 namespace tactus::sim::fem_detail {
 
+namespace {
+
+// Rotation maximising tr(R^T F) from the unit quaternion q maximising q^T N q (Horn's symmetric
+// 4x4 N; its largest eigenvalue is s1 + s2 + s3, the sum of F's singular values). The eigenvalue
+// is the largest root of N's characteristic polynomial l^4 + c2 l^2 + c1 l + c0, found by Newton
+// from sqrt(3) |F|_F (an upper bound; the quartic is convex and increasing above the root, so
+// the iterates decrease monotonically); the eigenvector is the largest column of adj(N - l I).
+// Returns false when the answer cannot be trusted (checked: R^T F must be symmetric).
+bool quaternionPolar(const Eigen::Matrix3d& F, double scale, double det, Eigen::Matrix3d& R) {
+  const double sxx = F(0, 0), sxy = F(0, 1), sxz = F(0, 2);
+  const double syx = F(1, 0), syy = F(1, 1), syz = F(1, 2);
+  const double szx = F(2, 0), szy = F(2, 1), szz = F(2, 2);
+  Eigen::Matrix4d n;
+  n << sxx + syy + szz, szy - syz, sxz - szx, syx - sxy,
+       szy - syz, sxx - syy - szz, sxy + syx, szx + sxz,
+       sxz - szx, sxy + syx, -sxx + syy - szz, syz + szy,
+       syx - sxy, szx + sxz, syz + szy, -sxx - syy + szz;
+  const double c2 = -2.0 * scale * scale;
+  const double c1 = -8.0 * det;
+  const double c0 = n.determinant();
+  double l = std::sqrt(3.0) * scale;
+  for (int it = 0; it < 50; ++it) {
+    const double l2 = l * l;
+    const double p = (l2 + c2) * l2 + c1 * l + c0;
+    const double dp = (4.0 * l2 + 2.0 * c2) * l + c1;
+    if (!(dp > 0.0)) return false;
+    const double step = p / dp;
+    l -= step;
+    if (step <= 1e-12 * l) break;   // quadratic: what is left is below 1e-20 l
+  }
+  Eigen::Matrix4d a = n;
+  a.diagonal().array() -= l;
+  // A = N - l I has rank 3 and adj(A) = c v v^T (v the eigenvector): take the column j of adj(A)
+  // whose diagonal cofactor (the principal minor without row and column j) is largest
+  auto minor3 = [&a](int skip_row, int skip_col) {
+    int r[3], c[3];
+    for (int k = 0, i = 0; k < 4; ++k) if (k != skip_row) r[i++] = k;
+    for (int k = 0, i = 0; k < 4; ++k) if (k != skip_col) c[i++] = k;
+    return a(r[0], c[0]) * (a(r[1], c[1]) * a(r[2], c[2]) - a(r[1], c[2]) * a(r[2], c[1])) -
+           a(r[0], c[1]) * (a(r[1], c[0]) * a(r[2], c[2]) - a(r[1], c[2]) * a(r[2], c[0])) +
+           a(r[0], c[2]) * (a(r[1], c[0]) * a(r[2], c[1]) - a(r[1], c[1]) * a(r[2], c[0]));
+  };
+  int best = 0;
+  double best_abs = std::abs(minor3(0, 0));
+  for (int j = 1; j < 4; ++j) {
+    const double m = std::abs(minor3(j, j));
+    if (m > best_abs) {
+      best = j;
+      best_abs = m;
+    }
+  }
+  Eigen::Vector4d col;
+  for (int i = 0; i < 4; ++i) col[i] = ((i + best) % 2 == 0 ? 1.0 : -1.0) * minor3(best, i);
+  const double len = col.norm();
+  if (!(len > 0.0)) return false;
+  const Eigen::Vector4d q = col / len;
+  R = Eigen::Quaterniond(q[0], q[1], q[2], q[3]).toRotationMatrix();
+  // trust check: R^T F is the symmetric stretch
+  const Eigen::Matrix3d s = R.transpose() * F;
+  return (s - s.transpose()).norm() <= 1e-12 * scale;
+}
+
+}  // namespace
+
 Eigen::Matrix3d polarRotation(const Eigen::Matrix3d& F) {
   const double scale = F.norm();
   const double det = F.determinant();
+  if (scale > 0.0 && det > 1e-3 * scale * scale * scale) {
+    Eigen::Matrix3d r;
+    if (quaternionPolar(F, scale, det, r)) return r;
+  }
   // fast path: scaled Newton iteration X <- (g X + X^-T / g) / 2 (Higham), converges
   // quadratically to the polar factor when det F > 0 and F is not near-singular
   if (scale > 0.0 && det > 1e-3 * scale * scale * scale) {
