@@ -90,7 +90,7 @@ struct Simulation::Impl {
   bool target_rejected = false;                   ///< the last setDeviceTarget was non-finite
   std::unique_ptr<Instrument> tool_free;          ///< god object after its free motion
   Eigen::Matrix<double, Eigen::Dynamic, 6, Eigen::RowMajor> h_tool;   ///< H_tool, rows x 6
-  Eigen::MatrixXd w_tissue;                       ///< one tissue's block of W
+  Eigen::Matrix<double, Eigen::Dynamic, 6, Eigen::RowMajor> b_tool;   ///< H_tool L, C6 = L L^T
 
   void buildTissues();
   void solveContacts(StepReport& report);
@@ -396,9 +396,10 @@ void Simulation::Impl::assembleProblem(StepReport& report, bool relinearise) {
     const int nc = static_cast<int>(ts.rows.row_offset.size()) - 1;
     for (int c = 1; c <= nc; ++c) p.row_offset.push_back(ts.row_begin + ts.rows.row_offset[c]);
     if (m == 0) continue;
-    w_tissue.setZero(m, m);
-    ts.compliance->addW(ts.rows.tissue, w_tissue);
-    p.W.block(ts.row_begin, ts.row_begin, m, m) = w_tissue;
+    // the tissue's block in place: W is symmetric, so the transposed view of the row-major block
+    // (column-major for the model) is the same matrix
+    auto block = p.W.block(ts.row_begin, ts.row_begin, m, m).transpose();
+    ts.compliance->addW(ts.rows.tissue, block);
     h_tool.middleRows(ts.row_begin, m) = ts.rows.tool;
     for (int r = 0; r < m; ++r) p.delta_free[ts.row_begin + r] = ts.rows.delta_free[r];
     ++counters.w_builds;
@@ -411,14 +412,19 @@ void Simulation::Impl::assembleProblem(StepReport& report, bool relinearise) {
     p.tangent2[c] = all_contacts[c].t2;
   }
   if (rows > 0) {
+    // + H_tool C6 H_tool^T = B B^T with B = H_tool L (C6 = L L^T), each pair (i, j) computed
+    // once and written to both halves: W stays symmetric to the bit (the tissue blocks are), so
+    // NSGS may use its symmetric sweep
     const shared::Matrix6d c6 = instrument->compliance6(h);
-    p.W.noalias() += h_tool * c6 * h_tool.transpose();
-    // W = H C H^T is symmetric; make it so to the bit, so NSGS may use its symmetric sweep
+    const shared::Matrix6d l6 = c6.llt().matrixL();
+    b_tool.noalias() = h_tool * l6;
     for (int i = 0; i < rows; ++i) {
-      for (int j = i + 1; j < rows; ++j) {
-        const double w = 0.5 * (p.W(i, j) + p.W(j, i));
-        p.W(i, j) = w;
-        p.W(j, i) = w;
+      const auto bi = b_tool.row(i);
+      double* wi = p.W.row(i).data();
+      for (int j = i; j < rows; ++j) {
+        const double w = bi.dot(b_tool.row(j));
+        wi[j] += w;
+        if (j != i) p.W(j, i) += w;
       }
     }
     p.J.noalias() = h_tool * tool_free->freeMotionSensitivity(h);
