@@ -71,6 +71,7 @@ struct BenchOptions {
   int jaw_samples = 0;                 ///< > 0: overrides instrument.grasper.samples
   int jaw_rows = 0;                    ///< > 0: overrides instrument.grasper.width_samples
   double jaw_width_mm = -1.0;          ///< >= 0: overrides instrument.grasper.width
+  double grip_stiffness = -1.0;        ///< >= 0: overrides instrument.grasper.grip_stiffness
   int min_contacts = 0;                ///< > 0: a second table over the steps with this many
 };
 
@@ -81,6 +82,7 @@ int run(const BenchOptions& o) {
   if (o.jaw_samples > 0) spec.instrument.jaw_samples = o.jaw_samples;
   if (o.jaw_rows > 0) spec.instrument.jaw_rows = o.jaw_rows;
   if (o.jaw_width_mm >= 0.0) spec.instrument.jaw_width_m = 1e-3 * o.jaw_width_mm;
+  if (o.grip_stiffness >= 0.0) spec.instrument.grip_k_nmprad = o.grip_stiffness;
   const double h = spec.time_step_s;
   const long steps = o.steps > 0 ? o.steps : static_cast<long>(std::llround(spec.duration_s / h));
   if (steps <= 0) throw Error(o.scene + ": no duration in the scene; pass --steps N");
@@ -288,6 +290,8 @@ int main(int argc, char** argv) {
                  "Override the grasper's rows of samples across each jaw pad");
   app.add_option("--jaw-width-mm", o.jaw_width_mm,
                  "Override the grasper's pad width (span of the sample rows) [mm]");
+  app.add_option("--grip-stiffness", o.grip_stiffness,
+                 "Override the grasper's grip stiffness [N m/rad] (0: kinematic jaws)");
   app.add_option("--min-contacts", o.min_contacts,
                  "Also report the stages over the steps with at least this many contacts");
   app.add_option("--log-level", o.log_level, "spdlog level of the simulation library")

@@ -56,6 +56,13 @@ Instrument::Instrument(const InstrumentSpec& spec) : spec_(spec) {
                        " rows of jaw samples need a width > 0");
     }
     features_.resize(static_cast<std::size_t>(2 * spec.jaw_rows * (spec.jaw_samples + 1)));
+    requireNonNegative(spec.grip_k_nmprad, "grip_k_nmprad");
+    requireNonNegative(spec.grip_b_nmsprad, "grip_b_nmsprad");
+    grip_dynamic_ = spec.grip_k_nmprad > 0.0;
+    if (grip_dynamic_) {
+      requirePositive(spec.grip_inertia_kgm2, "grip_inertia_kgm2");
+      requirePositive(spec.max_opening_rad, "max_opening_rad");
+    }
   }
   const double opening = spec.trajectory.empty() ? 1.0 : spec.trajectory.front().gripper_opening;
   reset(toPose(spec.initial_pose), opening);
@@ -68,6 +75,7 @@ void Instrument::reset(const shared::Pose& pose, double gripper_opening) {
   target_ = pose_;
   target_twist_.setZero();
   opening_ = std::clamp(gripper_opening, 0.0, 1.0);
+  grip_rate_ = 0.0;
   theta0_.setZero();
   rot_step_.setZero();
   updateFeatures();
@@ -79,8 +87,21 @@ void Instrument::freeMotion(double h_s, const shared::Pose& target, const Vector
   h_s_ = h_s;
   target_ = target;
   target_twist_ = target_twist;
-  opening_ = std::clamp(gripper_opening, 0.0, 1.0);
   const double h = h_s;
+  if (grip_dynamic_) {
+    // jaw angle: (I_g/h + B_g + h K_g) w+ = I_g w/h + K_g (phi_h - phi)
+    const double phi_max = spec_.max_opening_rad;
+    const double phi = opening_ * phi_max;
+    const double phi_h = std::clamp(gripper_opening, 0.0, 1.0) * phi_max;
+    const double ig = spec_.grip_inertia_kgm2;
+    grip_rate_ = (ig / h * grip_rate_ + spec_.grip_k_nmprad * (phi_h - phi)) /
+                 (ig / h + spec_.grip_b_nmsprad + h * spec_.grip_k_nmprad);
+    const double next = std::clamp(phi + h * grip_rate_, 0.0, phi_max);
+    grip_rate_ = (next - phi) / h;
+    opening_ = next / phi_max;
+  } else {
+    opening_ = std::clamp(gripper_opening, 0.0, 1.0);
+  }
   // translation: (m/h + B + hK) v+ = m v/h + K (p_h - p) + B v_h
   const double m = spec_.mass_kg;
   const double kl = spec_.coupling_k_npm;
@@ -135,6 +156,33 @@ Vector6d Instrument::applyCorrection(const Vector6d& wrench) {
   return dx;
 }
 
+double Instrument::gripCompliance(double h_s) const {
+  if (!grip_dynamic_ || !(h_s > 0.0)) return 0.0;
+  return 1.0 / (spec_.grip_inertia_kgm2 / (h_s * h_s) + spec_.grip_b_nmsprad / h_s +
+                spec_.grip_k_nmprad);
+}
+
+Eigen::Vector3d Instrument::gripJacobian(int feature_id, const Eigen::Vector3d& point_m) const {
+  if (!grip_dynamic_ || feature_id < 0 || feature_id >= static_cast<int>(features_.size())) {
+    return Eigen::Vector3d::Zero();
+  }
+  const ToolFeature& f = features_[static_cast<std::size_t>(feature_id)];
+  const Eigen::Vector3d axis = pose_.rot * Eigen::Vector3d::UnitX();
+  return f.opening_sign * axis.cross(point_m - f.hinge_m);
+}
+
+double Instrument::applyGripCorrection(double torque_nm) {
+  if (!grip_dynamic_ || !(h_s_ > 0.0)) return 0.0;
+  const double phi_max = spec_.max_opening_rad;
+  const double phi = opening_ * phi_max;
+  const double next = std::clamp(phi + gripCompliance(h_s_) * torque_nm, 0.0, phi_max);
+  const double dphi = next - phi;
+  opening_ = next / phi_max;
+  grip_rate_ += dphi / h_s_;
+  updateFeatures();
+  return dphi;
+}
+
 Vector6d Instrument::couplingWrench() const {
   Vector6d w;
   w.head<3>() = spec_.coupling_k_npm * (target_.pos_m - pose_.pos_m) +
@@ -147,7 +195,8 @@ Vector6d Instrument::couplingWrench() const {
 
 double Instrument::kineticEnergy() const {
   return 0.5 * spec_.mass_kg * twist_.head<3>().squaredNorm() +
-         0.5 * spec_.inertia_kgm2 * twist_.tail<3>().squaredNorm();
+         0.5 * spec_.inertia_kgm2 * twist_.tail<3>().squaredNorm() +
+         0.5 * spec_.grip_inertia_kgm2 * grip_rate_ * grip_rate_;
 }
 
 Eigen::Matrix<double, 3, 6> Instrument::toolPointJacobian(const Eigen::Vector3d& point_m) const {
@@ -207,6 +256,8 @@ void Instrument::updateFeatures() {
     cap.b_m = b;
     cap.radius_m = r;
     cap.skip_cap_a = false;
+    cap.hinge_m = a;
+    cap.opening_sign = side;
     for (int i = 0; i < n; ++i) {
       const double t = n == 1 ? 1.0 : static_cast<double>(i) / (n - 1);
       ToolFeature& s = features_[base + 1 + i];
@@ -217,6 +268,8 @@ void Instrument::updateFeatures() {
       s.b_m = s.a_m;
       s.radius_m = r;
       s.skip_cap_a = false;
+      s.hinge_m = a;
+      s.opening_sign = side;
     }
   }
 }

@@ -60,9 +60,11 @@ struct TissueState {
   std::unique_ptr<TissueCompliance> compliance;   ///< only with an instrument
   std::unique_ptr<Collision> collision;           ///< only with an instrument
   ContactRows rows;                               ///< this step's rows on this tissue
+  std::vector<double> grip;                       ///< per row: d gap / d phi (dynamic grip)
   int row_begin = 0;                              ///< first global row
   int contact_begin = 0;                          ///< first global contact
   Eigen::VectorXd dq;                             ///< correction scratch
+  Eigen::VectorXd dq_previous;                    ///< the previous contact pass's correction
   Eigen::VectorXd q_begin;                        ///< positions at the start of the step
   Eigen::VectorXd q_free, v_free;                 ///< after the free motion
   const std::vector<Contact>* found = nullptr;    ///< contacts of the last detection
@@ -86,11 +88,15 @@ struct Simulation::Impl {
   std::vector<double> vtk_times;
   long frame = 0;
   Eigen::Matrix<double, 6, 1> last_wrench = Eigen::Matrix<double, 6, 1>::Zero();
+  double last_grip_torque = 0.0;                  ///< g^T f of the last correction (dynamic grip)
+  Eigen::Matrix<double, 6, 1> previous_wrench = Eigen::Matrix<double, 6, 1>::Zero();  ///< pass k-1
+  double previous_grip_torque = 0.0;              ///< pass k-1
   shared::Pose tool_begin;                        ///< god object pose at the start of the step
   bool target_rejected = false;                   ///< the last setDeviceTarget was non-finite
   std::unique_ptr<Instrument> tool_free;          ///< god object after its free motion
   Eigen::Matrix<double, Eigen::Dynamic, 6, Eigen::RowMajor> h_tool;   ///< H_tool, rows x 6
   Eigen::Matrix<double, Eigen::Dynamic, 6, Eigen::RowMajor> b_tool;   ///< H_tool L, C6 = L L^T
+  Eigen::VectorXd g_tool;                         ///< rows: the jaw angle's column (dynamic grip)
 
   void buildTissues();
   void solveContacts(StepReport& report);
@@ -98,6 +104,7 @@ struct Simulation::Impl {
   double detectContacts(StepReport& report);
   void assembleProblem(StepReport& report, bool relinearise);
   void solveAndCorrect(StepReport& report, bool restore_free);
+  void blendWithPreviousPass();
 };
 
 void Simulation::Impl::buildTissues() {
@@ -308,16 +315,47 @@ void Simulation::Impl::solveContacts(StepReport& report) {
     *tool_free = *instrument;
   }
   detectContacts(report);
+  double previous_gap = std::numeric_limits<double>::infinity();
   for (int pass = 0;; ++pass) {
     assembleProblem(report, pass > 0);
     solveAndCorrect(report, pass > 0);
     report.contact_passes = pass + 1;
     if (passes == 1) break;
     // the nonlinear gaps at the corrected state
-    const double min_gap = detectContacts(report);
+    double min_gap = detectContacts(report);
     report.geometric_penetration_m = std::isfinite(min_gap) ? std::max(0.0, -min_gap) : 0.0;
     if (!(min_gap < -spec.solver.penetration_tolerance_m) || pass + 1 >= passes) break;
+    const double pass_gap = min_gap;
+    if (pass > 0 && min_gap < previous_gap) {
+      // worse than the previous pass: the linearisations alternate (the contact set flips
+      // between two states). Linearise the next pass at the mean of the two corrections. (A step
+      // never ends on such a mean: the last pass's state is its own solution, so the published
+      // forces are those that moved it.)
+      blendWithPreviousPass();
+      detectContacts(report);
+    }
+    previous_gap = pass_gap;
+    for (TissueState& ts : tissues) ts.dq_previous = ts.body->positions() - ts.q_free;
+    previous_wrench = last_wrench;
+    previous_grip_torque = last_grip_torque;
   }
+}
+
+// State = free state + the mean of this pass's and the previous pass's corrections (tissue dq,
+// tool wrench, grip torque; each correction is linear in its force, so this is the correction of
+// the mean force).
+void Simulation::Impl::blendWithPreviousPass() {
+  const double h = spec.time_step_s;
+  for (TissueState& ts : tissues) {
+    const Eigen::VectorXd dq = 0.5 * (ts.body->positions() - ts.q_free + ts.dq_previous);
+    ts.body->positions() = ts.q_free + dq;
+    ts.body->velocities() = ts.v_free + dq / h;
+  }
+  last_wrench = 0.5 * (last_wrench + previous_wrench);
+  last_grip_torque = 0.5 * (last_grip_torque + previous_grip_torque);
+  *instrument = *tool_free;
+  instrument->applyCorrection(last_wrench);
+  if (instrument->dynamicGrip()) instrument->applyGripCorrection(last_grip_torque);
 }
 
 // Contact rows of every tissue from the contacts last detected, and W = sum H C H^T + H_tool C6
@@ -339,6 +377,20 @@ void Simulation::Impl::assembleProblem(StepReport& report, bool relinearise) {
     const std::vector<Contact>& found = *ts.found;
     report.contacts_dropped += ts.collision->stats().overflow;
     buildContactRows(found, mu, tool_pose.pos_m, ts.rows);
+    // the jaw angle's column: a row's gap grows by dir . dp/dphi per radian of opening
+    ts.grip.assign(static_cast<std::size_t>(ts.rows.rows()), 0.0);
+    if (instrument->dynamicGrip()) {
+      for (std::size_t c = 0; c < found.size(); ++c) {
+        const Contact& k = found[c];
+        const Eigen::Vector3d dp = instrument->gripJacobian(k.feature, k.tool_point_m);
+        const int r0 = ts.rows.row_offset[c];
+        ts.grip[static_cast<std::size_t>(r0)] = k.n.dot(dp);
+        if (ts.rows.row_offset[c + 1] - r0 == 3) {
+          ts.grip[static_cast<std::size_t>(r0 + 1)] = k.t1.dot(dp);
+          ts.grip[static_cast<std::size_t>(r0 + 2)] = k.t2.dot(dp);
+        }
+      }
+    }
     const Eigen::VectorXd& q = ts.body->positions();
     for (std::size_t c = 0; c < found.size(); ++c) {
       const Contact& k = found[c];
@@ -353,7 +405,13 @@ void Simulation::Impl::assembleProblem(StepReport& report, bool relinearise) {
         tissue_now += k.weights[j] * q.segment<3>(3 * n);
         tissue_begin += k.weights[j] * ts.q_begin.segment<3>(3 * n);
       }
-      const Eigen::Vector3d tool_free_point = free_pose.pos_m + free_pose.rot * k.tool_local_m;
+      Eigen::Vector3d tool_free_point = free_pose.pos_m + free_pose.rot * k.tool_local_m;
+      if (relinearise && instrument->dynamicGrip()) {
+        // the jaw point at the free opening (first order in the opening change)
+        const double dphi = (instrument->gripperOpening() - tool_free->gripperOpening()) *
+                            spec.instrument.max_opening_rad;
+        tool_free_point -= dphi * tool_free->gripJacobian(k.feature, tool_free_point);
+      }
       if (relinearise) {
         const Eigen::Vector3d moved =
             (k.tool_point_m - tool_free_point) - (tissue_now - tissue_free);
@@ -391,6 +449,8 @@ void Simulation::Impl::assembleProblem(StepReport& report, bool relinearise) {
   p.delta_free.resize(rows);
   p.J.resize(rows, 6);
   h_tool.resize(rows, 6);
+  g_tool.resize(rows);
+  p.grip.resize(rows);
   for (TissueState& ts : tissues) {
     const int m = ts.rows.rows();
     const int nc = static_cast<int>(ts.rows.row_offset.size()) - 1;
@@ -401,6 +461,8 @@ void Simulation::Impl::assembleProblem(StepReport& report, bool relinearise) {
     auto block = p.W.block(ts.row_begin, ts.row_begin, m, m).transpose();
     ts.compliance->addW(ts.rows.tissue, block);
     h_tool.middleRows(ts.row_begin, m) = ts.rows.tool;
+    for (int r = 0; r < m; ++r) g_tool[ts.row_begin + r] = ts.grip[static_cast<std::size_t>(r)];
+    p.grip.segment(ts.row_begin, m) = g_tool.segment(ts.row_begin, m);
     for (int r = 0; r < m; ++r) p.delta_free[ts.row_begin + r] = ts.rows.delta_free[r];
     ++counters.w_builds;
   }
@@ -415,14 +477,17 @@ void Simulation::Impl::assembleProblem(StepReport& report, bool relinearise) {
     // + H_tool C6 H_tool^T = B B^T with B = H_tool L (C6 = L L^T), each pair (i, j) computed
     // once and written to both halves: W stays symmetric to the bit (the tissue blocks are), so
     // NSGS may use its symmetric sweep
+    // (+ c_g g g^T for a dynamic grip, g the jaw angle's column)
     const shared::Matrix6d c6 = instrument->compliance6(h);
     const shared::Matrix6d l6 = c6.llt().matrixL();
     b_tool.noalias() = h_tool * l6;
+    const double c_grip = instrument->gripCompliance(h);
     for (int i = 0; i < rows; ++i) {
       const auto bi = b_tool.row(i);
       double* wi = p.W.row(i).data();
+      const double gi = c_grip * g_tool[i];
       for (int j = i; j < rows; ++j) {
-        const double w = bi.dot(b_tool.row(j));
+        const double w = bi.dot(b_tool.row(j)) + gi * g_tool[j];
         wi[j] += w;
         if (j != i) p.W(j, i) += w;
       }
@@ -487,6 +552,8 @@ void Simulation::Impl::solveAndCorrect(StepReport& report, bool restore_free) {
     const shared::Vector6d wrench = h_tool.transpose() * p.f;
     last_wrench = wrench;
     instrument->applyCorrection(wrench);
+    last_grip_torque = instrument->dynamicGrip() ? g_tool.dot(p.f) : 0.0;
+    if (instrument->dynamicGrip()) instrument->applyGripCorrection(last_grip_torque);
     // linearised gaps after the correction: delta = W f + delta_free, left by NSGS on exit
     // (not when it refused the problem as larger than its workspace: then computed here)
     Eigen::VectorXd unsolved_delta;
@@ -506,6 +573,7 @@ void Simulation::Impl::solveAndCorrect(StepReport& report, bool restore_free) {
     report.complementarity = comp;
   } else {
     last_wrench.setZero();
+    last_grip_torque = 0.0;
   }
   report.times.correction_s += secondsSince(t0);
 }

@@ -480,7 +480,7 @@ class SceneParser {
     if (section(n, p, "grasper", &s)) {
       const std::string q = join(p, "grasper");
       checkKeys(s, q, {"jaw_length", "jaw_radius", "max_opening_deg", "samples", "width",
-                       "width_samples"});
+                       "width_samples", "grip_stiffness", "grip_damping", "grip_inertia"});
       number(s, q, "jaw_length", &in->jaw_length_m, kPositive);
       number(s, q, "jaw_radius", &in->jaw_radius_m, kPositive);
       double deg = 0.0;
@@ -490,6 +490,9 @@ class SceneParser {
       integer(s, q, "samples", &in->jaw_samples, 1);
       number(s, q, "width", &in->jaw_width_m, kNonNegative);
       integer(s, q, "width_samples", &in->jaw_rows, 1);
+      number(s, q, "grip_stiffness", &in->grip_k_nmprad, kNonNegative);
+      number(s, q, "grip_damping", &in->grip_b_nmsprad, kNonNegative);
+      number(s, q, "grip_inertia", &in->grip_inertia_kgm2, kPositive);
     }
     if (section(n, p, "initial_pose", &s)) {
       const std::string q = join(p, "initial_pose");

@@ -290,6 +290,51 @@ TEST(Instrument, GrasperPadRowsSpanTheWidthAlongTheHingeAxis) {
   EXPECT_THROW(Instrument{pad}, tactus::SceneError);
 }
 
+// Dynamic grip: without contacts the jaw angle follows the device's value through its PD law
+// (implicit Euler, so it settles without overshoot for this damping), its compliance is the
+// 1-DOF formula, and gripJacobian is the derivative of the jaw points with respect to the angle.
+TEST(Instrument, DynamicGripFollowsTheTargetAndItsJacobianIsTheDerivative) {
+  InstrumentSpec spec = grasperSpec();
+  spec.grip_k_nmprad = 2.0;
+  spec.grip_b_nmsprad = 0.05;
+  spec.grip_inertia_kgm2 = 1e-6;
+  Instrument tool(spec);
+  ASSERT_TRUE(tool.dynamicGrip());
+  const double h = 0.01;
+  EXPECT_NEAR(tool.gripCompliance(h), 1.0 / (1e-6 / (h * h) + 0.05 / h + 2.0), 1e-15);
+  const Pose pose = targetPose();
+  tool.reset(pose, 1.0);
+  // one step moves only part of the way (finite stiffness), many steps reach the target
+  tool.freeMotion(h, pose, Vector6d::Zero(), 0.3);
+  EXPECT_LT(tool.gripperOpening(), 1.0);
+  EXPECT_GT(tool.gripperOpening(), 0.3 + 0.1);
+  for (int k = 0; k < 400; ++k) tool.freeMotion(h, pose, Vector6d::Zero(), 0.3);
+  EXPECT_NEAR(tool.gripperOpening(), 0.3, 1e-6);
+  EXPECT_NEAR(tool.gripRate(), 0.0, 1e-6);
+  // a torque opening the jaws: dphi = c_g torque, clamped at the range
+  const double before = tool.gripperOpening();
+  const double dphi = tool.applyGripCorrection(0.01);
+  EXPECT_NEAR(dphi, tool.gripCompliance(h) * 0.01, 1e-15);
+  EXPECT_NEAR(tool.gripperOpening(), before + dphi / spec.max_opening_rad, 1e-15);
+  // Jacobian: finite difference of every jaw feature's centre over the opening
+  Instrument a(spec), b(spec);
+  const double eps = 1e-7;
+  a.reset(pose, 0.4);
+  b.reset(pose, 0.4 + eps / spec.max_opening_rad);
+  for (std::size_t i = 0; i < a.features().size(); ++i) {
+    const Eigen::Vector3d fd = (b.features()[i].b_m - a.features()[i].b_m) / eps;
+    const Eigen::Vector3d jac = a.gripJacobian(static_cast<int>(i), a.features()[i].b_m);
+    EXPECT_LT((jac - fd).norm(), 1e-6 * (1.0 + fd.norm())) << "feature " << i;
+  }
+  // kinematic jaws and the probe: no grip DOF
+  Instrument kinematic(grasperSpec());
+  EXPECT_FALSE(kinematic.dynamicGrip());
+  EXPECT_EQ(kinematic.gripCompliance(h), 0.0);
+  EXPECT_EQ(kinematic.gripJacobian(1, Eigen::Vector3d::Ones()).norm(), 0.0);
+  kinematic.freeMotion(h, Pose{}, Vector6d::Zero(), 0.3);
+  EXPECT_DOUBLE_EQ(kinematic.gripperOpening(), 0.3);
+}
+
 TEST(Instrument, RejectsBadSpec) {
   InstrumentSpec spec = probeSpec();
   spec.mass_kg = 0.0;

@@ -251,6 +251,8 @@ TEST(Scene, EachKindOfErrorHasItsExactMessage) {
             "s.yaml:4:33: instrument.grasper.samples: must be an integer (got '2.5')");
   EXPECT_EQ(sceneError(kHead + "instrument: {grasper: {width: -0.001}}\n"),
             "s.yaml:4:31: instrument.grasper.width: must be >= 0 (got -0.001)");
+  EXPECT_EQ(sceneError(kHead + "instrument: {grasper: {grip_stiffness: -1}}\n"),
+            "s.yaml:4:40: instrument.grasper.grip_stiffness: must be >= 0 (got -1)");
   EXPECT_EQ(sceneError(kHead + "instrument: {grasper: {width_samples: 0}}\n"),
             "s.yaml:4:39: instrument.grasper.width_samples: must be >= 1 (got 0)");
   EXPECT_EQ(sceneError(kHead + "instrument: {initial_pose: {quaternion: [2, 0, 0, 0]}}\n"),

@@ -36,7 +36,16 @@
 //             Jaw pads (jaw_rows k > 1): each jaw is k such rows, row i's axis shifted along the
 //             tool x axis (the hinge axis) by jaw_width (i/(k-1) - 1/2); ids run jaw-major,
 //             then row: jaw j row i has capsule (j k + i)(n + 1) and samples after it.
-//  The jaws are kinematic: the opening follows the gripper value given to freeMotion.
+//  Grip. By default the jaws are kinematic: the opening follows the gripper value given to
+//  freeMotion, whatever lies between them (a closing grasper squeezes tissue near the hinge
+//  without limit). With grip_k_nmprad > 0 the jaw half-angle phi = opening * max_opening_rad is
+//  a DOF of the god object, pulled toward the device's phi_h by a PD law and integrated like the
+//  rotation (implicit Euler, coupling linearised at the start of the step):
+//      (I_g/h + B_g + h K_g) w+ = I_g w/h + K_g (phi_h - phi),  phi+ = phi + h w+,
+//  clamped to [0, max_opening_rad]. Its compliance c_g = (I_g/h^2 + B_g/h + K_g)^-1 enters W with
+//  the contact rows' column g_r = dir_r . dp/dphi (gripJacobian), and the correction turns the
+//  contact torque g^T f into dphi = c_g g^T f: the jaws stop where the tissue pushes back as
+//  hard as the grip spring pulls, as a real grasper's finite grip force does.
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
@@ -70,6 +79,10 @@ struct ToolFeature {
   /// the probe tip: on a fine surface the triangle query's local minima leave the nodes between
   /// them free to sink into the sphere)
   bool query_vertices = false;
+  /// grasper: the jaw's hinge point (its axis start) and the sign s_j of its opening (+1 jaw 0,
+  /// -1 jaw 1): a jaw-fixed point p moves by s_j x_tool x (p - hinge) per radian of phi.
+  Eigen::Vector3d hinge_m = Eigen::Vector3d::Zero();
+  double opening_sign = 0.0;
 };
 
 /// PoseSpec (scene file) -> Pose.
@@ -112,6 +125,18 @@ class Instrument {
   /// twist += dx / h. Returns dx. Does nothing (returns zero) before the first freeMotion.
   Vector6d applyCorrection(const Vector6d& wrench);
 
+  /// Grip (see the header comment): true when the jaw angle is a DOF (grasper, grip_k > 0).
+  bool dynamicGrip() const { return grip_dynamic_; }
+  /// c_g = (I_g/h^2 + B_g/h + K_g)^-1 [rad / (N m)]; 0 for kinematic jaws.
+  double gripCompliance(double h_s) const;
+  /// d(point)/d(phi) [m / rad] of a point attached to feature `feature_id` (zero for the probe and
+  /// for kinematic jaws).
+  Eigen::Vector3d gripJacobian(int feature_id, const Eigen::Vector3d& point_m) const;
+  /// Constrained motion of the jaw angle: dphi = c_g(h) torque (clamped to the range), rate +=
+  /// dphi / h. Returns dphi. No-op (0) for kinematic jaws or before the first freeMotion.
+  double applyGripCorrection(double torque_nm);
+  double gripRate() const { return grip_rate_; }   ///< d phi / dt [rad/s]
+
   /// The wrench on the hand [force_n; torque_nm] = -(coupling wrench on the god object), at the
   /// current state and the last target. This is what the device renders (before scaling).
   Vector6d couplingWrench() const;
@@ -142,6 +167,8 @@ class Instrument {
   shared::Pose target_;
   Vector6d target_twist_ = Vector6d::Zero();
   double opening_ = 1.0;
+  bool grip_dynamic_ = false;
+  double grip_rate_ = 0.0;                              ///< d phi / dt [rad/s]
   double h_s_ = 0.0;
   Eigen::Vector3d theta0_ = Eigen::Vector3d::Zero();   ///< log(R_h R^-1) at the last free motion
   Eigen::Vector3d rot_step_ = Eigen::Vector3d::Zero(); ///< h w+ of the last free motion

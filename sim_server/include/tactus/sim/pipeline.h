@@ -71,6 +71,9 @@ struct ContactProblemData {
   Eigen::VectorXd delta_free;
   Eigen::VectorXd f;
   Eigen::Matrix<double, Eigen::Dynamic, 6, Eigen::RowMajor> J;   ///< d delta_free / d x_h
+  /// d gap / d phi per row: the jaw angle's column of H (dynamic grip; zeros otherwise). The
+  /// contact torque on the jaw angle is grip . f.
+  Eigen::VectorXd grip;
   std::vector<Eigen::Vector3d> point_m;        ///< per contact, on the tissue
   std::vector<Eigen::Vector3d> normal;         ///< per contact (row n), tissue -> tool
   std::vector<Eigen::Vector3d> tangent1;       ///< per contact (row t1)

@@ -90,6 +90,11 @@ struct InstrumentSpec {
   /// axis (tool x), each row a capsule plus jaw_samples spheres. 1 row: a round jaw (default).
   int jaw_rows = 1;
   double jaw_width_m = 0.0;                     ///< centre-to-centre span of the rows
+  /// Grip: 0 (default) = kinematic jaws (the opening follows the device's gripper value);
+  /// > 0 = the jaw angle is a DOF pulled toward the device's value by this PD (see instrument.h).
+  double grip_k_nmprad = 0.0;                   ///< grip stiffness [N m / rad]
+  double grip_b_nmsprad = 0.0;                  ///< grip damping [N m s / rad]
+  double grip_inertia_kgm2 = 1e-6;              ///< inertia of the jaw angle [kg m^2]
   PoseSpec initial_pose;
   std::vector<TrajectoryKey> trajectory;        ///< scripted device target when no device drives it
 };
