@@ -530,7 +530,11 @@ TEST(HardCases, FrictionlessAndMuTwo) {
 // law's compressive stress stays ~E, so a few hundredths of a newton (3 kPa over the tip) push the
 // top-centre node through its column; once the surface is inside out the inside/outside test of
 // the sphere contacts flips and the tool passes (tunnel from 0.29 s). Needs an inversion-resistant
-// material law. Disabled so the suite stays green; run it with --gtest_also_run_disabled_tests.
+// material law. Note for whoever revisits the case: even without tunnelling, `tool.z > -0.015`
+// asks the disc to hold 2 N against the 400 N/m coupling (5 mm lag), which means a stress of
+// ~9 kPa (three times E) across the 4 mm disc at its 9 mm rim. That is far outside what a
+// 3 kPa linear material carries, so the scene's parameters need revisiting along with the law.
+// Disabled so the suite stays green; run it with --gtest_also_run_disabled_tests.
 TEST(HardCases, DISABLED_ToolPressedThroughTheOrganDoesNotTunnel) {
   const SceneSpec spec = loadCase("press_through.yaml");
   Simulation sim(spec);
