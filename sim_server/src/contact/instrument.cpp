@@ -23,6 +23,20 @@ void requireNonNegative(double value, const char* field) {
   }
 }
 
+// One PD-coupled DOF (translation, rotation or the jaw angle) under implicit Euler with the
+// coupling linearised at the start of the step:
+//     (M/h + B + hK) rate+ = M rate/h + K error + B target_rate
+template <class T>
+T implicitPdRate(double inertia, double b, double k, double h, const T& rate, const T& error,
+                 const T& target_rate) {
+  return (inertia / h * rate + k * error + b * target_rate) / (inertia / h + b + h * k);
+}
+
+// Its compliance (M/h^2 + B/h + K)^-1: the increment per unit generalised force.
+double pdCompliance(double inertia, double b, double k, double h) {
+  return 1.0 / (inertia / (h * h) + b / h + k);
+}
+
 }  // namespace
 
 Instrument::Instrument(const InstrumentSpec& spec) : spec_(spec) {
@@ -89,34 +103,26 @@ void Instrument::freeMotion(double h_s, const shared::Pose& target, const Vector
   target_twist_ = target_twist;
   const double h = h_s;
   if (grip_dynamic_) {
-    // jaw angle: (I_g/h + B_g + h K_g) w+ = I_g w/h + K_g (phi_h - phi)
+    // jaw angle, toward phi_h at rest
     const double phi_max = spec_.max_opening_rad;
     const double phi = opening_ * phi_max;
     const double phi_h = std::clamp(gripper_opening, 0.0, 1.0) * phi_max;
-    const double ig = spec_.grip_inertia_kgm2;
-    grip_rate_ = (ig / h * grip_rate_ + spec_.grip_k_nmprad * (phi_h - phi)) /
-                 (ig / h + spec_.grip_b_nmsprad + h * spec_.grip_k_nmprad);
+    grip_rate_ = implicitPdRate(spec_.grip_inertia_kgm2, spec_.grip_b_nmsprad, spec_.grip_k_nmprad,
+                                h, grip_rate_, phi_h - phi, 0.0);
     const double next = std::clamp(phi + h * grip_rate_, 0.0, phi_max);
     grip_rate_ = (next - phi) / h;
     opening_ = next / phi_max;
   } else {
     opening_ = std::clamp(gripper_opening, 0.0, 1.0);
   }
-  // translation: (m/h + B + hK) v+ = m v/h + K (p_h - p) + B v_h
-  const double m = spec_.mass_kg;
-  const double kl = spec_.coupling_k_npm;
-  const double bl = spec_.coupling_b_nspm;
-  const Eigen::Vector3d v_new =
-      (m / h * twist_.head<3>() + kl * (target.pos_m - pose_.pos_m) + bl * target_twist.head<3>()) /
-      (m / h + bl + h * kl);
-  // rotation: (I/h + B_r + h K_r) w+ = I w/h + K_r log(R_h R^-1) + B_r w_h
-  const double inertia = spec_.inertia_kgm2;
-  const double kr = spec_.coupling_k_rot_nmprad;
-  const double br = spec_.coupling_b_rot_nmsprad;
+  // translation, error p_h - p; rotation, error log(R_h R^-1)
+  const Eigen::Vector3d v_new = implicitPdRate<Eigen::Vector3d>(
+      spec_.mass_kg, spec_.coupling_b_nspm, spec_.coupling_k_npm, h, twist_.head<3>(),
+      target.pos_m - pose_.pos_m, target_twist.head<3>());
   theta0_ = shared::rotationVector(target.rot * pose_.rot.conjugate());
-  const Eigen::Vector3d w_new =
-      (inertia / h * twist_.tail<3>() + kr * theta0_ + br * target_twist.tail<3>()) /
-      (inertia / h + br + h * kr);
+  const Eigen::Vector3d w_new = implicitPdRate<Eigen::Vector3d>(
+      spec_.inertia_kgm2, spec_.coupling_b_rot_nmsprad, spec_.coupling_k_rot_nmprad, h,
+      twist_.tail<3>(), theta0_, target_twist.tail<3>());
   rot_step_ = h * w_new;
   twist_.head<3>() = v_new;
   twist_.tail<3>() = w_new;
@@ -126,11 +132,10 @@ void Instrument::freeMotion(double h_s, const shared::Pose& target, const Vector
 }
 
 Matrix6d Instrument::compliance6(double h_s) const {
-  const double h2 = h_s * h_s;
   const double cl =
-      1.0 / (spec_.mass_kg / h2 + spec_.coupling_b_nspm / h_s + spec_.coupling_k_npm);
-  const double cr = 1.0 / (spec_.inertia_kgm2 / h2 + spec_.coupling_b_rot_nmsprad / h_s +
-                           spec_.coupling_k_rot_nmprad);
+      pdCompliance(spec_.mass_kg, spec_.coupling_b_nspm, spec_.coupling_k_npm, h_s);
+  const double cr = pdCompliance(spec_.inertia_kgm2, spec_.coupling_b_rot_nmsprad,
+                                 spec_.coupling_k_rot_nmprad, h_s);
   Matrix6d c = Matrix6d::Zero();
   c.topLeftCorner<3, 3>().diagonal().setConstant(cl);
   c.bottomRightCorner<3, 3>().diagonal().setConstant(cr);
@@ -158,8 +163,7 @@ Vector6d Instrument::applyCorrection(const Vector6d& wrench) {
 
 double Instrument::gripCompliance(double h_s) const {
   if (!grip_dynamic_ || !(h_s > 0.0)) return 0.0;
-  return 1.0 / (spec_.grip_inertia_kgm2 / (h_s * h_s) + spec_.grip_b_nmsprad / h_s +
-                spec_.grip_k_nmprad);
+  return pdCompliance(spec_.grip_inertia_kgm2, spec_.grip_b_nmsprad, spec_.grip_k_nmprad, h_s);
 }
 
 Eigen::Vector3d Instrument::gripJacobian(int feature_id, const Eigen::Vector3d& point_m) const {
