@@ -96,7 +96,6 @@ struct Simulation::Impl {
   std::unique_ptr<Instrument> tool_free;          ///< god object after its free motion
   Eigen::Matrix<double, Eigen::Dynamic, 6, Eigen::RowMajor> h_tool;   ///< H_tool, rows x 6
   Eigen::Matrix<double, Eigen::Dynamic, 6, Eigen::RowMajor> b_tool;   ///< H_tool L, C6 = L L^T
-  Eigen::VectorXd g_tool;                         ///< rows: the jaw angle's column (dynamic grip)
 
   void buildTissues();
   void solveContacts(StepReport& report);
@@ -449,7 +448,6 @@ void Simulation::Impl::assembleProblem(StepReport& report, bool relinearise) {
   p.delta_free.resize(rows);
   p.J.resize(rows, 6);
   h_tool.resize(rows, 6);
-  g_tool.resize(rows);
   p.grip.resize(rows);
   for (TissueState& ts : tissues) {
     const int m = ts.rows.rows();
@@ -461,8 +459,7 @@ void Simulation::Impl::assembleProblem(StepReport& report, bool relinearise) {
     auto block = p.W.block(ts.row_begin, ts.row_begin, m, m).transpose();
     ts.compliance->addW(ts.rows.tissue, block);
     h_tool.middleRows(ts.row_begin, m) = ts.rows.tool;
-    for (int r = 0; r < m; ++r) g_tool[ts.row_begin + r] = ts.grip[static_cast<std::size_t>(r)];
-    p.grip.segment(ts.row_begin, m) = g_tool.segment(ts.row_begin, m);
+    for (int r = 0; r < m; ++r) p.grip[ts.row_begin + r] = ts.grip[static_cast<std::size_t>(r)];
     for (int r = 0; r < m; ++r) p.delta_free[ts.row_begin + r] = ts.rows.delta_free[r];
     ++counters.w_builds;
   }
@@ -485,9 +482,9 @@ void Simulation::Impl::assembleProblem(StepReport& report, bool relinearise) {
     for (int i = 0; i < rows; ++i) {
       const auto bi = b_tool.row(i);
       double* wi = p.W.row(i).data();
-      const double gi = c_grip * g_tool[i];
+      const double gi = c_grip * p.grip[i];
       for (int j = i; j < rows; ++j) {
-        const double w = bi.dot(b_tool.row(j)) + gi * g_tool[j];
+        const double w = bi.dot(b_tool.row(j)) + gi * p.grip[j];
         wi[j] += w;
         if (j != i) p.W(j, i) += w;
       }
@@ -552,7 +549,7 @@ void Simulation::Impl::solveAndCorrect(StepReport& report, bool restore_free) {
     const shared::Vector6d wrench = h_tool.transpose() * p.f;
     last_wrench = wrench;
     instrument->applyCorrection(wrench);
-    last_grip_torque = instrument->dynamicGrip() ? g_tool.dot(p.f) : 0.0;
+    last_grip_torque = instrument->dynamicGrip() ? p.grip.dot(p.f) : 0.0;
     if (instrument->dynamicGrip()) instrument->applyGripCorrection(last_grip_torque);
     // linearised gaps after the correction: delta = W f + delta_free, left by NSGS on exit
     // (not when it refused the problem as larger than its workspace: then computed here)
