@@ -141,6 +141,17 @@ struct DisplayLayout {
 
   static constexpr std::size_t pad8(std::size_t bytes) noexcept { return (bytes + 7) / 8 * 8; }
 
+  /// fn(offset, floats) for each per-frame array, with the floats used by v vertices and c
+  /// contacts (the one list the writer's stores and the reader's loads both follow).
+  template <class Fn>
+  void forEachFrameArray(std::size_t v, std::size_t c, Fn&& fn) const noexcept {
+    fn(positions, 3 * v);
+    fn(displacement, v);
+    fn(stress, v);
+    fn(contact_point, 3 * c);
+    fn(contact_force, 3 * c);
+  }
+
   static constexpr DisplayLayout forCapacity(DisplayCapacity c) noexcept {
     DisplayLayout l;
     l.capacity = c;
@@ -285,11 +296,9 @@ class DisplayPublisher {
     detail::storeWords(slot + 8, frame.data() + 8, end_at - 8);
     const auto v = static_cast<std::size_t>(staged.vertex_count);
     const auto c = static_cast<std::size_t>(staged.contact_count);
-    copyArray(slot, frame, layout_.positions, 3 * v);
-    copyArray(slot, frame, layout_.displacement, v);
-    copyArray(slot, frame, layout_.stress, v);
-    copyArray(slot, frame, layout_.contact_point, 3 * c);
-    copyArray(slot, frame, layout_.contact_force, 3 * c);
+    layout_.forEachFrameArray(v, c, [&](std::size_t offset, std::size_t floats) {
+      copyArray(slot, frame, offset, floats);
+    });
     // release: the payload happens-before a reader's acquire of seq_end
     __atomic_store_n(reinterpret_cast<std::uint64_t*>(slot + end_at), seq, __ATOMIC_RELEASE);
     writer_.publish();
@@ -387,11 +396,9 @@ class DisplaySubscriber {
       if (sane) {
         const auto v = static_cast<std::size_t>(h.vertex_count);
         const auto c = static_cast<std::size_t>(h.contact_count);
-        loadArray(out, slot, layout_.positions, 3 * v);
-        loadArray(out, slot, layout_.displacement, v);
-        loadArray(out, slot, layout_.stress, v);
-        loadArray(out, slot, layout_.contact_point, 3 * c);
-        loadArray(out, slot, layout_.contact_force, 3 * c);
+        layout_.forEachFrameArray(v, c, [&](std::size_t offset, std::size_t floats) {
+          loadArray(out, slot, offset, floats);
+        });
       }
       // acquire fence: every load above happens before the seq_begin re-load
       std::atomic_thread_fence(std::memory_order_acquire);
