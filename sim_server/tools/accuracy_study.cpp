@@ -391,6 +391,17 @@ struct TickSeries {
   std::vector<double> sweeps, residual;
   std::vector<bool> valid;
   std::vector<Eigen::Vector3d> device_pos;  // reference only: x_h(t_j) [m]
+
+  // a tick with no snapshot to compare (before the first arrives, after the last one's span)
+  void pushInvalid() {
+    force.push_back(Eigen::Vector3d::Zero());
+    penetration.push_back(0.0);
+    complementarity.push_back(0.0);
+    time_s.push_back(0.0);
+    sweeps.push_back(0.0);
+    residual.push_back(0.0);
+    valid.push_back(false);
+  }
 };
 
 struct HapticRow {
@@ -564,13 +575,7 @@ std::vector<HapticRow> runHaptic(const Options& o, const HapticPlan& plan) {
       // ticks before the first snapshot arrives are not compared
       for (auto& row : local) {
         for (long j = 0; j < std::min(ticks, lat * n); ++j) {
-          row.series.force.push_back(Eigen::Vector3d::Zero());
-          row.series.penetration.push_back(0.0);
-          row.series.complementarity.push_back(0.0);
-          row.series.time_s.push_back(0.0);
-          row.series.sweeps.push_back(0.0);
-          row.series.residual.push_back(0.0);
-          row.series.valid.push_back(false);
+          row.series.pushInvalid();
         }
       }
       for (long k = 0; k < sim_steps; ++k) {
@@ -590,13 +595,7 @@ std::vector<HapticRow> runHaptic(const Options& o, const HapticPlan& plan) {
       for (auto& row : local) {
         // pad to the reference's length (ticks after the last snapshot's span)
         while (static_cast<long>(row.series.force.size()) < ticks) {
-          row.series.force.push_back(Eigen::Vector3d::Zero());
-          row.series.penetration.push_back(0.0);
-          row.series.complementarity.push_back(0.0);
-          row.series.time_s.push_back(0.0);
-          row.series.sweeps.push_back(0.0);
-          row.series.residual.push_back(0.0);
-          row.series.valid.push_back(false);
+          row.series.pushInvalid();
         }
         rows.push_back(std::move(row));
       }
