@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "hard_case_support.h"
+#include "../support/liver_lobe.h"
 #include "tactus/sim/mesh_gen.h"
 
 namespace tactus::hard_cases {
@@ -83,16 +84,8 @@ std::string fmt(const char* f, double a, double b = 0.0, double c = 0.0, double 
 TEST(HardCases, GraspAndLiftWithHighFriction) {
   const SceneSpec spec = loadCase("grasp_lift.yaml");
   Simulation sim(spec);
-  const FemBody& liver = sim.tissue(0);
-  std::vector<int> lobe;
-  for (int i = 0; i < liver.nodeCount(); ++i) {
-    if (liver.restPositions()[3 * i] > 0.088) lobe.push_back(i);
-  }
-  auto lobe_z = [&] {
-    double z = 0.0;
-    for (int i : lobe) z += liver.positions()[3 * i + 2];
-    return z / static_cast<double>(lobe.size());
-  };
+  const test_support::LiverLobe lobe(sim.tissue(0));
+  auto lobe_z = [&] { return lobe.meanZ(); };
   StepWatch watch(spec);
   EnergyWatch rest;
   double z_closed = 0.0;

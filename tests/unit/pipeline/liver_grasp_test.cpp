@@ -10,6 +10,7 @@
 
 #include <cmath>
 
+#include "../../support/liver_lobe.h"
 #include "tactus/sim/fem.h"
 #include "tactus/sim/instrument.h"
 #include "tactus/sim/pipeline.h"
@@ -38,16 +39,8 @@ GraspResult runGrasp(double mu) {
   for (auto& t : spec.tissues) t.compliance_cache_dir.clear();
   EXPECT_EQ(spec.solver.penetration_tolerance_m, kTolerance_m);
   Simulation sim(spec);
-  const FemBody& liver = sim.tissue(0);
-  std::vector<int> lobe;
-  for (int i = 0; i < liver.nodeCount(); ++i) {
-    if (liver.restPositions()[3 * i] > 0.088) lobe.push_back(i);
-  }
-  auto lobe_z = [&] {
-    double z = 0.0;
-    for (int i : lobe) z += liver.positions()[3 * i + 2];
-    return z / static_cast<double>(lobe.size());
-  };
+  const test_support::LiverLobe lobe(sim.tissue(0));
+  auto lobe_z = [&] { return lobe.meanZ(); };
   GraspResult out;
   double z_before = 0.0;
   double tool_before = 0.0;
