@@ -17,6 +17,14 @@
 namespace tactus::sim {
 namespace {
 
+/// Options for a model built for time step h, without the progress bar.
+ComplianceOptions quietOptions(double h) {
+  ComplianceOptions o;
+  o.h_s = h;
+  o.show_progress = false;
+  return o;
+}
+
 namespace fs = std::filesystem;
 
 FemMaterial liverMaterial() {
@@ -146,7 +154,7 @@ TEST(Compliance, ExactMatchesDenseInverse) {
     EXPECT_LT((x - c_dense.col(j)).norm(), 1e-6 * c_dense.col(j).norm()) << "column " << j;
   }
   // W through the exact model, on rows that include interior and fixed nodes
-  auto model = makeCompliance(ComplianceKind::kExact, body, {h, {}, false});
+  auto model = makeCompliance(ComplianceKind::kExact, body, quietOptions(h));
   std::vector<TissueRow> rows;
   for (int node : {0, 5, 11, 23, mesh.nodeCount() - 1}) {
     for (int c = 0; c < 3; ++c) {
@@ -200,9 +208,9 @@ TEST_F(LiverCompliance, WarpedEqualsExactAtRest) {
   auto body = makeBody();
   ASSERT_TRUE(body->freeMotion(h_).ok);  // from rest, no gravity: stays at rest
   const auto rows = randomRows(*body, 40, 1);
-  auto exact = makeCompliance(ComplianceKind::kExact, *body, {h_, {}, false});
-  auto warped = makeCompliance(ComplianceKind::kWarped, *body, {h_, {}, false});
-  auto rest = makeCompliance(ComplianceKind::kRest, *body, {h_, {}, false});
+  auto exact = makeCompliance(ComplianceKind::kExact, *body, quietOptions(h_));
+  auto warped = makeCompliance(ComplianceKind::kWarped, *body, quietOptions(h_));
+  auto rest = makeCompliance(ComplianceKind::kRest, *body, quietOptions(h_));
   exact->update(*body);
   warped->update(*body);
   rest->update(*body);
@@ -233,10 +241,10 @@ TEST_F(LiverCompliance, WarpedBeatsRestUnderLargeRotation) {
     body->positions().segment<3>(3 * i) =
         centre + rot * squash.cwiseProduct(mesh_.nodes.col(i) - centre);
   ASSERT_TRUE(body->freeMotion(h_).ok);
-  auto exact = makeCompliance(ComplianceKind::kExact, *body, {h_, {}, false});
-  auto warped = makeCompliance(ComplianceKind::kWarped, *body, {h_, {}, false});
-  auto rest = makeCompliance(ComplianceKind::kRest, *body, {h_, {}, false});
-  auto uncoupled = makeCompliance(ComplianceKind::kUncoupled, *body, {h_, {}, false});
+  auto exact = makeCompliance(ComplianceKind::kExact, *body, quietOptions(h_));
+  auto warped = makeCompliance(ComplianceKind::kWarped, *body, quietOptions(h_));
+  auto rest = makeCompliance(ComplianceKind::kRest, *body, quietOptions(h_));
+  auto uncoupled = makeCompliance(ComplianceKind::kUncoupled, *body, quietOptions(h_));
   for (auto* m : {exact.get(), warped.get(), rest.get(), uncoupled.get()}) m->update(*body);
   const auto rows = randomRows(*body, 40, 2);
   const Eigen::MatrixXd w_exact = buildW(*exact, rows);
@@ -258,7 +266,7 @@ TEST_F(LiverCompliance, CorrectionIsConsistentWithW) {
   const Eigen::VectorXd f = randomForces(rows.size(), 4);
   for (ComplianceKind kind : {ComplianceKind::kExact, ComplianceKind::kWarped,
                               ComplianceKind::kRest, ComplianceKind::kUncoupled}) {
-    auto model = makeCompliance(kind, *body, {h_, {}, false});
+    auto model = makeCompliance(kind, *body, quietOptions(h_));
     model->update(*body);
     const Eigen::MatrixXd w = buildW(*model, rows);
     Eigen::VectorXd dq;
@@ -277,12 +285,12 @@ TEST_F(LiverCompliance, ExactCorrectionUsesTheFreeMotionCompliance) {
   const auto rows = randomRows(*body, 30, 3);
   const Eigen::MatrixXd hm = denseH(*body, rows);
   const Eigen::VectorXd f = randomForces(rows.size(), 5);
-  auto exact = makeCompliance(ComplianceKind::kExact, *body, {h_, {}, false});
+  auto exact = makeCompliance(ComplianceKind::kExact, *body, quietOptions(h_));
   exact->update(*body);
   Eigen::VectorXd dq_exact;
   exact->correction(*body, rows, f.data(), dq_exact);
   for (ComplianceKind kind : {ComplianceKind::kWarped, ComplianceKind::kRest}) {
-    ComplianceOptions opt{h_, {}, false};
+    ComplianceOptions opt = quietOptions(h_);
     opt.exact_correction = true;
     auto model = makeCompliance(kind, *body, opt);
     model->update(*body);
@@ -402,7 +410,7 @@ TEST_F(LiverCompliance, SinglePrecisionC0MatchesDouble) {
 
 TEST_F(LiverCompliance, UncoupledCouplesOnlyRowsSharingNodes) {
   auto body = makeBody();
-  auto model = makeCompliance(ComplianceKind::kUncoupled, *body, {h_, {}, false});
+  auto model = makeCompliance(ComplianceKind::kUncoupled, *body, quietOptions(h_));
   const auto& surf = body->surfaceNodes();
   std::vector<TissueRow> rows(2);
   rows[0].node = {surf[0], -1, -1};
