@@ -20,6 +20,14 @@ namespace {
 
 const double kH = 0.01;
 
+/// Compliance options for kH without the progress bar.
+ComplianceOptions quietOptions() {
+  ComplianceOptions o;
+  o.h_s = kH;
+  o.show_progress = false;
+  return o;
+}
+
 TetMesh loadLiver(const char* name) {
   static std::map<std::string, TetMesh> cache;
   auto it = cache.find(name);
@@ -157,7 +165,7 @@ void precompute(benchmark::State& state, const char* name) {
   int surface = 0;
   for (auto _ : state) {
     auto body = makeBody(mesh, LinearSolverKind::kCholmod, PcgPreconditioner::kJacobi, 20);
-    auto model = makeCompliance(ComplianceKind::kWarped, *body, {kH, {}, false});
+    auto model = makeCompliance(ComplianceKind::kWarped, *body, quietOptions());
     bytes = model->memoryBytes();
     surface = model->buildInfo().surface_nodes;
   }
@@ -174,7 +182,7 @@ BENCHMARK(BM_WarpedPrecompute_Liver23k)->Unit(benchmark::kMillisecond)->Iteratio
 void buildW(benchmark::State& state, const TetMesh& mesh, ComplianceKind kind) {
   auto body = makeBody(mesh, LinearSolverKind::kCholmod, PcgPreconditioner::kJacobi, 20);
   for (int s = 0; s < 5; ++s) body->freeMotion(kH);
-  auto model = makeCompliance(kind, *body, {kH, {}, false});
+  auto model = makeCompliance(kind, *body, quietOptions());
   model->update(*body);
   const auto rows = rows450(*body);
   Eigen::MatrixXd w(rows.size(), rows.size());
