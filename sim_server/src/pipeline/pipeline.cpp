@@ -67,6 +67,7 @@ struct TissueState {
   Eigen::VectorXd dq_previous;                    ///< the previous contact pass's correction
   Eigen::VectorXd q_begin;                        ///< positions at the start of the step
   Eigen::VectorXd q_free, v_free;                 ///< after the free motion
+  Eigen::VectorXd q_detected;                     ///< positions at the last detection
   const std::vector<Contact>* found = nullptr;    ///< contacts of the last detection
 };
 
@@ -94,6 +95,7 @@ struct Simulation::Impl {
   shared::Pose tool_begin;                        ///< god object pose at the start of the step
   bool target_rejected = false;                   ///< the last setDeviceTarget was non-finite
   std::unique_ptr<Instrument> tool_free;          ///< god object after its free motion
+  std::unique_ptr<Instrument> tool_detected;      ///< god object at the last detection
   Eigen::Matrix<double, Eigen::Dynamic, 6, Eigen::RowMajor> h_tool;   ///< H_tool, rows x 6
   Eigen::Matrix<double, Eigen::Dynamic, 6, Eigen::RowMajor> b_tool;   ///< H_tool L, C6 = L L^T
 
@@ -152,6 +154,7 @@ void Simulation::Impl::buildTissues() {
       col.alarm_distance_m = spec.instrument.alarm_distance_m;
       col.contact_distance_m = spec.instrument.contact_distance_m;
       col.max_contacts = spec.solver.max_contacts;
+      col.sphere_vs_triangle = spec.instrument.face_contacts;
       state.collision =
           std::make_unique<Collision>(state.surface, state.body->positions(), col);
     }
@@ -293,9 +296,17 @@ double Simulation::Impl::queryContacts() {
   return min_gap;
 }
 
+// Also records the state the contacts were found at (tissue positions, god object), which
+// assembleProblem carries the gaps from.
 double Simulation::Impl::detectContacts(StepReport& report) {
   const auto t0 = Clock::now();
   const double min_gap = queryContacts();
+  for (TissueState& ts : tissues) ts.q_detected = ts.body->positions();
+  if (!tool_detected) {
+    tool_detected = std::make_unique<Instrument>(*instrument);
+  } else {
+    *tool_detected = *instrument;
+  }
   counters.collision_queries += static_cast<long>(tissues.size());
   report.times.collision_s += secondsSince(t0);
   return min_gap;
@@ -313,10 +324,13 @@ void Simulation::Impl::solveContacts(StepReport& report) {
   } else {
     *tool_free = *instrument;
   }
-  detectContacts(report);
+  // kStepStart: step() detected the contacts before the free motion; their gaps are carried to
+  // the free state like those of a later pass
+  const bool detected_at_start = spec.solver.contact_detection == ContactDetection::kStepStart;
+  if (!detected_at_start) detectContacts(report);
   double previous_gap = std::numeric_limits<double>::infinity();
   for (int pass = 0;; ++pass) {
-    assembleProblem(report, pass > 0);
+    assembleProblem(report, pass > 0 || detected_at_start);
     solveAndCorrect(report, pass > 0);
     report.contact_passes = pass + 1;
     if (passes == 1) break;
@@ -358,14 +372,16 @@ void Simulation::Impl::blendWithPreviousPass() {
 }
 
 // Contact rows of every tissue from the contacts last detected, and W = sum H C H^T + H_tool C6
-// H_tool^T. delta_free is the gap at the free state: on the first pass the contacts were
-// detected there; on later passes they were detected at the corrected state and their gaps are
-// carried back to the free state along the rows (gap - H (x - x_free)). Friction rows: the
-// relative tangential displacement of the tool point over the free motion.
+// H_tool^T. delta_free is the gap at the free state: on the first pass with kFreeState the
+// contacts were detected there; otherwise (later passes: at the corrected state; kStepStart:
+// at the start of the step) their gaps are carried to the free state along the rows
+// (gap - H (x_detected - x_free)). Friction rows: the relative tangential displacement of the
+// tool point over the free motion.
 void Simulation::Impl::assembleProblem(StepReport& report, bool relinearise) {
   const double h = spec.time_step_s;
   const double mu = spec.instrument.friction_mu;
-  const shared::Pose& tool_pose = instrument->pose();
+  const Instrument& detected = *tool_detected;   // the god object the contacts were found at
+  const shared::Pose& tool_pose = detected.pose();
   const shared::Pose& free_pose = tool_free->pose();
   auto t0 = Clock::now();
   int rows = 0;
@@ -381,7 +397,7 @@ void Simulation::Impl::assembleProblem(StepReport& report, bool relinearise) {
     if (instrument->dynamicGrip()) {
       for (std::size_t c = 0; c < found.size(); ++c) {
         const Contact& k = found[c];
-        const Eigen::Vector3d dp = instrument->gripJacobian(k.feature, k.tool_point_m);
+        const Eigen::Vector3d dp = detected.gripJacobian(k.feature, k.tool_point_m);
         const int r0 = ts.rows.row_offset[c];
         ts.grip[static_cast<std::size_t>(r0)] = k.n.dot(dp);
         if (ts.rows.row_offset[c + 1] - r0 == 3) {
@@ -390,30 +406,30 @@ void Simulation::Impl::assembleProblem(StepReport& report, bool relinearise) {
         }
       }
     }
-    const Eigen::VectorXd& q = ts.body->positions();
+    const Eigen::VectorXd& q = ts.q_detected;
     for (std::size_t c = 0; c < found.size(); ++c) {
       const Contact& k = found[c];
       const int r0 = ts.rows.row_offset[c];
       Eigen::Vector3d tissue_free = Eigen::Vector3d::Zero();
-      Eigen::Vector3d tissue_now = Eigen::Vector3d::Zero();
+      Eigen::Vector3d tissue_detected = Eigen::Vector3d::Zero();
       Eigen::Vector3d tissue_begin = Eigen::Vector3d::Zero();
       for (int j = 0; j < 3; ++j) {
         const int n = k.nodes[j];
         if (n < 0) continue;
         tissue_free += k.weights[j] * ts.q_free.segment<3>(3 * n);
-        tissue_now += k.weights[j] * q.segment<3>(3 * n);
+        tissue_detected += k.weights[j] * q.segment<3>(3 * n);
         tissue_begin += k.weights[j] * ts.q_begin.segment<3>(3 * n);
       }
       Eigen::Vector3d tool_free_point = free_pose.pos_m + free_pose.rot * k.tool_local_m;
       if (relinearise && instrument->dynamicGrip()) {
         // the jaw point at the free opening (first order in the opening change)
-        const double dphi = (instrument->gripperOpening() - tool_free->gripperOpening()) *
+        const double dphi = (detected.gripperOpening() - tool_free->gripperOpening()) *
                             spec.instrument.max_opening_rad;
         tool_free_point -= dphi * tool_free->gripJacobian(k.feature, tool_free_point);
       }
       if (relinearise) {
         const Eigen::Vector3d moved =
-            (k.tool_point_m - tool_free_point) - (tissue_now - tissue_free);
+            (k.tool_point_m - tool_free_point) - (tissue_detected - tissue_free);
         ts.rows.delta_free[r0] = k.gap_m - k.n.dot(moved);
       }
       if (ts.rows.row_offset[c + 1] - r0 == 3) {
@@ -580,6 +596,11 @@ StepReport Simulation::step() {
   StepReport report;
   const auto t_step = Clock::now();
   const double h = s.spec.time_step_s;
+
+  // kStepStart: contacts at the start-of-step state (carried to the free state when assembled)
+  if (s.instrument && s.spec.solver.contact_detection == ContactDetection::kStepStart) {
+    s.detectContacts(report);
+  }
 
   // free motion of every object (no contact forces)
   auto t0 = Clock::now();

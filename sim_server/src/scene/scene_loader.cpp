@@ -454,7 +454,8 @@ class SceneParser {
     const std::string p = "instrument";
     in->present = true;
     checkKeys(n, p, {"type", "mass", "inertia", "coupling", "friction", "alarm_distance",
-                     "contact_distance", "probe", "grasper", "initial_pose", "trajectory"});
+                     "contact_distance", "face_contacts", "probe", "grasper", "initial_pose",
+                     "trajectory"});
     choice(n, p, "type", &in->kind,
            {{"probe", InstrumentKind::kProbe}, {"grasper", InstrumentKind::kGrasper}});
     number(n, p, "mass", &in->mass_kg, kPositive);
@@ -462,6 +463,7 @@ class SceneParser {
     number(n, p, "friction", &in->friction_mu, kNonNegative);
     number(n, p, "alarm_distance", &in->alarm_distance_m, kNonNegative);
     number(n, p, "contact_distance", &in->contact_distance_m, kNonNegative);
+    boolean(n, p, "face_contacts", &in->face_contacts);
     YAML::Node s;
     if (section(n, p, "coupling", &s)) {
       const std::string q = join(p, "coupling");
@@ -538,7 +540,7 @@ class SceneParser {
     const std::string p = "solver";
     checkKeys(n, p, {"linear", "cg_tolerance", "cg_max_iterations", "nsgs_tolerance",
                      "nsgs_max_sweeps", "nsgs_sor", "max_contacts", "contact_iterations",
-                     "penetration_tolerance"});
+                     "penetration_tolerance", "contact_detection"});
     choice(n, p, "linear", &s->linear,
            {{"cholmod", LinearSolverKind::kCholmod}, {"pcg", LinearSolverKind::kPcg}});
     number(n, p, "cg_tolerance", &s->cg_tolerance, kPositive);
@@ -549,6 +551,9 @@ class SceneParser {
     integer(n, p, "max_contacts", &s->max_contacts, 1);
     integer(n, p, "contact_iterations", &s->contact_iterations, 1);
     number(n, p, "penetration_tolerance", &s->penetration_tolerance_m, kPositive);
+    choice(n, p, "contact_detection", &s->contact_detection,
+           {{"free_state", ContactDetection::kFreeState},
+            {"step_start", ContactDetection::kStepStart}});
   }
 
   void readHaptics(const YAML::Node& n, HapticsSpec* h) {

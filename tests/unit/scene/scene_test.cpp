@@ -175,6 +175,24 @@ TEST(Scene, SectionsPresentWithDefaults) {
                    .haptics.enabled);
 }
 
+TEST(Scene, ContactDetectionAndFaceContacts) {
+  const SceneSpec def = parseScene(kHead + "instrument: {}\n", "s.yaml", kScenes);
+  EXPECT_EQ(def.solver.contact_detection, ContactDetection::kFreeState);
+  EXPECT_TRUE(def.instrument.face_contacts);
+  const SceneSpec s = parseScene(kHead +
+                                     "instrument: {face_contacts: false}\n"
+                                     "solver: {contact_detection: step_start}\n",
+                                 "s.yaml", kScenes);
+  EXPECT_EQ(s.solver.contact_detection, ContactDetection::kStepStart);
+  EXPECT_FALSE(s.instrument.face_contacts);
+  EXPECT_EQ(parseScene(kHead + "solver: {contact_detection: free_state}\n", "s.yaml", kScenes)
+                .solver.contact_detection,
+            ContactDetection::kFreeState);
+  EXPECT_EQ(sceneError(kHead + "solver: {contact_detection: later}\n"),
+            "s.yaml:4:29: solver.contact_detection: must be one of free_state, step_start (got "
+            "'later')");
+}
+
 TEST(Scene, EulerAnglesApplyXThenYThenZ) {
   const SceneSpec s = parseScene(kHead +
                                      "instrument:\n"

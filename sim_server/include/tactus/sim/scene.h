@@ -19,6 +19,12 @@ enum class MaterialLaw { kLinear, kCorotational };
 enum class ComplianceKind { kExact, kWarped, kRest, kUncoupled };
 enum class LinearSolverKind { kCholmod, kPcg };
 enum class InstrumentKind { kProbe, kGrasper };
+/// Where the first contact pass of a step detects its contacts (SolverSpec::contact_detection).
+enum class ContactDetection {
+  kFreeState,   ///< after the free motion, at the free state (the paper's scheme)
+  kStepStart,   ///< before the free motion, at the start-of-step state; gaps carried to the free
+                ///< state along the rows (gap + n . (x_free - x_start) relative motion)
+};
 
 /// Axis-aligned box in scene coordinates (after the mesh transform) [m].
 struct BoxSpec {
@@ -78,6 +84,13 @@ struct InstrumentSpec {
   double friction_mu = 0.0;                     ///< Coulomb coefficient tool/tissue (0: no tangential rows)
   double alarm_distance_m = 0.004;              ///< collision query radius beyond contact
   double contact_distance_m = 0.0;              ///< gap offset treated as contact
+  /// Sphere-vs-triangle contacts (collision.h kind (b)) of the tool's spheres. false: only the
+  /// surface vertices are held out of the tool (kind (a); a probe tip is also queried as a
+  /// degenerate capsule), so the surface between held vertices may dip into a sphere of radius
+  /// r by about l^2 / (8 r) for edges of length l: for tools much larger than the elements. On a
+  /// surface that wraps a sphere the face contacts' closest points (projections of the centre on
+  /// nearly equidistant triangles) jump between steps and the contact set never settles.
+  bool face_contacts = true;
   // probe: a capsule from the tool origin along -z (shaft) with a spherical tip
   double tip_radius_m = 0.003;
   double shaft_length_m = 0.0;
@@ -112,6 +125,16 @@ struct SolverSpec {
   /// is linearised there and solved again from the free motion (1: the paper's single pass).
   int contact_iterations = 1;
   double penetration_tolerance_m = 1e-4;        ///< geometric gap accepted by the passes [m]
+  /// Where the first pass detects its contacts. kFreeState (default): at the free state, so the
+  /// rows are linearised where the free motion put the tissue (when it springs deep into the
+  /// tool, far from where the constraint holds). kStepStart: at the start of the step (gaps ~0
+  /// on a resting contact, normals and contact points of the constrained state), each gap
+  /// carried to the free state along its row: delta_free = gap - n . ((p_tool - p_tool_free) -
+  /// (p_tissue - p_tissue_free)). At rest the linearisation point is then the constrained
+  /// equilibrium itself. The alarm distance must cover the relative motion of one step (contacts
+  /// that start further apart are found only at the next step). Later passes
+  /// (contact_iterations > 1) detect at the corrected state in both modes.
+  ContactDetection contact_detection = ContactDetection::kFreeState;
 };
 
 struct HapticsSpec {
