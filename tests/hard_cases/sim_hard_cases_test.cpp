@@ -538,6 +538,9 @@ TEST(HardCases, FrictionlessAndMuTwo) {
 // asks the disc to hold 2 N against the 400 N/m coupling (5 mm lag), which means a stress of
 // ~9 kPa (three times E) across the 4 mm disc at its 9 mm rim. That is far outside what a
 // 3 kPa linear material carries, so the scene's parameters need revisiting along with the law.
+// Tried since (README "Known failures"): an inversion barrier (branch inversion-barrier) is
+// unstable under the warped correction; with exact W, exact correction and 4 contact passes the
+// disc tents properly but thins under the tip to ~0.3 mm and the tool passes at 0.34-0.36 s.
 // Disabled so the suite stays green; run it with --gtest_also_run_disabled_tests.
 TEST(HardCases, DISABLED_ToolPressedThroughTheOrganDoesNotTunnel) {
   const SceneSpec spec = loadCase("press_through.yaml");

@@ -202,8 +202,12 @@ std::vector<std::string> Simulation::stages() const {
     out.push_back(fmt::format("free motion of the {} god object (PD coupling k = {} N/m)",
                               in.kind == InstrumentKind::kGrasper ? "grasper" : "probe",
                               in.coupling_k_npm));
-    out.push_back(fmt::format("collision detection (BVH refit, alarm {} mm, at most {} contacts)",
-                              1e3 * in.alarm_distance_m, s.spec.solver.max_contacts));
+    out.push_back(fmt::format(
+        "collision detection (BVH refit, alarm {} mm, at most {} contacts, {}, at the {})",
+        1e3 * in.alarm_distance_m, s.spec.solver.max_contacts,
+        in.face_contacts ? "vertex and face contacts" : "vertex contacts only",
+        s.spec.solver.contact_detection == ContactDetection::kStepStart ? "start of the step"
+                                                                        : "free state"));
     for (const auto& ts : s.spec.tissues) {
       out.push_back(fmt::format("W = H C H^T with {} compliance of '{}'", toString(ts.compliance),
                                 ts.name));

@@ -129,6 +129,20 @@ TEST(EffectsTest, EveryEffectAScenePutsInRuns) {
                               "Coulomb friction mu = 0.5", "constrained motion", "VTK output"}) {
     EXPECT_TRUE(anyContains(r.stages, present)) << present;
   }
+  EXPECT_TRUE(anyContains(r.stages, "vertex and face contacts, at the free state"));
+}
+
+// Detection at the start of the step still queries once per step (before the free motion instead
+// of after it), finds the contacts, and the printed stages say where and which kinds.
+TEST(EffectsTest, StepStartDetectionWithVertexContactsOnly) {
+  SceneSpec spec = parse(cubeScene(true, true, true, 0.5));
+  spec.solver.contact_detection = ContactDetection::kStepStart;
+  spec.instrument.face_contacts = false;
+  const EffectsRun r = run(spec);
+  EXPECT_GT(r.max_contacts, 0);
+  EXPECT_EQ(r.counters.collision_queries, 5);
+  EXPECT_GT(r.counters.solves, 0);
+  EXPECT_TRUE(anyContains(r.stages, "vertex contacts only, at the start of the step"));
 }
 
 TEST(EffectsTest, FrictionlessContactsCarryOneRowEach) {
