@@ -67,7 +67,6 @@ struct TissueState {
   Eigen::VectorXd dq_previous;                    ///< the previous contact pass's correction
   Eigen::VectorXd q_begin;                        ///< positions at the start of the step
   Eigen::VectorXd q_free, v_free;                 ///< after the free motion
-  Eigen::VectorXd q_detected;                     ///< positions at the last detection
   const std::vector<Contact>* found = nullptr;    ///< contacts of the last detection
 };
 
@@ -95,7 +94,8 @@ struct Simulation::Impl {
   shared::Pose tool_begin;                        ///< god object pose at the start of the step
   bool target_rejected = false;                   ///< the last setDeviceTarget was non-finite
   std::unique_ptr<Instrument> tool_free;          ///< god object after its free motion
-  std::unique_ptr<Instrument> tool_detected;      ///< god object at the last detection
+  /// god object at the start of the step (kStepStart only: the contacts are found there)
+  std::unique_ptr<Instrument> tool_start;
   Eigen::Matrix<double, Eigen::Dynamic, 6, Eigen::RowMajor> h_tool;   ///< H_tool, rows x 6
   Eigen::Matrix<double, Eigen::Dynamic, 6, Eigen::RowMajor> b_tool;   ///< H_tool L, C6 = L L^T
 
@@ -103,7 +103,9 @@ struct Simulation::Impl {
   void solveContacts(StepReport& report);
   double queryContacts();
   double detectContacts(StepReport& report);
-  void assembleProblem(StepReport& report, bool relinearise);
+  /// Where the contacts assembleProblem uses were detected.
+  enum class FoundAt { kFreeState, kStepStart, kCorrectedState };
+  void assembleProblem(StepReport& report, FoundAt found_at);
   void solveAndCorrect(StepReport& report, bool restore_free);
   void blendWithPreviousPass();
 };
@@ -300,17 +302,9 @@ double Simulation::Impl::queryContacts() {
   return min_gap;
 }
 
-// Also records the state the contacts were found at (tissue positions, god object), which
-// assembleProblem carries the gaps from.
 double Simulation::Impl::detectContacts(StepReport& report) {
   const auto t0 = Clock::now();
   const double min_gap = queryContacts();
-  for (TissueState& ts : tissues) ts.q_detected = ts.body->positions();
-  if (!tool_detected) {
-    tool_detected = std::make_unique<Instrument>(*instrument);
-  } else {
-    *tool_detected = *instrument;
-  }
   counters.collision_queries += static_cast<long>(tissues.size());
   report.times.collision_s += secondsSince(t0);
   return min_gap;
@@ -334,7 +328,9 @@ void Simulation::Impl::solveContacts(StepReport& report) {
   if (!detected_at_start) detectContacts(report);
   double previous_gap = std::numeric_limits<double>::infinity();
   for (int pass = 0;; ++pass) {
-    assembleProblem(report, pass > 0 || detected_at_start);
+    assembleProblem(report, pass > 0            ? FoundAt::kCorrectedState
+                            : detected_at_start ? FoundAt::kStepStart
+                                                : FoundAt::kFreeState);
     solveAndCorrect(report, pass > 0);
     report.contact_passes = pass + 1;
     if (passes == 1) break;
@@ -376,15 +372,16 @@ void Simulation::Impl::blendWithPreviousPass() {
 }
 
 // Contact rows of every tissue from the contacts last detected, and W = sum H C H^T + H_tool C6
-// H_tool^T. delta_free is the gap at the free state: on the first pass with kFreeState the
-// contacts were detected there; otherwise (later passes: at the corrected state; kStepStart:
-// at the start of the step) their gaps are carried to the free state along the rows
-// (gap - H (x_detected - x_free)). Friction rows: the relative tangential displacement of the
-// tool point over the free motion.
-void Simulation::Impl::assembleProblem(StepReport& report, bool relinearise) {
+// H_tool^T. delta_free is the gap at the free state: with kFreeState the contacts were detected
+// there; otherwise (kCorrectedState: at the current state, kStepStart: at the start of the step)
+// their gaps are carried to the free state along the rows (gap - H (x_detected - x_free)).
+// Friction rows: the relative tangential displacement of the tool point over the free motion.
+void Simulation::Impl::assembleProblem(StepReport& report, FoundAt found_at) {
   const double h = spec.time_step_s;
   const double mu = spec.instrument.friction_mu;
-  const Instrument& detected = *tool_detected;   // the god object the contacts were found at
+  const bool relinearise = found_at != FoundAt::kFreeState;
+  const bool at_start = found_at == FoundAt::kStepStart;
+  const Instrument& detected = at_start ? *tool_start : *instrument;   // where found
   const shared::Pose& tool_pose = detected.pose();
   const shared::Pose& free_pose = tool_free->pose();
   auto t0 = Clock::now();
@@ -410,7 +407,7 @@ void Simulation::Impl::assembleProblem(StepReport& report, bool relinearise) {
         }
       }
     }
-    const Eigen::VectorXd& q = ts.q_detected;
+    const Eigen::VectorXd& q = at_start ? ts.q_begin : ts.body->positions();
     for (std::size_t c = 0; c < found.size(); ++c) {
       const Contact& k = found[c];
       const int r0 = ts.rows.row_offset[c];
@@ -601,9 +598,15 @@ StepReport Simulation::step() {
   const auto t_step = Clock::now();
   const double h = s.spec.time_step_s;
 
-  // kStepStart: contacts at the start-of-step state (carried to the free state when assembled)
+  // kStepStart: contacts at the start-of-step state (carried to the free state when assembled,
+  // from q_begin and tool_start)
   if (s.instrument && s.spec.solver.contact_detection == ContactDetection::kStepStart) {
     s.detectContacts(report);
+    if (!s.tool_start) {
+      s.tool_start = std::make_unique<Instrument>(*s.instrument);
+    } else {
+      *s.tool_start = *s.instrument;
+    }
   }
 
   // free motion of every object (no contact forces)
