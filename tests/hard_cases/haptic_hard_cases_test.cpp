@@ -30,8 +30,9 @@ constexpr std::int64_t kTickNs = 1'000'000;
 /// Simulation + segment + haptic loop, stepped together on a simulated clock.
 class Rig {
  public:
-  explicit Rig(const std::string& tag)
-      : spec_(loadCase("haptic_cube.yaml")),
+  explicit Rig(const std::string& tag, const std::string& scene = "haptic_cube.yaml",
+               std::optional<double> max_force_n = std::nullopt)
+      : spec_(loadCase(scene)),
         sim_(spec_),
         name_("tactus_hard_" + tag + "_" + std::to_string(::getpid())),
         watch_(spec_) {
@@ -41,7 +42,7 @@ class Rig {
                                                     spec_.instrument.friction_mu > 0.0)));
     publisher_ = segment_->snapshotPublisher();
     samples_ = segment_->deviceReader();
-    settings_.max_force_n = spec_.haptics.max_force_n;
+    settings_.max_force_n = max_force_n.value_or(spec_.haptics.max_force_n);
     settings_.watchdog_ms = spec_.haptics.watchdog_ms;
     settings_.max_sweeps = spec_.haptics.max_sweeps_per_tick;
     settings_.tolerance = spec_.haptics.nsgs_tolerance;
@@ -358,6 +359,43 @@ TEST(HapticHardCases, SimulationStallFadesTheForceAndItComesBack) {
   EXPECT_EQ(f_end_of_stall, 0.0) << "not faded out after watchdog + fade";
   EXPECT_NEAR(f_after, f_pressed, 0.05 * f_pressed) << "force did not come back";
   expectPassive(rig, "stall");
+}
+
+// --- the device pressed through the organ ------------------------------------------------------
+
+// The hand pushes the device through the thin disc of press_through.yaml (4 mm below its bottom
+// face, as in the simulation-side case), holds, and comes back out: a closed path. The clamp is
+// set below the force the hold asks for, so the rendered force saturates while the disc holds
+// the god object.
+TEST(HapticHardCases, DevicePressedThroughTheOrganStaysClampedAndPassive) {
+  Rig rig("press_through", "press_through.yaml", /*max_force_n=*/0.3);
+  const Eigen::Vector3d above = rig.spec().instrument.initial_pose.position_m;
+  const Eigen::Vector3d through = rig.spec().instrument.trajectory.back().pose.position_m;
+  const sim::FemBody& disc = rig.sim().tissue(0);
+  const double disc_bottom_z =
+      disc.restPositions()(Eigen::seqN(2, disc.nodeCount(), 3)).minCoeff();
+  rig.moveDevice(above);
+  rig.moveDevice(above);
+  hold(rig, 100);
+  glide(rig, through, 800);
+  hold(rig, 400);
+  const double f_held = rig.lastForce().norm();
+  const double tool_z = rig.sim().instrument()->pose().pos_m.z();
+  const double tip_r = rig.spec().instrument.tip_radius_m;
+  const auto clamped = rig.loop().counters().clamped.load();
+  glide(rig, above, 800);
+  hold(rig, 300);
+  printCase("press_through_haptic",
+            figures(rig) + " F_held=" + std::to_string(f_held) + " N tool_z=" +
+                std::to_string(tool_z) + " m clamped_ticks=" + std::to_string(clamped));
+  expectSafe(rig, "press through");
+  EXPECT_GT(rig.watch().min_geometric_gap_m, -5e-4);
+  EXPECT_LT(tool_z - tip_r, disc_bottom_z) << "the tip was not pressed through the rest thickness";
+  EXPECT_GT(tool_z - through.z(), 0.005) << "the god object followed the device through";
+  EXPECT_NEAR(f_held, rig.settings().max_force_n, 1e-9) << "the hold should saturate the clamp";
+  EXPECT_GT(clamped, 0u);
+  expectPassive(rig, "press through");
+  EXPECT_LT(rig.lastForce().norm(), 1e-9) << "force left after returning above the disc";
 }
 
 }  // namespace
