@@ -218,9 +218,9 @@ void expectPassive(const Rig& rig, const std::string& name) {
       << name << ": the haptic loop returned more energy than the hand put in";
 }
 
-void start(Rig& rig) {
-  rig.moveDevice(kStart);
-  rig.moveDevice(kStart);   // zero velocity
+void start(Rig& rig, const Eigen::Vector3d& at = kStart) {
+  rig.moveDevice(at);
+  rig.moveDevice(at);       // zero velocity
   hold(rig, 100);           // engaged at zero force, first snapshots published
 }
 
@@ -371,12 +371,8 @@ TEST(HapticHardCases, DevicePressedThroughTheOrganStaysClampedAndPassive) {
   Rig rig("press_through", "press_through.yaml", /*max_force_n=*/0.3);
   const Eigen::Vector3d above = rig.spec().instrument.initial_pose.position_m;
   const Eigen::Vector3d through = rig.spec().instrument.trajectory.back().pose.position_m;
-  const sim::FemBody& disc = rig.sim().tissue(0);
-  const double disc_bottom_z =
-      disc.restPositions()(Eigen::seqN(2, disc.nodeCount(), 3)).minCoeff();
-  rig.moveDevice(above);
-  rig.moveDevice(above);
-  hold(rig, 100);
+  const double disc_bottom_z = restZRange(rig.sim().tissue(0)).first;
+  start(rig, above);
   glide(rig, through, 800);
   hold(rig, 400);
   const double f_held = rig.lastForce().norm();

@@ -16,6 +16,7 @@
 #include <limits>
 #include <sstream>
 #include <string>
+#include <utility>
 
 #include "tactus/shared/nsgs.h"
 #include "tactus/sim/fem.h"
@@ -55,6 +56,12 @@ inline std::filesystem::path scratchDir(const std::string& tag) {
 /// Writes a mesh at its rest positions as a .vtu file (read back exactly by loadTetMesh).
 inline void writeMesh(const sim::TetMesh& mesh, const std::filesystem::path& path) {
   sim::writeVtu(path, mesh, mesh.nodes, Eigen::Matrix3Xd(), Eigen::VectorXd());
+}
+
+/// Lowest and highest z of a body's rest positions [m].
+inline std::pair<double, double> restZRange(const sim::FemBody& body) {
+  const auto z = body.restPositions()(Eigen::seqN(2, body.nodeCount(), 3));
+  return {z.minCoeff(), z.maxCoeff()};
 }
 
 /// Kinetic + elastic + gravity energy of the scene plus the potential energy stored in the god

@@ -540,9 +540,7 @@ TEST(HardCases, ToolPressedThroughTheOrganDoesNotTunnel) {
   Simulation sim(spec);
   const FemBody& disc = sim.tissue(0);
   const double tip_r = spec.instrument.tip_radius_m;
-  const double disc_top_z = disc.restPositions()(Eigen::seqN(2, disc.nodeCount(), 3)).maxCoeff();
-  const double disc_bottom_z =
-      disc.restPositions()(Eigen::seqN(2, disc.nodeCount(), 3)).minCoeff();
+  const auto [disc_bottom_z, disc_top_z] = restZRange(disc);
   const double target_z = spec.instrument.trajectory.back().pose.position_m.z();
   StepWatch watch(spec);
   EnergyWatch hold;
