@@ -1,0 +1,56 @@
+// Command-line validators that reject what CLI11's own range checks let through.
+//
+// CLI::Range(lo, hi) compares with < and >, so "nan" passes every range check, and "inf" passes an
+// open upper bound. Every numeric option that can reach a device, a timer or a loop bound goes
+// through one of these instead: the text must parse completely as a finite number inside the range.
+// Header-only; include it only from programs that already link CLI11 (the daemons and tools).
+#pragma once
+
+#include <CLI/CLI.hpp>
+
+#include <cerrno>
+#include <cmath>
+#include <cstdlib>
+#include <string>
+
+namespace tactus::shared {
+
+/// Parses `text` as a finite double; false when it is empty, has trailing characters, overflows
+/// or is NaN/Inf.
+inline bool parseFiniteDouble(const std::string& text, double& value) {
+  if (text.empty()) return false;
+  errno = 0;
+  char* end = nullptr;
+  value = std::strtod(text.c_str(), &end);
+  return errno == 0 && end == text.c_str() + text.size() && std::isfinite(value);
+}
+
+/// Finite and within [lo, hi]. `what` names the unit in the help text (for example "N").
+inline CLI::Validator finiteRange(double lo, double hi, const std::string& unit = "") {
+  const std::string range = "[" + std::to_string(lo) + ", " + std::to_string(hi) + "]" +
+                            (unit.empty() ? "" : " " + unit);
+  return CLI::Validator(
+      [lo, hi, range](std::string& text) -> std::string {
+        double value = 0.0;
+        if (!parseFiniteDouble(text, value)) return "must be a finite number (got '" + text + "')";
+        if (value < lo || value > hi) return "must be in " + range + " (got " + text + ")";
+        return {};
+      },
+      "FINITE in " + range);
+}
+
+/// Finite and strictly greater than lo (and at most hi).
+inline CLI::Validator finiteAbove(double lo, double hi, const std::string& unit = "") {
+  const std::string range = "(" + std::to_string(lo) + ", " + std::to_string(hi) + "]" +
+                            (unit.empty() ? "" : " " + unit);
+  return CLI::Validator(
+      [lo, hi, range](std::string& text) -> std::string {
+        double value = 0.0;
+        if (!parseFiniteDouble(text, value)) return "must be a finite number (got '" + text + "')";
+        if (!(value > lo) || value > hi) return "must be in " + range + " (got " + text + ")";
+        return {};
+      },
+      "FINITE in " + range);
+}
+
+}  // namespace tactus::shared
