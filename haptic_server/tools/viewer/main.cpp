@@ -20,6 +20,7 @@
 #include <boost/beast/core.hpp>
 #include <boost/beast/http.hpp>
 #include <boost/beast/websocket.hpp>
+#include <array>
 #include <chrono>
 #include <cstdio>
 #include <deque>
@@ -168,6 +169,7 @@ const char* kMissingPage =
 constexpr std::uint32_t kMaxHeaderBytes = 8192;
 constexpr std::size_t kMaxTargetBytes = 2048;
 constexpr std::uint64_t kMaxBodyBytes = 4096;
+constexpr std::size_t kMaxLingerBytes = std::size_t{1} << 20;
 
 std::string_view sv(beast::string_view s) { return {s.data(), s.size()}; }
 
@@ -197,10 +199,9 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
 
   void onRead(beast::error_code ec, std::size_t) {
     if (ec == http::error::header_limit || ec == http::error::buffer_overflow) {
-      // no end of the request line in what was buffered: the target itself is too long
-      const auto data = buffer_.cdata();
-      const std::string_view seen(static_cast<const char*>(data.data()), data.size());
-      if (seen.find("\r\n") == std::string_view::npos) {
+      // the parser fills in the target once it has the whole request line: without one, the
+      // request line itself was too long
+      if (parser_->get().target().empty()) {
         fail(http::status::uri_too_long, "request target too long\n");
       } else {
         fail(http::status::request_header_fields_too_large, "request header too large\n");
@@ -272,7 +273,21 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
     req_ = {};
     req_.version(11);
     req_.keep_alive(false);
+    linger_ = true;
     reply(status, "text/plain", body, false);
+  }
+
+  // After an error answer: stop sending, then read and drop what the client still sends (at most
+  // kMaxLingerBytes or 2 s) so that closing does not reset the connection before the client has
+  // read the answer.
+  void lingerClose() {
+    close();
+    stream_.expires_after(std::chrono::seconds(2));
+    stream_.async_read_some(
+        net::buffer(discard_), [self = shared_from_this()](beast::error_code ec, std::size_t n) {
+          self->lingered_ += n;
+          if (!ec && self->lingered_ < kMaxLingerBytes) self->lingerClose();
+        });
   }
 
   void reply(http::status status, const std::string& type, const std::string& body,
@@ -289,6 +304,10 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
     if (head) res->content_length(body.size());
     http::async_write(stream_, *res,
                       [self = shared_from_this(), res](beast::error_code ec, std::size_t) {
+                        if (!ec && self->linger_) {
+                          self->lingerClose();
+                          return;
+                        }
                         if (ec || !res->keep_alive()) {
                           self->close();
                           return;
@@ -307,6 +326,9 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
   beast::flat_buffer buffer_;
   std::optional<http::request_parser<http::string_body>> parser_;
   http::request<http::string_body> req_;
+  bool linger_ = false;
+  std::array<char, 4096> discard_{};
+  std::size_t lingered_ = 0;
 };
 
 class Listener : public std::enable_shared_from_this<Listener> {
