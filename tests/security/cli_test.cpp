@@ -56,7 +56,8 @@ TEST_F(CliTest, SimServerRejectsEndlessOrInvalidRunLengths) {
   for (const std::string& steps : std::vector<std::string>{"0", "-1", "nan", "1.5"}) {
     expectRejected({kSim, kScene, "--segment", segment_, "--steps", steps}, "--steps");
   }
-  for (const std::string& duration : std::vector<std::string>{"-1", "nan", "inf", "-inf", "1e400", "3s"}) {
+  for (const std::string& duration :
+       std::vector<std::string>{"-1", "nan", "inf", "-inf", "1e400", "3s"}) {
     expectRejected({kSim, kScene, "--segment", segment_, "--duration", duration}, "--duration");
   }
 }
@@ -69,8 +70,9 @@ TEST_F(CliTest, SimServerHelpStatesWhatZeroDurationMeans) {
 
 TEST_F(CliTest, HapticServerRejectsInvalidDurations) {
   for (const std::string& duration : std::vector<std::string>{"-1", "nan", "inf", "1e400"}) {
-    expectRejected({kHaptic, "--device", "simulated", "--segment", segment_, "--duration", duration},
-                   "--duration");
+    expectRejected(
+        {kHaptic, "--device", "simulated", "--segment", segment_, "--duration", duration},
+        "--duration");
   }
   const tactus::test::RunResult r = runProgram({kHaptic, "--help"}, dir_, 20s);
   EXPECT_NE(r.out.find("0 (the default): run until SIGINT, SIGTERM or SIGHUP"), std::string::npos)
@@ -81,7 +83,8 @@ TEST_F(CliTest, MonitorRejectsFloodingIntervalsAndBadSegmentNames) {
   for (const std::string& interval : std::vector<std::string>{"0", "-1", "0.001", "nan", "inf"}) {
     expectRejected({kMonitor, "--segment", segment_, "--interval", interval}, "--interval");
   }
-  for (const std::string& name : std::vector<std::string>{"a/b", "../x", "", std::string(100, 'n')}) {
+  for (const std::string& name :
+       std::vector<std::string>{"a/b", "../x", "", std::string(100, 'n')}) {
     expectRejected({kMonitor, "--segment", name}, "--segment");
   }
   expectRejected({kMonitor, "--segment", segment_, "--duration", "nan"}, "--duration");

@@ -99,16 +99,18 @@ TEST_F(ViewerSecurity, ServesItsPageWithoutASimulation) {
   EXPECT_EQ(get("/index.html").status, 200);
   EXPECT_EQ(get("/app.js?v=1").status, 200);
   EXPECT_EQ(get("/status.json").status, 200);
-  const HttpAnswer head = request("HEAD / HTTP/1.1\r\nHost: " + host() + "\r\nConnection: close\r\n\r\n");
+  const HttpAnswer head =
+      request("HEAD / HTTP/1.1\r\nHost: " + host() + "\r\nConnection: close\r\n\r\n");
   EXPECT_EQ(head.status, 200);
   EXPECT_TRUE(head.body().empty());
 }
 
 TEST_F(ViewerSecurity, FileSystemPathsAreNotFound) {
-  for (const std::string& target :
-       std::vector<std::string>{"//etc/passwd", "/../../etc/passwd", "/%2e%2e/%2e%2e/etc/passwd", "/..%2f..%2fetc%2fpasswd",
-        "/%2e%2e%2f%2e%2e%2fetc%2fpasswd", "/index.html/../../../etc/passwd", "//dev/zero",
-        "//proc/self/environ", "/web/index.html", "/viewer.out"}) {
+  const std::vector<std::string> targets = {
+      "//etc/passwd", "/../../etc/passwd", "/%2e%2e/%2e%2e/etc/passwd", "/..%2f..%2fetc%2fpasswd",
+      "/%2e%2e%2f%2e%2e%2fetc%2fpasswd", "/index.html/../../../etc/passwd", "//dev/zero",
+      "//proc/self/environ", "/web/index.html", "/viewer.out"};
+  for (const std::string& target : targets) {
     const HttpAnswer a = get(target);
     EXPECT_EQ(a.status, 404) << target << ": " << a.raw.substr(0, 200);
     EXPECT_EQ(a.body().find("root:"), std::string::npos) << target;
@@ -120,9 +122,10 @@ TEST_F(ViewerSecurity, FileSystemPathsAreNotFound) {
 
 TEST_F(ViewerSecurity, ForeignHostIsForbidden) {
   const std::string port = std::to_string(port_);
-  for (const std::string& bad : std::vector<std::string>{"evil.example:" + port, "evil.example", "127.0.0.1",
-                                "127.0.0.1:1", "localhost.evil.example:" + port,
-                                "127.0.0.1:" + port + "@evil.example", ""}) {
+  const std::vector<std::string> bad_hosts = {
+      "evil.example:" + port, "evil.example", "127.0.0.1", "127.0.0.1:1",
+      "localhost.evil.example:" + port, "127.0.0.1:" + port + "@evil.example", ""};
+  for (const std::string& bad : bad_hosts) {
     const HttpAnswer a =
         request("GET / HTTP/1.1\r\nHost: " + bad + "\r\nConnection: close\r\n\r\n");
     EXPECT_EQ(a.status, 403) << "Host: " << bad;
@@ -130,7 +133,8 @@ TEST_F(ViewerSecurity, ForeignHostIsForbidden) {
   }
   // HTTP/1.0 without a Host header
   EXPECT_EQ(request("GET / HTTP/1.0\r\n\r\n").status, 403);
-  for (const std::string& good : std::vector<std::string>{"localhost:" + port, "LOCALHOST:" + port, "[::1]:" + port}) {
+  for (const std::string& good :
+       std::vector<std::string>{"localhost:" + port, "LOCALHOST:" + port, "[::1]:" + port}) {
     EXPECT_EQ(request("GET / HTTP/1.1\r\nHost: " + good + "\r\nConnection: close\r\n\r\n").status,
               200)
         << "Host: " << good;
@@ -138,9 +142,10 @@ TEST_F(ViewerSecurity, ForeignHostIsForbidden) {
 }
 
 TEST_F(ViewerSecurity, CrossSiteOriginIsRefused) {
-  for (const std::string& origin : std::vector<std::string>{"http://evil.example", "http://evil.example:" +
-                                   std::to_string(port_), "null", "https://" + host(),
-                                   "file://"}) {
+  const std::vector<std::string> origins = {"http://evil.example",
+                                            "http://evil.example:" + std::to_string(port_), "null",
+                                            "https://" + host(), "file://"};
+  for (const std::string& origin : origins) {
     const HttpAnswer ws = request(upgrade(host(), origin), true);
     EXPECT_NE(ws.status, 101) << "Origin: " << origin;
     EXPECT_EQ(ws.status, 403) << "Origin: " << origin;

@@ -429,8 +429,9 @@ int main(int argc, char** argv) {
   app.add_option("--rate", rate, "Frames per second streamed at most")
       ->capture_default_str()
       ->check(CLI::Range(1.0, 240.0));
-  app.add_option("--web-dir", web, "Directory of the built page: index.html, app.js, app.js.map and style.css are read "
-                 "once at start-up (regular files only); nothing else is served")
+  app.add_option("--web-dir", web,
+                 "Directory of the built page: index.html, app.js, app.js.map and style.css are "
+                 "read once at start-up (regular files only); nothing else is served")
       ->capture_default_str();
   app.add_option("--nice", nice_level, "Scheduling niceness of the viewer (it yields the CPU to "
                  "the simulation)")
