@@ -1,12 +1,16 @@
 #!/usr/bin/env bash
 # The main job: builds if needed, then starts sim_server and haptic_server on a scene (default:
 # the paper's liver grasp) with a device backend (default: the simulated hand), prints a status
-# line every second, and stops both cleanly on Ctrl-C or at the end of --duration.
+# line every second, and stops both cleanly on Ctrl-C, SIGTERM, SIGHUP (terminal closed) or at
+# the end of --duration S (0, the default: until stopped).
 #
 # Usage: scripts/start.sh [SCENE.yaml] [--device NAME|PATH.so] [--device-option k=v]...
 #                         [--duration S] [--segment NAME] [--run-dir DIR] [--no-haptic]
-#                         [--core N] [--rate HZ] [--view [--view-port N]]
+#                         [--core N] [--rate HZ] [--view [--view-port N]] [--no-build]
 #        --view: also serve the live view in a browser (scripts/view; http://127.0.0.1:8090/)
+#        --run-dir: logs there (default run/<date-time>, which run/latest then points to)
+#        --no-build: use the binaries already built. Exit status: 0 after a clean run or stop,
+#        else the failing daemon's (sim_server's, or haptic_server's when it stopped early).
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 source "$root/scripts/env.sh"
