@@ -50,6 +50,7 @@ done
 scene="$(cd "$(dirname "$scene")" && pwd)/$(basename "$scene")"
 [[ "$duration" =~ ^[0-9]+(\.[0-9]+)?$ ]] ||
   { echo "start.sh: --duration must be a number of seconds >= 0 (got '$duration')" >&2; exit 2; }
+[[ "$duration" =~ ^0+(\.0*)?$ ]] && duration=0  # 0, 0.0, ...: until stopped
 
 if [[ $build_first -eq 1 ]]; then
   "$root/scripts/build.sh" sim_server haptic_server tactus-monitor >/dev/null
