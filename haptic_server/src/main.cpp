@@ -12,6 +12,7 @@
 #include "tactus/device/device.h"
 #include "tactus/haptic/haptic_loop.h"
 #include "tactus/haptic/supervisor.h"
+#include "tactus/shared/cli_checks.h"
 #include "tactus/shared/clock.h"
 #include "tactus/shared/rt.h"
 
@@ -57,7 +58,9 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--tolerance", settings.tolerance, "NSGS tolerance")->capture_default_str();
   app.add_flag("--render-torque", settings.render_torque, "Render torques too");
-  app.add_option("--duration", duration_s, "Stop after S seconds (0: until SIGINT/SIGTERM)");
+  app.add_option("--duration", duration_s,
+                 "Stop after S seconds; 0 (the default): run until SIGINT, SIGTERM or SIGHUP")
+      ->check(shared::finiteRange(0.0, 1e7, "s"));
   app.add_flag("--status", status, "Log a status line every second");
   app.add_option("--log-level", log_level, "trace, debug, info, warn, error")
       ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error"}));
@@ -66,6 +69,7 @@ int main(int argc, char** argv) {
   spdlog::set_pattern("[%H:%M:%S.%e] [haptic] [%^%l%$] %v");
   std::signal(SIGINT, onSignal);
   std::signal(SIGTERM, onSignal);
+  std::signal(SIGHUP, onSignal);  // the terminal closed: stop cleanly, zero force
 
   try {
     shared::Segment::validateName(segment);

@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <optional>
 
+#include "tactus/shared/cli_checks.h"
 #include "tactus/sim/runner.h"
 #include "tactus/shared/error.h"
 
@@ -22,8 +23,12 @@ int main(int argc, char** argv) {
   tactus::sim::RunOptions opt;
   std::string log_level = "info";
   app.add_option("scene", opt.scene_path, "Scene file (YAML)")->required()->check(CLI::ExistingFile);
-  app.add_option("--steps", opt.steps, "Run N steps offline as fast as possible, then exit");
-  app.add_option("--duration", opt.duration_s, "Stop after this simulated time [s] (0: run until SIGINT/SIGTERM)");
+  app.add_option("--steps", opt.steps, "Run N >= 1 steps offline as fast as possible, then exit")
+      ->check(CLI::Range(1L, 1'000'000'000L));
+  app.add_option("--duration", opt.duration_s,
+                 "Stop after this simulated time [s]; 0 (the default): run until SIGINT, SIGTERM "
+                 "or SIGHUP")
+      ->check(tactus::shared::finiteRange(0.0, 1e7, "s"));
   app.add_option("--output", opt.output_dir, "Write a VTK series (.vtu + .pvd) into DIR");
   app.add_option("--output-every", opt.output_every, "Write every N steps (with --output)");
   app.add_option("--segment", opt.segment, "Shared-memory segment name (haptics)");
@@ -40,6 +45,7 @@ int main(int argc, char** argv) {
 
   std::signal(SIGINT, onSignal);
   std::signal(SIGTERM, onSignal);
+  std::signal(SIGHUP, onSignal);  // the terminal closed: stop cleanly (removes the segment)
   try {
     return tactus::sim::runSimulation(opt, g_stop);
   } catch (const std::exception& e) {
