@@ -18,11 +18,12 @@ RecordingDevice::~RecordingDevice() { close(); }
 void RecordingDevice::open() {
   if (!file_) {
     try {
-      file_ = std::make_unique<shared::OutputFile>(path_, "recording",
-                                                   shared::OutputOptions{.overwrite = overwrite_});
+      file_ = std::make_unique<shared::OutputFile>(
+          path_, "recording",
+          shared::OutputOptions{.overwrite = overwrite_,
+                                .overwrite_hint = "give device option record_overwrite=1"});
     } catch (const FileError& e) {
-      throw DeviceError("cannot record to '" + shared::printable(path_, 256) + "': " + e.what() +
-                        " (device option record_overwrite=1 replaces an existing file)");
+      throw DeviceError("cannot record to '" + shared::printable(path_, 256) + "': " + e.what());
     }
     write_error_.clear();
     file_->write(Trajectory::kCsvHeader);

@@ -23,7 +23,7 @@ Trajectory::Trajectory(std::vector<TrajectoryPoint> points) : points_(std::move(
 Trajectory Trajectory::loadCsv(const std::string& path) {
   std::string text;
   try {
-    text = shared::readFileChecked(path, "trajectory CSV", shared::kMaxTrajectoryCsvBytes);
+    text = shared::readTextFileChecked(path, "trajectory CSV", shared::kMaxTrajectoryCsvBytes);
   } catch (const FileError& e) {
     throw DeviceError("cannot read trajectory '" + shared::printable(path, 256) + "': " + e.what());
   }

@@ -17,7 +17,7 @@ class TokenReader {
  public:
   explicit TokenReader(const std::filesystem::path& path)
       : file_(printable(path.string(), 256)) {
-    std::istringstream in(readFileChecked(path, "FCLIB file", kMaxFclibBytes));
+    std::istringstream in(readTextFileChecked(path, "FCLIB file", kMaxFclibBytes));
     std::string line;
     int line_no = 0;
     while (std::getline(in, line)) {
@@ -179,7 +179,7 @@ FclibProblem readFclibText(const std::filesystem::path& path) {
 
 FclibReference readFclibReference(const std::filesystem::path& path) {
   const std::string file = printable(path.string(), 256);
-  std::istringstream in(readFileChecked(path, "FCLIB reference", kMaxFclibBytes));
+  std::istringstream in(readTextFileChecked(path, "FCLIB reference", kMaxFclibBytes));
   FclibReference ref;
   std::string line;
   int line_no = 0;

@@ -199,6 +199,18 @@ std::string readFileChecked(const std::filesystem::path& path, std::string_view 
   return f.readRest();
 }
 
+std::string readTextFileChecked(const std::filesystem::path& path, std::string_view what,
+                                std::uint64_t max_bytes) {
+  InputFile f(path, what, max_bytes);
+  std::string text(static_cast<std::size_t>(std::min<std::uint64_t>(f.size(), 4096)), '\0');
+  text.resize(f.read(text.data(), text.size()));
+  if (text.find('\0') != std::string::npos) {
+    throw FileError(f.name() + ": holds NUL bytes: a binary file, not a " + std::string(what));
+  }
+  text += f.readRest();
+  return text;
+}
+
 // ------------------------------------------------------------------------------------------------
 // Output
 
@@ -226,7 +238,10 @@ OutputFile::OutputFile(const std::filesystem::path& path, std::string_view what,
     }
     if (!options.overwrite) {
       throw FileError(name_ + ": " + what_ + " exists; not overwritten without an explicit "
-                      "request (remove it, choose another name or ask to overwrite)");
+                      "request (remove it, choose another name or " +
+                      (options.overwrite_hint != nullptr ? std::string(options.overwrite_hint)
+                                                         : std::string("ask to overwrite")) +
+                      ")");
     }
   } else if (errno != ENOENT) {
     throw FileError(name_ + ": cannot examine the target: " + errnoText(errno));

@@ -319,6 +319,23 @@ TEST_F(FilesTest, ReplayOfDevZeroIsRefusedAtOnce) {
   } catch (const DeviceError& e) {
     EXPECT_THAT(e.what(), HasSubstr("not a regular file"));
   }
+  // a regular but binary file (sparse: all NUL bytes) is rejected from its first bytes
+  const fs::path zeros = dir_ / "zeros.csv";
+  {
+    std::ofstream touch(zeros);
+  }
+  fs::resize_file(zeros, std::uintmax_t{200} << 20);
+  rusage before{};
+  ::getrusage(RUSAGE_SELF, &before);
+  try {
+    (void)device::loadDevice("replay", {{"file", zeros.string()}});
+    FAIL() << "no error";
+  } catch (const DeviceError& e) {
+    EXPECT_THAT(e.what(), HasSubstr("binary file"));
+  }
+  rusage after{};
+  ::getrusage(RUSAGE_SELF, &after);
+  EXPECT_LT(after.ru_maxrss - before.ru_maxrss, 64 * 1024);  // [KiB]: not read whole
   const RunResult r = run({kHaptic, "--device", "replay", "--device-option", "file=/dev/zero",
                            "--segment", "tactus_files_test_" + std::to_string(::getpid())},
                           std::chrono::seconds(20));
@@ -376,6 +393,7 @@ TEST_F(FilesTest, StatsJsonIsNotOverwrittenUnlessAsked) {
   ASSERT_TRUE(r.exited) << r.output;
   EXPECT_NE(r.code, 0);
   EXPECT_THAT(r.output, HasSubstr("exists"));
+  EXPECT_THAT(r.output, HasSubstr("--overwrite"));
   EXPECT_THAT(r.output, Not(HasSubstr("steps, simulated")));  // refused before running
   EXPECT_EQ(readAll(stats), "precious");
   r = run({kSim, scene.string(), "--steps", "2", "--stats-json", stats.string(), "--overwrite"});

@@ -121,7 +121,8 @@ void exportTrajectory(const SceneSpec& spec, const std::filesystem::path& csv, d
   Simulation sim(light);
   const auto& keys = spec.instrument.trajectory;
   const double end = keys.empty() ? 0.0 : keys.back().t_s;
-  shared::OutputFile out(csv, "trajectory CSV", {.overwrite = overwrite});
+  shared::OutputFile out(csv, "trajectory CSV",
+                         {.overwrite = overwrite, .overwrite_hint = "pass --overwrite"});
   out.write("t_s,x,y,z,qw,qx,qy,qz,gripper\n");
   const long n = static_cast<long>(std::ceil(end / dt_s));
   for (long k = 0; k <= n && out.ok(); ++k) {
@@ -140,9 +141,10 @@ int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
   // refuse an existing statistics file now, not after the run
   std::unique_ptr<shared::OutputFile> stats_file;
   if (!options.stats_json.empty() && options.export_trajectory.empty()) {
-    stats_file = std::make_unique<shared::OutputFile>(options.stats_json, "statistics file",
-                                                      shared::OutputOptions{.overwrite =
-                                                                                options.overwrite});
+    stats_file = std::make_unique<shared::OutputFile>(
+        options.stats_json, "statistics file",
+        shared::OutputOptions{.overwrite = options.overwrite,
+                              .overwrite_hint = "pass --overwrite"});
   }
   if (!options.export_trajectory.empty()) {
     exportTrajectory(spec, options.export_trajectory, 0.01, options.overwrite);

@@ -607,7 +607,7 @@ SceneSpec parseScene(const std::string& yaml, const std::string& name,
 SceneSpec loadScene(const std::filesystem::path& path) {
   std::string text;
   try {
-    text = shared::readFileChecked(path, "scene file", shared::kMaxSceneBytes);
+    text = shared::readTextFileChecked(path, "scene file", shared::kMaxSceneBytes);
   } catch (const FileError& e) {
     throw SceneError(e.what());
   }

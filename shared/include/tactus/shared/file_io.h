@@ -93,10 +93,16 @@ class InputFile {
 std::string readFileChecked(const std::filesystem::path& path, std::string_view what,
                             std::uint64_t max_bytes);
 
+/// The whole of a checked text file: as readFileChecked, but the first 4 KiB are read first and a
+/// NUL byte there rejects the file as binary before the rest is read.
+std::string readTextFileChecked(const std::filesystem::path& path, std::string_view what,
+                                std::uint64_t max_bytes);
+
 /// How an OutputFile may treat an existing target.
 struct OutputOptions {
   bool overwrite = false;       ///< replace an existing regular file
   bool allow_special = true;    ///< write into an existing device or FIFO (else refuse)
+  const char* overwrite_hint = nullptr;  ///< how to ask for overwrite ("pass --overwrite")
 };
 
 /// A file being written (see the header comment). Writes are buffered; write() never throws and
