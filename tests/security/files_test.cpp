@@ -461,6 +461,15 @@ TEST_F(FilesTest, RecordingWriteFailureIsReported) {
   auto* rec = dynamic_cast<device::RecordingDevice*>(dev.get());
   ASSERT_NE(rec, nullptr);
   EXPECT_THAT(rec->writeError(), HasSubstr("No space left on device"));
+  // the daemon reports it and exits non-zero
+  const RunResult r = run({kHaptic, "--device", "simulated", "--device-option", "record=/dev/full",
+                           "--duration", "0.2", "--segment",
+                           "tactus_files_test_" + std::to_string(::getpid())},
+                          std::chrono::seconds(20));
+  ASSERT_FALSE(r.timed_out);
+  ASSERT_TRUE(r.exited) << r.output;
+  EXPECT_NE(r.code, 0);
+  EXPECT_THAT(r.output, HasSubstr("recording not saved"));
 }
 
 TEST_F(FilesTest, OutputFileWritesThroughATemporaryFile) {
