@@ -39,6 +39,7 @@ Trajectory Trajectory::parseCsv(const std::string& text, const std::string& orig
   bool header_seen = false;
   while (std::getline(in, line)) {
     ++line_no;
+    if ((line_no & 0xFFFF) == 0) shared::throwIfStopRequested("reading a trajectory");
     const std::string t = trim(line);
     if (t.empty() || t[0] == '#') continue;
     auto where = [&](int col) {

@@ -26,6 +26,7 @@
 #include "tactus/shared/error.h"
 #include "tactus/shared/file_io.h"
 #include "tactus/sim/mesh.h"
+#include "tactus/sim/runner.h"
 #include "tactus/sim/scene.h"
 
 namespace fs = std::filesystem;
@@ -523,6 +524,11 @@ TEST(FilesMessages, SceneErrorsEscapeControlBytesAndBoundTokens) {
     EXPECT_LT(std::string(e.what()).size(), 2000u);
     EXPECT_THAT(e.what(), HasSubstr("AAAA..."));
   }
+}
+
+TEST(FilesMessages, StatsJsonEscapesTheScenePath) {
+  const std::string js = sim::RunStatistics().json("a\"b\\c\x1b.yaml");
+  EXPECT_THAT(js, HasSubstr("\"scene\": \"a\\\"b\\\\c\\u001b.yaml\""));
 }
 
 TEST(FilesMessages, TrajectoryCsvErrorsEscapeControlBytes) {

@@ -41,6 +41,22 @@ StageSummary summarise(const std::string& name, const std::vector<double>& v) {
   return s;
 }
 
+// A JSON string's content: quotes, backslashes and control characters escaped.
+std::string jsonEscape(const std::string& s) {
+  std::string out;
+  for (const char c : s) {
+    if (c == '"' || c == '\\') {
+      out += '\\';
+      out += c;
+    } else if (static_cast<unsigned char>(c) < 0x20) {
+      out += fmt::format("\\u{:04x}", static_cast<int>(c));
+    } else {
+      out += c;
+    }
+  }
+  return out;
+}
+
 std::int64_t nowNs() {
   timespec ts{};
   clock_gettime(CLOCK_MONOTONIC, &ts);
@@ -98,7 +114,7 @@ std::string RunStatistics::table() const {
 
 std::string RunStatistics::json(const std::string& scene) const {
   std::string out = fmt::format("{{\n  \"scene\": \"{}\",\n  \"steps\": {},\n  \"stages_ms\": {{\n",
-                                scene, steps());
+                                jsonEscape(scene), steps());
   const auto st = stages();
   for (std::size_t i = 0; i < st.size(); ++i) {
     out += fmt::format("    \"{}\": {{\"median\": {:.6f}, \"p90\": {:.6f}, \"p99\": {:.6f}, "
