@@ -132,7 +132,8 @@ InputFile::InputFile(const std::filesystem::path& path, std::string_view what,
   struct stat st {};
   std::string problem;
   if (::fstat(fd_, &st) != 0) {
-    problem = "cannot be examined: " + errnoText(errno);
+    const int err = errno;
+    problem = "cannot be examined: " + errnoText(err);
   } else if (S_ISDIR(st.st_mode)) {
     problem = "is a directory, not a " + what_;
   } else if (!S_ISREG(st.st_mode)) {
@@ -161,8 +162,9 @@ std::size_t InputFile::read(void* buffer, std::size_t n) {
     const std::size_t want = std::min(n - done, kReadChunk);
     const ssize_t r = ::read(fd_, out + done, want);
     if (r < 0) {
-      if (errno == EINTR) continue;
-      throw FileError(name_ + ": read error: " + errnoText(errno));
+      const int err = errno;
+      if (err == EINTR) continue;
+      throw FileError(name_ + ": read error: " + errnoText(err));
     }
     if (r == 0) break;
     done += static_cast<std::size_t>(r);
@@ -243,8 +245,8 @@ OutputFile::OutputFile(const std::filesystem::path& path, std::string_view what,
                                                          : std::string("ask to overwrite")) +
                       ")");
     }
-  } else if (errno != ENOENT) {
-    throw FileError(name_ + ": cannot examine the target: " + errnoText(errno));
+  } else if (const int err = errno; err != ENOENT) {
+    throw FileError(name_ + ": cannot examine the target: " + errnoText(err));
   }
   const std::string file_name = path.filename().string();
   if (file_name.empty() || file_name == "." || file_name == "..") {
@@ -287,8 +289,9 @@ bool OutputFile::writeAll(std::string_view bytes) noexcept {
   while (done < bytes.size()) {
     const ssize_t r = ::write(fd_, bytes.data() + done, bytes.size() - done);
     if (r < 0) {
-      if (errno == EINTR) continue;
-      fail("write failed", errno);
+      const int err = errno;
+      if (err == EINTR) continue;
+      fail("write failed", err);
       return false;
     }
     if (r == 0) {
@@ -326,9 +329,15 @@ void OutputFile::commit() {
   if (committed_) return;
   if (fd_ < 0 && ok()) fail("write failed", EBADF);
   flush();
-  if (ok() && !direct_ && ::fsync(fd_) != 0) fail("fsync failed", errno);
+  if (ok() && !direct_ && ::fsync(fd_) != 0) {
+    const int err = errno;
+    fail("fsync failed", err);
+  }
   if (fd_ >= 0) {
-    if (::close(fd_) != 0 && ok()) fail("close failed", errno);
+    if (::close(fd_) != 0 && ok()) {
+      const int err = errno;
+      fail("close failed", err);
+    }
     fd_ = -1;
   }
   if (ok() && !direct_) {
@@ -344,8 +353,9 @@ void OutputFile::commit() {
       }
     }
     if (rc != 0) {
-      fail(errno == EEXIST ? "appeared while it was written; not overwritten" : "rename failed",
-           errno);
+      const int err = errno;
+      fail(err == EEXIST ? "appeared while it was written; not overwritten" : "rename failed",
+           err);
     } else {
       temp_path_.clear();
       // make the rename itself durable
