@@ -104,7 +104,7 @@ echo "$sim_pid" >"$run_dir/sim.pid"
 if [[ $haptic -eq 1 ]]; then
   if [[ "$device" == "simulated" && ${#device_opts[@]} -eq 0 ]]; then
     # the simulated hand follows the scene's scripted trajectory
-    "$build/sim_server/sim_server" "$scene" --export-trajectory "$run_dir/trajectory.csv" \
+    "$build/sim_server/sim_server" "$scene" --overwrite --export-trajectory "$run_dir/trajectory.csv" \
       >>"$run_dir/sim_export.log" 2>&1 &&
       device_opts=(--device-option "trajectory=$run_dir/trajectory.csv" --device-option loop=true)
   fi

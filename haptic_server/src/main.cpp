@@ -9,16 +9,21 @@
 #include <csignal>
 #include <thread>
 
+#include "tactus/device/backends.h"
 #include "tactus/device/device.h"
 #include "tactus/haptic/haptic_loop.h"
 #include "tactus/haptic/supervisor.h"
 #include "tactus/shared/cli_checks.h"
 #include "tactus/shared/clock.h"
+#include "tactus/shared/file_io.h"
 #include "tactus/shared/rt.h"
 
 namespace {
 std::atomic<bool> g_stop{false};
-void onSignal(int) { g_stop.store(true); }
+void onSignal(int) {
+  g_stop.store(true);
+  tactus::shared::requestStop();  // also interrupts file reads (a long replay CSV)
+}
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -163,6 +168,11 @@ int main(int argc, char** argv) {
     dev->enableForces(false);
     dev->close();
     if (fatal) std::rethrow_exception(fatal);
+    if (const auto* rec = dynamic_cast<const device::RecordingDevice*>(dev.get());
+        rec != nullptr && !rec->writeError().empty()) {
+      spdlog::error("recording not saved: {}", rec->writeError());
+      return 1;
+    }
     return 0;
   } catch (const std::exception& e) {
     spdlog::error("{}", e.what());

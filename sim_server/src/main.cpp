@@ -12,10 +12,16 @@
 #include "tactus/shared/cli_checks.h"
 #include "tactus/sim/runner.h"
 #include "tactus/shared/error.h"
+#include "tactus/shared/file_io.h"
 
 namespace {
-std::atomic<bool> g_stop{false};
-void onSignal(int) { g_stop.store(true); }
+// the one stop flag: loading, C0 precomputation and file reads poll it too
+std::atomic<bool>& g_stop = tactus::shared::stopFlag();
+volatile std::sig_atomic_t g_signal = 0;
+void onSignal(int signo) {
+  g_signal = signo;
+  g_stop.store(true);
+}
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -37,6 +43,8 @@ int main(int argc, char** argv) {
   app.add_option("--stats-json", opt.stats_json, "Write per-stage statistics as JSON to FILE");
   app.add_option("--export-trajectory", opt.export_trajectory,
                  "Write the scene's scripted instrument trajectory as a device CSV and exit");
+  app.add_flag("--overwrite", opt.overwrite,
+               "Replace existing --stats-json / --export-trajectory files");
   app.add_option("--log-level", log_level, "trace, debug, info, warn, error")
       ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error"}));
   CLI11_PARSE(app, argc, argv);
@@ -48,6 +56,9 @@ int main(int argc, char** argv) {
   std::signal(SIGHUP, onSignal);  // the terminal closed: stop cleanly (removes the segment)
   try {
     return tactus::sim::runSimulation(opt, g_stop);
+  } catch (const tactus::Cancelled& e) {
+    spdlog::error("{}; exiting", e.what());
+    return 128 + (g_signal != 0 ? static_cast<int>(g_signal) : SIGTERM);
   } catch (const std::exception& e) {
     spdlog::error("{}", e.what());
     return 1;
