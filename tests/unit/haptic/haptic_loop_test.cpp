@@ -5,6 +5,7 @@
 #include <unistd.h>
 
 #include <cmath>
+#include <cstdlib>
 #include <string>
 
 #include "../../support/alloc_counter.h"
@@ -242,6 +243,99 @@ TEST_F(HapticLoopTest, ATickAllocatesNothing) {
     tickFor(1);
   }
   EXPECT_EQ(scope.allocations(), 0);
+  EXPECT_EQ(scope.cAllocations(), 0);
+}
+
+// The counter really sees the C allocator (otherwise the checks above could not fail).
+TEST(AllocCounter, CountsMallocCallocAndRealloc) {
+  test::AllocScope scope;
+  void* volatile a = std::malloc(16);
+  void* volatile b = std::calloc(4, 8);
+  void* volatile c = std::realloc(a, 64);
+  std::free(b);
+  std::free(c);
+  EXPECT_EQ(scope.cAllocations(), 3);
+  EXPECT_EQ(scope.allocations(), 3);
+  auto* p = new int(3);
+  delete p;
+  EXPECT_EQ(scope.allocations(), 4);
+  EXPECT_EQ(scope.cAllocations(), 3);
+}
+
+// A 150-contact frictional problem (450 rows, symmetric coupled W): every tick solves it with
+// NSGS, computes the wrench and runs the safety chain without any allocation.
+TEST(HapticLoopLarge, AFrictionalTickOf450RowsAllocatesNothing) {
+  constexpr int kContacts = 150;
+  constexpr int kRows = 3 * kContacts;
+  const std::string name = "tactus_haptic_large_" + std::to_string(::getpid());
+  shared::Segment::remove(name);
+  shared::Segment sim =
+      shared::Segment::create(name, shared::SegmentCapacity::forContacts(kContacts, true));
+  shared::SnapshotPublisher publisher = sim.snapshotPublisher();
+  ScriptedDevice device;
+  HapticSettings settings;
+  settings.solve_budget_ns = 1'000'000'000;   // sweeps bound the solve, not the clock
+  settings.max_sweeps = 20;
+  HapticLoop loop(device, settings);
+  auto link = std::make_unique<HapticLink>(shared::Segment::open(name));
+  loop.offerLink(link.get());
+  std::int64_t t = shared::monotonicNs();
+  std::uint64_t seq = 0;
+  auto publish = [&](double depth_m) {
+    auto slot = publisher.slot();
+    ASSERT_TRUE(slot.setSize(kRows, kContacts));
+    auto& h = slot.header();
+    h.seq = ++seq;
+    h.t_ns = t;
+    h.flags = shared::kSnapshotValid | shared::kSnapshotHasJacobian | shared::kSnapshotSymmetricW;
+    const int ld = slot.ld();
+    for (int c = 0; c <= kContacts; ++c) slot.rowOffset()[c] = 3 * c;
+    for (int c = 0; c < kContacts; ++c) {
+      slot.contactId()[c] = static_cast<std::uint64_t>(c + 1);
+      slot.mu()[c] = 0.5;
+      for (int k = 0; k < 3; ++k) {
+        slot.contactPoint()[3 * c + k] = k == 0 ? 1e-3 * c : 0.0;
+        slot.contactNormal()[3 * c + k] = k == 2 ? 1.0 : 0.0;
+        slot.contactTangent()[6 * c + k] = k == 0 ? 1.0 : 0.0;
+        slot.contactTangent()[6 * c + 3 + k] = k == 1 ? 1.0 : 0.0;
+      }
+    }
+    for (int i = 0; i < kRows; ++i) {
+      for (int j = 0; j < kRows; ++j) {
+        slot.W()[i * ld + j] = i == j ? 1e-3 : 0.5e-3 * std::exp(-std::abs(i - j));
+      }
+      const bool normal = i % 3 == 0;
+      slot.deltaFree()[i] = normal ? -depth_m : 1e-5 * ((i % 5) - 2);
+      slot.f()[i] = 0.0;
+      for (int k = 0; k < 6; ++k) slot.J()[6 * i + k] = (normal ? k == 2 : k == (i % 3) - 1);
+    }
+    publisher.publish();
+  };
+  device.state.pos_m = {0.0, 0.0, 0.0};
+  publish(1e-4);
+  for (int i = 0; i < 5; ++i) {
+    t += 1'000'000;
+    (void)loop.tick(t, t);
+  }
+  test::AllocScope scope;
+  TickOutput out;
+  for (int i = 0; i < 50; ++i) {
+    if (i % 10 == 0) publish(1e-4 * (1 + i % 3));
+    device.state.pos_m = {1e-5 * (i % 4), 0.0, -1e-5 * (i % 7)};
+    t += 1'000'000;
+    out = loop.tick(t, t);
+  }
+  EXPECT_EQ(scope.allocations(), 0);
+  EXPECT_EQ(scope.cAllocations(), 0);
+  // it did solve the large frictional problem every tick
+  EXPECT_EQ(out.contacts, kContacts);
+  EXPECT_GT(out.sweeps, 0);
+  EXPECT_GT(out.unlimited_force_norm_n, 0.0);
+  loop.offerLink(nullptr);
+  t += 1'000'000;
+  (void)loop.tick(t, t);
+  link.reset();
+  shared::Segment::remove(name);
 }
 
 }  // namespace
