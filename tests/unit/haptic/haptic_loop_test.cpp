@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <string>
+#include <vector>
 
 #include "../../support/alloc_counter.h"
 #include "../../support/scripted_device.h"
@@ -64,6 +65,41 @@ class HapticLoopTest : public ::testing::Test {
     for (int k = 0; k < 3; ++k) {
       slot.contactPoint()[k] = 0.0;
       slot.contactNormal()[k] = k == 2 ? 1.0 : 0.0;
+    }
+    publisher_.publish();
+  }
+
+  // Publishes a general frictionless-or-frictional problem (normals per contact, tangents x/y),
+  // with zero J (the device does not move delta_free) and the given flags.
+  void publishProblem(const std::vector<int>& row_offset, const std::vector<double>& W,
+                      const std::vector<double>& delta_free, const std::vector<double>& f,
+                      const std::vector<std::array<double, 3>>& normals, std::uint32_t flags) {
+    auto slot = publisher_.slot();
+    const int contacts = static_cast<int>(normals.size());
+    const int rows = static_cast<int>(delta_free.size());
+    ASSERT_TRUE(slot.setSize(rows, contacts));
+    auto& h = slot.header();
+    h.seq = ++seq_;
+    h.t_ns = t_;
+    h.flags = flags;
+    h.device_pose.pos_m = {0.0, 0.0, 0.0};
+    h.tool_pose.pos_m = {0.0, 0.0, 0.0};
+    for (int c = 0; c <= contacts; ++c) slot.rowOffset()[c] = row_offset[c];
+    for (int c = 0; c < contacts; ++c) {
+      slot.contactId()[c] = static_cast<std::uint64_t>(c + 1);
+      slot.mu()[c] = 0.0;
+      for (int k = 0; k < 3; ++k) {
+        slot.contactPoint()[3 * c + k] = 0.0;
+        slot.contactNormal()[3 * c + k] = normals[c][k];
+        slot.contactTangent()[6 * c + k] = k == 0 ? 1.0 : 0.0;
+        slot.contactTangent()[6 * c + 3 + k] = k == 1 ? 1.0 : 0.0;
+      }
+    }
+    for (int i = 0; i < rows; ++i) {
+      for (int j = 0; j < rows; ++j) slot.W()[i * slot.ld() + j] = W[i * rows + j];
+      slot.deltaFree()[i] = delta_free[i];
+      slot.f()[i] = f[i];
+      for (int k = 0; k < 6; ++k) slot.J()[6 * i + k] = 0.0;
     }
     publisher_.publish();
   }
@@ -244,6 +280,79 @@ TEST_F(HapticLoopTest, ATickAllocatesNothing) {
   }
   EXPECT_EQ(scope.allocations(), 0);
   EXPECT_EQ(scope.cAllocations(), 0);
+}
+
+// Row offsets stepping by 2 (neither 1 nor 3 rows per contact): NSGS refuses the problem
+// (kEmpty) and the wrench must not be built from those offsets (here the snapshot's own f,
+// copied as the warm start, would render 3 N).
+TEST_F(HapticLoopTest, InconsistentRowOffsetsRenderNoForce) {
+  device_.state.pos_m = {0.0, 0.0, 0.0};
+  publish(0.001, 1e-3, 0.0);                     // engage at zero force
+  tickFor(10);
+  publishProblem({0, 2}, {1e-3, 0.0, 0.0, 1e-3}, {-0.003, 0.0}, {3.0, 0.0},
+                 {{0.0, 0.0, 1.0}}, shared::kSnapshotValid | shared::kSnapshotSymmetricW);
+  const TickOutput out = tickFor(20);
+  EXPECT_EQ(out.contacts, 1);
+  EXPECT_EQ(out.force_n, (std::array<double, 3>{0.0, 0.0, 0.0}));
+  EXPECT_EQ(device_.last.force_n, (std::array<double, 3>{0.0, 0.0, 0.0}));
+}
+
+// Without kSnapshotSymmetricW the loop must not assume W == W^T. Two frictionless contacts
+// (normals z and x) coupled one way only: W f + delta_free = 0 gives f = (0.5, 1) N, so the
+// force is (1, 0, 0.5) N; the symmetric sweep (which reads W^T) would give (0.5, 0, 1) N.
+TEST_F(HapticLoopTest, WithoutTheSymmetricFlagTheGeneralSweepSolvesANonSymmetricW) {
+  device_.state.pos_m = {0.0, 0.0, 0.0};
+  publish(0.001, 1e-3, 0.0);                     // engage at zero force
+  tickFor(10);
+  publishProblem({0, 1, 2}, {1e-3, 0.5e-3, 0.0, 1e-3}, {-1e-3, -1e-3}, {0.0, 0.0},
+                 {{0.0, 0.0, 1.0}, {1.0, 0.0, 0.0}}, shared::kSnapshotValid);
+  const TickOutput out = tickFor(30);
+  EXPECT_NEAR(out.force_n[0], 1.0, 1e-6);
+  EXPECT_NEAR(out.force_n[1], 0.0, 1e-9);
+  EXPECT_NEAR(out.force_n[2], 0.5, 1e-6);
+}
+
+// The hazard-pointer handover: the real-time thread stalls after reading an offered link and
+// before announcing it; meanwhile the supervisor withdraws the link and, seeing linkInUse() !=
+// link, would free it. The tick must then not use it at all.
+TEST_F(HapticLoopTest, AWithdrawnLinkIsNeverUsedEvenIfTheTickStalledWhileAdoptingIt) {
+  const std::string other = name_ + "_b";
+  shared::Segment::remove(other);
+  shared::Segment sim_b =
+      shared::Segment::create(other, shared::SegmentCapacity::forContacts(4, true));
+  auto samples_b = sim_b.deviceReader();
+  auto link_b = std::make_unique<HapticLink>(shared::Segment::open(other));
+  struct Supervisor {
+    HapticLoop* loop;
+    HapticLink* link;
+    bool would_free = false;
+  } supervisor{&*loop_, link_b.get()};
+  loop_->setAdoptionHookForTest(
+      [](void* context) {
+        auto* s = static_cast<Supervisor*>(context);
+        s->loop->offerLink(nullptr);                       // withdraw
+        s->would_free = s->loop->linkInUse() != s->link;   // the supervisor's free test
+      },
+      &supervisor);
+  tickFor(2);                                             // on link_ (the fixture's)
+  loop_->offerLink(link_b.get());
+  tickFor(1);
+  EXPECT_TRUE(supervisor.would_free);
+  EXPECT_EQ(loop_->linkInUse(), nullptr);
+  tickFor(3);
+  EXPECT_EQ(samples_b.latest().seq, 0u) << "the tick wrote into a link that may be freed";
+  EXPECT_EQ(loop_->linkInUse(), nullptr);
+  // the check can see writes: offered and not withdrawn, the link is adopted and written
+  loop_->setAdoptionHookForTest(nullptr, nullptr);
+  loop_->offerLink(link_b.get());
+  tickFor(2);
+  EXPECT_EQ(loop_->linkInUse(), link_b.get());
+  EXPECT_GT(samples_b.latest().seq, 0u);
+  loop_->offerLink(nullptr);
+  tickFor(1);
+  EXPECT_EQ(loop_->linkInUse(), nullptr);
+  link_b.reset();
+  shared::Segment::remove(other);
 }
 
 // The counter really sees the C allocator (otherwise the checks above could not fail).
