@@ -53,7 +53,9 @@ double OptionReader::number(const std::string& key, double fallback) {
 double OptionReader::number(const std::string& key, double fallback, double lo, double hi) {
   const double v = number(key, fallback);
   if (!(v >= lo && v <= hi)) {
-    throw DeviceError("device '" + backend_ + "': option " + key + "=" + show(v) +
+    const auto it = config_.find(key);
+    throw DeviceError("device '" + backend_ + "': option " + key + "=" +
+                      (it != config_.end() ? it->second : show(v)) +
                       " must be in [" + show(lo) + ", " + show(hi) + "]");
   }
   return v;
