@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <string>
@@ -353,6 +354,62 @@ TEST_F(HapticLoopTest, AWithdrawnLinkIsNeverUsedEvenIfTheTickStalledWhileAdoptin
   EXPECT_EQ(loop_->linkInUse(), nullptr);
   link_b.reset();
   shared::Segment::remove(other);
+}
+
+// The protocol's event codes and flags are raised by the loop: force clamped (event, stats
+// flag, device-sample flag), solver not converged, device without data, overrun (a tick whose
+// work ends more than one period after its scheduled start).
+TEST_F(HapticLoopTest, ClampSolverNoDataAndOverrunRaiseTheirEventsAndFlags) {
+  auto drain = [this] {
+    std::vector<std::uint32_t> codes;
+    shared::RtEvent e;
+    while (loop_->events().tryPop(&e)) codes.push_back(e.code);
+    return codes;
+  };
+  auto samples = sim_->deviceReader();
+  // the simulated clock runs a second ahead of the real one: no tick ends late by accident
+  t_ = shared::monotonicNs() + 1'000'000'000;
+  device_.state.pos_m = {0.0, 0.0, 0.0};
+  publish(0.0, 1e-3, 0.0);
+  tickFor(10);
+  drain();
+  publish(-0.01, 1e-3, 0.0);                       // 10 N against a 5 N clamp
+  TickOutput out = tickFor(20);
+  EXPECT_NE(out.flags & shared::kStatsForceClamped, 0u);
+  tickFor(1);
+  EXPECT_NE(samples.latest().status & shared::kDeviceForceClamped, 0u);
+  std::vector<std::uint32_t> codes = drain();
+  EXPECT_EQ(std::count(codes.begin(), codes.end(), shared::kEventForceClamped), 1)
+      << "one event when the clamping starts, not one per tick";
+
+  device_.no_data = true;
+  out = tickFor(3);
+  EXPECT_NE(out.flags & shared::kStatsDeviceNoData, 0u);
+  codes = drain();
+  EXPECT_EQ(std::count(codes.begin(), codes.end(), shared::kEventDeviceNoData), 1);
+  device_.no_data = false;
+
+  EXPECT_EQ(loop_->counters().overruns.load(), 0u);
+  t_ += 1'000'000;
+  out = loop_->tick(shared::monotonicNs() - 10 * settings_.period_ns, t_);   // 10 periods late
+  EXPECT_EQ(loop_->counters().overruns.load(), 1u);
+  codes = drain();
+  EXPECT_EQ(std::count(codes.begin(), codes.end(), shared::kEventOverrun), 1);
+
+  // a loop allowed one sweep on a strongly coupled two-contact problem does not converge
+  loop_->offerLink(nullptr);
+  tickFor(1);
+  settings_.max_sweeps = 1;
+  loop_.emplace(device_, settings_);
+  loop_->offerLink(link_.get());
+  publishProblem({0, 1, 2}, {1e-3, 0.9e-3, 0.9e-3, 1e-3}, {-1e-3, -2e-3}, {0.0, 0.0},
+                 {{0.0, 0.0, 1.0}, {0.0, 0.0, 1.0}},
+                 shared::kSnapshotValid | shared::kSnapshotSymmetricW);
+  out = tickFor(1);
+  EXPECT_NE(out.flags & shared::kStatsSolverNotConverged, 0u);
+  tickFor(1);
+  codes = drain();
+  EXPECT_EQ(std::count(codes.begin(), codes.end(), shared::kEventSolverNotConverged), 1);
 }
 
 // The counter really sees the C allocator (otherwise the checks above could not fail).
