@@ -45,8 +45,8 @@ struct HapticSettingsLimits {
   static constexpr double kMaxFadeMs = 10'000.0;          ///< fade_ms in [0, this] ms
   static constexpr int kMaxSweeps = 100'000;              ///< max_sweeps in [1, this]
   static constexpr double kMaxTolerance = 1.0;            ///< tolerance in (0, this]
-  static constexpr std::int64_t kMaxPeriodNs = 1'000'000'000;  ///< period_ns, solve_budget_ns
-                                                               ///< in (0, this] ns
+  /// period_ns in (0, this] ns, solve_budget_ns in [0, this] ns (0: sweeps only)
+  static constexpr std::int64_t kMaxPeriodNs = 1'000'000'000;
   /// Limits below this are treated as zero by the guard (no force rather than denormal maths).
   static constexpr double kMinLimit = 1e-9;
 };
@@ -62,7 +62,7 @@ struct HapticSettings {
   double fade_ms = 100.0;               ///< fade-out and fade-in ramp
   int max_sweeps = 50;                  ///< NSGS sweep budget per tick
   double tolerance = 1e-6;              ///< NSGS tolerance
-  std::int64_t solve_budget_ns = 400'000;  ///< NSGS time budget per tick
+  std::int64_t solve_budget_ns = 400'000;  ///< NSGS time budget per tick (0: sweeps only)
   std::int64_t period_ns = 1'000'000;   ///< tick period (a tick ending later is an overrun)
   bool render_torque = false;           ///< devices without rotational feedback: false
 
