@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <iomanip>
+#include <limits>
 #include <sstream>
 #include <string>
 
@@ -116,7 +117,9 @@ void HapticSettings::validate() const {
   checkSetting("max_force_n", max_force_n, 0.0, true, L::kMaxForceN, "N");
   checkSetting("max_torque_nm", max_torque_nm, 0.0, true, L::kMaxTorqueNm, "N m");
   checkSetting("slew_n_per_s", slew_n_per_s, 0.0, true, L::kMaxSlewNPerS, "N/s");
-  checkSetting("engage_threshold_n", engage_threshold_n, 0.0, false, L::kMaxForceN, "N");
+  // any finite threshold is safe (the clamp still applies); tools use a huge one to engage at once
+  checkSetting("engage_threshold_n", engage_threshold_n, 0.0, false,
+               std::numeric_limits<double>::max(), "N");
   checkSetting("watchdog_ms", watchdog_ms, 0.0, true, L::kMaxWatchdogMs, "ms");
   checkSetting("fade_ms", fade_ms, 0.0, false, L::kMaxFadeMs, "ms");
   checkSetting("max_sweeps", max_sweeps, 1.0, false, L::kMaxSweeps, "");

@@ -67,7 +67,7 @@ struct HapticSettings {
   bool render_torque = false;           ///< devices without rotational feedback: false
 
   /// Throws tactus::Error naming the first setting that is not finite or outside its range
-  /// (HapticSettingsLimits; engage_threshold_n in [0, kMaxForceN]).
+  /// (HapticSettingsLimits; engage_threshold_n: finite and >= 0).
   void validate() const;
 };
 
