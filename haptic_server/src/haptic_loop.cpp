@@ -57,6 +57,16 @@ void slewLimit(std::array<double, 3>& v, const std::array<double, 3>& previous,
   }
 }
 
+// now - t_ns, saturated instead of overflowing (time stamps from shared memory or a device)
+std::int64_t ageNs(std::int64_t now, std::int64_t t_ns) noexcept {
+  std::int64_t age = 0;
+  if (__builtin_sub_overflow(now, t_ns, &age)) {
+    return t_ns < 0 ? std::numeric_limits<std::int64_t>::max()
+                    : std::numeric_limits<std::int64_t>::min();
+  }
+  return age;
+}
+
 // A usable clamp: finite and >= kMinLimit, at most `ceiling`; anything else is 0 (no output).
 double sanitizeLimit(double limit, double ceiling) noexcept {
   if (!std::isfinite(limit) || !(limit >= HapticSettingsLimits::kMinLimit)) return 0.0;
@@ -353,20 +363,10 @@ void HapticLoop::applySafetyChain(double dt, TickOutput& out, std::array<double,
   last_torque_nm_ = torque;
 }
 
-TickOutput HapticLoop::tick(std::int64_t scheduled_ns, std::int64_t woken_ns) noexcept {
-  TickOutput out;
-  const std::int64_t now = woken_ns;
-  const double dt =
-      last_tick_ns_ > 0 ? std::clamp(1e-9 * static_cast<double>(now - last_tick_ns_), 1e-5, 0.05)
-                        : 1e-3;
-  last_tick_ns_ = now;
-
-  adoptOfferedLink();   // never waits
-
-  // device
+device::IoStatus HapticLoop::readDevice(std::int64_t now, TickOutput& out) noexcept {
   device::IoStatus io = device_.read(&state_);
   if (io == device::IoStatus::kOk && state_.t_ns > 0 &&
-      now - state_.t_ns > watchdog_ns_) {
+      ageNs(now, state_.t_ns) > watchdog_ns_) {
     // a sample stamped long ago: the device stopped updating (disconnected, stuck driver)
     counters_.stale_device_samples.fetch_add(1, std::memory_order_relaxed);
     io = device::IoStatus::kFault;
@@ -401,7 +401,11 @@ TickOutput HapticLoop::tick(std::int64_t scheduled_ns, std::int64_t woken_ns) no
 
   no_data_ = io == device::IoStatus::kNoData;
 
-  // publish the device sample (pose held on no data, fault flagged)
+  return io;
+}
+
+// Publishes the device sample (pose held on no data, fault flagged).
+void HapticLoop::publishSample(std::int64_t now, device::IoStatus io) noexcept {
   if (link_ != nullptr) {
     shared::DeviceSample& s = link_->samples.buffer();
     s.seq = ++sample_seq_;
@@ -426,7 +430,10 @@ TickOutput HapticLoop::tick(std::int64_t scheduled_ns, std::int64_t woken_ns) no
     link_->samples.publish();
   }
 
-  // the newest snapshot, its age, and the local model
+}
+
+// The newest snapshot, its age, and the local model.
+void HapticLoop::takeSnapshot(std::int64_t now, TickOutput& out) noexcept {
   bool stale = true;
   if (link_ != nullptr) {
     bool fresh = false;
@@ -435,7 +442,7 @@ TickOutput HapticLoop::tick(std::int64_t scheduled_ns, std::int64_t woken_ns) no
     if (hdr.seq == 0) {
       out.flags |= shared::kStatsNoSnapshot;
     } else {
-      const std::int64_t age = now - hdr.t_ns;
+      const std::int64_t age = ageNs(now, hdr.t_ns);
       const bool shutting = (hdr.flags & shared::kSnapshotShuttingDown) != 0;
       stale = watchdog_ns_ == 0 || age > watchdog_ns_ || shutting ||
               (hdr.flags & shared::kSnapshotValid) == 0;
@@ -462,47 +469,69 @@ TickOutput HapticLoop::tick(std::int64_t scheduled_ns, std::int64_t woken_ns) no
   out.stale = stale;
   out.snapshot_seq = snapshot_seq_;
 
-  std::array<double, 3> force{};
-  std::array<double, 3> torque{};
-  applySafetyChain(dt, out, force, torque);
+}
 
+void HapticLoop::writeDevice(const std::array<double, 3>& force,
+                             const std::array<double, 3>& torque) noexcept {
   device::DeviceCommand cmd;
   cmd.force_n = force;
   cmd.torque_nm = torque;
   if (device_.write(cmd) != device::IoStatus::kOk) {
     counters_.write_faults.fetch_add(1, std::memory_order_relaxed);
   }
+}
 
-  // one stats record per tick
-  if (link_ != nullptr) {
-    shared::StatsRecord rec;
-    rec.tick = tick_index_;
-    rec.scheduled_ns = scheduled_ns;
-    rec.woken_ns = woken_ns;
-    rec.finished_ns = shared::monotonicNs();
-    rec.solve_ns = out.solve_ns;
-    rec.sweeps = out.sweeps;
-    rec.residual = out.residual;
-    rec.contacts = out.contacts;
-    rec.force_norm_n = wrenchNorm(force);
-    rec.snapshot_seq = snapshot_seq_;
-    // an overrun: the tick's work ended more than one period after its scheduled start
-    const std::int64_t late_ns = rec.finished_ns - scheduled_ns - settings_.period_ns;
-    const bool overrun = late_ns > 0;
-    rec.flags = out.flags | (overrun ? shared::kStatsOverrun : 0u);
-    link_->stats.push(rec);
-    link_->segment.beat(shared::Side::kHaptic, now);
-    if (overrun) {
-      counters_.overruns.fetch_add(1, std::memory_order_relaxed);
-      if (!overrun_) {   // first of a burst
-        pushEvent(shared::kEventOverrun, static_cast<double>(late_ns),
-                  settings_.period_ns > 0 ? std::floor(static_cast<double>(late_ns) /
-                                                       static_cast<double>(settings_.period_ns))
-                                          : 0.0);
-      }
+void HapticLoop::recordStats(std::int64_t scheduled_ns, std::int64_t woken_ns,
+                             const TickOutput& out, const std::array<double, 3>& force) noexcept {
+  // one stats record per tick, and the heartbeat
+  if (link_ == nullptr) return;
+  shared::StatsRecord rec;
+  rec.tick = tick_index_;
+  rec.scheduled_ns = scheduled_ns;
+  rec.woken_ns = woken_ns;
+  rec.finished_ns = shared::monotonicNs();
+  rec.solve_ns = out.solve_ns;
+  rec.sweeps = out.sweeps;
+  rec.residual = out.residual;
+  rec.contacts = out.contacts;
+  rec.force_norm_n = wrenchNorm(force);
+  rec.snapshot_seq = snapshot_seq_;
+  // an overrun: the tick's work ended more than one period after its scheduled start
+  const std::int64_t late_ns = rec.finished_ns - scheduled_ns - settings_.period_ns;
+  const bool overrun = late_ns > 0;
+  rec.flags = out.flags | (overrun ? shared::kStatsOverrun : 0u);
+  link_->stats.push(rec);
+  link_->segment.beat(shared::Side::kHaptic, woken_ns);
+  if (overrun) {
+    counters_.overruns.fetch_add(1, std::memory_order_relaxed);
+    if (!overrun_) {   // first of a burst
+      pushEvent(shared::kEventOverrun, static_cast<double>(late_ns),
+                settings_.period_ns > 0 ? std::floor(static_cast<double>(late_ns) /
+                                                     static_cast<double>(settings_.period_ns))
+                                        : 0.0);
     }
-    overrun_ = overrun;
   }
+  overrun_ = overrun;
+}
+
+TickOutput HapticLoop::tick(std::int64_t scheduled_ns, std::int64_t woken_ns) noexcept {
+  TickOutput out;
+  const std::int64_t now = woken_ns;
+  const double dt =
+      last_tick_ns_ > 0 ? std::clamp(1e-9 * static_cast<double>(ageNs(now, last_tick_ns_)), 1e-5,
+                                     0.05)
+                        : 1e-3;
+  last_tick_ns_ = now;
+
+  adoptOfferedLink();   // never waits
+  const device::IoStatus io = readDevice(now, out);
+  publishSample(now, io);
+  takeSnapshot(now, out);
+  std::array<double, 3> force{};
+  std::array<double, 3> torque{};
+  applySafetyChain(dt, out, force, torque);
+  writeDevice(force, torque);
+  recordStats(scheduled_ns, woken_ns, out, force);
   ++tick_index_;
   counters_.ticks.fetch_add(1, std::memory_order_relaxed);
   return out;

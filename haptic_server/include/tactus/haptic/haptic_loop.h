@@ -186,7 +186,15 @@ class HapticLoop {
   void solveLocalModel(HapticLink& link, const shared::SnapshotView& snap,
                        const shared::Pose& device_pose, TickOutput& out) noexcept;
   void pushEvent(std::uint32_t code, double a = 0.0, double b = 0.0) noexcept;
+  // the tick's phases, in order
   void adoptOfferedLink() noexcept;
+  device::IoStatus readDevice(std::int64_t now, TickOutput& out) noexcept;
+  void publishSample(std::int64_t now, device::IoStatus io) noexcept;
+  void takeSnapshot(std::int64_t now, TickOutput& out) noexcept;   // and the local model
+  void writeDevice(const std::array<double, 3>& force,
+                   const std::array<double, 3>& torque) noexcept;
+  void recordStats(std::int64_t scheduled_ns, std::int64_t woken_ns, const TickOutput& out,
+                   const std::array<double, 3>& force) noexcept;
   void applySafetyChain(double dt, TickOutput& out, std::array<double, 3>& force,
                         std::array<double, 3>& torque) noexcept;
   void initLimits();
