@@ -225,6 +225,15 @@ void HapticLoop::pushEvent(std::uint32_t code, double a, double b) noexcept {
   }
 }
 
+void HapticLoop::pushRateLimited(NoisyEvent which, std::uint32_t code, std::int64_t now_ns,
+                                 double a, double b) noexcept {
+  const auto i = static_cast<std::size_t>(which);
+  if (noisy_pushed_[i] && ageNs(now_ns, noisy_event_ns_[i]) < 1'000'000'000) return;
+  noisy_pushed_[i] = true;
+  noisy_event_ns_[i] = now_ns;
+  pushEvent(code, a, b);
+}
+
 void HapticLoop::solveLocalModel(HapticLink& link, const shared::SnapshotView& snap,
                                  const shared::Pose& device_pose, TickOutput& out) noexcept {
   shared::NsgsWorkspace& workspace = link.workspace;
@@ -285,7 +294,10 @@ void HapticLoop::solveLocalModel(HapticLink& link, const shared::SnapshotView& s
   if (not_converged) {
     out.flags |= shared::kStatsSolverNotConverged;
     counters_.solver_not_converged.fetch_add(1, std::memory_order_relaxed);
-    if (!not_converged_) pushEvent(shared::kEventSolverNotConverged, res.sweeps, res.error);
+    if (!not_converged_) {
+      pushRateLimited(kNoisyNotConverged, shared::kEventSolverNotConverged, last_tick_ns_,
+                      res.sweeps, res.error);
+    }
   }
   not_converged_ = not_converged;
   // wrench on the instrument from the contact forces (frame rows n, t1, t2)
@@ -344,7 +356,10 @@ void HapticLoop::applySafetyChain(double dt, TickOutput& out, std::array<double,
   if (clamped) {
     out.flags |= shared::kStatsForceClamped;
     counters_.clamped.fetch_add(1, std::memory_order_relaxed);
-    if (!clamped_) pushEvent(shared::kEventForceClamped, requested_n, wrenchNorm(force));
+    if (!clamped_) {
+      pushRateLimited(kNoisyClamped, shared::kEventForceClamped, last_tick_ns_, requested_n,
+                      wrenchNorm(force));
+    }
   }
   clamped_ = clamped;
   clampNorm(torque, torque_limit_nm_);
@@ -391,7 +406,7 @@ device::IoStatus HapticLoop::readDevice(std::int64_t now, TickOutput& out) noexc
   } else if (io == device::IoStatus::kNoData) {
     counters_.device_no_data.fetch_add(1, std::memory_order_relaxed);
     out.flags |= shared::kStatsDeviceNoData;
-    if (!no_data_) pushEvent(shared::kEventDeviceNoData);
+    if (!no_data_) pushRateLimited(kNoisyNoData, shared::kEventDeviceNoData, now);
   } else {
     counters_.device_faults.fetch_add(1, std::memory_order_relaxed);
     if (!device_fault_) pushEvent(shared::kEventDeviceFault);
@@ -505,10 +520,12 @@ void HapticLoop::recordStats(std::int64_t scheduled_ns, std::int64_t woken_ns,
   if (overrun) {
     counters_.overruns.fetch_add(1, std::memory_order_relaxed);
     if (!overrun_) {   // first of a burst
-      pushEvent(shared::kEventOverrun, static_cast<double>(late_ns),
-                settings_.period_ns > 0 ? std::floor(static_cast<double>(late_ns) /
-                                                     static_cast<double>(settings_.period_ns))
-                                        : 0.0);
+      const double periods_missed =
+          settings_.period_ns > 0 ? std::floor(static_cast<double>(late_ns) /
+                                               static_cast<double>(settings_.period_ns))
+                                  : 0.0;
+      pushRateLimited(kNoisyOverrun, shared::kEventOverrun, woken_ns,
+                      static_cast<double>(late_ns), periods_missed);
     }
   }
   overrun_ = overrun;

@@ -186,6 +186,17 @@ class HapticLoop {
   void solveLocalModel(HapticLink& link, const shared::SnapshotView& snap,
                        const shared::Pose& device_pose, TickOutput& out) noexcept;
   void pushEvent(std::uint32_t code, double a = 0.0, double b = 0.0) noexcept;
+  /// Episode events that can recur every few ticks (no data, clamped, not converged, overrun):
+  /// pushed at most once per second each, so the ring and the log are not flooded.
+  enum NoisyEvent : int {
+    kNoisyNoData,
+    kNoisyClamped,
+    kNoisyNotConverged,
+    kNoisyOverrun,
+    kNoisyCount
+  };
+  void pushRateLimited(NoisyEvent which, std::uint32_t code, std::int64_t now_ns, double a = 0.0,
+                       double b = 0.0) noexcept;
   // the tick's phases, in order
   void adoptOfferedLink() noexcept;
   device::IoStatus readDevice(std::int64_t now, TickOutput& out) noexcept;
@@ -225,6 +236,8 @@ class HapticLoop {
   bool clamped_ = false;           ///< the last command was clamped (sample flag, event)
   bool not_converged_ = false;     ///< the last solve did not converge (event on the transition)
   bool overrun_ = false;           ///< the last tick overran (event at the start of a burst)
+  std::array<std::int64_t, kNoisyCount> noisy_event_ns_{};   ///< last push per NoisyEvent
+  std::array<bool, kNoisyCount> noisy_pushed_{};             ///< pushed at least once
   double gain_ = 0.0;
   double last_force_norm_n_ = 0.0;
   std::array<double, 3> last_force_n_{};
