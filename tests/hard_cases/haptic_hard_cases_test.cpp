@@ -113,13 +113,10 @@ class Rig {
     for (double x : s.quat_wxyz) finite = finite && std::isfinite(x);
     for (double x : s.vel_mps) finite = finite && std::isfinite(x);
     if (!finite) ++nonfinite_samples_;
-    if (s.seq != 0 && finite && (s.status & shared::kDeviceFault) == 0) {
-      target_.pose.pos_m = Eigen::Vector3d(s.pos_m[0], s.pos_m[1], s.pos_m[2]);
-      target_.pose.rot =
-          Eigen::Quaterniond(s.quat_wxyz[0], s.quat_wxyz[1], s.quat_wxyz[2], s.quat_wxyz[3])
-              .normalized();
-      target_.twist.setZero();
-      for (int i = 0; i < 3; ++i) target_.twist[i] = s.vel_mps[i];
+    // the production path: sim_server's freshness and target rules
+    if (sim::deviceSampleFresh(s, t_ns_,
+                               static_cast<std::int64_t>(spec_.haptics.watchdog_ms * 1e6))) {
+      sim::deviceTargetFromSample(s, spec_.instrument.max_opening_rad, target_);
     }
     sim_.setDeviceTarget(target_);
     const sim::StepReport r = sim_.step();

@@ -33,16 +33,14 @@ HapticLink::~HapticLink() {
   }
 }
 
-bool HapticLink::deviceTarget(DeviceTarget& target) {
-  const shared::DeviceSample& s = device_.latest();
-  const std::int64_t age = shared::monotonicNs() - s.t_ns;
-  const bool fresh = s.seq != 0 && age < watchdog_ns_ && (s.status & shared::kDeviceFault) == 0;
-  if (fresh != device_active_) {
-    spdlog::info(fresh ? "device samples arriving: the instrument follows the device"
-                       : "no fresh device sample: the instrument follows the scene's script");
-    device_active_ = fresh;
-  }
-  if (!fresh) return false;
+bool deviceSampleFresh(const shared::DeviceSample& s, std::int64_t now_ns,
+                       std::int64_t watchdog_ns) {
+  const std::int64_t age = now_ns - s.t_ns;
+  return s.seq != 0 && age < watchdog_ns && (s.status & shared::kDeviceFault) == 0;
+}
+
+bool deviceTargetFromSample(const shared::DeviceSample& s, double max_opening_rad,
+                            DeviceTarget& target) {
   const bool finite = std::all_of(s.pos_m.begin(), s.pos_m.end(), [](double x) { return std::isfinite(x); }) &&
                       std::all_of(s.quat_wxyz.begin(), s.quat_wxyz.end(), [](double x) { return std::isfinite(x); });
   if (!finite) return false;
@@ -55,8 +53,21 @@ bool HapticLink::deviceTarget(DeviceTarget& target) {
     target.twist[3 + i] = std::isfinite(s.angvel_radps[i]) ? s.angvel_radps[i] : 0.0;
   }
   // the device's gripper angle maps onto the jaws' opening range
-  const double opening = std::isfinite(s.gripper_rad) ? s.gripper_rad / max_opening_rad_ : 1.0;
+  const double full_rad = max_opening_rad > 0.0 ? max_opening_rad : 1.0;
+  const double opening = std::isfinite(s.gripper_rad) ? s.gripper_rad / full_rad : 1.0;
   target.gripper_opening = std::clamp(opening, 0.0, 1.0);
+  return true;
+}
+
+bool HapticLink::deviceTarget(DeviceTarget& target) {
+  const shared::DeviceSample& s = device_.latest();
+  const bool fresh = deviceSampleFresh(s, shared::monotonicNs(), watchdog_ns_);
+  if (fresh != device_active_) {
+    spdlog::info(fresh ? "device samples arriving: the instrument follows the device"
+                       : "no fresh device sample: the instrument follows the scene's script");
+    device_active_ = fresh;
+  }
+  if (!fresh || !deviceTargetFromSample(s, max_opening_rad_, target)) return false;
   device_seq_ = s.seq;
   ++samples_used_;
   return true;
@@ -80,9 +91,13 @@ bool writeSnapshot(const Simulation& sim, double max_opening_rad, std::uint64_t 
   hdr.step = static_cast<std::uint64_t>(sim.stepIndex());
   hdr.h_s = sim.spec().time_step_s;
   hdr.device_seq = device_seq;
-  hdr.solver_sweeps = 0;
-  hdr.solver_error = 0.0;
-  hdr.flags = shared::kSnapshotValid | shared::kSnapshotHasJacobian;
+  const bool solved = fits && rows > 0 && p.solve.status != shared::NsgsStatus::kEmpty;
+  hdr.solver_sweeps = solved ? p.solve.sweeps : 0;
+  hdr.solver_error = solved ? p.solve.error : 0.0;
+  hdr.flags = shared::kSnapshotValid | shared::kSnapshotHasJacobian |
+              (solved && p.solve.status == shared::NsgsStatus::kConverged
+                   ? shared::kSnapshotConverged
+                   : 0u);
   auto put_pose = [](shared::PoseSample& out, const shared::Pose& pose, double gripper) {
     for (int i = 0; i < 3; ++i) out.pos_m[i] = pose.pos_m[i];
     out.quat_wxyz = {pose.rot.w(), pose.rot.x(), pose.rot.y(), pose.rot.z()};
@@ -111,6 +126,17 @@ bool writeSnapshot(const Simulation& sim, double max_opening_rad, std::uint64_t 
     slot.f()[i] = p.f[i];
     for (int k = 0; k < 6; ++k) slot.J()[6 * i + k] = p.J(i, k);
   }
+  // the haptic side's symmetric sweep needs W == W^T exactly: say so only when it holds
+  bool symmetric = true;
+  for (int i = 0; i < rows && symmetric; ++i) {
+    for (int j = i + 1; j < rows; ++j) {
+      if (!(W[static_cast<std::ptrdiff_t>(i) * ld + j] == W[static_cast<std::ptrdiff_t>(j) * ld + i])) {
+        symmetric = false;
+        break;
+      }
+    }
+  }
+  if (symmetric) hdr.flags |= shared::kSnapshotSymmetricW;
   return fits;
 }
 

@@ -536,6 +536,7 @@ void Simulation::Impl::solveAndCorrect(StepReport& report, bool restore_free) {
   } else {
     report.nsgs = shared::NsgsResult{};
   }
+  p.solve = report.nsgs;
   previous_f.clear();
   for (int c = 0; c < contacts; ++c) {
     const int r0 = p.row_offset[c];
