@@ -208,7 +208,7 @@ std::string figures(const Rig& rig) {
 void expectSafe(const Rig& rig, const std::string& name) {
   EXPECT_EQ(rig.nonfiniteForces(), 0) << name;
   EXPECT_LE(rig.maxForce(), rig.settings().max_force_n + 1e-12) << name;
-  rig.watch().expectHealthy(name, 1e-5);
+  rig.watch().expectHealthy(name, 1e-5, 1000000, 1.0);
   EXPECT_GT(rig.watch().min_geometric_gap_m, -1e-3) << name;
 }
 
