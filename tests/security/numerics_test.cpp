@@ -20,6 +20,9 @@
 #include <vector>
 
 #include "tactus/sim/fem.h"
+#include "tactus/sim/pipeline.h"
+#include "tactus/sim/runner.h"
+#include "tactus/sim/scene.h"
 
 extern char** environ;
 
@@ -117,6 +120,74 @@ TEST(NumericThreads, SimServerReportsOneBlasThreadWhateverTheEnvironment) {
   if (dlsym(RTLD_DEFAULT, "omp_get_max_active_levels") != nullptr) {
     EXPECT_NE(line.find("OpenMP max active levels 0"), std::string::npos) << line;
   }
+}
+
+// Inverted tetrahedra are counted and reported: a tet flipped by hand in a running scene shows
+// up in the step report, the stats JSON and the VTU cell fields "volume_ratio" / "inverted".
+TEST(InvertedElements, AreCountedInTheStepReportTheStatsJsonAndTheVtu) {
+  const fs::path dir = fs::temp_directory_path() /
+                       ("tactus_inverted_" + std::to_string(getpid()));
+  fs::remove_all(dir);
+  SceneSpec spec = loadScene(std::string(TACTUS_TEST_DATA_DIR) + "/scenes/minimal_scene.yaml");
+  spec.output.enabled = true;
+  spec.output.directory = dir;
+  spec.output.every_n_steps = 1;
+  Simulation sim(spec);
+  ASSERT_GE(sim.tissueCount(), 1);
+  FemBody& body = sim.tissue(0);
+  ASSERT_EQ(body.invertedElementCount(), 0);
+  // mirror the first free node of tet 0 through the plane of its three other nodes
+  const auto& mesh = body.mesh();
+  int node = -1;
+  int others[3] = {0, 0, 0};
+  for (int a = 0; a < 4 && node < 0; ++a) {
+    if (body.fixedMask()[mesh.tets[0][a]]) continue;
+    node = mesh.tets[0][a];
+    for (int b = 0, k = 0; b < 4; ++b) {
+      if (b != a) others[k++] = mesh.tets[0][b];
+    }
+  }
+  ASSERT_GE(node, 0);
+  const Eigen::Vector3d p0 = body.positions().segment<3>(3 * others[0]);
+  const Eigen::Vector3d n = (body.positions().segment<3>(3 * others[1]) - p0)
+                                .cross(body.positions().segment<3>(3 * others[2]) - p0)
+                                .normalized();
+  const Eigen::Vector3d x = body.positions().segment<3>(3 * node);
+  body.positions().segment<3>(3 * node) = x - 2.0 * (x - p0).dot(n) * n;
+  const int inverted = body.invertedElementCount();
+  ASSERT_GE(inverted, 1);
+
+  const StepReport report = sim.step();
+  EXPECT_EQ(report.inverted_elements, inverted);
+  RunStatistics stats;
+  stats.add(report);
+  EXPECT_EQ(stats.maxInvertedElements(), inverted);
+  const std::string js = stats.json("flipped");
+  EXPECT_NE(js.find("\"inverted_elements_max\": " + std::to_string(inverted)), std::string::npos)
+      << js;
+  sim.writeOutputIfDue();
+  sim.finishOutput();
+  // the VTU of that step carries the per-cell fields, with as many 1s as inverted cells now
+  std::string vtu;
+  for (const auto& e : fs::directory_iterator(dir)) {
+    if (e.path().extension() == ".vtu") {
+      std::ifstream in(e.path());
+      std::stringstream ss;
+      ss << in.rdbuf();
+      vtu = ss.str();
+    }
+  }
+  fs::remove_all(dir);
+  ASSERT_FALSE(vtu.empty());
+  EXPECT_NE(vtu.find("Name=\"volume_ratio\""), std::string::npos);
+  const auto at = vtu.find("Name=\"inverted\"");
+  ASSERT_NE(at, std::string::npos);
+  const auto begin = vtu.find('>', at) + 1;
+  const std::string flags = vtu.substr(begin, vtu.find("</DataArray>", begin) - begin);
+  int ones = 0;
+  for (char c : flags) ones += c == '1' ? 1 : 0;
+  EXPECT_EQ(ones, body.invertedElementCount());
+  EXPECT_GE(ones, 1);
 }
 
 }  // namespace
