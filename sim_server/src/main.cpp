@@ -9,7 +9,6 @@
 #include <cstdio>
 #include <optional>
 
-#include "tactus/sim/fem.h"
 #include "tactus/sim/runner.h"
 #include "tactus/shared/error.h"
 
@@ -39,11 +38,6 @@ int main(int argc, char** argv) {
   spdlog::set_level(spdlog::level::from_str(log_level));
   spdlog::set_pattern("[%H:%M:%S.%e] [sim] [%^%l%$] %v");
 
-  // one thread for CHOLMOD's BLAS/OpenMP: the other core belongs to the haptic loop
-  const tactus::sim::NumericThreads threads = tactus::sim::limitNumericThreads();
-  spdlog::info("numeric threads: BLAS {} ({}), OpenMP max active levels {}", threads.blas_threads,
-               threads.blas_config.empty() ? "no OpenBLAS" : threads.blas_config,
-               threads.omp_max_active_levels);
   std::signal(SIGINT, onSignal);
   std::signal(SIGTERM, onSignal);
   try {

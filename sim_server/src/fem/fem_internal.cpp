@@ -126,7 +126,11 @@ NumericThreads applyNumericThreadLimitImpl() {
   using SetThreads = void (*)(int);
   if (auto* fn = reinterpret_cast<SetThreads>(dlsym(RTLD_DEFAULT, "openblas_set_num_threads")))
     fn(1);
-  return queryNumericThreads();
+  const NumericThreads now = queryNumericThreads();
+  spdlog::info("numeric threads: BLAS {} ({}), OpenMP max active levels {}", now.blas_threads,
+               now.blas_config.empty() ? "no OpenBLAS" : now.blas_config,
+               now.omp_max_active_levels);
+  return now;
 }
 
 }  // namespace

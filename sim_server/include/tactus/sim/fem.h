@@ -202,8 +202,9 @@ struct NumericThreads {
 /// regions off (omp_set_max_active_levels(0)) and OpenBLAS at one thread
 /// (openblas_set_num_threads(1)), both looked up with dlsym so neither is a link dependency.
 /// Setting OPENBLAS_NUM_THREADS from the program cannot work: OpenBLAS is loaded with CHOLMOD and
-/// reads it in its load-time constructor, before main. The first call applies the limit (every
-/// CholmodSolver makes it; sim_server at start-up); later calls return the state it left.
+/// reads it in its load-time constructor, before main. The first call applies the limit and logs
+/// it ("numeric threads: BLAS 1 (...)"); every CholmodSolver makes that call before CHOLMOD's
+/// first BLAS call. Later calls return the state it left.
 NumericThreads limitNumericThreads();
 
 /// The current state, without changing it.
