@@ -19,7 +19,9 @@
 #include <thread>
 #include <vector>
 
+#include "tactus/shared/error.h"
 #include "tactus/sim/fem.h"
+#include "tactus/sim/mesh.h"
 #include "tactus/sim/pipeline.h"
 #include "tactus/sim/runner.h"
 #include "tactus/sim/scene.h"
@@ -188,6 +190,13 @@ TEST(InvertedElements, AreCountedInTheStepReportTheStatsJsonAndTheVtu) {
   for (char c : flags) ones += c == '1' ? 1 : 0;
   EXPECT_EQ(ones, body.invertedElementCount());
   EXPECT_GE(ones, 1);
+  // a volume-ratio field of the wrong size is refused, not written short
+  fs::create_directories(dir);
+  EXPECT_THROW(writeVtu(dir / "bad.vtu", mesh, mesh.nodes, Eigen::Matrix3Xd(3, 0),
+                        Eigen::VectorXd(), Eigen::VectorXd::Ones(mesh.tetCount() + 1)),
+               Error);
+  EXPECT_FALSE(fs::exists(dir / "bad.vtu"));
+  fs::remove_all(dir);
 }
 
 }  // namespace
