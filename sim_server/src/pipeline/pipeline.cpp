@@ -616,6 +616,7 @@ StepReport Simulation::step() {
     if (s.instrument) ts.q_begin = ts.body->positions();
     const FemStepStats st = ts.body->freeMotion(h);
     if (!st.ok) report.finite = false;
+    report.inverted_elements += st.inverted_elements;
   }
   if (s.instrument) {
     s.tool_begin = s.instrument->pose();
@@ -695,8 +696,10 @@ void Simulation::writeOutputIfDue() {
         pos - Eigen::Map<const Eigen::Matrix3Xd>(ts.body->restPositions().data(), 3, n);
     Eigen::VectorXd vm;
     ts.body->vonMises(vm);
+    Eigen::VectorXd volume_ratio;
+    ts.body->volumeRatios(volume_ratio);
     const std::string file = fmt::format("{}_{:06d}.vtu", ts.name, s.frame);
-    writeVtu(dir / file, ts.body->mesh(), pos, disp, vm);
+    writeVtu(dir / file, ts.body->mesh(), pos, disp, vm, volume_ratio);
     s.vtk_files.push_back(file);
     s.vtk_times.push_back(s.t_s);
   }

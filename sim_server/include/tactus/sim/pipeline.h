@@ -50,6 +50,9 @@ struct StepReport {
   /// solver.contact_iterations > 1 (else 0)
   double geometric_penetration_m = 0.0;
   bool finite = true;                ///< every state value finite
+  /// Tetrahedra inverted (det F <= 0) at the start of the step, over all tissues
+  /// (FemStepStats::inverted_elements)
+  int inverted_elements = 0;
   StageTimes times;
 };
 
