@@ -39,8 +39,8 @@ enum SnapshotFlags : std::uint32_t {
   kSnapshotSymmetricW = 1u << 4,
 };
 
-/// Fixed part of the contact snapshot (the local model of DESIGN.md section 3, "haptic local
-/// model"), at offset 0 of its triple-buffer slot.
+/// Fixed part of the contact snapshot (the haptic local model of
+/// ../../../../docs/design.md#the-haptic-local-model), at offset 0 of its triple-buffer slot.
 struct ContactSnapshotHeader {
   std::uint64_t seq = 0;             ///< publish counter, 0 = nothing published yet
   std::int64_t t_ns = 0;             ///< monotonic time of publication
