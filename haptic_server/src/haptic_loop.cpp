@@ -147,6 +147,7 @@ const char* eventName(std::uint32_t code) noexcept {
     case kEventNonFinite: return "non_finite_device_data";
     case kEventSnapshotTooLarge: return "snapshot_too_large";
     case kEventSimShuttingDown: return "simulation_shutting_down";
+    case kEventIllPosedSnapshot: return "ill_posed_snapshot";
     default: return shared::eventCodeName(code);
   }
 }
@@ -288,6 +289,19 @@ void HapticLoop::solveLocalModel(HapticLink& link, const shared::SnapshotView& s
   if (res.status == shared::NsgsStatus::kEmpty) return;
   if (res.status == shared::NsgsStatus::kNonFinite) {   // NSGS has zeroed f
     counters_.non_finite_input.fetch_add(1, std::memory_order_relaxed);
+    return;
+  }
+  // kIllPosed: W itself is unusable (a contact with a zero, negative or denormal diagonal). The
+  // simulation never publishes such a W from a real scene, so the snapshot is corrupt: render no
+  // force from it (the safety chain ramps the command down) and report it once per snapshot.
+  if (res.status == shared::NsgsStatus::kIllPosed) {
+    counters_.ill_posed_solves.fetch_add(1, std::memory_order_relaxed);
+    out.flags |= shared::kStatsSolverNotConverged;
+    if (link.ill_posed_seq != hdr.seq) {
+      link.ill_posed_seq = hdr.seq;
+      pushEvent(kEventIllPosedSnapshot, static_cast<double>(res.ill_posed_contacts),
+                static_cast<double>(hdr.seq));
+    }
     return;
   }
   const bool not_converged = res.status != shared::NsgsStatus::kConverged;

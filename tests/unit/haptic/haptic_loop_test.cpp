@@ -298,6 +298,29 @@ TEST_F(HapticLoopTest, InconsistentRowOffsetsRenderNoForce) {
   EXPECT_EQ(device_.last.force_n, (std::array<double, 3>{0.0, 0.0, 0.0}));
 }
 
+// A W whose diagonal NSGS cannot use (here a negative compliance, W_nn = -1e-3) is a corrupt
+// snapshot: the solver reports kIllPosed, and the loop must render no force from it (the
+// snapshot's own f of 3 N, copied as the warm start, would otherwise reach the hand), count every
+// such solve and raise the event once for the snapshot, not once per tick.
+TEST_F(HapticLoopTest, IllPosedSnapshotRendersNoForceAndIsReportedOnce) {
+  device_.state.pos_m = {0.0, 0.0, 0.0};
+  publish(0.001, 1e-3, 0.0);                     // engage at zero force
+  tickFor(10);
+  shared::RtEvent e;
+  while (loop_->events().tryPop(&e)) {
+  }
+  publishProblem({0, 1}, {-1e-3}, {-0.003}, {3.0}, {{0.0, 0.0, 1.0}},
+                 shared::kSnapshotValid | shared::kSnapshotSymmetricW);
+  const TickOutput out = tickFor(20);
+  EXPECT_EQ(out.contacts, 1);
+  EXPECT_EQ(out.force_n, (std::array<double, 3>{0.0, 0.0, 0.0}));
+  EXPECT_EQ(device_.last.force_n, (std::array<double, 3>{0.0, 0.0, 0.0}));
+  EXPECT_EQ(loop_->counters().ill_posed_solves.load(), 20u);
+  int ill_posed_events = 0;
+  while (loop_->events().tryPop(&e)) ill_posed_events += e.code == kEventIllPosedSnapshot;
+  EXPECT_EQ(ill_posed_events, 1);
+}
+
 // Without kSnapshotSymmetricW the loop must not assume W == W^T. Two frictionless contacts
 // (normals z and x) coupled one way only: W f + delta_free = 0 gives f = (0.5, 1) N, so the
 // force is (1, 0, 0.5) N; the symmetric sweep (which reads W^T) would give (0.5, 0, 1) N.

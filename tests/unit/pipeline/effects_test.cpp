@@ -1,4 +1,4 @@
-// "Only the effects a scene calls for" (DESIGN section 4): the pipeline's stage counters prove
+// "Only the effects a scene calls for" (docs/design.md section 5.2): the pipeline's stage counters prove
 // that an absent effect costs nothing (linear material: no rotation extraction; mu = 0: no
 // tangential rows; no damping: no damping terms; no instrument: no collision and no solve; no
 // output: no VTK frame), that each present effect does run, and that stages() lists exactly what

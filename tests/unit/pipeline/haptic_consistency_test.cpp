@@ -1,4 +1,4 @@
-// The haptic local model against the full simulation (DESIGN 3, "required consistency"):
+// The haptic local model against the full simulation (docs/design.md, "The haptic local model"):
 //  * at the snapshot's own device pose, re-solving the published problem gives the simulation's
 //    contact forces;
 //  * for a small device displacement dx, delta_free* + J dx re-solved gives the force a full

@@ -1,5 +1,5 @@
 #pragma once
-// Haptic device backend interface (STYLE.md "Device backend interface") and the backend loader.
+// Haptic device backend interface (docs/design.md section 5.1) and the backend loader.
 //
 // Lifecycle (non-real-time, may allocate, log and throw tactus::DeviceError with a message that
 // says what to do): construct (loadDevice) -> open() -> calibrate() -> enableForces(true) ->

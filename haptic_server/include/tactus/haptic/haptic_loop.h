@@ -1,5 +1,5 @@
 #pragma once
-// The haptic loop (DESIGN sections 3 "haptic local model" and 6): every period it reads the
+// The haptic loop (docs/design.md, "The haptic local model" and section 4): every period it reads the
 // device, publishes the sample to the simulation, takes the newest contact snapshot, moves its
 // delta_free with the device (delta_free = delta_free* + J (x_h [-] x_h*)), re-solves the
 // frictional contact problem with warm-started NSGS under a sweep and time budget, turns the
@@ -93,6 +93,9 @@ struct HapticCounters {
   std::atomic<std::uint64_t> solver_not_converged{0};
   std::atomic<std::uint64_t> clamped{0};
   std::atomic<std::uint64_t> non_finite_input{0};
+  /// solves that found a contact NSGS cannot solve (zero, negative or denormal W diagonal):
+  /// the snapshot is corrupt, so the tick renders no force from it (shared::NsgsStatus::kIllPosed)
+  std::atomic<std::uint64_t> ill_posed_solves{0};
   std::atomic<std::uint64_t> events_dropped{0};
   std::atomic<std::uint64_t> overruns{0};            ///< ticks flagged shared::kStatsOverrun
   /// ticks where the final guard had to change the command (never with valid settings)
@@ -107,6 +110,9 @@ enum HapticEvent : std::uint32_t {
   kEventNonFinite = shared::kEventUser + 3,       ///< NaN/Inf from the device (arg0 = which)
   kEventSnapshotTooLarge = shared::kEventUser + 4,  ///< arg0 = rows
   kEventSimShuttingDown = shared::kEventUser + 5,
+  /// the snapshot's W has a diagonal NSGS cannot use (arg0 = ill-posed contacts, arg1 = snapshot
+  /// sequence); raised once per snapshot, no force is rendered from it
+  kEventIllPosedSnapshot = shared::kEventUser + 6,
 };
 
 /// Name of a shared::EventCode or HapticEvent code.
@@ -124,6 +130,7 @@ struct HapticLink {
   std::vector<double> f;                ///< forces, warm start across ticks
   std::vector<double> last_delta_free;  ///< delta_free of the last solve (capacity rows)
   std::uint64_t delta_seq = 0;          ///< snapshot whose W f + delta_free workspace.delta holds
+  std::uint64_t ill_posed_seq = 0;      ///< last snapshot reported ill-posed (one event each)
   explicit HapticLink(shared::Segment&& s);
 };
 

@@ -1,6 +1,6 @@
 #pragma once
-// Collision detection between the instrument and the deformed tissue surface (DESIGN 3 step 2),
-// and the contact rows of the contact problem (step 3).
+// Collision detection between the instrument and the deformed tissue surface, and the contact
+// rows of the contact problem (docs/design.md, "Collision detection" and "The contact problem").
 //
 // Two AABB trees over the tissue surface (one over triangles, one over surface vertices) are
 // built once from the topology and refit every step from the FEM state q (3n, node-major xyz).

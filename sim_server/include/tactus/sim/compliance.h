@@ -1,5 +1,6 @@
 #pragma once
-// Contact compliance models of a tissue (paper 3.2 "Contact Compliance Warping", DESIGN 3.4).
+// Contact compliance models of a tissue (paper 3.2 "Contact Compliance Warping";
+// docs/design.md, "Compliance models").
 //
 // A contact row acts on the tissue through H: row r maps the DOF displacement dq to a relative
 // displacement   (H dq)_r = sum_k weight[k] * dir . dq[node[k]]   (up to 3 nodes: a triangle

@@ -1,6 +1,6 @@
 #pragma once
-// The instrument: a rigid 6-DOF god object coupled to the device (paper 4.1, DESIGN 3 "The
-// instrument"), and its collision geometry.
+// The instrument: a rigid 6-DOF god object coupled to the device (paper 4.1; docs/design.md,
+// "The god object and its PD coupling"), and its collision geometry.
 //
 // Dynamics. State: pose x = (p, R), twist [v; w] (world frame, see tactus/shared/pose.h).
 // The device target x_h = (p_h, R_h) with twist [v_h; w_h] pulls the god object through a PD

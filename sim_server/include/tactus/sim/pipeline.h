@@ -1,5 +1,5 @@
 #pragma once
-// The simulation pipeline built from a scene (paper 3.1, DESIGN section 3):
+// The simulation pipeline built from a scene (paper 3.1; docs/design.md section 2):
 //
 //   free motion (tissues, instrument) -> collision -> contact rows, W = H C H^T -> NSGS
 //   -> constrained motion -> [publish snapshot] -> [VTK output]
@@ -63,7 +63,7 @@ struct DeviceTarget {
   double gripper_opening = 1.0;      ///< 0 closed .. 1 open
 };
 
-/// The last contact problem, in the form the haptic loop needs (DESIGN 3, "local model").
+/// The last contact problem, in the form the haptic loop needs (docs/design.md, "The haptic local model").
 struct ContactProblemData {
   int contacts = 0;
   int rows = 0;
