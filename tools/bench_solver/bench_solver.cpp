@@ -244,7 +244,8 @@ int run(int argc, char** argv) {
       "(SICONOS_FRICTION_3D_NSGS through fc3d_driver) alternately on the same FCLIB problems, "
       "cold start (r = 0), --reps times each, and prints per problem: error, sweeps, median "
       "time and convergence of both, the time ratio Tactus/Siconos, the per-sweep time ratio "
-      "and the u agreement max|u_T - u_S| / max(|u_T|, |u_S|, |q|) (max-norms; u = W r + q; r is not compared: "
+      "and the u agreement max|u_T - u_S| / max(|u_T|, |u_S|, |q|) (max-norms; u = W r + q; "
+      "r is not compared: "
       "it is not unique on redundant problems).\n"
       "Siconos options set: dparam[SICONOS_DPARAM_TOL] = --tol, iparam[SICONOS_IPARAM_MAX_ITER] "
       "= --max-sweeps, iparam[SICONOS_FRICTION_3D_IPARAM_ERROR_EVALUATION] = "
@@ -329,7 +330,8 @@ int run(int argc, char** argv) {
     }
     ++total;
     const double tr = ratio(row.t_ms, row.s_ms);
-    const double sr = ratio(row.t_ms / std::max(row.t_sweeps, 1), row.s_ms / std::max(row.s_iters, 1));
+    const double sr =
+        ratio(row.t_ms / std::max(row.t_sweeps, 1), row.s_ms / std::max(row.s_iters, 1));
     t_conv += row.t_conv;
     s_conv += row.s_conv;
     if (row.t_conv && row.s_conv) {
@@ -344,7 +346,8 @@ int run(int argc, char** argv) {
                 row.s_conv ? "yes" : "no", tr, sr, row.u_diff);
     std::fflush(stdout);
     if (csv != nullptr &&
-        std::fprintf(csv, "%s,%d,%.6e,%d,%.6f,%d,%.6e,%.6e,%d,%.6f,%d,%.6f,%.6f,%.6e,%.6e,%.6e,%.6e\n",
+        std::fprintf(csv,
+                     "%s,%d,%.6e,%d,%.6f,%d,%.6e,%.6e,%d,%.6f,%d,%.6f,%.6f,%.6e,%.6e,%.6e,%.6e\n",
                      row.name.c_str(), row.contacts, row.t_error, row.t_sweeps, row.t_ms,
                      row.t_conv, row.s_error, row.s_reported, row.s_iters, row.s_ms, row.s_conv,
                      tr, sr, row.u_diff, row.norm_q, row.norm_r_s, row.norm_u_s) < 0) {
