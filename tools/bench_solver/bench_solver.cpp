@@ -355,6 +355,7 @@ int run(int argc, char** argv) {
       throw tactus::Error(csv_path + ": write failed");
     }
   }
+  if (failed > 0) std::printf("failed: %d file(s) could not be read (above)\n", failed);
   std::printf("summary: %d problems; tactus converged %d/%d, siconos converged %d/%d, both "
               "converged %d/%d; over those: median time ratio T/S %.2f (min %.2f, max %.2f), "
               "median per-sweep ratio %.2f, worst u diff %.2e\n",
