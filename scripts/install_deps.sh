@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Installs the Debian packages Tactus needs, only those missing (idempotent; instant when all present).
-# Uses sudo when not root. Set TACTUS_SKIP_DEPS=1 to skip entirely.
+# Uses sudo when not root. Set TACTUS_SKIP_DEPS=1 to skip entirely. Arguments name extra packages
+# to install the same way (e.g. scripts/bench-solver: libsiconos-numerics-dev).
 set -euo pipefail
 [[ "${TACTUS_SKIP_DEPS:-0}" == "1" ]] && exit 0
 packages=(
@@ -12,6 +13,7 @@ packages=(
   libopenblas0-serial
   chromium
 )
+packages+=("$@")
 # node and npm build the live view's page (three.js); from Debian only when no node is installed
 command -v node >/dev/null 2>&1 || packages+=(nodejs npm)
 missing=()
