@@ -239,6 +239,9 @@ TEST(SegmentTrust, AnotherUsersStaleSegmentIsNotReplaced) {
   ASSERT_EQ(::ftruncate(fd, 4096), 0);
   ASSERT_EQ(::fchown(fd, 65534, 65534), 0);
   ::close(fd);
+  // an hour old: by age alone it would count as a crashed creation and be replaced
+  const timespec old_times[2] = {{::time(nullptr) - 3600, 0}, {::time(nullptr) - 3600, 0}};
+  ASSERT_EQ(::utimensat(AT_FDCWD, Segment::pathOf(g.name).c_str(), old_times, 0), 0);
   try {
     Segment::create(g.name, SegmentCapacity::forContacts(2));
     FAIL() << "another user's object was replaced";
