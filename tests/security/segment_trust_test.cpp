@@ -53,11 +53,18 @@ std::string uniqueName(const char* tag) {
   return "tactus_sec_segment_" + std::to_string(::getpid()) + "_" + tag;
 }
 
-// Removes the name at scope exit whatever happens.
+std::string logPath(const std::string& name, const char* what) {
+  return std::string(::testing::TempDir()) + "/" + name + "_" + what + ".log";
+}
+
+// Removes the name (and the daemons' logs of this test) at scope exit whatever happens.
 struct NameGuard {
   std::string name;
   explicit NameGuard(std::string n) : name(std::move(n)) { Segment::remove(name); }
-  ~NameGuard() { Segment::remove(name); }
+  ~NameGuard() {
+    Segment::remove(name);
+    for (const char* tag : {"first", "second", "displaced"}) ::unlink(logPath(name, tag).c_str());
+  }
 };
 
 bool exited(pid_t pid, int* status) { return ::waitpid(pid, status, WNOHANG) == pid; }
@@ -108,10 +115,6 @@ std::string slurp(const std::string& path) {
   std::stringstream ss;
   ss << in.rdbuf();
   return ss.str();
-}
-
-std::string logPath(const std::string& name, const char* what) {
-  return std::string(::testing::TempDir()) + "/" + name + "_" + what + ".log";
 }
 
 Child startSim(const std::string& name, const char* log_tag) {
