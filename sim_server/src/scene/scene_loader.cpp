@@ -15,8 +15,9 @@
 #include <tuple>
 
 #include "tactus/shared/error.h"
-#include "tactus/shared/segment.h"
 #include "tactus/sim/scene.h"
+// the contact problem's size limit (max_contacts)
+#include "tactus/shared/segment.h"
 
 namespace tactus::sim {
 namespace {
