@@ -258,6 +258,12 @@ std::unique_ptr<Device> loadDevice(std::string_view name_or_path, const DeviceCo
     inner_config.erase(it);
     if (record.empty()) throw DeviceError("device option record= needs a file name");
   }
+  bool record_overwrite = false;
+  if (auto it = inner_config.find("record_overwrite"); it != inner_config.end()) {
+    OptionReader opt("recorder", inner_config);
+    record_overwrite = opt.flag("record_overwrite", false);
+    inner_config.erase("record_overwrite");
+  }
   if (auto it = inner_config.find("record_capacity"); it != inner_config.end()) {
     OptionReader opt("recorder", inner_config);
     const double cap = opt.number("record_capacity", 0.0);
@@ -274,7 +280,8 @@ std::unique_ptr<Device> loadDevice(std::string_view name_or_path, const DeviceCo
     device = loadPlugin(request, inner_config);
   }
   if (!record.empty()) {
-    device = std::make_unique<RecordingDevice>(std::move(device), record, record_capacity);
+    device = std::make_unique<RecordingDevice>(std::move(device), record, record_capacity,
+                                               record_overwrite);
   }
   return device;
 }

@@ -2,23 +2,32 @@
 #include <cstring>
 
 #include "tactus/device/backends.h"
+#include "tactus/shared/file_io.h"
 
 namespace tactus::device {
 
 RecordingDevice::RecordingDevice(std::unique_ptr<Device> inner, std::string path,
-                                 std::size_t capacity)
-    : inner_(std::move(inner)), path_(std::move(path)), ring_(std::max<std::size_t>(capacity, 2)) {}
+                                 std::size_t capacity, bool overwrite)
+    : inner_(std::move(inner)),
+      path_(std::move(path)),
+      ring_(std::max<std::size_t>(capacity, 2)),
+      overwrite_(overwrite) {}
 
 RecordingDevice::~RecordingDevice() { close(); }
 
 void RecordingDevice::open() {
-  if (file_ == nullptr) {
-    file_ = std::fopen(path_.c_str(), "w");
-    if (file_ == nullptr) {
-      throw DeviceError("cannot record to '" + path_ + "': " + std::strerror(errno) +
-                        " (check the folder exists and is writable)");
+  if (!file_) {
+    try {
+      file_ = std::make_unique<shared::OutputFile>(
+          path_, "recording",
+          shared::OutputOptions{.overwrite = overwrite_,
+                                .overwrite_hint = "give device option record_overwrite=1"});
+    } catch (const FileError& e) {
+      throw DeviceError("cannot record to '" + shared::printable(path_, 256) + "': " + e.what());
     }
-    std::fprintf(file_, "%s\n", Trajectory::kCsvHeader);
+    write_error_.clear();
+    file_->write(Trajectory::kCsvHeader);
+    file_->write("\n");
   }
   inner_->open();
   // the flusher writes the file; read() only fills the ring
@@ -35,10 +44,19 @@ void RecordingDevice::close() noexcept {
     stop_.store(true, std::memory_order_release);
     flusher_.join();
   }
-  if (file_ != nullptr) {
+  if (file_) {
     drainToFile();
-    std::fclose(file_);
-    file_ = nullptr;
+    try {
+      file_->commit();
+    } catch (const std::exception& e) {
+      try {
+        write_error_ = e.what();
+      } catch (...) {
+        // out of memory: leave the message empty-safe below
+      }
+      if (write_error_.empty()) write_error_ = "recording failed";
+    }
+    file_.reset();
   }
   if (inner_) inner_->close();
 }
@@ -81,7 +99,7 @@ std::size_t RecordingDevice::drainToFile() noexcept {
     p.quat_wxyz = s.quat_wxyz;
     p.gripper_rad = s.gripper_rad;
     const int len = Trajectory::formatRow(line, sizeof(line), p);
-    if (file_ != nullptr && len > 0) std::fwrite(line, 1, static_cast<std::size_t>(len), file_);
+    if (file_ && len > 0) file_->write(std::string_view(line, static_cast<std::size_t>(len)));
     // relaxed: a statistic
     written_.fetch_add(1, std::memory_order_relaxed);
   }
@@ -94,7 +112,7 @@ void RecordingDevice::flushLoop() noexcept {
     if (drainToFile() == 0) std::this_thread::sleep_for(std::chrono::milliseconds(5));
   }
   drainToFile();
-  if (file_ != nullptr) std::fflush(file_);
+  if (file_) file_->flush();
 }
 
 }  // namespace tactus::device

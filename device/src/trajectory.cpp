@@ -2,10 +2,10 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
-#include <fstream>
 #include <sstream>
 
 #include "tactus/device/backends.h"
+#include "tactus/shared/file_io.h"
 
 namespace tactus::device {
 
@@ -21,13 +21,13 @@ std::string trim(const std::string& s) {
 Trajectory::Trajectory(std::vector<TrajectoryPoint> points) : points_(std::move(points)) {}
 
 Trajectory Trajectory::loadCsv(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) {
-    throw DeviceError("cannot read trajectory '" + path + "': no such file or not readable");
+  std::string text;
+  try {
+    text = shared::readTextFileChecked(path, "trajectory CSV", shared::kMaxTrajectoryCsvBytes);
+  } catch (const FileError& e) {
+    throw DeviceError("cannot read trajectory '" + shared::printable(path, 256) + "': " + e.what());
   }
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return parseCsv(ss.str(), path);
+  return parseCsv(text, shared::printable(path, 256));
 }
 
 Trajectory Trajectory::parseCsv(const std::string& text, const std::string& origin) {
@@ -39,6 +39,7 @@ Trajectory Trajectory::parseCsv(const std::string& text, const std::string& orig
   bool header_seen = false;
   while (std::getline(in, line)) {
     ++line_no;
+    if ((line_no & 0xFFFF) == 0) shared::throwIfStopRequested("reading a trajectory");
     const std::string t = trim(line);
     if (t.empty() || t[0] == '#') continue;
     auto where = [&](int col) {
@@ -59,7 +60,7 @@ Trajectory Trajectory::parseCsv(const std::string& text, const std::string& orig
       }
       if (compact != kCsvHeader) {
         throw DeviceError(where(0) + ": expected the header line '" + std::string(kCsvHeader) +
-                          "', found '" + t + "'");
+                          "', found '" + shared::printable(t) + "'");
       }
       header_seen = true;
       continue;
@@ -78,7 +79,7 @@ Trajectory Trajectory::parseCsv(const std::string& text, const std::string& orig
       v[i] = std::strtod(field.c_str(), &end);
       if (field.empty() || *end != '\0' || !std::isfinite(v[i])) {
         throw DeviceError(where(static_cast<int>(pos) + 1) + ": column " + kColumns[i] + ": '" +
-                          field + "' is not a finite number");
+                          shared::printable(field) + "' is not a finite number");
       }
       pos = comma + 1;
     }

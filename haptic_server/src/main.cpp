@@ -9,15 +9,21 @@
 #include <csignal>
 #include <thread>
 
+#include "tactus/device/backends.h"
 #include "tactus/device/device.h"
 #include "tactus/haptic/haptic_loop.h"
 #include "tactus/haptic/supervisor.h"
+#include "tactus/shared/cli_checks.h"
 #include "tactus/shared/clock.h"
+#include "tactus/shared/file_io.h"
 #include "tactus/shared/rt.h"
 
 namespace {
 std::atomic<bool> g_stop{false};
-void onSignal(int) { g_stop.store(true); }
+void onSignal(int) {
+  g_stop.store(true);
+  tactus::shared::requestStop();  // also interrupts file reads (a long replay CSV)
+}
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -57,7 +63,9 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--tolerance", settings.tolerance, "NSGS tolerance")->capture_default_str();
   app.add_flag("--render-torque", settings.render_torque, "Render torques too");
-  app.add_option("--duration", duration_s, "Stop after S seconds (0: until SIGINT/SIGTERM)");
+  app.add_option("--duration", duration_s,
+                 "Stop after S seconds; 0 (the default): run until SIGINT, SIGTERM or SIGHUP")
+      ->check(shared::finiteRange(0.0, 1e7, "s"));
   app.add_flag("--status", status, "Log a status line every second");
   app.add_option("--log-level", log_level, "trace, debug, info, warn, error")
       ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error"}));
@@ -66,6 +74,7 @@ int main(int argc, char** argv) {
   spdlog::set_pattern("[%H:%M:%S.%e] [haptic] [%^%l%$] %v");
   std::signal(SIGINT, onSignal);
   std::signal(SIGTERM, onSignal);
+  std::signal(SIGHUP, onSignal);  // the terminal closed: stop cleanly, zero force
 
   try {
     shared::Segment::validateName(segment);
@@ -159,6 +168,11 @@ int main(int argc, char** argv) {
     dev->enableForces(false);
     dev->close();
     if (fatal) std::rethrow_exception(fatal);
+    if (const auto* rec = dynamic_cast<const device::RecordingDevice*>(dev.get());
+        rec != nullptr && !rec->writeError().empty()) {
+      spdlog::error("recording not saved: {}", rec->writeError());
+      return 1;
+    }
     return 0;
   } catch (const std::exception& e) {
     spdlog::error("{}", e.what());

@@ -1,6 +1,8 @@
 // tactus-monitor: attaches read-only to a running segment and prints one status line per
 // interval (simulation rate, haptic rate, contacts, rendered force, haptic tick p99). Used by
-// scripts/start.sh; costs the haptic loop nothing (it only reads the stats ring).
+// scripts/start.sh; costs the haptic loop nothing (it only reads the stats ring). Waits at most
+// --wait seconds for the segment to (re)appear, then gives up with a message; SIGINT, SIGTERM
+// and SIGHUP stop it within 50 ms.
 #include <CLI/CLI.hpp>
 
 #include <algorithm>
@@ -11,12 +13,25 @@
 #include <thread>
 #include <vector>
 
+#include "tactus/shared/cli_checks.h"
 #include "tactus/shared/clock.h"
 #include "tactus/shared/segment.h"
 
 namespace {
 std::atomic<bool> g_stop{false};
 void onSignal(int) { g_stop.store(true); }
+
+// Sleeps `s` seconds in short slices, returning early on a stop signal.
+void sleepInterruptibly(double s) {
+  using Clock = std::chrono::steady_clock;
+  const Clock::time_point end =
+      Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(s));
+  while (!g_stop.load()) {
+    const Clock::duration left = end - Clock::now();
+    if (left <= Clock::duration::zero()) return;
+    std::this_thread::sleep_for(std::min<Clock::duration>(left, std::chrono::milliseconds(50)));
+  }
+}
 
 double p99(std::vector<double>& v) {
   if (v.empty()) return 0.0;
@@ -31,12 +46,33 @@ int main(int argc, char** argv) {
   std::string name = "tactus";
   double interval_s = 1.0;
   double duration_s = 0.0;
-  app.add_option("--segment", name, "Segment name")->capture_default_str();
-  app.add_option("--interval", interval_s, "Seconds between lines")->capture_default_str();
-  app.add_option("--duration", duration_s, "Stop after S seconds (0: until SIGINT)");
+  double wait_s = 60.0;
+  app.add_option("--segment", name, "Segment name")
+      ->capture_default_str()
+      ->check(CLI::Validator(
+          [](std::string& text) -> std::string {
+            try {
+              Segment::validateName(text);
+            } catch (const std::exception& e) {
+              return e.what();
+            }
+            return {};
+          },
+          "NAME"));
+  app.add_option("--interval", interval_s, "Seconds between lines")
+      ->capture_default_str()
+      ->check(tactus::shared::finiteRange(0.05, 3600.0, "s"));
+  app.add_option("--duration", duration_s,
+                 "Stop after S seconds; 0 (the default): run until SIGINT, SIGTERM or SIGHUP")
+      ->check(tactus::shared::finiteRange(0.0, 1e7, "s"));
+  app.add_option("--wait", wait_s,
+                 "Give up (exit 1) when no segment has been found for S seconds")
+      ->capture_default_str()
+      ->check(tactus::shared::finiteRange(0.1, 1e7, "s"));
   CLI11_PARSE(app, argc, argv);
   std::signal(SIGINT, onSignal);
   std::signal(SIGTERM, onSignal);
+  std::signal(SIGHUP, onSignal);
 
   std::optional<Segment> seg;
   std::optional<StatsRingReader> reader;
@@ -45,17 +81,25 @@ int main(int argc, char** argv) {
   const std::int64_t t0 = monotonicNs();
   std::int64_t last = t0;
   std::uint64_t last_snapshot = 0;
+  std::int64_t absent_since = t0;  // when the segment was last seen (or the start)
   while (!g_stop.load()) {
-    std::this_thread::sleep_for(std::chrono::duration<double>(interval_s));
+    sleepInterruptibly(interval_s);
+    if (g_stop.load()) break;
     const std::int64_t now = monotonicNs();
     if (duration_s > 0.0 && now - t0 > static_cast<std::int64_t>(duration_s * 1e9)) break;
     if (seg && !seg->stillCurrent()) {
       reader.reset();
       seg.reset();
+      absent_since = now;
     }
     if (!seg) {
       TryOpenResult r = Segment::tryOpen(name, Access::kReadOnly);
       if (!r.ok()) {
+        if (now - absent_since > static_cast<std::int64_t>(wait_s * 1e9)) {
+          std::fprintf(stderr, "tactus-monitor: giving up after %.1f s without the segment "
+                       "(--wait): %s\n", wait_s, r.message.c_str());
+          return 1;
+        }
         std::printf("[status] waiting for segment '%s'\n", name.c_str());
         std::fflush(stdout);
         continue;

@@ -3,11 +3,11 @@
 #include <algorithm>
 #include <charconv>
 #include <cmath>
-#include <fstream>
 #include <iomanip>
 #include <sstream>
 
 #include "tactus/shared/error.h"
+#include "tactus/shared/file_io.h"
 
 namespace tactus::shared {
 namespace {
@@ -15,9 +15,9 @@ namespace {
 // Whitespace-separated tokens of a text file, each with its line number; '#' lines skipped.
 class TokenReader {
  public:
-  explicit TokenReader(const std::filesystem::path& path) : file_(path.string()) {
-    std::ifstream in(path);
-    if (!in) throw Error(file_ + ": cannot open (check the path and permissions)");
+  explicit TokenReader(const std::filesystem::path& path)
+      : file_(printable(path.string(), 256)) {
+    std::istringstream in(readTextFileChecked(path, "FCLIB file", kMaxFclibBytes));
     std::string line;
     int line_no = 0;
     while (std::getline(in, line)) {
@@ -46,9 +46,9 @@ class TokenReader {
     const char* end = t.text.data() + t.text.size();
     const auto [ptr, ec] = std::from_chars(t.text.data(), end, v);
     if (ec != std::errc() || ptr != end) {
-      fail(t.line, "expected " + field + ", got '" + t.text + "'");
+      fail(t.line, "expected " + field + ", got '" + printable(t.text) + "'");
     }
-    if (!std::isfinite(v)) fail(t.line, field + " is not finite ('" + t.text + "')");
+    if (!std::isfinite(v)) fail(t.line, field + " is not finite ('" + printable(t.text) + "')");
     return v;
   }
 
@@ -178,9 +178,8 @@ FclibProblem readFclibText(const std::filesystem::path& path) {
 }
 
 FclibReference readFclibReference(const std::filesystem::path& path) {
-  const std::string file = path.string();
-  std::ifstream in(path);
-  if (!in) throw Error(file + ": cannot open (check the path and permissions)");
+  const std::string file = printable(path.string(), 256);
+  std::istringstream in(readTextFileChecked(path, "FCLIB reference", kMaxFclibBytes));
   FclibReference ref;
   std::string line;
   int line_no = 0;
@@ -209,7 +208,7 @@ FclibReference readFclibReference(const std::filesystem::path& path) {
     };
     if (!two || !parse(a, r) || !parse(b, u)) {
       throw Error(file + ":" + std::to_string(line_no) +
-                  ": expected two finite numbers `r u`, got '" + line + "'");
+                  ": expected two finite numbers `r u`, got '" + printable(line) + "'");
     }
     ref.r.push_back(r);
     ref.u.push_back(u);
@@ -219,14 +218,14 @@ FclibReference readFclibReference(const std::filesystem::path& path) {
 
 void writeFclibSolution(const std::filesystem::path& path, const std::vector<double>& r,
                         const std::vector<double>& u, const std::string& comment) {
-  std::ofstream out(path);
-  if (!out) throw Error(path.string() + ": cannot open for writing");
+  std::ostringstream out;
   std::istringstream lines(comment);
   std::string line;
   while (std::getline(lines, line)) out << "# " << line << '\n';
   out << std::setprecision(17);
   for (std::size_t j = 0; j < r.size() && j < u.size(); ++j) out << r[j] << ' ' << u[j] << '\n';
-  if (!out) throw Error(path.string() + ": write failed (disk full?)");
+  // the solver tool's output: replaced like before, but through a checked temporary file
+  writeFileChecked(path, out.str(), "FCLIB solution", {.overwrite = true});
 }
 
 }  // namespace tactus::shared

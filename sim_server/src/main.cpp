@@ -9,12 +9,19 @@
 #include <cstdio>
 #include <optional>
 
+#include "tactus/shared/cli_checks.h"
 #include "tactus/sim/runner.h"
 #include "tactus/shared/error.h"
+#include "tactus/shared/file_io.h"
 
 namespace {
-std::atomic<bool> g_stop{false};
-void onSignal(int) { g_stop.store(true); }
+// the one stop flag: loading, C0 precomputation and file reads poll it too
+std::atomic<bool>& g_stop = tactus::shared::stopFlag();
+volatile std::sig_atomic_t g_signal = 0;
+void onSignal(int signo) {
+  g_signal = signo;
+  g_stop.store(true);
+}
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -22,8 +29,12 @@ int main(int argc, char** argv) {
   tactus::sim::RunOptions opt;
   std::string log_level = "info";
   app.add_option("scene", opt.scene_path, "Scene file (YAML)")->required()->check(CLI::ExistingFile);
-  app.add_option("--steps", opt.steps, "Run N steps offline as fast as possible, then exit");
-  app.add_option("--duration", opt.duration_s, "Stop after this simulated time [s] (0: run until SIGINT/SIGTERM)");
+  app.add_option("--steps", opt.steps, "Run N >= 1 steps offline as fast as possible, then exit")
+      ->check(CLI::Range(1L, 1'000'000'000L));
+  app.add_option("--duration", opt.duration_s,
+                 "Stop after this simulated time [s]; 0 (the default): run until SIGINT, SIGTERM "
+                 "or SIGHUP")
+      ->check(tactus::shared::finiteRange(0.0, 1e7, "s"));
   app.add_option("--output", opt.output_dir, "Write a VTK series (.vtu + .pvd) into DIR");
   app.add_option("--output-every", opt.output_every, "Write every N steps (with --output)");
   app.add_option("--segment", opt.segment, "Shared-memory segment name (haptics)");
@@ -32,6 +43,8 @@ int main(int argc, char** argv) {
   app.add_option("--stats-json", opt.stats_json, "Write per-stage statistics as JSON to FILE");
   app.add_option("--export-trajectory", opt.export_trajectory,
                  "Write the scene's scripted instrument trajectory as a device CSV and exit");
+  app.add_flag("--overwrite", opt.overwrite,
+               "Replace existing --stats-json / --export-trajectory files");
   app.add_option("--log-level", log_level, "trace, debug, info, warn, error")
       ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error"}));
   CLI11_PARSE(app, argc, argv);
@@ -40,8 +53,12 @@ int main(int argc, char** argv) {
 
   std::signal(SIGINT, onSignal);
   std::signal(SIGTERM, onSignal);
+  std::signal(SIGHUP, onSignal);  // the terminal closed: stop cleanly (removes the segment)
   try {
     return tactus::sim::runSimulation(opt, g_stop);
+  } catch (const tactus::Cancelled& e) {
+    spdlog::error("{}; exiting", e.what());
+    return 128 + (g_signal != 0 ? static_cast<int>(g_signal) : SIGTERM);
   } catch (const std::exception& e) {
     spdlog::error("{}", e.what());
     return 1;

@@ -59,7 +59,7 @@ function startSim() {
 async function startHaptic() {
   const csv = path.join(out, 'trajectory.csv');
   await new Promise((resolve) => spawn(path.join(build, 'sim_server/sim_server'),
-    [scene, '--export-trajectory', csv], { stdio: 'ignore' }).on('exit', resolve));
+    [scene, '--overwrite', '--export-trajectory', csv], { stdio: 'ignore' }).on('exit', resolve));
   return start('haptic_server', path.join(build, 'haptic_server/haptic_server'),
     ['--segment', segment, '--device', 'simulated', '--device-option', `trajectory=${csv}`]);
 }

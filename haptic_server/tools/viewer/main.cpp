@@ -7,6 +7,10 @@
 // simulation across restarts. Nothing a client sends changes the simulation: the HTTP side
 // answers GET/HEAD only and the WebSocket side ignores incoming messages.
 //
+// Only the page's bundled files are served, from memory (loaded once at start-up; http_guard.h),
+// and only to requests whose Host (and Origin, when sent) name this server: a web page elsewhere
+// cannot read the view or open its WebSocket. Over-long request lines get 414, headers are bounded.
+//
 // Single-threaded (one Asio io_context): a timer polls the segment at --rate Hz and broadcasts.
 // A client that cannot keep up loses frames, never the topology, and never slows the others.
 #include <CLI/CLI.hpp>
@@ -16,16 +20,17 @@
 #include <boost/beast/core.hpp>
 #include <boost/beast/http.hpp>
 #include <boost/beast/websocket.hpp>
+#include <array>
 #include <chrono>
 #include <cstdio>
 #include <deque>
 #include <filesystem>
-#include <fstream>
 #include <memory>
-#include <sstream>
+#include <optional>
 #include <string>
 #include <vector>
 
+#include "http_guard.h"
 #include "segment_watcher.h"
 #include "tactus/shared/clock.h"
 
@@ -101,6 +106,7 @@ class Hub {
 
 void WsSession::run(http::request<http::string_body> req) {
   ws_.set_option(websocket::stream_base::timeout::suggested(beast::role_type::server));
+  ws_.read_message_max(4096);  // clients have nothing to say: incoming messages are ignored
   ws_.set_option(websocket::stream_base::decorator([](websocket::response_type& res) {
     res.set(http::field::server, "tactus-viewer");
   }));
@@ -151,44 +157,85 @@ void WsSession::write() {
   });
 }
 
-std::string mimeType(const std::filesystem::path& p) {
-  const std::string e = p.extension().string();
-  if (e == ".html") return "text/html; charset=utf-8";
-  if (e == ".js" || e == ".mjs") return "text/javascript; charset=utf-8";
-  if (e == ".css") return "text/css; charset=utf-8";
-  if (e == ".json" || e == ".map") return "application/json";
-  if (e == ".png") return "image/png";
-  if (e == ".svg") return "image/svg+xml";
-  return "application/octet-stream";
-}
-
 const char* kMissingPage =
     "<!doctype html><meta charset=utf-8><title>Tactus live view</title>"
     "<body style='font:14px sans-serif;margin:2em'><h1>Tactus live view</h1>"
     "<p>The web page has not been built. It is built with node and npm by the CMake target "
     "<code>tactus-viewer-web</code> (<code>ninja -C build tactus-viewer-web</code>), or by "
-    "<code>scripts/view</code>; then reload.</p>"
+    "<code>scripts/view</code>; then restart the viewer.</p>"
     "<p>Raw status: <a href='/status.json'>/status.json</a></p>";
 
-// One HTTP connection: static files, /status.json, and the upgrade to /ws.
+// Request size bounds: the whole header (request line included) and the request target.
+constexpr std::uint32_t kMaxHeaderBytes = 8192;
+constexpr std::size_t kMaxTargetBytes = 2048;
+constexpr std::uint64_t kMaxBodyBytes = 4096;
+constexpr std::size_t kMaxLingerBytes = std::size_t{1} << 20;
+
+std::string_view sv(beast::string_view s) { return {s.data(), s.size()}; }
+
+// What every HTTP session shares (read-only after start-up).
+struct ServerContext {
+  Hub& hub;
+  const AssetTable& assets;
+  const HostPolicy& hosts;
+};
+
+// One HTTP connection: the bundled assets, /status.json, and the upgrade to /ws.
 class HttpSession : public std::enable_shared_from_this<HttpSession> {
  public:
-  HttpSession(tcp::socket&& socket, Hub& hub, std::filesystem::path web)
-      : stream_(std::move(socket)), hub_(hub), web_(std::move(web)) {}
+  HttpSession(tcp::socket&& socket, const ServerContext& ctx)
+      : stream_(std::move(socket)), ctx_(ctx), buffer_(2 * kMaxHeaderBytes) {}
   void run() { doRead(); }
 
  private:
   void doRead() {
-    req_ = {};
+    parser_.emplace();
+    parser_->header_limit(kMaxHeaderBytes);
+    parser_->body_limit(kMaxBodyBytes);
     stream_.expires_after(std::chrono::seconds(30));
-    http::async_read(stream_, buffer_, req_,
+    http::async_read(stream_, buffer_, *parser_,
                      beast::bind_front_handler(&HttpSession::onRead, shared_from_this()));
   }
 
   void onRead(beast::error_code ec, std::size_t) {
+    if (ec == http::error::header_limit || ec == http::error::buffer_overflow) {
+      // the parser fills in the target once it has the whole request line: without one, the
+      // request line itself was too long
+      if (parser_->get().target().empty()) {
+        fail(http::status::uri_too_long, "request target too long\n");
+      } else {
+        fail(http::status::request_header_fields_too_large, "request header too large\n");
+      }
+      return;
+    }
+    if (ec == http::error::body_limit) {
+      fail(http::status::payload_too_large, "request body too large\n");
+      return;
+    }
+    if (ec && ec.category() == http::make_error_code(http::error::bad_target).category() &&
+        ec != http::error::end_of_stream && ec != http::error::partial_message) {
+      fail(http::status::bad_request, "malformed request\n");
+      return;
+    }
     if (ec) {
-      beast::error_code ignored;
-      stream_.socket().shutdown(tcp::socket::shutdown_send, ignored);
+      close();
+      return;
+    }
+    req_ = parser_->release();
+    if (req_.target().size() > kMaxTargetBytes) {
+      fail(http::status::uri_too_long, "request target too long\n");
+      return;
+    }
+    // another site's page (DNS rebinding, cross-site WebSocket) never gets an answer
+    const auto host = req_.find(http::field::host);
+    if (host == req_.end() || !ctx_.hosts.hostAllowed(sv(host->value()))) {
+      fail(http::status::forbidden, "Host not allowed: the live view answers only to the address "
+                                    "it listens on (localhost, 127.0.0.1, [::1])\n");
+      return;
+    }
+    if (const auto origin = req_.find(http::field::origin);
+        origin != req_.end() && !ctx_.hosts.originAllowed(sv(origin->value()), sv(host->value()))) {
+      fail(http::status::forbidden, "cross-origin requests are refused\n");
       return;
     }
     if (websocket::is_upgrade(req_)) {
@@ -197,7 +244,7 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
         return;
       }
       stream_.expires_never();
-      std::make_shared<WsSession>(stream_.release_socket(), hub_)->run(std::move(req_));
+      std::make_shared<WsSession>(stream_.release_socket(), ctx_.hub)->run(std::move(req_));
       return;
     }
     if (req_.method() != http::verb::get && req_.method() != http::verb::head) {
@@ -205,84 +252,111 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
             "the live view is read-only: GET and HEAD only\n");
       return;
     }
-    std::string target(req_.target());
-    if (const auto q = target.find('?'); q != std::string::npos) target.resize(q);
+    std::string_view target = sv(req_.target());
+    if (const auto q = target.find('?'); q != std::string_view::npos) target = target.substr(0, q);
     if (target == "/status.json") {
-      reply(http::status::ok, "application/json", hub_.status());
+      reply(http::status::ok, "application/json", ctx_.hub.status());
       return;
     }
-    if (target == "/" || target.empty()) target = "/index.html";
-    if (target.find("..") != std::string::npos || target[0] != '/') {
-      reply(http::status::bad_request, "text/plain", "bad path\n");
-      return;
+    // only the fixed table of bundled files: never a path on the file system
+    if (const Asset* asset = ctx_.assets.find(target)) {
+      reply(http::status::ok, asset->content_type, asset->body);
+    } else if (target == "/" || target == "/index.html") {
+      reply(http::status::ok, "text/html; charset=utf-8", kMissingPage);
+    } else {
+      reply(http::status::not_found, "text/plain", "not found\n");
     }
-    const std::filesystem::path file = web_ / target.substr(1);
-    std::ifstream in(file, std::ios::binary);
-    if (!in) {
-      if (target == "/index.html") {
-        reply(http::status::ok, "text/html; charset=utf-8", kMissingPage);
-      } else {
-        reply(http::status::not_found, "text/plain", "not found\n");
-      }
-      return;
-    }
-    std::ostringstream body;
-    body << in.rdbuf();
-    reply(http::status::ok, mimeType(file), body.str());
   }
 
-  void reply(http::status status, const std::string& type, std::string body) {
+  // An error answer to a request that may not have been parsed; the connection closes after it.
+  void fail(http::status status, const char* body) {
+    req_ = {};
+    req_.version(11);
+    req_.keep_alive(false);
+    linger_ = true;
+    reply(status, "text/plain", body, false);
+  }
+
+  // After an error answer: stop sending, then read and drop what the client still sends (at most
+  // kMaxLingerBytes or 2 s) so that closing does not reset the connection before the client has
+  // read the answer.
+  void lingerClose() {
+    close();
+    stream_.expires_after(std::chrono::seconds(2));
+    stream_.async_read_some(
+        net::buffer(discard_), [self = shared_from_this()](beast::error_code ec, std::size_t n) {
+          self->lingered_ += n;
+          if (!ec && self->lingered_ < kMaxLingerBytes) self->lingerClose();
+        });
+  }
+
+  void reply(http::status status, const std::string& type, const std::string& body,
+             bool keep_alive = true) {
     auto res = std::make_shared<http::response<http::string_body>>(status, req_.version());
     res->set(http::field::server, "tactus-viewer");
     res->set(http::field::content_type, type);
     res->set(http::field::cache_control, "no-store");
-    res->keep_alive(req_.keep_alive());
+    res->set("X-Content-Type-Options", "nosniff");
+    res->keep_alive(keep_alive && req_.keep_alive());
     const bool head = req_.method() == http::verb::head;
-    res->body() = head ? std::string() : std::move(body);
+    if (!head) res->body() = body;
     res->prepare_payload();
     if (head) res->content_length(body.size());
     http::async_write(stream_, *res,
                       [self = shared_from_this(), res](beast::error_code ec, std::size_t) {
+                        if (!ec && self->linger_) {
+                          self->lingerClose();
+                          return;
+                        }
                         if (ec || !res->keep_alive()) {
-                          beast::error_code ignored;
-                          self->stream_.socket().shutdown(tcp::socket::shutdown_send, ignored);
+                          self->close();
                           return;
                         }
                         self->doRead();
                       });
   }
 
+  void close() {
+    beast::error_code ignored;
+    stream_.socket().shutdown(tcp::socket::shutdown_send, ignored);
+  }
+
   beast::tcp_stream stream_;
-  Hub& hub_;
-  std::filesystem::path web_;
+  const ServerContext& ctx_;
   beast::flat_buffer buffer_;
+  std::optional<http::request_parser<http::string_body>> parser_;
   http::request<http::string_body> req_;
+  bool linger_ = false;
+  std::array<char, 4096> discard_{};
+  std::size_t lingered_ = 0;
 };
 
 class Listener : public std::enable_shared_from_this<Listener> {
  public:
-  Listener(net::io_context& ioc, tcp::endpoint at, Hub& hub, std::filesystem::path web)
-      : ioc_(ioc), acceptor_(ioc), hub_(hub), web_(std::move(web)) {
+  Listener(net::io_context& ioc, tcp::endpoint at)
+      : ioc_(ioc), acceptor_(ioc) {
     acceptor_.open(at.protocol());
     acceptor_.set_option(net::socket_base::reuse_address(true));
     acceptor_.bind(at);
     acceptor_.listen(net::socket_base::max_listen_connections);
   }
   unsigned short port() const { return acceptor_.local_endpoint().port(); }
-  void run() { doAccept(); }
+  void run(const ServerContext& ctx) {
+    ctx_ = &ctx;
+    doAccept();
+  }
 
  private:
   void doAccept() {
     acceptor_.async_accept(net::make_strand(ioc_), [self = shared_from_this()](
                                                        beast::error_code ec, tcp::socket s) {
-      if (!ec) std::make_shared<HttpSession>(std::move(s), self->hub_, self->web_)->run();
+      if (!ec) std::make_shared<HttpSession>(std::move(s), *self->ctx_)->run();
       self->doAccept();
     });
   }
   net::io_context& ioc_;
   tcp::acceptor acceptor_;
-  Hub& hub_;
-  std::filesystem::path web_;
+  const ServerContext* ctx_ = nullptr;
 };
 
 // Polls the segment at the frame rate and broadcasts; status every 50 ms.
@@ -355,7 +429,9 @@ int main(int argc, char** argv) {
   app.add_option("--rate", rate, "Frames per second streamed at most")
       ->capture_default_str()
       ->check(CLI::Range(1.0, 240.0));
-  app.add_option("--web-dir", web, "Directory of the built page (index.html, app.js)")
+  app.add_option("--web-dir", web,
+                 "Directory of the built page: index.html, app.js, app.js.map and style.css are "
+                 "read once at start-up (regular files only); nothing else is served")
       ->capture_default_str();
   app.add_option("--nice", nice_level, "Scheduling niceness of the viewer (it yields the CPU to "
                  "the simulation)")
@@ -386,29 +462,36 @@ int main(int argc, char** argv) {
     return 2;
   }
 
+  std::vector<std::string> problems;
+  const AssetTable assets = AssetTable::load(std::filesystem::path(web), problems);
+  for (const auto& p : problems) std::fprintf(stderr, "tactus-viewer: %s\n", p.c_str());
+  if (!assets.hasIndex()) {
+    std::fprintf(stderr, "tactus-viewer: no built page in '%s' (build the tactus-viewer-web "
+                 "target); serving a placeholder\n", web.c_str());
+  }
+
   net::io_context ioc(1);
   Hub hub;
   SegmentWatcher watcher(segment);
   std::shared_ptr<Listener> listener;
   try {
-    listener = std::make_shared<Listener>(ioc, tcp::endpoint(address, static_cast<unsigned short>(port)),
-                                          hub, std::filesystem::path(web));
+    listener = std::make_shared<Listener>(
+        ioc, tcp::endpoint(address, static_cast<unsigned short>(port)));
   } catch (const boost::system::system_error& e) {
     std::fprintf(stderr, "tactus-viewer: cannot listen on %s:%d: %s (choose another --port)\n",
                  bind.c_str(), port, e.what());
     return 1;
   }
-  listener->run();
+  const HostPolicy hosts(address.to_string(), listener->port(), allow_remote);
+  const ServerContext context{hub, assets, hosts};
+  listener->run(context);
   Pump pump(ioc, watcher, hub, rate);
   pump.start();
-  net::signal_set signals(ioc, SIGINT, SIGTERM);
+  // SIGHUP (the terminal closed) stops the viewer like SIGINT and SIGTERM
+  net::signal_set signals(ioc, SIGINT, SIGTERM, SIGHUP);
   signals.async_wait([&ioc](beast::error_code, int) { ioc.stop(); });
 
   const std::string host = address.is_v6() ? "[" + bind + "]" : bind;
-  if (!std::filesystem::exists(std::filesystem::path(web) / "index.html")) {
-    std::fprintf(stderr, "tactus-viewer: no built page in '%s' (build the tactus-viewer-web "
-                 "target); serving a placeholder\n", web.c_str());
-  }
   std::printf("tactus-viewer: http://%s:%u/ (segment '%s', read-only)\n", host.c_str(),
               listener->port(), segment.c_str());
   std::fflush(stdout);

@@ -8,12 +8,12 @@
 #include <chrono>
 #include <cstdio>
 #include <cstring>
-#include <fstream>
 #include <string>
 #include <vector>
 
 #include "fem_internal.h"
 #include "tactus/shared/error.h"
+#include "tactus/shared/file_io.h"
 
 namespace tactus::sim {
 
@@ -107,96 +107,87 @@ void progress(bool show, int done, int total) {
 }
 
 // Reads and validates a cache file; returns false (with a reason) unless every
-// check passes.
+// check passes. The file must be a regular file of exactly the size the mesh
+// implies (checked before reading). Throws tactus::Cancelled on a stop request.
 bool readCache(const std::filesystem::path &path, std::uint64_t hash,
                const FemBody &body, RestBlock &blk, std::string &why) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) {
-    why = "cannot open";
-    return false;
-  }
-  in.seekg(0, std::ios::end);
-  const auto file_size = static_cast<std::uint64_t>(in.tellg());
-  in.seekg(0);
-  CacheHeader hdr{};
-  if (file_size < sizeof(hdr) ||
-      !in.read(reinterpret_cast<char *>(&hdr), sizeof(hdr))) {
-    why = "truncated header";
-    return false;
-  }
-  if (std::memcmp(hdr.magic, kMagic, sizeof(kMagic)) != 0) {
-    why = "bad magic (not a compliance cache)";
-    return false;
-  }
-  if (hdr.version != kVersion) {
-    why = "version " + std::to_string(hdr.version) +
-          " != " + std::to_string(kVersion);
-    return false;
-  }
-  if (hdr.hash != hash) {
-    why = "stale (mesh, material, fixed nodes or h changed)";
-    return false;
-  }
   const auto &surface = body.surfaceNodes();
-  if (hdr.node_count != static_cast<std::uint64_t>(body.nodeCount()) ||
-      hdr.surface_count != surface.size()) {
-    why = "sizes do not match the mesh";
-    return false;
-  }
-  const std::uint64_t s = hdr.surface_count, d = 3 * s;
-  if (hdr.scalar_bytes != blk.scalarBytes()) {
-    why = "precision differs (" + std::to_string(hdr.scalar_bytes) +
-          "-byte values)";
-    return false;
-  }
+  const std::uint64_t s = surface.size(), d = 3 * s;
   const std::uint64_t expected =
-      sizeof(hdr) + s * sizeof(int) + d * d * blk.scalarBytes() + 8;
-  if (file_size != expected) {
-    why = "size " + std::to_string(file_size) + " bytes, expected " +
-          std::to_string(expected) + " (truncated or corrupt)";
+      sizeof(CacheHeader) + s * sizeof(int) + d * d * blk.scalarBytes() + 8;
+  try {
+    shared::InputFile in(path, "compliance cache", expected);
+    const std::uint64_t file_size = in.size();
+    CacheHeader hdr{};
+    if (file_size < sizeof(hdr)) {
+      why = "truncated header";
+      return false;
+    }
+    in.readExact(&hdr, sizeof(hdr));
+    if (std::memcmp(hdr.magic, kMagic, sizeof(kMagic)) != 0) {
+      why = "bad magic (not a compliance cache)";
+      return false;
+    }
+    if (hdr.version != kVersion) {
+      why = "version " + std::to_string(hdr.version) +
+            " != " + std::to_string(kVersion);
+      return false;
+    }
+    if (hdr.hash != hash) {
+      why = "stale (mesh, material, fixed nodes or h changed)";
+      return false;
+    }
+    if (hdr.node_count != static_cast<std::uint64_t>(body.nodeCount()) ||
+        hdr.surface_count != s) {
+      why = "sizes do not match the mesh";
+      return false;
+    }
+    if (hdr.scalar_bytes != blk.scalarBytes()) {
+      why = "precision differs (" + std::to_string(hdr.scalar_bytes) +
+            "-byte values)";
+      return false;
+    }
+    if (file_size != expected) {
+      why = "size " + std::to_string(file_size) + " bytes, expected " +
+            std::to_string(expected) + " (truncated or corrupt)";
+      return false;
+    }
+    std::vector<int> nodes(s);
+    blk.resize(static_cast<Eigen::Index>(d));
+    std::uint64_t checksum = 0;
+    in.readExact(nodes.data(), s * sizeof(int));
+    in.readExact(blk.data(), d * d * blk.scalarBytes());
+    in.readExact(&checksum, sizeof(checksum));
+    std::uint64_t sum = fem_detail::fnv1a(nodes.data(), s * sizeof(int));
+    sum = fem_detail::fnv1a(blk.data(), d * d * blk.scalarBytes(), sum);
+    if (sum != checksum) {
+      why = "checksum mismatch (corrupt)";
+      return false;
+    }
+    if (nodes != surface) {
+      why = "surface nodes differ";
+      return false;
+    }
+    if (!blk.allFinite()) {
+      why = "non-finite values";
+      return false;
+    }
+    return true;
+  } catch (const FileError &e) {
+    why = e.what();
     return false;
   }
-  std::vector<int> nodes(s);
-  blk.resize(static_cast<Eigen::Index>(d));
-  std::uint64_t checksum = 0;
-  in.read(reinterpret_cast<char *>(nodes.data()),
-          static_cast<std::streamsize>(s * sizeof(int)));
-  in.read(static_cast<char *>(blk.data()),
-          static_cast<std::streamsize>(d * d * blk.scalarBytes()));
-  in.read(reinterpret_cast<char *>(&checksum), sizeof(checksum));
-  if (!in) {
-    why = "read error";
-    return false;
-  }
-  std::uint64_t sum = fem_detail::fnv1a(nodes.data(), s * sizeof(int));
-  sum = fem_detail::fnv1a(blk.data(), d * d * blk.scalarBytes(), sum);
-  if (sum != checksum) {
-    why = "checksum mismatch (corrupt)";
-    return false;
-  }
-  if (nodes != surface) {
-    why = "surface nodes differ";
-    return false;
-  }
-  if (!blk.allFinite()) {
-    why = "non-finite values";
-    return false;
-  }
-  return true;
 }
 
+// Writes the cache through a temporary file (fsync + rename): a reader never
+// sees a half-written file under the final name. Failures only warn.
 void writeCache(const std::filesystem::path &path, std::uint64_t hash,
                 const FemBody &body, const RestBlock &blk) {
   std::error_code ec;
   std::filesystem::create_directories(path.parent_path(), ec);
-  const auto tmp = path.string() + ".tmp";
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    if (!out) {
-      spdlog::warn(
-          "compliance cache: cannot write {} (continuing without cache)", tmp);
-      return;
-    }
+  try {
+    shared::OutputFile out(path, "compliance cache",
+                           {.overwrite = true, .allow_special = false});
     CacheHeader hdr{};
     std::memcpy(hdr.magic, kMagic, sizeof(kMagic));
     hdr.version = kVersion;
@@ -208,25 +199,17 @@ void writeCache(const std::filesystem::path &path, std::uint64_t hash,
     std::uint64_t sum =
         fem_detail::fnv1a(blk.surface.data(), blk.surface.size() * sizeof(int));
     sum = fem_detail::fnv1a(blk.data(), d * d * blk.scalarBytes(), sum);
-    out.write(reinterpret_cast<const char *>(&hdr), sizeof(hdr));
-    out.write(reinterpret_cast<const char *>(blk.surface.data()),
-              static_cast<std::streamsize>(blk.surface.size() * sizeof(int)));
-    out.write(static_cast<const char *>(blk.data()),
-              static_cast<std::streamsize>(d * d * blk.scalarBytes()));
-    out.write(reinterpret_cast<const char *>(&sum), sizeof(sum));
-    if (!out) {
-      spdlog::warn(
-          "compliance cache: write to {} failed (continuing without cache)",
-          tmp);
-      return;
-    }
+    const auto bytes = [](const void *p, std::size_t n) {
+      return std::string_view(static_cast<const char *>(p), n);
+    };
+    out.write(bytes(&hdr, sizeof(hdr)));
+    out.write(bytes(blk.surface.data(), blk.surface.size() * sizeof(int)));
+    out.write(bytes(blk.data(), d * d * blk.scalarBytes()));
+    out.write(bytes(&sum, sizeof(sum)));
+    out.commit();
+  } catch (const FileError &e) {
+    spdlog::warn("compliance cache: {} (continuing without cache)", e.what());
   }
-  // atomic replace: a reader never sees a half-written file under the final
-  // name
-  std::filesystem::rename(tmp, path, ec);
-  if (ec)
-    spdlog::warn("compliance cache: cannot rename {} to {}: {}", tmp,
-                 path.string(), ec.message());
 }
 
 // C0 on the surface DOFs: one rest factorisation, one (batched) solve per
@@ -247,6 +230,7 @@ void computeRestBlock(FemBody &body, const ComplianceOptions &opt,
       const int col = c0 + j;
       rhs(3 * blk.surface[col / 3] + col % 3, j) = 1.0;
     }
+    shared::throwIfStopRequested("precomputing the rest compliance C0");
     body.solveRestComplianceBatch(opt.h_s, rhs, sol);
     for (int j = 0; j < k; ++j)
       for (int a = 0; a < s; ++a) {

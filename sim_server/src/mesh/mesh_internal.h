@@ -8,6 +8,7 @@
 #include <string_view>
 #include <vector>
 
+#include "tactus/shared/file_io.h"
 #include "tactus/sim/mesh.h"
 
 namespace tactus::sim::detail {
@@ -58,6 +59,7 @@ class LineCursor {
     if (!l.empty() && l.back() == '\r') l.remove_suffix(1);
     pos_ = end == std::string_view::npos ? text_.size() : end + 1;
     ++line_;
+    if ((line_ & 0xFFFFF) == 0) shared::throwIfStopRequested("reading a mesh");
     *line = l;
     return true;
   }

@@ -9,20 +9,20 @@
 #include <algorithm>
 #include <charconv>
 #include <cmath>
-#include <fstream>
 #include <limits>
-#include <sstream>
 #include <unordered_map>
 
 #include "mesh_internal.h"
 #include "tactus/shared/error.h"
+#include "tactus/shared/file_io.h"
 #include "tactus/sim/mesh.h"
 
 namespace tactus::sim {
 namespace detail {
 
 void fail(const std::string& name, int line, const std::string& message) {
-  throw MeshError(fmt::format("{}:{}: {}", name, line, message));
+  // the message may quote file content: no control bytes, bounded length
+  throw MeshError(fmt::format("{}:{}: {}", name, line, shared::printable(message, 1000)));
 }
 
 bool parseDouble(std::string_view token, double* out) {
@@ -63,12 +63,7 @@ int lineOf(std::string_view text, std::size_t pos) {
 namespace {
 
 // A printable excerpt of a token for messages (bounded, no control characters).
-std::string excerpt(std::string_view s) {
-  std::string out;
-  for (char c : s.substr(0, 40)) out += (static_cast<unsigned char>(c) < 32 || c == 127) ? '?' : c;
-  if (s.size() > 40) out += "...";
-  return out;
-}
+std::string excerpt(std::string_view s) { return shared::printable(s, 40); }
 
 // Signed 6 x volume of the tetrahedron (a, b, c, d).
 double sixVolume(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c,
@@ -807,37 +802,61 @@ void readVtkLegacy(const std::string& content, const std::string& name, RawMesh*
 // ------------------------------------------------------------------------------------------------
 // Entry points
 
+namespace {
+
+enum class MeshFormat { kUnknown, kGmsh, kVtkLegacy, kVtu };
+
+// The format from the first bytes; `start` is where the content begins (after a UTF-8 byte order
+// mark and white space). kUnknown also when `head` holds only white space.
+MeshFormat sniffMeshFormat(std::string_view head, std::size_t* start) {
+  std::size_t i = 0;
+  if (head.substr(0, 3) == "\xEF\xBB\xBF") i = 3;  // UTF-8 byte order mark
+  while (i < head.size() && std::isspace(static_cast<unsigned char>(head[i]))) ++i;
+  *start = i;
+  const std::string_view h = head.substr(i);
+  if (!h.empty() && h.front() == '$') return MeshFormat::kGmsh;
+  if (h.rfind("# vtk DataFile", 0) == 0) return MeshFormat::kVtkLegacy;
+  if (h.rfind("<?xml", 0) == 0 || h.rfind("<VTKFile", 0) == 0) return MeshFormat::kVtu;
+  return MeshFormat::kUnknown;
+}
+
+[[noreturn]] void failUnrecognised(std::string_view content, std::size_t start,
+                                   const std::string& name) {
+  detail::fail(name, detail::lineOf(content, start),
+               "unrecognised mesh format (expected Gmsh .msh, legacy VTK .vtk or VTK XML .vtu)");
+}
+
+}  // namespace
+
 TetMesh parseTetMesh(const std::string& content, const std::string& name, MeshReport* report) {
   std::size_t start = 0;
-  if (content.rfind("\xEF\xBB\xBF", 0) == 0) start = 3;  // UTF-8 byte order mark
-  while (start < content.size() && std::isspace(static_cast<unsigned char>(content[start]))) {
-    ++start;
-  }
-  const std::string_view head = std::string_view(content).substr(start);
+  const MeshFormat format = sniffMeshFormat(content, &start);
   detail::RawMesh raw;
-  if (!head.empty() && head.front() == '$') {
-    detail::readGmsh(content, name, &raw);
-  } else if (head.rfind("# vtk DataFile", 0) == 0) {
-    detail::readVtkLegacy(content.substr(start), name, &raw);
-  } else if (head.rfind("<?xml", 0) == 0 || head.rfind("<VTKFile", 0) == 0) {
-    detail::readVtu(content, name, &raw);
-  } else {
-    detail::fail(name, detail::lineOf(content, start),
-                 "unrecognised mesh format (expected Gmsh .msh, legacy VTK .vtk or VTK XML .vtu)");
+  switch (format) {
+    case MeshFormat::kGmsh: detail::readGmsh(content, name, &raw); break;
+    case MeshFormat::kVtkLegacy: detail::readVtkLegacy(content.substr(start), name, &raw); break;
+    case MeshFormat::kVtu: detail::readVtu(content, name, &raw); break;
+    case MeshFormat::kUnknown: failUnrecognised(content, start, name);
   }
   return detail::finalizeMesh(std::move(raw), name, report);
 }
 
 TetMesh loadTetMesh(const std::filesystem::path& path, MeshReport* report) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) {
-    throw MeshError(fmt::format("{}: cannot open mesh file (check the path and permissions)",
-                                path.string()));
+  try {
+    shared::InputFile file(path, "mesh file", shared::kMaxMeshBytes);
+    // sniff the format from the first bytes before reading the whole file
+    std::string content(static_cast<std::size_t>(std::min<std::uint64_t>(file.size(), 4096)), '\0');
+    content.resize(file.read(content.data(), content.size()));
+    std::size_t start = 0;
+    const bool all_blank = content.find_first_not_of(" \t\r\n\v\f") == std::string::npos;
+    if (!all_blank && sniffMeshFormat(content, &start) == MeshFormat::kUnknown) {
+      failUnrecognised(content, start, file.name());
+    }
+    content += file.readRest();
+    return parseTetMesh(content, file.name(), report);
+  } catch (const FileError& e) {
+    throw MeshError(e.what());
   }
-  std::ostringstream buffer;
-  buffer << in.rdbuf();
-  if (in.bad()) throw MeshError(fmt::format("{}: read error", path.string()));
-  return parseTetMesh(buffer.str(), path.string(), report);
 }
 
 }  // namespace tactus::sim

@@ -3,10 +3,10 @@
 #include <spdlog/fmt/fmt.h>
 
 #include <charconv>
-#include <fstream>
 #include <string>
 
 #include "tactus/shared/error.h"
+#include "tactus/shared/file_io.h"
 #include "tactus/sim/mesh.h"
 
 namespace tactus::sim {
@@ -20,15 +20,14 @@ void appendDouble(std::string* out, double v) {
   out->append(buf, ptr);
 }
 
+// The series' own files: replaced on a re-run into the same folder, always through a checked,
+// fsync'ed temporary file (a full disk is an error, never a silently truncated file).
 void writeFile(const std::filesystem::path& path, const std::string& text) {
-  std::ofstream out(path, std::ios::binary | std::ios::trunc);
-  if (!out) {
-    throw Error(fmt::format("{}: cannot open for writing (does the folder exist?)",
-                            path.string()));
+  try {
+    shared::writeFileChecked(path, text, "VTK output file", {.overwrite = true});
+  } catch (const FileError& e) {
+    throw Error(fmt::format("{} (does the folder exist and have space?)", e.what()));
   }
-  out << text;
-  out.close();
-  if (!out) throw Error(fmt::format("{}: write failed (disk full?)", path.string()));
 }
 
 std::string xmlEscape(const std::string& s) {

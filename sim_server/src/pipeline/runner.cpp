@@ -13,6 +13,7 @@
 #include "haptic_link.h"
 #include "tactus/sim/instrument.h"
 #include "tactus/shared/error.h"
+#include "tactus/shared/file_io.h"
 
 namespace tactus::sim {
 namespace {
@@ -38,6 +39,22 @@ StageSummary summarise(const std::string& name, const std::vector<double>& v) {
   for (double x : v) sum += x;
   s.mean_s = sum / static_cast<double>(v.size());
   return s;
+}
+
+// A JSON string's content: quotes, backslashes and control characters escaped.
+std::string jsonEscape(const std::string& s) {
+  std::string out;
+  for (const char c : s) {
+    if (c == '"' || c == '\\') {
+      out += '\\';
+      out += c;
+    } else if (static_cast<unsigned char>(c) < 0x20) {
+      out += fmt::format("\\u{:04x}", static_cast<int>(c));
+    } else {
+      out += c;
+    }
+  }
+  return out;
 }
 
 std::int64_t nowNs() {
@@ -97,7 +114,7 @@ std::string RunStatistics::table() const {
 
 std::string RunStatistics::json(const std::string& scene) const {
   std::string out = fmt::format("{{\n  \"scene\": \"{}\",\n  \"steps\": {},\n  \"stages_ms\": {{\n",
-                                scene, steps());
+                                jsonEscape(scene), steps());
   const auto st = stages();
   for (std::size_t i = 0; i < st.size(); ++i) {
     out += fmt::format("    \"{}\": {{\"median\": {:.6f}, \"p90\": {:.6f}, \"p99\": {:.6f}, "
@@ -111,7 +128,8 @@ std::string RunStatistics::json(const std::string& scene) const {
   return out;
 }
 
-void exportTrajectory(const SceneSpec& spec, const std::filesystem::path& csv, double dt_s) {
+void exportTrajectory(const SceneSpec& spec, const std::filesystem::path& csv, double dt_s,
+                      bool overwrite) {
   if (!spec.instrument.present) throw SceneError(spec.source.string() + ": no instrument to export");
   // a Simulation is not needed: interpolate the keys directly
   SceneSpec light = spec;
@@ -119,25 +137,33 @@ void exportTrajectory(const SceneSpec& spec, const std::filesystem::path& csv, d
   Simulation sim(light);
   const auto& keys = spec.instrument.trajectory;
   const double end = keys.empty() ? 0.0 : keys.back().t_s;
-  std::FILE* f = std::fopen(csv.c_str(), "w");
-  if (f == nullptr) throw Error("cannot write " + csv.string());
-  std::fprintf(f, "t_s,x,y,z,qw,qx,qy,qz,gripper\n");
+  shared::OutputFile out(csv, "trajectory CSV",
+                         {.overwrite = overwrite, .overwrite_hint = "pass --overwrite"});
+  out.write("t_s,x,y,z,qw,qx,qy,qz,gripper\n");
   const long n = static_cast<long>(std::ceil(end / dt_s));
-  for (long k = 0; k <= n; ++k) {
+  for (long k = 0; k <= n && out.ok(); ++k) {
     const double t = std::min(end, static_cast<double>(k) * dt_s);
     const DeviceTarget d = sim.scriptedTarget(t);
     const auto& q = d.pose.rot;
-    std::fprintf(f, "%.6f,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g\n", t, d.pose.pos_m.x(),
-                 d.pose.pos_m.y(), d.pose.pos_m.z(), q.w(), q.x(), q.y(), q.z(),
-                 d.gripper_opening * spec.instrument.max_opening_rad);
+    out.write(fmt::format("{:.6f},{:.9g},{:.9g},{:.9g},{:.9g},{:.9g},{:.9g},{:.9g},{:.9g}\n", t,
+                          d.pose.pos_m.x(), d.pose.pos_m.y(), d.pose.pos_m.z(), q.w(), q.x(),
+                          q.y(), q.z(), d.gripper_opening * spec.instrument.max_opening_rad));
   }
-  std::fclose(f);
+  out.commit();
 }
 
 int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
   SceneSpec spec = loadScene(options.scene_path);
+  // refuse an existing statistics file now, not after the run
+  std::unique_ptr<shared::OutputFile> stats_file;
+  if (!options.stats_json.empty() && options.export_trajectory.empty()) {
+    stats_file = std::make_unique<shared::OutputFile>(
+        options.stats_json, "statistics file",
+        shared::OutputOptions{.overwrite = options.overwrite,
+                              .overwrite_hint = "pass --overwrite"});
+  }
   if (!options.export_trajectory.empty()) {
-    exportTrajectory(spec, options.export_trajectory);
+    exportTrajectory(spec, options.export_trajectory, 0.01, options.overwrite);
     spdlog::info("trajectory written to {}", options.export_trajectory);
     return 0;
   }
@@ -150,6 +176,7 @@ int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
   if (offline || options.no_haptics) spec.haptics.enabled = false;
 
   Simulation sim(spec);
+  shared::throwIfStopRequested("loading the scene");
   spdlog::info("scene {}: stages:", spec.source.string());
   for (const auto& s : sim.stages()) spdlog::info("  - {}", s);
 
@@ -229,12 +256,10 @@ int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
   const double wall_s = 1e-9 * static_cast<double>(nowNs() - t0);
   spdlog::info("{} steps, simulated {:.3f} s in {:.3f} s wall", stats.steps(), sim.time(), wall_s);
   std::printf("%s", stats.table().c_str());
-  if (!options.stats_json.empty()) {
-    std::FILE* f = std::fopen(options.stats_json.c_str(), "w");
-    if (f == nullptr) throw Error("cannot write " + options.stats_json);
-    const std::string js = stats.json(spec.source.string());
-    std::fwrite(js.data(), 1, js.size(), f);
-    std::fclose(f);
+  if (stats_file) {
+    stats_file->write(stats.json(spec.source.string()));
+    stats_file->commit();
+    spdlog::info("statistics written to {}", options.stats_json);
   }
   return exit_code;
 }

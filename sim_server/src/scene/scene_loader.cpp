@@ -15,6 +15,7 @@
 #include <tuple>
 
 #include "tactus/shared/error.h"
+#include "tactus/shared/file_io.h"
 #include "tactus/sim/scene.h"
 // the contact problem's size limit (max_contacts)
 #include "tactus/shared/segment.h"
@@ -63,7 +64,7 @@ std::string kindOf(const YAML::Node& n) {
     case YAML::NodeType::Map: return "a map";
     case YAML::NodeType::Sequence: return "a list";
     case YAML::NodeType::Null: return "nothing";
-    case YAML::NodeType::Scalar: return "'" + n.Scalar() + "'";
+    case YAML::NodeType::Scalar: return "'" + shared::printable(n.Scalar()) + "'";
     default: return "nothing";
   }
 }
@@ -79,7 +80,7 @@ Eigen::Quaterniond eulerXyzDeg(const Eigen::Vector3d& deg) {
 class SceneParser {
  public:
   SceneParser(std::string name, std::filesystem::path base_dir)
-      : name_(std::move(name)), base_dir_(std::move(base_dir)) {}
+      : name_(shared::printable(name, 256)), base_dir_(std::move(base_dir)) {}
 
   SceneSpec parse(const std::string& yaml) {
     SceneSpec spec;
@@ -90,7 +91,7 @@ class SceneParser {
     } catch (const YAML::Exception& e) {
       throw SceneError(fmt::format("{}:{}:{}: YAML syntax error: {}", name_,
                                    std::max(1, e.mark.line + 1), std::max(1, e.mark.column + 1),
-                                   e.msg));
+                                   shared::printable(e.msg, 200)));
     }
     if (!root.IsMap()) {
       throw SceneError(fmt::format("{}:1:1: scene: must be a map of settings (got {})", name_,
@@ -100,7 +101,7 @@ class SceneParser {
       readRoot(root, &spec);
     } catch (const YAML::Exception& e) {
       // defensive: accessors above check types first, so this means a yaml-cpp surprise
-      error(root, "scene", std::string("cannot be read: ") + e.what());
+      error(root, "scene", "cannot be read: " + shared::printable(e.what(), 200));
     }
     if (!errors_.empty()) {
       std::stable_sort(errors_.begin(), errors_.end(), [](const Problem& a, const Problem& b) {
@@ -147,8 +148,9 @@ class SceneParser {
     const YAML::Mark m = at.Mark();
     const int line = std::max(1, m.line + 1);
     const int column = std::max(1, m.column + 1);
+    // messages quote file content: no control bytes, bounded length (shared::printable)
     errors_.push_back({line, column, fmt::format("{}:{}:{}: {}: {}", name_, line, column, path,
-                                                 what)});
+                                                 shared::printable(what, 1000))});
   }
 
   static std::string join(const std::string& path, const std::string& key) {
@@ -165,7 +167,7 @@ class SceneParser {
         error(key, path, "keys must be plain names");
         continue;
       }
-      const std::string& k = key.Scalar();
+      const std::string k = shared::printable(key.Scalar());
       if (std::find_if(allowed.begin(), allowed.end(),
                        [&](const char* a) { return k == a; }) == allowed.end()) {
         std::string list;
@@ -414,9 +416,16 @@ class SceneParser {
     if (string(t, path, "mesh", &mesh)) {
       tissue->mesh_path = resolve(mesh);
       std::error_code ec;
-      if (!std::filesystem::is_regular_file(tissue->mesh_path, ec)) {
+      const auto status = std::filesystem::status(tissue->mesh_path, ec);
+      const std::string shown = shared::printable(tissue->mesh_path.string(), 256);
+      if (std::filesystem::is_directory(status)) {
+        error(t["mesh"], join(path, "mesh"), "mesh file " + shown + " is a directory");
+      } else if (std::filesystem::exists(status) && !std::filesystem::is_regular_file(status)) {
         error(t["mesh"], join(path, "mesh"),
-              "mesh file not found: " + tissue->mesh_path.string() +
+              "mesh file " + shown + " is not a regular file (a FIFO, socket or device)");
+      } else if (!std::filesystem::is_regular_file(status)) {
+        error(t["mesh"], join(path, "mesh"),
+              "mesh file not found: " + shown +
                   " (relative paths are resolved against the scene file's folder)");
       }
     }
@@ -717,16 +726,15 @@ SceneSpec parseScene(const std::string& yaml, const std::string& name,
 }
 
 SceneSpec loadScene(const std::filesystem::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) {
-    throw SceneError(fmt::format("{}: cannot open scene file (check the path and permissions)",
-                                 path.string()));
+  std::string text;
+  try {
+    text = shared::readTextFileChecked(path, "scene file", shared::kMaxSceneBytes);
+  } catch (const FileError& e) {
+    throw SceneError(e.what());
   }
-  std::ostringstream buffer;
-  buffer << in.rdbuf();
   const std::filesystem::path dir =
       path.has_parent_path() ? path.parent_path() : std::filesystem::path(".");
-  SceneSpec spec = parseScene(buffer.str(), path.string(), dir);
+  SceneSpec spec = parseScene(text, path.string(), dir);
   spec.source = path;
   return spec;
 }

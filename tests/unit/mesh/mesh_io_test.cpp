@@ -178,7 +178,7 @@ TEST(MeshIo, BadFixturesNameFileAndLine) {
                 ":12: unexpected end of file: <DataArray> is not closed");
   EXPECT_EQ(loadError("does_not_exist.msh"),
             meshPath("does_not_exist.msh") +
-                ": cannot open mesh file (check the path and permissions)");
+                ": cannot open mesh file: No such file or directory (check the path)");
 }
 
 TEST(MeshIo, InMemoryErrors) {

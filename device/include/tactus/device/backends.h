@@ -21,6 +21,10 @@
 
 #include "tactus/device/device.h"
 
+namespace tactus::shared {
+class OutputFile;  // tactus/shared/file_io.h
+}
+
 namespace tactus::device {
 
 /// Reads typed options and rejects unknown ones (non-RT helper for backend constructors).
@@ -164,9 +168,14 @@ class ReplayDevice final : public Device {
 /// replay format. read() only copies the sample into a preallocated single-producer ring
 /// (capacity samples; full => the sample is dropped and counted); a background thread writes
 /// the file, and close() drains the ring and closes it. No file I/O on the real-time thread.
+/// The file is written through a temporary file in the same folder and renamed into place by
+/// close() (after fsync); an existing file is never replaced unless `overwrite` (device option
+/// record_overwrite=1). open() throws DeviceError when the target exists or cannot be created;
+/// a later write, fsync or rename failure is kept in writeError() (the file is then not created).
 class RecordingDevice final : public Device {
  public:
-  RecordingDevice(std::unique_ptr<Device> inner, std::string path, std::size_t capacity = 1 << 16);
+  RecordingDevice(std::unique_ptr<Device> inner, std::string path, std::size_t capacity = 1 << 16,
+                  bool overwrite = false);
   ~RecordingDevice() override;
   DeviceInfo info() const override { return inner_->info(); }
   void open() override;
@@ -179,6 +188,9 @@ class RecordingDevice final : public Device {
   Device& inner() noexcept { return *inner_; }
   std::uint64_t recorded() const noexcept { return written_.load(std::memory_order_relaxed); }
   std::uint64_t dropped() const noexcept { return dropped_.load(std::memory_order_relaxed); }
+  /// Empty while the recording is intact; else why the file was not (completely) written. Valid
+  /// after close().
+  const std::string& writeError() const noexcept { return write_error_; }
 
  private:
   void flushLoop() noexcept;
@@ -192,7 +204,9 @@ class RecordingDevice final : public Device {
   std::atomic<std::uint64_t> dropped_{0};
   std::atomic<std::uint64_t> written_{0};
   std::atomic<bool> stop_{false};
-  std::FILE* file_ = nullptr;
+  std::unique_ptr<shared::OutputFile> file_;
+  bool overwrite_ = false;
+  std::string write_error_;
   std::thread flusher_;
   std::int64_t first_t_ns_ = -1;     ///< flusher thread only
   std::int64_t last_t_ns_ = -1;      ///< flusher thread only (samples must move forward)

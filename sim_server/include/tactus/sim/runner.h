@@ -23,12 +23,16 @@ struct RunOptions {
   bool status = false;               ///< log a status line every second
   std::string stats_json;            ///< write per-stage statistics here at the end
   std::string export_trajectory;     ///< write the scripted trajectory (device CSV) and exit
+  bool overwrite = false;            ///< replace an existing stats_json / export_trajectory file
 };
 
 /// Writes the scene's instrument trajectory in the replay device's CSV format
 /// (`t_s,x,y,z,qw,qx,qy,qz,gripper`, gripper in radians of jaw opening), sampled every
 /// `dt_s`, so the simulated device can follow the same script as the simulation.
-void exportTrajectory(const SceneSpec& spec, const std::filesystem::path& csv, double dt_s = 0.01);
+/// Written through a temporary file and renamed into place; an existing file is only replaced
+/// when `overwrite`. Throws tactus::FileError on any write failure (the target is then untouched).
+void exportTrajectory(const SceneSpec& spec, const std::filesystem::path& csv, double dt_s = 0.01,
+                      bool overwrite = false);
 
 /// Percentile summary of one stage over a run [s].
 struct StageSummary {

@@ -1,0 +1,133 @@
+// The daemons' command lines and signals: every rejected value exits non-zero with a message
+// naming the option before any segment exists; SIGHUP (the terminal closed) stops
+// sim_server/haptic_server/tactus-monitor cleanly and leaves no segment behind.
+#include <gtest/gtest.h>
+
+#include <memory>
+
+#include "daemon_process.h"
+
+namespace fs = std::filesystem;
+using namespace std::chrono_literals;
+using tactus::test::ChildProcess;
+using tactus::test::runProgram;
+
+namespace {
+
+const std::string kSim = TACTUS_BINARY_DIR "/sim_server/sim_server";
+const std::string kHaptic = TACTUS_BINARY_DIR "/haptic_server/haptic_server";
+const std::string kMonitor = TACTUS_BINARY_DIR "/haptic_server/tactus-monitor";
+const std::string kScene = TACTUS_TEST_DATA_DIR "/scenes/press_cube.yaml";
+
+class CliTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    const std::string id =
+        std::to_string(::getpid()) + "_" +
+        ::testing::UnitTest::GetInstance()->current_test_info()->name();
+    dir_ = fs::temp_directory_path() / ("tactus_sec_cli_" + id);
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+    segment_ = "tactus_sec_cli_" + std::to_string(::getpid());
+  }
+  void TearDown() override {
+    fs::remove(shm());
+    fs::remove_all(dir_);
+  }
+  fs::path shm() const { return fs::path("/dev/shm") / segment_; }
+
+  // Runs argv and expects a refusal that names `option`, with no segment created.
+  void expectRejected(std::vector<std::string> argv, const std::string& option) {
+    std::string line;
+    for (const auto& a : argv) line += a + " ";
+    const tactus::test::RunResult r = runProgram(argv, dir_, 20s);
+    EXPECT_FALSE(r.timed_out) << line << ": still running after 20 s";
+    EXPECT_GT(r.exit_code, 0) << line;
+    EXPECT_NE((r.err + r.out).find(option), std::string::npos)
+        << line << ": the message does not name " << option << ":\n" << r.err << r.out;
+    EXPECT_FALSE(fs::exists(shm())) << line << ": a segment was created";
+  }
+
+  fs::path dir_;
+  std::string segment_;
+};
+
+TEST_F(CliTest, SimServerRejectsEndlessOrInvalidRunLengths) {
+  for (const std::string& steps : std::vector<std::string>{"0", "-1", "nan", "1.5"}) {
+    expectRejected({kSim, kScene, "--segment", segment_, "--steps", steps}, "--steps");
+  }
+  for (const std::string& duration :
+       std::vector<std::string>{"-1", "nan", "inf", "-inf", "1e400", "3s"}) {
+    expectRejected({kSim, kScene, "--segment", segment_, "--duration", duration}, "--duration");
+  }
+}
+
+TEST_F(CliTest, SimServerHelpStatesWhatZeroDurationMeans) {
+  const tactus::test::RunResult r = runProgram({kSim, "--help"}, dir_, 20s);
+  EXPECT_EQ(r.exit_code, 0);
+  EXPECT_NE(r.out.find("0 (the default): run until SIGINT, SIGTERM"), std::string::npos) << r.out;
+}
+
+TEST_F(CliTest, HapticServerRejectsInvalidDurations) {
+  for (const std::string& duration : std::vector<std::string>{"-1", "nan", "inf", "1e400"}) {
+    expectRejected(
+        {kHaptic, "--device", "simulated", "--segment", segment_, "--duration", duration},
+        "--duration");
+  }
+  const tactus::test::RunResult r = runProgram({kHaptic, "--help"}, dir_, 20s);
+  EXPECT_NE(r.out.find("0 (the default): run until SIGINT, SIGTERM or SIGHUP"), std::string::npos)
+      << r.out;
+}
+
+TEST_F(CliTest, MonitorRejectsFloodingIntervalsAndBadSegmentNames) {
+  for (const std::string& interval : std::vector<std::string>{"0", "-1", "0.001", "nan", "inf"}) {
+    expectRejected({kMonitor, "--segment", segment_, "--interval", interval}, "--interval");
+  }
+  for (const std::string& name :
+       std::vector<std::string>{"a/b", "../x", "", std::string(100, 'n')}) {
+    expectRejected({kMonitor, "--segment", name}, "--segment");
+  }
+  expectRejected({kMonitor, "--segment", segment_, "--duration", "nan"}, "--duration");
+  expectRejected({kMonitor, "--segment", segment_, "--wait", "inf"}, "--wait");
+}
+
+TEST_F(CliTest, MonitorGivesUpWaitingForAMissingSegment) {
+  const tactus::test::RunResult r = runProgram(
+      {kMonitor, "--segment", segment_, "--interval", "0.05", "--wait", "0.3"}, dir_, 20s);
+  EXPECT_FALSE(r.timed_out) << "the monitor waited without bound";
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("giving up"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find(segment_), std::string::npos) << r.err;
+}
+
+// SIGHUP to a running pair: both stop cleanly (exit 0) and the segment is removed.
+TEST_F(CliTest, SighupStopsTheDaemonsAndRemovesTheSegment) {
+  ChildProcess sim({kSim, kScene, "--segment", segment_}, dir_ / "sim.out", dir_ / "sim.err");
+  ChildProcess haptic({kHaptic, "--device", "simulated", "--segment", segment_, "--priority", "0"},
+                      dir_ / "haptic.out", dir_ / "haptic.err");
+  ChildProcess monitor({kMonitor, "--segment", segment_, "--interval", "0.1"},
+                       dir_ / "monitor.out", dir_ / "monitor.err");
+  ASSERT_TRUE(tactus::test::waitFor([&] { return fs::exists(shm()) || !sim.running(); }, 60s));
+  ASSERT_TRUE(fs::exists(shm())) << sim.out() << sim.err();
+  // the haptic side attached (its log says so) before the hang-up
+  ASSERT_TRUE(tactus::test::waitFor(
+      [&] {
+        return (haptic.out() + haptic.err()).find("attached to segment") != std::string::npos ||
+               !haptic.running();
+      },
+      30s));
+  ASSERT_TRUE(haptic.running()) << haptic.out() << haptic.err();
+
+  haptic.signal(SIGHUP);
+  sim.signal(SIGHUP);
+  monitor.signal(SIGHUP);
+  for (ChildProcess* p : {&haptic, &sim, &monitor}) {
+    const std::optional<int> st = p->waitExit(30s);
+    ASSERT_TRUE(st.has_value()) << "still running 30 s after SIGHUP: " << p->out() << p->err();
+    EXPECT_TRUE(WIFEXITED(*st) && WEXITSTATUS(*st) == 0)
+        << "wait status " << *st << " (killed by the signal?)\n" << p->out() << p->err();
+  }
+  EXPECT_FALSE(fs::exists(shm())) << "the segment was left behind";
+}
+
+}  // namespace

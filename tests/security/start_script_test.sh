@@ -1,0 +1,61 @@
+#!/usr/bin/env bash
+# scripts/start.sh exit status and run dir: 0 after a clean --duration run, non-zero for a bad
+# scene and for a missing device plugin; an explicit --run-dir leaves the checkout's run/latest
+# alone; no segment is left behind. Uses the built binaries (--no-build), a temp run dir and
+# unique segment names; every run is bounded by `timeout`.
+#
+# Usage: start_script_test.sh SOURCE_DIR BUILD_DIR
+set -uo pipefail
+src="$1"
+build="$2"
+tmp="$(mktemp -d)"
+seg="tactus_sec_start_$$"
+cleanup() {
+  rm -rf "$tmp"
+  rm -f /dev/shm/"$seg"_*
+}
+trap cleanup EXIT
+failures=0
+fail() { echo "FAIL: $*" >&2; failures=$((failures + 1)); }
+
+latest_before="$(readlink "$src/run/latest" 2>/dev/null || echo "(none)")"
+
+# start.sh NAME ARGS...: runs start.sh with its log in $tmp/NAME.out; sets rc
+run() {
+  local name="$1"
+  shift
+  TACTUS_BUILD_DIR="$build" TACTUS_SKIP_DEPS=1 timeout -k 5 90 \
+    bash "$src/scripts/start.sh" "$@" --no-build --run-dir "$tmp/$name" --segment "${seg}_$name" \
+    >"$tmp/$name.out" 2>&1 </dev/null
+  rc=$?
+  echo "start.sh $name: exit $rc"
+}
+
+scene="$src/tests/data/scenes/press_cube.yaml"
+run clean "$scene" --duration 3
+[[ $rc -eq 0 ]] || { fail "clean --duration 3 run exited $rc"; tail -20 "$tmp/clean.out" >&2; }
+[[ -s "$tmp/clean/sim.log" ]] || fail "no sim.log in the --run-dir"
+
+printf 'scene: [unterminated\n' >"$tmp/bad.yaml"
+run bad_scene "$tmp/bad.yaml" --duration 3
+[[ $rc -ne 0 && $rc -ne 124 && $rc -ne 137 ]] || fail "bad scene: exit $rc (want a failure status)"
+
+run no_plugin "$scene" --duration 3 --device "$tmp/no_such_plugin.so"
+[[ $rc -ne 0 && $rc -ne 124 && $rc -ne 137 ]] || fail "missing plugin: exit $rc (want a failure)"
+grep -q "haptic_server exited" "$tmp/no_plugin.out" || fail "missing plugin: no message"
+
+run bad_duration "$scene" --duration nan
+[[ $rc -eq 2 ]] || fail "--duration nan: exit $rc (want 2)"
+
+latest_after="$(readlink "$src/run/latest" 2>/dev/null || echo "(none)")"
+[[ "$latest_before" == "$latest_after" ]] ||
+  fail "run/latest was repointed by a --run-dir run: '$latest_before' -> '$latest_after'"
+for f in /dev/shm/"$seg"_*; do
+  [[ -e "$f" ]] && fail "segment left behind: $f"
+done
+
+if [[ $failures -gt 0 ]]; then
+  echo "start_script_test: $failures failure(s)"
+  exit 1
+fi
+echo "start_script_test: PASS"
