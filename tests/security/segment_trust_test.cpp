@@ -63,7 +63,9 @@ struct NameGuard {
   explicit NameGuard(std::string n) : name(std::move(n)) { Segment::remove(name); }
   ~NameGuard() {
     Segment::remove(name);
-    for (const char* tag : {"first", "second", "displaced"}) ::unlink(logPath(name, tag).c_str());
+    for (const char* tag : {"first", "second", "displaced", "haptic"}) {
+      ::unlink(logPath(name, tag).c_str());
+    }
   }
 };
 
@@ -231,6 +233,34 @@ TEST(SegmentTrust, AWorldWritableSegmentIsRefused) {
   ASSERT_EQ(::fchmod(fd, 0600), 0);
   EXPECT_TRUE(Segment::tryOpen(g.name).ok());
   ::close(fd);
+}
+
+TEST(SegmentTrust, HapticServerDoesNotAttachToAWorldWritableSegment) {
+  NameGuard g(uniqueName("haptic_mode"));
+  Segment sim = Segment::create(g.name, SegmentCapacity::forContacts(2));
+  sim.beat(Side::kSim);
+  const int fd = openShm(g.name);
+  ASSERT_GE(fd, 0);
+  ASSERT_EQ(::fchmod(fd, 0666), 0);
+  ::close(fd);
+  Child haptic = spawn({kBin + "/haptic_server/haptic_server", "--segment", g.name, "--device",
+                        "simulated", "--priority", "0"},
+                       logPath(g.name, "haptic"));
+  // bounded wait for the refusal in its log, beating meanwhile so the segment looks alive
+  const auto end = std::chrono::steady_clock::now() + 20s;
+  std::string log;
+  while (std::chrono::steady_clock::now() < end && log.find("has mode 0666") == std::string::npos) {
+    sim.beat(Side::kSim);
+    std::this_thread::sleep_for(50ms);
+    log = slurp(logPath(g.name, "haptic"));
+  }
+  EXPECT_THAT(log, HasSubstr("cannot attach to segment '" + g.name + "'"));
+  EXPECT_THAT(log, HasSubstr("has mode 0666: other users can read or write it"));
+  EXPECT_THAT(log, ::testing::Not(HasSubstr("attached to segment")));
+  EXPECT_EQ(sim.header().haptic_pid.load(), 0);   // it never claimed the segment
+  EXPECT_EQ(sim.heartbeatNs(Side::kHaptic), 0);   // nor ran its loop on it
+  ::kill(haptic.pid, SIGTERM);
+  EXPECT_TRUE(haptic.waitExit(10000ms));
 }
 
 TEST(SegmentTrust, AnotherUsersStaleSegmentIsNotReplaced) {
