@@ -89,9 +89,19 @@ bool HapticLink::deviceTarget(DeviceTarget& target) {
       q_max > 0.0 && !(jump_scale > 0.0 && jump_scale * (jump / jump_scale).norm() > allowed_m);
   if (!plausible) {
     // hold the last accepted target, at rest
+    if (!rejecting_) {
+      spdlog::warn("implausible device sample (a jump of {:.3g} m in {:.3g} ms, or a zero "
+                   "orientation): rejected, holding the last good target until samples are sane",
+                   jump_scale > 0.0 ? jump_scale * (jump / jump_scale).norm() : 0.0, 1e3 * dt_s);
+      rejecting_ = true;
+    }
     ++rejected_jumps_;
     target = last_good_;
     return true;
+  }
+  if (rejecting_) {
+    spdlog::info("device samples plausible again: the instrument follows the device");
+    rejecting_ = false;
   }
   q /= q_max;
   q.normalize();

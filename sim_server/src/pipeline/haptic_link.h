@@ -77,6 +77,7 @@ class HapticLink {
   std::uint64_t rejected_reported_ = 0;          ///< rejected_jumps_ at the last status line
   bool device_active_ = false;
   bool have_good_ = false;                        ///< an accepted sample exists
+  bool rejecting_ = false;                        ///< in an episode of rejected samples (logged once)
   DeviceTarget last_good_;                        ///< the last accepted target (held on a jump)
   std::int64_t last_good_ns_ = 0;                 ///< when it was accepted (this clock)
   std::int64_t next_displacement_check_ns_ = 0;
