@@ -6,7 +6,7 @@ namespace tactus::device {
 NullDevice::NullDevice(const DeviceConfig& config) {
   OptionReader opt("null", config);
   has_pose_ = opt.has("pose");
-  pose_ = opt.vec3("pose", {0.0, 0.0, 0.0});
+  pose_ = opt.vec3("pose", {0.0, 0.0, 0.0}, 10.0);   // m, within any workspace
   opt.rejectUnknown();
 }
 

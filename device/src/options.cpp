@@ -1,12 +1,20 @@
 #include <cerrno>
 #include <cmath>
 #include <cstdlib>
+#include <iomanip>
+#include <sstream>
 
 #include "tactus/device/backends.h"
 
 namespace tactus::device {
 
 namespace {
+std::string show(double v) {
+  std::ostringstream os;
+  os << std::setprecision(17) << v;
+  return os.str();
+}
+
 // Parses a full-string double or throws naming the option.
 double parseNumber(const std::string& backend, const std::string& key, const std::string& text) {
   const char* begin = text.c_str();
@@ -40,6 +48,29 @@ double OptionReader::number(const std::string& key, double fallback) {
   known_.insert(key);
   const auto it = config_.find(key);
   return it == config_.end() ? fallback : parseNumber(backend_, key, it->second);
+}
+
+double OptionReader::number(const std::string& key, double fallback, double lo, double hi) {
+  const double v = number(key, fallback);
+  if (!(v >= lo && v <= hi)) {
+    const auto it = config_.find(key);
+    throw DeviceError("device '" + backend_ + "': option " + key + "=" +
+                      (it != config_.end() ? it->second : show(v)) +
+                      " must be in [" + show(lo) + ", " + show(hi) + "]");
+  }
+  return v;
+}
+
+std::array<double, 3> OptionReader::vec3(const std::string& key,
+                                         const std::array<double, 3>& fallback, double max_abs) {
+  const std::array<double, 3> v = vec3(key, fallback);
+  for (double x : v) {
+    if (!(std::abs(x) <= max_abs)) {
+      throw DeviceError("device '" + backend_ + "': option " + key + " component " + show(x) +
+                        " must be in [" + show(-max_abs) + ", " + show(max_abs) + "]");
+    }
+  }
+  return v;
 }
 
 std::array<double, 3> OptionReader::vec3(const std::string& key,

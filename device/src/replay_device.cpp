@@ -9,14 +9,13 @@ ReplayDevice::ReplayDevice(const DeviceConfig& config) {
   OptionReader opt("replay", config);
   const std::string file = opt.text("file");
   loop_ = opt.flag("loop", false);
-  speed_ = opt.number("speed", 1.0);
+  speed_ = opt.number("speed", 1.0, 1e-3, 1e3);
   opt.rejectUnknown();
   if (file.empty()) {
     throw DeviceError("device 'replay' needs a trajectory: --device-option file=PATH.csv (format "
                       "t_s,x,y,z,qw,qx,qy,qz,gripper; record one with --device-option "
                       "record=PATH.csv)");
   }
-  if (speed_ <= 0.0) throw DeviceError("device 'replay': option speed must be > 0");
   trajectory_ = Trajectory::loadCsv(file);
 }
 

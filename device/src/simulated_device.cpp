@@ -10,27 +10,40 @@ namespace tactus::device {
 namespace {
 constexpr double kSubstepS = 0.25e-3;
 constexpr double kMaxStepS = 0.05;
+constexpr double kMinMassKg = 1e-3;
+constexpr double kMaxMassKg = 100.0;
+constexpr double kMaxStiffnessNpm = 1e6;
+constexpr double kMaxDampingNspm = 1e4;
+constexpr double kMinForceN = 1e-3;
+constexpr double kMaxForceN = 100.0;
+constexpr double kMaxDistanceM = 10.0;
+constexpr double kMinPeriodS = 1e-3;
+constexpr double kMaxPeriodS = 1e5;
 }  // namespace
 
 SimulatedDevice::SimulatedDevice(const DeviceConfig& config) {
   OptionReader opt("simulated", config);
-  mass_ = opt.number("mass", 0.3);
-  stiffness_ = opt.number("stiffness", 300.0);
+  // ranges keep the hand's integration stable and its numbers physical (a hand-held device)
+  mass_ = opt.number("mass", 0.3, kMinMassKg, kMaxMassKg);
+  stiffness_ = opt.number("stiffness", 300.0, 0.0, kMaxStiffnessNpm);
   // default: 0.7 of critical damping
-  damping_ = opt.number("damping", 1.4 * std::sqrt(stiffness_ * mass_));
-  max_force_ = opt.number("max_force", 10.0);
-  origin_ = opt.vec3("origin", {0.0, 0.0, 0.0});
-  axis_ = opt.vec3("axis", {0.0, 0.0, -1.0});
-  amplitude_m_ = opt.number("amplitude", 0.02);
-  period_s_ = opt.number("period", 4.0);
+  damping_ = opt.number("damping", 1.4 * std::sqrt(stiffness_ * mass_), 0.0, kMaxDampingNspm);
+  max_force_ = opt.number("max_force", 10.0, kMinForceN, kMaxForceN);
+  origin_ = opt.vec3("origin", {0.0, 0.0, 0.0}, kMaxDistanceM);
+  axis_ = opt.vec3("axis", {0.0, 0.0, -1.0}, kMaxDistanceM);
+  amplitude_m_ = opt.number("amplitude", 0.02, -kMaxDistanceM, kMaxDistanceM);
+  period_s_ = opt.number("period", 4.0, kMinPeriodS, kMaxPeriodS);
   loop_ = opt.flag("loop", true);
   const std::string file = opt.text("trajectory");
   opt.rejectUnknown();
-  if (mass_ <= 0.0 || stiffness_ < 0.0 || damping_ < 0.0 || period_s_ <= 0.0) {
-    throw DeviceError("device 'simulated': mass and period must be > 0, stiffness and damping "
-                      ">= 0 (got mass=" + std::to_string(mass_) + ", stiffness=" +
-                      std::to_string(stiffness_) + ", damping=" + std::to_string(damping_) +
-                      ", period=" + std::to_string(period_s_) + ")");
+  // semi-implicit Euler at kSubstepS: stable only while the spring and damper rates are small
+  // against the sub-step
+  if (stiffness_ / mass_ * kSubstepS * kSubstepS > 1.0 || damping_ / mass_ * kSubstepS > 1.0) {
+    throw DeviceError("device 'simulated': stiffness=" + std::to_string(stiffness_) +
+                      " N/m and damping=" + std::to_string(damping_) + " N s/m are too stiff for "
+                      "mass=" + std::to_string(mass_) + " kg (need stiffness/mass <= " +
+                      std::to_string(1.0 / (kSubstepS * kSubstepS)) + " and damping/mass <= " +
+                      std::to_string(1.0 / kSubstepS) + "): raise mass or lower them");
   }
   const double n = std::sqrt(axis_[0] * axis_[0] + axis_[1] * axis_[1] + axis_[2] * axis_[2]);
   if (n < 1e-12) throw DeviceError("device 'simulated': option axis must not be zero");

@@ -45,23 +45,27 @@ int main(int argc, char** argv) {
                  "Device backend: simulated, replay, null, or a plugin .so path")
       ->capture_default_str();
   app.add_option("--device-option", device_options, "Backend option key=value (repeatable)");
-  app.add_option("--rate", rate_hz, "Loop rate [Hz]")->check(CLI::Range(50.0, 4000.0))
-      ->capture_default_str();
+  app.add_option("--rate", rate_hz, "Loop rate [Hz]")
+      ->check(shared::finiteRange(50.0, 4000.0, "Hz"))->capture_default_str();
   app.add_option("--core", core, "CPU core to pin the loop to (-1: the last core)");
   app.add_option("--priority", priority, "SCHED_FIFO priority (0: do not ask)")
       ->check(CLI::Range(0, 99))->capture_default_str();
   app.add_flag("--require-rt", require_rt, "Fail if pinning, SCHED_FIFO or mlockall is refused");
-  app.add_option("--max-force", settings.max_force_n, "Force clamp [N]")->capture_default_str();
+  using Limits = haptic::HapticSettingsLimits;
+  app.add_option("--max-force", settings.max_force_n, "Force clamp [N]")
+      ->check(shared::finiteAbove(0.0, Limits::kMaxForceN, "N"))->capture_default_str();
   app.add_option("--force-scale", settings.force_scale, "Rendered force per contact force")
-      ->capture_default_str();
+      ->check(shared::finiteRange(0.0, Limits::kMaxForceScale))->capture_default_str();
   app.add_option("--watchdog-ms", settings.watchdog_ms, "Fade out when the snapshot is older")
-      ->capture_default_str();
-  app.add_option("--fade-ms", settings.fade_ms, "Fade ramp [ms]")->capture_default_str();
+      ->check(shared::finiteAbove(0.0, Limits::kMaxWatchdogMs, "ms"))->capture_default_str();
+  app.add_option("--fade-ms", settings.fade_ms, "Fade ramp [ms]")
+      ->check(shared::finiteRange(0.0, Limits::kMaxFadeMs, "ms"))->capture_default_str();
   app.add_option("--slew", settings.slew_n_per_s, "Force slew-rate limit [N/s]")
-      ->capture_default_str();
+      ->check(shared::finiteAbove(0.0, Limits::kMaxSlewNPerS, "N/s"))->capture_default_str();
   app.add_option("--max-sweeps", settings.max_sweeps, "NSGS sweeps per tick")
-      ->capture_default_str();
-  app.add_option("--tolerance", settings.tolerance, "NSGS tolerance")->capture_default_str();
+      ->check(CLI::Range(1, Limits::kMaxSweeps))->capture_default_str();
+  app.add_option("--tolerance", settings.tolerance, "NSGS tolerance")
+      ->check(shared::finiteAbove(0.0, Limits::kMaxTolerance))->capture_default_str();
   app.add_flag("--render-torque", settings.render_torque, "Render torques too");
   app.add_option("--duration", duration_s,
                  "Stop after S seconds; 0 (the default): run until SIGINT, SIGTERM or SIGHUP")
@@ -84,17 +88,18 @@ int main(int argc, char** argv) {
     dev->open();
     dev->calibrate();
     const device::DeviceInfo info = dev->info();
-    if (info.max_force_n > 0.0 && info.max_force_n < settings.max_force_n) {
-      spdlog::info("clamping to the device's maximum force {} N", info.max_force_n);
-      settings.max_force_n = info.max_force_n;
-    }
     settings.render_torque = settings.render_torque && info.has_rotation;
     settings.period_ns = static_cast<std::int64_t>(std::llround(1e9 / rate_hz));
     settings.solve_budget_ns = settings.period_ns * 4 / 10;
-    spdlog::info("device '{}' ({}), max force {} N, loop {} Hz", device_name, info.model,
-                 settings.max_force_n, rate_hz);
 
+    // validates the settings and combines the clamp with the device's own limit
     haptic::HapticLoop loop(*dev, settings);
+    if (loop.forceLimitN() < settings.max_force_n) {
+      spdlog::info("clamping to the device's maximum force {} N", loop.forceLimitN());
+    }
+    spdlog::info("device '{}' ({}), max force {} N, loop {} Hz", device_name, info.model,
+                 loop.forceLimitN(), rate_hz);
+
     haptic::Supervisor supervisor(loop, segment);
     if (core < 0) core = shared::availableCpuCount() - 1;
 

@@ -41,7 +41,9 @@ void Supervisor::detach() {
 }
 
 void Supervisor::poll() {
-  // free a retired link once the loop acknowledged it no longer uses it
+  // free a retired link once the loop has published that it no longer holds it: retire()
+  // withdrew the offer first, and the tick re-checks the offer after announcing a link, so a
+  // linkInUse() other than the retired link now means the tick will never touch it again
   if (retired_ && loop_.linkInUse() != retired_.get()) retired_.reset();
   if (retired_) return;
 
@@ -108,6 +110,19 @@ int Supervisor::drainEvents() {
         break;
       case kEventNonFinite:
         spdlog::warn("device returned NaN/Inf: sample ignored, force faded out");
+        break;
+      case shared::kEventDeviceNoData:
+        spdlog::info("device returned no new data: holding the last pose");
+        break;
+      case shared::kEventForceClamped:
+        spdlog::info("force clamped: {:.2f} N requested, {:.2f} N rendered", e.arg0, e.arg1);
+        break;
+      case shared::kEventSolverNotConverged:
+        spdlog::info("haptic NSGS not converged within its budget ({} sweeps, error {:.2e})",
+                     e.arg0, e.arg1);
+        break;
+      case shared::kEventOverrun:
+        spdlog::warn("haptic tick overran its period by {:.1f} us", 1e-3 * e.arg0);
         break;
       default:
         spdlog::info("haptic event: {} ({}, {})", eventName(e.code), e.arg0, e.arg1);

@@ -327,6 +327,33 @@ void loadBlock(const ContactProblemView& p, int r, Local3& loc) noexcept {
   }
 }
 
+// Marks in `mark` (per row, 1.0 on a contact's first row) the contacts whose diagonal entries
+// Gauss-Seidel divides by are not usable (see NsgsStatus::kIllPosed); returns their number.
+int markIllPosed(const ContactProblemView& p, double* mark) noexcept {
+  const int m = p.rows;
+  double max_diag = 0.0;
+  for (int j = 0; j < m; ++j) {
+    const double d = p.W[static_cast<std::ptrdiff_t>(j) * p.ld + j];
+    if (d > max_diag) max_diag = d;   // NaN never compares greater
+  }
+  const double floor = kMinRelativeDiagonal * max_diag;
+  int count = 0;
+  for (int i = 0; i < p.contacts; ++i) {
+    const int r = p.row_offset[i];
+    const int k = p.row_offset[i + 1] - r;
+    const int used = (k == 3 && p.mu[i] > 0.0) ? 3 : 1;
+    bool bad = false;
+    for (int a = 0; a < used; ++a) {
+      const double d = p.W[static_cast<std::ptrdiff_t>(r + a) * p.ld + r + a];
+      if (!(std::isnormal(d) && d > 0.0 && d >= floor)) bad = true;
+    }
+    for (int a = 0; a < k; ++a) mark[r + a] = 0.0;
+    mark[r] = bad ? 1.0 : 0.0;
+    count += bad ? 1 : 0;
+  }
+  return count;
+}
+
 }  // namespace
 
 std::string_view toString(NsgsStatus status) noexcept {
@@ -336,6 +363,7 @@ std::string_view toString(NsgsStatus status) noexcept {
     case NsgsStatus::kTimeBudget: return "time_budget";
     case NsgsStatus::kNonFinite: return "non_finite";
     case NsgsStatus::kEmpty: return "empty";
+    case NsgsStatus::kIllPosed: return "ill_posed";
   }
   return "unknown";
 }
@@ -435,8 +463,22 @@ NsgsResult solveNsgs(const ContactProblemView& problem, const NsgsSettings& sett
       return fail(NsgsStatus::kNonFinite);
     }
   }
+  // contacts NSGS cannot solve: held at zero force (then delta must be formed afresh)
+  double* ill = workspace.scratch.data();
+  result.ill_posed_contacts = markIllPosed(p, ill);
+  bool delta_current = settings.delta_is_current;
+  if (result.ill_posed_contacts > 0) {
+    for (int i = 0; i < nc; ++i) {
+      const int r = p.row_offset[i];
+      if (ill[r] == 0.0) continue;
+      for (int j = r; j < p.row_offset[i + 1]; ++j) {
+        if (f[j] != 0.0) delta_current = false;
+        f[j] = 0.0;
+      }
+    }
+  }
   double delta2 = 0.0;
-  if (settings.delta_is_current) {
+  if (delta_current) {
     for (int j = 0; j < m; ++j) delta2 += delta[j] * delta[j];
   } else {
     delta2 = computeDelta(p, f, delta);
@@ -456,6 +498,7 @@ NsgsResult solveNsgs(const ContactProblemView& problem, const NsgsSettings& sett
       const int r = p.row_offset[i];
       const int k = p.row_offset[i + 1] - r;
       double* fi = f + r;
+      if (ill[r] != 0.0) continue;   // ill-posed: held at zero
       // current local velocity of contact i
       double di[3];
       if (row_gather) {
@@ -527,6 +570,13 @@ NsgsResult solveNsgs(const ContactProblemView& problem, const NsgsSettings& sett
     if (row_gather) computeDelta(p, f, delta);
     result.error = normalisedError(errorParts(p, f, delta), q2);
     if (!std::isfinite(result.error)) return fail(NsgsStatus::kNonFinite);
+    if (result.error <= settings.tolerance && !row_gather) {
+      // claim checked against delta = W f + q formed afresh (the running delta accumulates
+      // rounding, worst when f is large)
+      computeDelta(p, f, delta);
+      result.error = normalisedError(errorParts(p, f, delta), q2);
+      if (!std::isfinite(result.error)) return fail(NsgsStatus::kNonFinite);
+    }
     if (result.error <= settings.tolerance) {
       result.status = NsgsStatus::kConverged;
       break;
@@ -545,6 +595,7 @@ NsgsResult solveNsgs(const ContactProblemView& problem, const NsgsSettings& sett
       window_best = best_error;
     }
   }
+  if (result.ill_posed_contacts > 0) result.status = NsgsStatus::kIllPosed;
   result.sor = sor;
   result.elapsed_ns = nowNs() - t0;
   return result;

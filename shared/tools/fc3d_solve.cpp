@@ -1,5 +1,7 @@
 // tactus-fc3d-solve: solves one FCLIB frictional contact problem with the project's NSGS and
-// prints contacts, sweeps, error (Siconos normalisation), status and time.
+// prints contacts, sweeps, error (Siconos normalisation, recomputed from the returned forces),
+// status and time. Exit status 0 only when the solver converged; 2 otherwise (including a
+// problem with an unusable diagonal of W, status ill_posed).
 
 #include <spdlog/spdlog.h>
 
@@ -81,6 +83,11 @@ int run(int argc, char** argv) {
   std::printf("error     %.3e (Siconos fc3d error, normalised by max(|q|,|r|,|u|))\n", error);
   std::printf("status    %s (tol %.1e)\n", std::string(toString(result.status)).c_str(),
               settings.tolerance);
+  if (result.ill_posed_contacts > 0) {
+    std::printf("ill-posed %d contacts (W diagonal zero, negative, denormal or negligible: held at "
+                "zero force)\n",
+                result.ill_posed_contacts);
+  }
   std::printf("time      %.3f ms\n", static_cast<double>(result.elapsed_ns) * 1e-6);
   if (!output_path.empty()) {
     char comment[256];

@@ -129,12 +129,20 @@ struct StepWatch {
     }
   }
 
-  /// The assertions every case shares.
-  void expectHealthy(const std::string& name, double linear_penetration_bound_m) const {
+  /// The assertions every case shares. A solve stopped at the sweep budget is only tolerated
+  /// up to `max_budget_stops` times in the run (each case states its measured count with a small
+  /// margin: more means the solver got worse), and each such stop must have left a residual at
+  /// most `max_budget_residual` (a finite but useless iterate is not healthy).
+  void expectHealthy(const std::string& name, double linear_penetration_bound_m,
+                     long max_budget_stops, double max_budget_residual_bound) const {
     EXPECT_EQ(nonfinite_steps, 0) << name << ": non-finite state";
     EXPECT_EQ(bad_solves, 0) << name << ": NSGS neither converged nor stopped at its budget";
     EXPECT_LE(max_linear_penetration_m, linear_penetration_bound_m) << name;
     EXPECT_LE(max_residual, nsgs_tolerance) << name;
+    EXPECT_LE(budget_stops, max_budget_stops) << name << ": NSGS stopped at its sweep budget ("
+                                              << nsgs_max_sweeps << ") more often than measured";
+    EXPECT_LE(max_budget_residual, max_budget_residual_bound)
+        << name << ": a solve stopped at the sweep budget left a large residual";
   }
 
   std::string summary() const {

@@ -3,6 +3,10 @@
 // (and, where stated, the geometric one) below its bound, every NSGS solve converged below its
 // tolerance or stopped exactly at its sweep budget, and no energy growth where nothing drives the
 // scene (kinetic + elastic + gravity + the coupling spring's energy).
+// Budget stops are bounded per case (expectHealthy's third and fourth arguments): the measured
+// count plus a small margin, and the largest residual a budget stop may leave. Measured
+// (2026-11-24, 500-sweep budget, tolerance 1e-6): big sphere 7 stops (residual <= 4.61e-6),
+// mu 0 7 (1.03e-5), mu 2 2 (3.44e-6), press_through 69 (1.09e-5), every other case 0.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -113,7 +117,7 @@ TEST(HardCases, GraspAndLiftWithHighFriction) {
                                     fmt(" lobe_rise=%.4g m tool_rise=%.4g m E_rest=%.5g J "
                                         "growth=%.3g J",
                                         lobe_rise, tool_rise, rest.start_j, rest.growth()));
-  watch.expectHealthy("grasp_lift", 1e-5);
+  watch.expectHealthy("grasp_lift", 1e-5, 2, 1.2e-5);
   EXPECT_GT(watch.min_geometric_gap_m, -5e-4) << "penetration beyond 0.5 mm while holding";
   EXPECT_GT(watch.max_contacts, 4);
   EXPECT_GT(tool_rise, 0.018);
@@ -149,7 +153,7 @@ TEST(HardCases, ThreeHundredContactsWithARedundantContactMatrix) {
                                  fmt(" top_nodes=%.0f rows/dofs=%.3g E_hold=%.4g J growth=%.3g J",
                                      top_nodes, watch.max_rows / top_dofs, hold.start_j,
                                      hold.growth()));
-  watch.expectHealthy("many_contacts", 1e-5);
+  watch.expectHealthy("many_contacts", 1e-5, 2, 1.2e-5);
   EXPECT_GE(watch.max_contacts, 300);
   EXPECT_EQ(watch.contacts_dropped, 0);
   EXPECT_GT(watch.max_rows, top_dofs) << "fewer rows than the contact zone's DOFs";
@@ -170,7 +174,7 @@ TEST(HardCases, BigSphereOnAFineSurface) {
   });
   printCase("big_sphere_fine_surface",
             watch.summary() + fmt(" E_hold=%.4g J growth=%.3g J", hold.start_j, hold.growth()));
-  watch.expectHealthy("big sphere", 1e-5);
+  watch.expectHealthy("big sphere", 1e-5, 9, 6e-6);
   EXPECT_GT(watch.min_geometric_gap_m, -5e-4);
   EXPECT_LE(hold.growth(), 1e-3 * std::abs(hold.start_j) + 1e-9);
 }
@@ -219,7 +223,7 @@ TEST(HardCases, SoftTissueUnderAVeryStiffCoupling) {
                                   fmt(" tissue/tool compliance=%.3g F_contact_z=%.4g N "
                                       "F_hand_z=%.4g N growth=%.3g J",
                                       ratio, F.z(), coupling.z(), hold.growth()));
-  watch.expectHealthy("stiff_coupling", 1e-5);
+  watch.expectHealthy("stiff_coupling", 1e-5, 2, 1.2e-5);
   // (the ratio is bounded by the element size: a single surface node of this 0.8 mm mesh has a
   // compliance ~0.25 m/N at 1 kPa; 1e6 would take ~20 um elements)
   EXPECT_GT(ratio, 1e4) << "the case is meant to have a tissue/tool compliance ratio >= 1e4";
@@ -414,7 +418,7 @@ TEST(HardCases, SliversAndNearInvertedElements) {
                                min_ratio, volume_ratio, F.z(), hold.growth()) +
                            " inverted=" + std::to_string(inverted));
   std::filesystem::remove_all(dir);
-  watch.expectHealthy("slivers", 1e-5);
+  watch.expectHealthy("slivers", 1e-5, 2, 1.2e-5);
   EXPECT_GT(watch.min_geometric_gap_m, -5e-4);
   EXPECT_GT(F.z(), 0.1);
   EXPECT_NEAR(volume_ratio, 1.0, 0.03);
@@ -451,8 +455,8 @@ TEST(HardCases, TimeSteps1e4And004HoldTheSameForce) {
   const PressResult b = runPress("press_dt_0.04.yaml", &coarse);
   printCase("dt_1e-4", fine.summary() + fmt(" F_z=%.4g N growth=%.3g J", a.force_z, a.growth));
   printCase("dt_0.04", coarse.summary() + fmt(" F_z=%.4g N growth=%.3g J", b.force_z, b.growth));
-  fine.expectHealthy("dt 1e-4", 1e-5);
-  coarse.expectHealthy("dt 0.04", 1e-5);
+  fine.expectHealthy("dt 1e-4", 1e-5, 2, 1.2e-5);
+  coarse.expectHealthy("dt 0.04", 1e-5, 2, 1.2e-5);
   EXPECT_GT(fine.min_geometric_gap_m, -5e-4);
   EXPECT_GT(coarse.min_geometric_gap_m, -5e-4);
   EXPECT_GT(a.force_z, 0.3);
@@ -510,8 +514,8 @@ TEST(HardCases, FrictionlessAndMuTwo) {
   printCase("mu2", w2.summary() + fmt(" F_hand=(%.3g, %.3g, %.3g) N cone_excess=%.3g N", b.hand.x(),
                                       b.hand.y(), b.hand.z(), b.worst_cone) +
                        fmt(" growth=%.3g J", b.growth));
-  w0.expectHealthy("mu 0", 1e-5);
-  w2.expectHealthy("mu 2", 1e-5);
+  w0.expectHealthy("mu 0", 1e-5, 9, 1.2e-5);
+  w2.expectHealthy("mu 2", 1e-5, 4, 5e-6);
   EXPECT_GT(w0.min_geometric_gap_m, -5e-4);
   EXPECT_GT(w2.min_geometric_gap_m, -5e-4);
   // mu = 0: one row per contact, no tangential rows, no lateral force at rest
@@ -584,7 +588,7 @@ TEST(HardCases, ToolPressedThroughTheOrganDoesNotTunnel) {
                 " tunnel_steps=" + std::to_string(tunnel_steps) +
                 fmt(" first_at=%.2f s", first_tunnel_t) +
                 " crushed_steps=" + std::to_string(crushed_steps));
-  watch.expectHealthy("press_through", 1e-5);
+  watch.expectHealthy("press_through", 1e-5, 76, 1.2e-5);
   EXPECT_GT(watch.min_geometric_gap_m, -5e-4);
   EXPECT_EQ(tunnel_steps, 0);
   EXPECT_EQ(crushed_steps, 0) << "tets inverted under the tip";
@@ -634,7 +638,7 @@ TEST(HardCases, NonFiniteDeviceTargetsDoNotCorruptTheSimulation) {
   const double f_after = sim.renderedWrench()[2];
   printCase("nan_device_sim", watch.summary() +
                                   fmt(" F_before=%.4g N F_after=%.4g N", f_before, f_after));
-  watch.expectHealthy("nan target", 1e-5);
+  watch.expectHealthy("nan target", 1e-5, 2, 1.2e-5);
   EXPECT_GT(watch.min_geometric_gap_m, -5e-4);
   EXPECT_GT(f_before, 0.1);
   EXPECT_NEAR(f_after, f_before, 0.02 * f_before);

@@ -1,5 +1,6 @@
 #pragma once
-// Counting replacement of the global operator new/delete for "zero allocations" tests.
+// Counting replacement of the global operator new/delete, and (glibc) of malloc, calloc,
+// realloc, aligned_alloc, posix_memalign, memalign and free, for "zero allocations" tests.
 //
 // Include this header in exactly ONE translation unit of a test executable (it defines the
 // replaceable global allocation functions). Then:
@@ -10,7 +11,12 @@
 //
 // Counting is per thread (thread_local), so allocations of unrelated threads (a recorder's
 // flusher, gtest internals on other threads) do not pollute the measurement; a process-wide
-// total is kept too. malloc/calloc called directly are not counted (only operator new).
+// total is kept too. Every operator new and every C allocation call (malloc, calloc, realloc,
+// aligned_alloc, posix_memalign, memalign) counts once; cAllocations() counts the C calls alone.
+// The C functions are interposed by defining them in the executable (glibc resolves the
+// program's own definitions first, for libstdc++ and every other library too) and forward to
+// glibc's __libc_* entry points; operator new allocates through those directly, so it is not
+// counted twice.
 
 #include <atomic>
 #include <cstddef>
@@ -18,11 +24,27 @@
 #include <cstdlib>
 #include <new>
 
+extern "C" {
+void* __libc_malloc(std::size_t n);
+void* __libc_calloc(std::size_t count, std::size_t n);
+void* __libc_realloc(void* p, std::size_t n);
+void* __libc_memalign(std::size_t align, std::size_t n);
+void __libc_free(void* p);
+}
+
 namespace tactus::test {
 
 namespace detail {
+// constant-initialised thread-locals of the executable: no allocation on first use
 inline thread_local std::int64_t thread_allocations = 0;
+inline thread_local std::int64_t thread_c_allocations = 0;
 inline std::atomic<std::int64_t> total_allocations{0};
+
+inline void countC() noexcept {
+  ++thread_c_allocations;
+  ++thread_allocations;
+  total_allocations.fetch_add(1, std::memory_order_relaxed);
+}
 
 inline void countOne() noexcept {
   ++thread_allocations;
@@ -32,7 +54,7 @@ inline void countOne() noexcept {
 
 inline void* allocate(std::size_t n) {
   countOne();
-  void* p = std::malloc(n == 0 ? 1 : n);
+  void* p = __libc_malloc(n == 0 ? 1 : n);
   if (p == nullptr) throw std::bad_alloc();
   return p;
 }
@@ -41,13 +63,16 @@ inline void* allocateAligned(std::size_t n, std::size_t align) {
   countOne();
   if (align < sizeof(void*)) align = sizeof(void*);
   const std::size_t rounded = (n + align - 1) / align * align;
-  void* p = std::aligned_alloc(align, rounded == 0 ? align : rounded);
+  void* p = __libc_memalign(align, rounded == 0 ? align : rounded);
   if (p == nullptr) throw std::bad_alloc();
   return p;
 }
 }  // namespace detail
 
-/// Allocations (operator new calls) made by the calling thread so far.
+/// C allocation calls (malloc family) made by the calling thread so far.
+inline std::int64_t threadCAllocations() noexcept { return detail::thread_c_allocations; }
+
+/// Allocations (operator new and malloc-family calls) made by the calling thread so far.
 inline std::int64_t threadAllocations() noexcept { return detail::thread_allocations; }
 /// Allocations made by all threads so far.
 inline std::int64_t totalAllocations() noexcept {
@@ -57,14 +82,51 @@ inline std::int64_t totalAllocations() noexcept {
 /// RAII: allocations made by this thread between construction and allocations().
 class AllocScope {
  public:
-  AllocScope() noexcept : start_(threadAllocations()) {}
+  AllocScope() noexcept : start_(threadAllocations()), c_start_(threadCAllocations()) {}
+  /// operator new and malloc-family calls
   std::int64_t allocations() const noexcept { return threadAllocations() - start_; }
+  /// malloc-family calls only
+  std::int64_t cAllocations() const noexcept { return threadCAllocations() - c_start_; }
 
  private:
   std::int64_t start_;
+  std::int64_t c_start_;
 };
 
 }  // namespace tactus::test
+
+// The C allocator, interposed (must not be inline; glibc only).
+extern "C" {
+void* malloc(std::size_t n) noexcept {
+  tactus::test::detail::countC();
+  return __libc_malloc(n);
+}
+void* calloc(std::size_t count, std::size_t n) noexcept {
+  tactus::test::detail::countC();
+  return __libc_calloc(count, n);
+}
+void* realloc(void* p, std::size_t n) noexcept {
+  tactus::test::detail::countC();
+  return __libc_realloc(p, n);
+}
+void* aligned_alloc(std::size_t align, std::size_t n) noexcept {
+  tactus::test::detail::countC();
+  return __libc_memalign(align, n);
+}
+void* memalign(std::size_t align, std::size_t n) noexcept {
+  tactus::test::detail::countC();
+  return __libc_memalign(align, n);
+}
+int posix_memalign(void** out, std::size_t align, std::size_t n) noexcept {
+  tactus::test::detail::countC();
+  if (align < sizeof(void*) || (align & (align - 1)) != 0) return 22;  // EINVAL
+  void* p = __libc_memalign(align, n);
+  if (p == nullptr) return 12;  // ENOMEM
+  *out = p;
+  return 0;
+}
+void free(void* p) noexcept { __libc_free(p); }
+}
 
 // Replaceable global allocation functions (must not be inline).
 void* operator new(std::size_t n) { return tactus::test::detail::allocate(n); }
@@ -89,11 +151,11 @@ void* operator new(std::size_t n, std::align_val_t a) {
 void* operator new[](std::size_t n, std::align_val_t a) {
   return tactus::test::detail::allocateAligned(n, static_cast<std::size_t>(a));
 }
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete[](void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
-void operator delete(void* p, std::align_val_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::align_val_t) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
+void operator delete(void* p) noexcept { __libc_free(p); }
+void operator delete[](void* p) noexcept { __libc_free(p); }
+void operator delete(void* p, std::size_t) noexcept { __libc_free(p); }
+void operator delete[](void* p, std::size_t) noexcept { __libc_free(p); }
+void operator delete(void* p, std::align_val_t) noexcept { __libc_free(p); }
+void operator delete[](void* p, std::align_val_t) noexcept { __libc_free(p); }
+void operator delete(void* p, std::size_t, std::align_val_t) noexcept { __libc_free(p); }
+void operator delete[](void* p, std::size_t, std::align_val_t) noexcept { __libc_free(p); }

@@ -15,6 +15,7 @@ class ScriptedDevice : public device::Device {
   void close() noexcept override {}
   device::IoStatus read(device::DeviceState* out) noexcept override {
     if (fault) return device::IoStatus::kFault;
+    if (no_data) return device::IoStatus::kNoData;
     *out = state;
     return device::IoStatus::kOk;
   }
@@ -25,6 +26,7 @@ class ScriptedDevice : public device::Device {
   device::DeviceState state{};       ///< what read() returns
   device::DeviceCommand last{};      ///< the last command written
   bool fault = false;                ///< read() reports a fault
+  bool no_data = false;              ///< read() reports no new data (state unchanged)
 };
 
 }  // namespace tactus::test

@@ -90,6 +90,7 @@ struct FemBody::Impl {
   bool surface_ready = false;
   std::uint64_t hash = 0;
   Counters counters;
+  bool inversion_warned = false;   // "inverted elements" is logged once per body
 
   void init(const TetMesh& m, const FemMaterial& mat, const std::vector<int>& fixed_nodes,
             const Eigen::Vector3d* g, const FemSolverOptions& opt);
@@ -550,6 +551,14 @@ FemStepStats FemBody::freeMotion(double h, const Eigen::VectorXd* external_force
   const bool damped = m.material.damping.has_value();
   const double alpha = damped ? m.material.damping->mass_alpha_per_s : 0.0;
   const double beta = damped ? m.material.damping->stiffness_beta_s : 0.0;
+  stats.inverted_elements = invertedElementCount();
+  if (stats.inverted_elements > 0 && !m.inversion_warned) {
+    m.inversion_warned = true;
+    spdlog::warn("{}: {} of {} tetrahedra inverted (det F <= 0); the corotational force pushes "
+                 "them back. If the count stays up (stats inverted_elements, VTU cell field "
+                 "volume_ratio), the mesh or the material cannot carry the load. Logged once.",
+                 m.mesh.source, stats.inverted_elements, m.mesh.tetCount());
+  }
 
   // linearise at q + h v: internal force, tangent, and K v for the damping force
   m.x_lin = m.q + h * m.v;
@@ -717,6 +726,21 @@ void FemBody::stresses(std::vector<Eigen::Matrix3d>& out) const {
         m.sigma(0.5 * (fl + fl.transpose()) - Eigen::Matrix3d::Identity());
     out[e] = r * s * r.transpose();
   }
+}
+
+void FemBody::volumeRatios(Eigen::VectorXd& out) const {
+  const Impl& m = *impl_;
+  out.resize(m.mesh.tetCount());
+  for (int e = 0; e < m.mesh.tetCount(); ++e) out[e] = m.elementF(e, m.q).determinant();
+}
+
+int FemBody::invertedElementCount() const {
+  const Impl& m = *impl_;
+  int count = 0;
+  for (int e = 0; e < m.mesh.tetCount(); ++e) {
+    if (!(m.elementF(e, m.q).determinant() > 0.0)) ++count;
+  }
+  return count;
 }
 
 void FemBody::vonMises(Eigen::VectorXd& out) const {

@@ -13,6 +13,7 @@
 #include <spdlog/spdlog.h>
 
 #include "tactus/shared/error.h"
+#include "tactus/sim/fem.h"
 
 namespace tactus::sim::fem_detail {
 
@@ -114,23 +115,28 @@ Eigen::Matrix3d polarRotation(const Eigen::Matrix3d& F) {
 namespace {
 
 // CHOLMOD (Debian's build) runs parts of the supernodal factorisation in OpenMP parallel regions
-// of up to 4 threads. On our 2-core machine, where the haptic loop owns one core, those threads
-// only contend (measured: liver2 factorisation 5 ms -> 2.8 ms serial). Serialise every OpenMP
-// region of the process once, through libgomp if CHOLMOD loaded it (no link dependency).
-void serialiseOpenMp() {
-  static const bool done = [] {
-    using SetLevels = void (*)(int);
-    if (auto* fn = reinterpret_cast<SetLevels>(dlsym(RTLD_DEFAULT, "omp_set_max_active_levels")))
-      fn(0);
-    return true;
-  }();
-  (void)done;
+// of up to 4 threads, and its BLAS may be the multi-threaded OpenBLAS. On our 2-core machine,
+// where the haptic loop owns one core, those threads only contend (measured: liver2
+// factorisation 5 ms -> 2.8 ms serial; a pthread OpenBLAS worker spinning in sched_yield cost
+// sim_server 116 % CPU). See limitNumericThreads in fem.h.
+NumericThreads applyNumericThreadLimitImpl() {
+  using SetLevels = void (*)(int);
+  if (auto* fn = reinterpret_cast<SetLevels>(dlsym(RTLD_DEFAULT, "omp_set_max_active_levels")))
+    fn(0);
+  using SetThreads = void (*)(int);
+  if (auto* fn = reinterpret_cast<SetThreads>(dlsym(RTLD_DEFAULT, "openblas_set_num_threads")))
+    fn(1);
+  const NumericThreads now = queryNumericThreads();
+  spdlog::info("numeric threads: BLAS {} ({}), OpenMP max active levels {}", now.blas_threads,
+               now.blas_config.empty() ? "no OpenBLAS" : now.blas_config,
+               now.omp_max_active_levels);
+  return now;
 }
 
 }  // namespace
 
 CholmodSolver::CholmodSolver() {
-  serialiseOpenMp();
+  limitNumericThreads();
   cholmod_start(&common_);
   common_.print = 0;
   common_.error_handler = nullptr;
@@ -253,3 +259,27 @@ std::uint64_t fnv1a(const void* data, std::size_t bytes, std::uint64_t seed) {
 }
 
 }  // namespace tactus::sim::fem_detail
+
+namespace tactus::sim {
+
+NumericThreads queryNumericThreads() {
+  NumericThreads out;
+  using GetThreads = int (*)();
+  using GetConfig = char* (*)();
+  if (auto* fn = reinterpret_cast<GetThreads>(dlsym(RTLD_DEFAULT, "openblas_get_num_threads")))
+    out.blas_threads = fn();
+  if (auto* fn = reinterpret_cast<GetConfig>(dlsym(RTLD_DEFAULT, "openblas_get_config"))) {
+    if (const char* c = fn()) out.blas_config = c;
+  }
+  using GetLevels = int (*)();
+  if (auto* fn = reinterpret_cast<GetLevels>(dlsym(RTLD_DEFAULT, "omp_get_max_active_levels")))
+    out.omp_max_active_levels = fn();
+  return out;
+}
+
+NumericThreads limitNumericThreads() {
+  static const NumericThreads applied = fem_detail::applyNumericThreadLimitImpl();
+  return applied;
+}
+
+}  // namespace tactus::sim

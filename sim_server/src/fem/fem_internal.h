@@ -17,6 +17,12 @@ namespace tactus::sim::fem_detail {
 /// F: scaled Newton iteration (the unique polar factor); otherwise (inverted, flat or
 /// ill-conditioned): SVD F = U S V^T with the singular vector of the smallest singular value
 /// flipped when det(U V^T) < 0, so R is a proper rotation even for inverted elements.
+/// For det F < 0 this is Irving et al.'s reflection-aware ("invertible") polar decomposition:
+/// the stretch S = R^T F is symmetric with one negative principal stretch, so the linear
+/// corotational strain sym(S) - I compresses that direction past zero and the elastic force
+/// pushes the element back out of inversion (tests: polar_test InvertedGradientsPutTheInversion
+/// InTheStretch, fem_test Inversion.*). The linear material's restoring stress is bounded, so a
+/// large enough load can still hold an element inverted at equilibrium: FemStepStats counts them.
 Eigen::Matrix3d polarRotation(const Eigen::Matrix3d& F);
 
 /// Sparse symmetric positive-definite factorisation through the CHOLMOD C API. The matrix is the

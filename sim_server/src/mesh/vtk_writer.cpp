@@ -48,7 +48,7 @@ std::string xmlEscape(const std::string& s) {
 
 void writeVtu(const std::filesystem::path& path, const TetMesh& mesh,
               const Eigen::Matrix3Xd& positions, const Eigen::Matrix3Xd& displacement,
-              const Eigen::VectorXd& von_mises) {
+              const Eigen::VectorXd& von_mises, const Eigen::VectorXd& volume_ratio) {
   const Eigen::Index n = mesh.nodes.cols();
   const auto m = static_cast<Eigen::Index>(mesh.tets.size());
   if (positions.cols() != n) {
@@ -62,6 +62,10 @@ void writeVtu(const std::filesystem::path& path, const TetMesh& mesh,
   if (von_mises.size() != 0 && von_mises.size() != m) {
     throw Error(fmt::format("{}: writeVtu got {} von Mises values for {} tets", path.string(),
                             von_mises.size(), m));
+  }
+  if (volume_ratio.size() != 0 && volume_ratio.size() != m) {
+    throw Error(fmt::format("{}: writeVtu got {} volume ratios for {} tets", path.string(),
+                            volume_ratio.size(), m));
   }
   std::string s;
   s.reserve(static_cast<std::size_t>(n * 80 + m * 40 + 1024));
@@ -98,14 +102,30 @@ void writeVtu(const std::filesystem::path& path, const TetMesh& mesh,
     }
     s += "</DataArray>\n</PointData>\n";
   }
-  if (von_mises.size() == m && m > 0) {
-    s += "<CellData Scalars=\"von_mises\">\n<DataArray type=\"Float64\" Name=\"von_mises\" "
-         "format=\"ascii\">\n";
-    for (Eigen::Index c = 0; c < m; ++c) {
-      appendDouble(&s, von_mises(c));
-      s += '\n';
+  const bool with_vm = von_mises.size() == m && m > 0;
+  const bool with_ratio = volume_ratio.size() == m && m > 0;
+  if (with_vm || with_ratio) {
+    s += with_vm ? "<CellData Scalars=\"von_mises\">\n" : "<CellData Scalars=\"volume_ratio\">\n";
+    if (with_vm) {
+      s += "<DataArray type=\"Float64\" Name=\"von_mises\" format=\"ascii\">\n";
+      for (Eigen::Index c = 0; c < m; ++c) {
+        appendDouble(&s, von_mises(c));
+        s += '\n';
+      }
+      s += "</DataArray>\n";
     }
-    s += "</DataArray>\n</CellData>\n";
+    if (with_ratio) {
+      // det F: current / rest signed volume; inverted: 1 where det F <= 0
+      s += "<DataArray type=\"Float64\" Name=\"volume_ratio\" format=\"ascii\">\n";
+      for (Eigen::Index c = 0; c < m; ++c) {
+        appendDouble(&s, volume_ratio(c));
+        s += '\n';
+      }
+      s += "</DataArray>\n<DataArray type=\"UInt8\" Name=\"inverted\" format=\"ascii\">\n";
+      for (Eigen::Index c = 0; c < m; ++c) s += volume_ratio(c) > 0.0 ? "0\n" : "1\n";
+      s += "</DataArray>\n";
+    }
+    s += "</CellData>\n";
   }
   s += "</Piece>\n</UnstructuredGrid>\n</VTKFile>\n";
   writeFile(path, s);

@@ -48,11 +48,41 @@ HapticLink::~HapticLink() {
   }
 }
 
+bool deviceSampleFresh(const shared::DeviceSample& s, std::int64_t now_ns,
+                       std::int64_t watchdog_ns) {
+  const std::int64_t age = now_ns - s.t_ns;
+  return s.seq != 0 && age < watchdog_ns && (s.status & shared::kDeviceFault) == 0;
+}
+
+bool deviceTargetFromSample(const shared::DeviceSample& s, double max_opening_rad,
+                            DeviceTarget& target) {
+  const auto finite = [](const auto& a) {
+    return std::all_of(a.begin(), a.end(), [](double x) { return std::isfinite(x); });
+  };
+  if (!finite(s.pos_m) || !finite(s.quat_wxyz)) return false;
+  // orientation: scaled before normalising, so that huge components cannot overflow
+  Eigen::Vector4d q(s.quat_wxyz[0], s.quat_wxyz[1], s.quat_wxyz[2], s.quat_wxyz[3]);
+  const double q_max = q.cwiseAbs().maxCoeff();
+  if (!(q_max > 0.0)) return false;
+  q /= q_max;
+  q.normalize();
+  target.pose.pos_m = Eigen::Vector3d(s.pos_m[0], s.pos_m[1], s.pos_m[2]);
+  target.pose.rot = Eigen::Quaterniond(q[0], q[1], q[2], q[3]);
+  const Eigen::Vector3d v(s.vel_mps[0], s.vel_mps[1], s.vel_mps[2]);
+  const Eigen::Vector3d w(s.angvel_radps[0], s.angvel_radps[1], s.angvel_radps[2]);
+  target.twist.head<3>() = boundedNorm(v, kMaxDeviceSpeedMps);
+  target.twist.tail<3>() = boundedNorm(w, kMaxDeviceAngularSpeedRadps);
+  // the device's gripper angle maps onto the jaws' opening range
+  const double full_rad = max_opening_rad > 0.0 ? max_opening_rad : 1.0;
+  const double opening = std::isfinite(s.gripper_rad) ? s.gripper_rad / full_rad : 1.0;
+  target.gripper_opening = std::clamp(opening, 0.0, 1.0);
+  return true;
+}
+
 bool HapticLink::deviceTarget(DeviceTarget& target) {
   const shared::DeviceSample& s = device_.latest();
   const std::int64_t now = shared::monotonicNs();
-  const std::int64_t age = now - s.t_ns;
-  const bool fresh = s.seq != 0 && age < watchdog_ns_ && (s.status & shared::kDeviceFault) == 0;
+  const bool fresh = deviceSampleFresh(s, now, watchdog_ns_);
   if (fresh != device_active_) {
     spdlog::info(fresh ? "device samples arriving: the instrument follows the device"
                        : "no fresh device sample: the instrument follows the scene's script");
@@ -62,17 +92,6 @@ bool HapticLink::deviceTarget(DeviceTarget& target) {
     have_good_ = false;   // the script took over: the next device sample starts afresh
     return false;
   }
-  const auto finite = [](const auto& a) {
-    return std::all_of(a.begin(), a.end(), [](double x) { return std::isfinite(x); });
-  };
-  if (!finite(s.pos_m) || !finite(s.quat_wxyz)) return false;
-  // position: clamped into the workspace, then no faster than a hand can move
-  const Eigen::Vector3d raw(s.pos_m[0], s.pos_m[1], s.pos_m[2]);
-  const Eigen::Vector3d pos = raw.cwiseMax(workspace_.min_m).cwiseMin(workspace_.max_m);
-  if (!(pos == raw)) ++clamped_;
-  // orientation: scale before normalising so that huge components cannot overflow
-  Eigen::Vector4d q(s.quat_wxyz[0], s.quat_wxyz[1], s.quat_wxyz[2], s.quat_wxyz[3]);
-  const double q_max = q.cwiseAbs().maxCoeff();
   if (!have_good_) {
     // the device takes over from the script: its first sample is judged against the script
     last_good_ = target;
@@ -80,19 +99,25 @@ bool HapticLink::deviceTarget(DeviceTarget& target) {
     last_good_ns_ = now;
     have_good_ = true;
   }
+  DeviceTarget candidate = target;
+  const bool usable = deviceTargetFromSample(s, max_opening_rad_, candidate);
   // the raw position is judged (so 1e300 m never passes), the clamped one is used
   const double dt_s = 1e-9 * static_cast<double>(std::max<std::int64_t>(0, now - last_good_ns_));
   const double allowed_m = kJumpAllowanceM + kMaxDeviceSpeedMps * dt_s;
-  const Eigen::Vector3d jump = raw - last_good_.pose.pos_m;
+  const Eigen::Vector3d jump = candidate.pose.pos_m - last_good_.pose.pos_m;
   const double jump_scale = jump.cwiseAbs().maxCoeff();   // |jump| without overflow
-  const bool plausible =
-      q_max > 0.0 && !(jump_scale > 0.0 && jump_scale * (jump / jump_scale).norm() > allowed_m);
-  if (!plausible) {
+  const double jump_m = jump_scale > 0.0 ? jump_scale * (jump / jump_scale).norm() : 0.0;
+  if (!usable || jump_m > allowed_m) {
     // hold the last accepted target, at rest
     if (!rejecting_) {
-      spdlog::warn("implausible device sample (a jump of {:.3g} m in {:.3g} ms, or a zero "
-                   "orientation): rejected, holding the last good target until samples are sane",
-                   jump_scale > 0.0 ? jump_scale * (jump / jump_scale).norm() : 0.0, 1e3 * dt_s);
+      if (usable) {
+        spdlog::warn("implausible device sample (a jump of {:.3g} m in {:.3g} ms): rejected, "
+                     "holding the last good target until samples are sane",
+                     jump_m, 1e3 * dt_s);
+      } else {
+        spdlog::warn("unusable device sample (non-finite pose or zero orientation): holding the "
+                     "last good target until samples are sane");
+      }
       rejecting_ = true;
     }
     ++rejected_jumps_;
@@ -103,17 +128,10 @@ bool HapticLink::deviceTarget(DeviceTarget& target) {
     spdlog::info("device samples plausible again: the instrument follows the device");
     rejecting_ = false;
   }
-  q /= q_max;
-  q.normalize();
-  target.pose.pos_m = pos;
-  target.pose.rot = Eigen::Quaterniond(q[0], q[1], q[2], q[3]);
-  const Eigen::Vector3d v(s.vel_mps[0], s.vel_mps[1], s.vel_mps[2]);
-  const Eigen::Vector3d w(s.angvel_radps[0], s.angvel_radps[1], s.angvel_radps[2]);
-  target.twist.head<3>() = boundedNorm(v, kMaxDeviceSpeedMps);
-  target.twist.tail<3>() = boundedNorm(w, kMaxDeviceAngularSpeedRadps);
-  // the device's gripper angle maps onto the jaws' opening range
-  const double opening = std::isfinite(s.gripper_rad) ? s.gripper_rad / max_opening_rad_ : 1.0;
-  target.gripper_opening = std::clamp(opening, 0.0, 1.0);
+  const Eigen::Vector3d raw = candidate.pose.pos_m;
+  candidate.pose.pos_m = raw.cwiseMax(workspace_.min_m).cwiseMin(workspace_.max_m);
+  if (!(candidate.pose.pos_m == raw)) ++clamped_;
+  target = candidate;
   device_seq_ = s.seq;
   ++samples_used_;
   last_good_ = target;
@@ -151,9 +169,13 @@ bool writeSnapshot(const Simulation& sim, double max_opening_rad, std::uint64_t 
   hdr.step = static_cast<std::uint64_t>(sim.stepIndex());
   hdr.h_s = sim.spec().time_step_s;
   hdr.device_seq = device_seq;
-  hdr.solver_sweeps = 0;
-  hdr.solver_error = 0.0;
-  hdr.flags = shared::kSnapshotValid | shared::kSnapshotHasJacobian;
+  const bool solved = fits && rows > 0 && p.solve.status != shared::NsgsStatus::kEmpty;
+  hdr.solver_sweeps = solved ? p.solve.sweeps : 0;
+  hdr.solver_error = solved ? p.solve.error : 0.0;
+  hdr.flags = shared::kSnapshotValid | shared::kSnapshotHasJacobian |
+              (solved && p.solve.status == shared::NsgsStatus::kConverged
+                   ? shared::kSnapshotConverged
+                   : 0u);
   auto put_pose = [](shared::PoseSample& out, const shared::Pose& pose, double gripper) {
     for (int i = 0; i < 3; ++i) out.pos_m[i] = pose.pos_m[i];
     out.quat_wxyz = {pose.rot.w(), pose.rot.x(), pose.rot.y(), pose.rot.z()};
@@ -182,6 +204,17 @@ bool writeSnapshot(const Simulation& sim, double max_opening_rad, std::uint64_t 
     slot.f()[i] = p.f[i];
     for (int k = 0; k < 6; ++k) slot.J()[6 * i + k] = p.J(i, k);
   }
+  // the haptic side's symmetric sweep needs W == W^T exactly: say so only when it holds
+  bool symmetric = true;
+  for (int i = 0; i < rows && symmetric; ++i) {
+    for (int j = i + 1; j < rows; ++j) {
+      if (!(W[static_cast<std::ptrdiff_t>(i) * ld + j] == W[static_cast<std::ptrdiff_t>(j) * ld + i])) {
+        symmetric = false;
+        break;
+      }
+    }
+  }
+  if (symmetric) hdr.flags |= shared::kSnapshotSymmetricW;
   return fits;
 }
 

@@ -3,18 +3,19 @@
 // step's contact problem (the haptic local model) and reads the newest device sample.
 //
 // Device samples are untrusted input. A fresh sample drives the instrument only after:
-//  * non-finite values: the sample is ignored (the script or the held target goes on);
-//  * position: clamped into the instrument's workspace (counted in clampedSamples());
-//  * jumps: a device cannot move faster than kMaxDeviceSpeedMps. A raw position further
-//    than kJumpAllowanceM + kMaxDeviceSpeedMps * (time since the last accepted sample) from the
-//    last accepted one is rejected (counted in rejectedJumps()) and the last accepted target is
-//    held at rest. The first sample after the script drove is judged against the scripted
-//    target. The allowance grows with time, so a device that really is elsewhere (e.g.
-//    re-homed) is followed again after (distance / kMaxDeviceSpeedMps) s, and a sane sample
-//    near the last good one is followed at once; 1e300 m never is;
-//  * orientation: any finite non-zero quaternion is normalised (scaled first, so huge components
-//    do not overflow); a zero one is rejected like a jump;
-//  * twist: bounded to kMaxDeviceSpeedMps / kMaxDeviceAngularSpeedRadps.
+//  * per sample (deviceTargetFromSample, pipeline.h): a non-finite pose or a zero orientation
+//    makes it unusable; any other finite quaternion is normalised (scaled first, so huge
+//    components do not overflow); the twist is bounded to kMaxDeviceSpeedMps /
+//    kMaxDeviceAngularSpeedRadps (non-finite parts zeroed);
+//  * jumps: a device cannot move faster than kMaxDeviceSpeedMps. A raw position further than
+//    kJumpAllowanceM + kMaxDeviceSpeedMps * (time since the last accepted sample) from the last
+//    accepted one, or an unusable sample, is rejected (counted in rejectedJumps(), logged once
+//    per episode) and the last accepted target is held at rest. The first sample after the
+//    script drove is judged against the scripted target. The allowance grows with time, so a
+//    device that really is elsewhere (e.g. re-homed) is followed again after
+//    (distance / kMaxDeviceSpeedMps) s, a sane sample near the last good one at once, and
+//    1e300 m never;
+//  * position: clamped into the instrument's workspace (counted in clampedSamples()).
 //
 // Displacement: displacedReason() tells, at most every kDisplacementCheckNs (one stat() call, off
 // the hot path), whether the segment's name no longer refers to this simulation's object

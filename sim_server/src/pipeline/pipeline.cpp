@@ -543,6 +543,7 @@ void Simulation::Impl::solveAndCorrect(StepReport& report, bool restore_free) {
   } else {
     report.nsgs = shared::NsgsResult{};
   }
+  p.solve = report.nsgs;
   previous_f.clear();
   for (int c = 0; c < contacts; ++c) {
     const int r0 = p.row_offset[c];
@@ -622,6 +623,7 @@ StepReport Simulation::step() {
     if (s.instrument) ts.q_begin = ts.body->positions();
     const FemStepStats st = ts.body->freeMotion(h);
     if (!st.ok) report.finite = false;
+    report.inverted_elements += st.inverted_elements;
   }
   if (s.instrument) {
     s.tool_begin = s.instrument->pose();
@@ -701,8 +703,10 @@ void Simulation::writeOutputIfDue() {
         pos - Eigen::Map<const Eigen::Matrix3Xd>(ts.body->restPositions().data(), 3, n);
     Eigen::VectorXd vm;
     ts.body->vonMises(vm);
+    Eigen::VectorXd volume_ratio;
+    ts.body->volumeRatios(volume_ratio);
     const std::string file = fmt::format("{}_{:06d}.vtu", ts.name, s.frame);
-    writeVtu(dir / file, ts.body->mesh(), pos, disp, vm);
+    writeVtu(dir / file, ts.body->mesh(), pos, disp, vm, volume_ratio);
     s.vtk_files.push_back(file);
     s.vtk_times.push_back(s.t_s);
   }

@@ -84,6 +84,8 @@ void RunStatistics::add(const StepReport& r) {
   contacts_.push_back(r.contacts);
   sweeps_.push_back(r.nsgs.sweeps);
   max_penetration_m_ = std::max(max_penetration_m_, r.max_penetration_m);
+  max_inverted_ = std::max(max_inverted_, r.inverted_elements);
+  last_inverted_ = r.inverted_elements;
 }
 
 std::vector<StageSummary> RunStatistics::stages() const {
@@ -123,8 +125,10 @@ std::string RunStatistics::json(const std::string& scene) const {
                        1e3 * st[i].max_s, 1e3 * st[i].mean_s, i + 1 < st.size() ? "," : "");
   }
   out += fmt::format("  }},\n  \"contacts_median\": {:.1f},\n  \"contacts_max\": {},\n"
-                     "  \"sweeps_median\": {:.1f},\n  \"max_penetration_mm\": {:.6f}\n}}\n",
-                     medianContacts(), maxContacts(), medianSweeps(), 1e3 * max_penetration_m_);
+                     "  \"sweeps_median\": {:.1f},\n  \"max_penetration_mm\": {:.6f},\n"
+                     "  \"inverted_elements_max\": {},\n  \"inverted_elements_last\": {}\n}}\n",
+                     medianContacts(), maxContacts(), medianSweeps(), 1e3 * max_penetration_m_,
+                     max_inverted_, last_inverted_);
   return out;
 }
 
@@ -227,11 +231,12 @@ int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
       last_status_ns = nowNs();
       if (sim.hasInstrument()) {
         const Eigen::Vector3d p = sim.instrument()->pose().pos_m;
-        spdlog::info("status t={:.2f} s tool=({:.4f}, {:.4f}, {:.4f}) m contacts={} |F|={:.3f} N",
+        spdlog::info("status t={:.2f} s tool=({:.4f}, {:.4f}, {:.4f}) m contacts={} |F|={:.3f} N "
+                     "inverted={}",
                      sim.time(), p.x(), p.y(), p.z(), report.contacts,
-                     sim.renderedWrench().head<3>().norm());
+                     sim.renderedWrench().head<3>().norm(), report.inverted_elements);
       } else {
-        spdlog::info("status t={:.2f} s", sim.time());
+        spdlog::info("status t={:.2f} s inverted={}", sim.time(), report.inverted_elements);
       }
     }
     // pace to real time; report when the step cannot keep up

@@ -248,6 +248,73 @@ TEST(Inversion, InvertedElementsRecover) {
   }
 }
 
+// One tetrahedron flipped by hand: a node mirrored through the opposite face (F is then a pure
+// reflection, det F = -1, all singular values 1: the polar decomposition's tie case). With no
+// load and no fixed node, the corotational force must push it back: its signed volume becomes
+// positive again and it returns to its rest shape; the inversion is counted while it lasts.
+TEST(Inversion, AHandFlippedTetRecoversItsSignedVolume) {
+  TetMesh mesh;
+  mesh.source = "flipped tet";
+  mesh.nodes.resize(3, 4);
+  mesh.nodes.col(0) = Eigen::Vector3d(0.0, 0.0, 0.0);
+  mesh.nodes.col(1) = Eigen::Vector3d(0.01, 0.0, 0.0);
+  mesh.nodes.col(2) = Eigen::Vector3d(0.0, 0.012, 0.0);
+  mesh.nodes.col(3) = Eigen::Vector3d(0.002, 0.003, 0.011);
+  mesh.tets = {{0, 1, 2, 3}};
+  const auto signedVolume = [](const Eigen::VectorXd& q) {
+    Eigen::Matrix3d d;
+    d << q.segment<3>(3) - q.segment<3>(0), q.segment<3>(6) - q.segment<3>(0),
+        q.segment<3>(9) - q.segment<3>(0);
+    return d.determinant() / 6.0;
+  };
+  for (int flipped_node = 0; flipped_node < 4; ++flipped_node) {
+    SCOPED_TRACE(::testing::Message() << "node " << flipped_node);
+    FemMaterial mat = material(MaterialLaw::kCorotational, 1e4, 0.3);
+    mat.damping = RayleighSpec{2.0, 0.02};
+    FemBody body(mesh, mat, {}, nullptr);
+    const double rest_volume = signedVolume(body.positions());
+    ASSERT_GT(rest_volume, 0.0);
+    // mirror the node through the plane of the other three
+    const auto& t = mesh.tets[0];
+    int others[3], k = 0;
+    for (int a = 0; a < 4; ++a) {
+      if (t[a] != flipped_node) others[k++] = t[a];
+    }
+    const Eigen::Vector3d p0 = mesh.nodes.col(others[0]);
+    const Eigen::Vector3d n =
+        (Eigen::Vector3d(mesh.nodes.col(others[1])) - p0)
+            .cross(Eigen::Vector3d(mesh.nodes.col(others[2])) - p0)
+            .normalized();
+    const Eigen::Vector3d x = mesh.nodes.col(flipped_node);
+    body.positions().segment<3>(3 * flipped_node) = x - 2.0 * (x - p0).dot(n) * n;
+    ASSERT_NEAR(signedVolume(body.positions()), -rest_volume, 1e-12 * rest_volume);
+    EXPECT_EQ(body.invertedElementCount(), 1);
+    Eigen::VectorXd ratio;
+    body.volumeRatios(ratio);
+    ASSERT_EQ(ratio.size(), 1);
+    EXPECT_NEAR(ratio[0], -1.0, 1e-9);
+    const Eigen::Vector3d centre_before =
+        body.positions().reshaped(3, 4).rowwise().mean();
+    int first_positive_step = -1;
+    for (int s = 0; s < 400; ++s) {
+      const FemStepStats st = body.freeMotion(0.005);
+      ASSERT_TRUE(st.ok) << "step " << s;
+      ASSERT_TRUE(body.positions().allFinite()) << "step " << s;
+      if (s == 0) {
+        EXPECT_EQ(st.inverted_elements, 1);
+      }
+      if (first_positive_step < 0 && signedVolume(body.positions()) > 0.0) first_positive_step = s;
+    }
+    EXPECT_GE(first_positive_step, 0) << "the flipped tet never recovered";
+    EXPECT_EQ(body.invertedElementCount(), 0);
+    // back to its rest shape (up to a rigid motion), without an external load moving it away
+    EXPECT_NEAR(signedVolume(body.positions()), rest_volume, 1e-3 * rest_volume);
+    EXPECT_LT(body.elasticEnergy(), 1e-9);
+    const Eigen::Vector3d centre_after = body.positions().reshaped(3, 4).rowwise().mean();
+    EXPECT_LT((centre_after - centre_before).norm(), 1e-9);   // no load: momentum conserved
+  }
+}
+
 TEST(Solvers, PcgMatchesCholmod) {
   const TetMesh mesh = makeBoxTetMesh(6, 3, 3, Eigen::Vector3d(0.12, 0.06, 0.06));
   const Eigen::Vector3d gravity(0, 0, -9.81);

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
+#include <Eigen/Eigenvalues>
 #include <Eigen/SVD>
 #include <random>
 
@@ -89,6 +90,44 @@ TEST(PolarRotation, FlatAndInvertedElementsGiveAProperRotation) {
       const Eigen::Matrix3d f = rot * q * Eigen::Vector3d(1.2, 0.9, s3).asDiagonal() * q.transpose();
       expectProperRotationEqualTo(polarRotation(f), svdRotation(f), 1e-9);
     }
+  }
+}
+
+// Inverted F (det F < 0): the rotation stays proper and the stretch S = R^T F carries the
+// inversion (Irving et al.'s reflection-aware polar decomposition: the smallest singular value's
+// column is negated), so sym(R^T F) - I is a strong compression along the inverted direction and
+// the linear corotational force pushes the element back. A reflection-blind polar (R = U V^T,
+// then det R = -1 and S positive definite) fails every check here.
+TEST(PolarRotation, InvertedGradientsPutTheInversionInTheStretch) {
+  std::mt19937 rng(29);
+  for (int k = 0; k < 300; ++k) {
+    const Eigen::Matrix3d rot = randomRotation(rng);
+    const Eigen::Matrix3d q = randomRotation(rng);
+    std::uniform_real_distribution<double> u(0.2, 1.5);
+    Eigen::Vector3d sv(u(rng), u(rng), u(rng));
+    sv[k % 3] = -sv[k % 3];  // one direction inverted
+    const Eigen::Matrix3d f = rot * q * sv.asDiagonal() * q.transpose();
+    ASSERT_LT(f.determinant(), 0.0);
+    const Eigen::Matrix3d r = polarRotation(f);
+    EXPECT_NEAR(r.determinant(), 1.0, 1e-12);
+    const Eigen::Matrix3d stretch = r.transpose() * f;
+    EXPECT_LT((stretch - stretch.transpose()).norm(), 1e-9 * f.norm());
+    const Eigen::Vector3d ev =
+        Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(0.5 * (stretch + stretch.transpose()))
+            .eigenvalues();
+    EXPECT_LT(ev[0], 0.0);   // exactly one negative principal stretch: the inversion
+    EXPECT_GT(ev[1], 0.0);
+    EXPECT_NEAR(ev.prod(), f.determinant(), 1e-9);
+  }
+  // the tie: a pure reflection (a node mirrored through the opposite face), all |s_i| = 1
+  for (int k = 0; k < 50; ++k) {
+    const Eigen::Vector3d n = randomRotation(rng).col(0);
+    const Eigen::Matrix3d f = Eigen::Matrix3d::Identity() - 2.0 * n * n.transpose();
+    const Eigen::Matrix3d r = polarRotation(f);
+    EXPECT_NEAR(r.determinant(), 1.0, 1e-12);
+    const Eigen::Matrix3d stretch = r.transpose() * f;
+    EXPECT_LT((stretch - stretch.transpose()).norm(), 1e-9);
+    EXPECT_NEAR(stretch.determinant(), -1.0, 1e-9);
   }
 }
 

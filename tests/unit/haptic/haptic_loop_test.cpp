@@ -4,8 +4,11 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <string>
+#include <vector>
 
 #include "../../support/alloc_counter.h"
 #include "../../support/scripted_device.h"
@@ -63,6 +66,41 @@ class HapticLoopTest : public ::testing::Test {
     for (int k = 0; k < 3; ++k) {
       slot.contactPoint()[k] = 0.0;
       slot.contactNormal()[k] = k == 2 ? 1.0 : 0.0;
+    }
+    publisher_.publish();
+  }
+
+  // Publishes a general frictionless-or-frictional problem (normals per contact, tangents x/y),
+  // with zero J (the device does not move delta_free) and the given flags.
+  void publishProblem(const std::vector<int>& row_offset, const std::vector<double>& W,
+                      const std::vector<double>& delta_free, const std::vector<double>& f,
+                      const std::vector<std::array<double, 3>>& normals, std::uint32_t flags) {
+    auto slot = publisher_.slot();
+    const int contacts = static_cast<int>(normals.size());
+    const int rows = static_cast<int>(delta_free.size());
+    ASSERT_TRUE(slot.setSize(rows, contacts));
+    auto& h = slot.header();
+    h.seq = ++seq_;
+    h.t_ns = t_;
+    h.flags = flags;
+    h.device_pose.pos_m = {0.0, 0.0, 0.0};
+    h.tool_pose.pos_m = {0.0, 0.0, 0.0};
+    for (int c = 0; c <= contacts; ++c) slot.rowOffset()[c] = row_offset[c];
+    for (int c = 0; c < contacts; ++c) {
+      slot.contactId()[c] = static_cast<std::uint64_t>(c + 1);
+      slot.mu()[c] = 0.0;
+      for (int k = 0; k < 3; ++k) {
+        slot.contactPoint()[3 * c + k] = 0.0;
+        slot.contactNormal()[3 * c + k] = normals[c][k];
+        slot.contactTangent()[6 * c + k] = k == 0 ? 1.0 : 0.0;
+        slot.contactTangent()[6 * c + 3 + k] = k == 1 ? 1.0 : 0.0;
+      }
+    }
+    for (int i = 0; i < rows; ++i) {
+      for (int j = 0; j < rows; ++j) slot.W()[i * slot.ld() + j] = W[i * rows + j];
+      slot.deltaFree()[i] = delta_free[i];
+      slot.f()[i] = f[i];
+      for (int k = 0; k < 6; ++k) slot.J()[6 * i + k] = 0.0;
     }
     publisher_.publish();
   }
@@ -242,6 +280,228 @@ TEST_F(HapticLoopTest, ATickAllocatesNothing) {
     tickFor(1);
   }
   EXPECT_EQ(scope.allocations(), 0);
+  EXPECT_EQ(scope.cAllocations(), 0);
+}
+
+// Row offsets stepping by 2 (neither 1 nor 3 rows per contact): NSGS refuses the problem
+// (kEmpty) and the wrench must not be built from those offsets (here the snapshot's own f,
+// copied as the warm start, would render 3 N).
+TEST_F(HapticLoopTest, InconsistentRowOffsetsRenderNoForce) {
+  device_.state.pos_m = {0.0, 0.0, 0.0};
+  publish(0.001, 1e-3, 0.0);                     // engage at zero force
+  tickFor(10);
+  publishProblem({0, 2}, {1e-3, 0.0, 0.0, 1e-3}, {-0.003, 0.0}, {3.0, 0.0},
+                 {{0.0, 0.0, 1.0}}, shared::kSnapshotValid | shared::kSnapshotSymmetricW);
+  const TickOutput out = tickFor(20);
+  EXPECT_EQ(out.contacts, 1);
+  EXPECT_EQ(out.force_n, (std::array<double, 3>{0.0, 0.0, 0.0}));
+  EXPECT_EQ(device_.last.force_n, (std::array<double, 3>{0.0, 0.0, 0.0}));
+}
+
+// Without kSnapshotSymmetricW the loop must not assume W == W^T. Two frictionless contacts
+// (normals z and x) coupled one way only: W f + delta_free = 0 gives f = (0.5, 1) N, so the
+// force is (1, 0, 0.5) N; the symmetric sweep (which reads W^T) would give (0.5, 0, 1) N.
+TEST_F(HapticLoopTest, WithoutTheSymmetricFlagTheGeneralSweepSolvesANonSymmetricW) {
+  device_.state.pos_m = {0.0, 0.0, 0.0};
+  publish(0.001, 1e-3, 0.0);                     // engage at zero force
+  tickFor(10);
+  publishProblem({0, 1, 2}, {1e-3, 0.5e-3, 0.0, 1e-3}, {-1e-3, -1e-3}, {0.0, 0.0},
+                 {{0.0, 0.0, 1.0}, {1.0, 0.0, 0.0}}, shared::kSnapshotValid);
+  const TickOutput out = tickFor(30);
+  EXPECT_NEAR(out.force_n[0], 1.0, 1e-6);
+  EXPECT_NEAR(out.force_n[1], 0.0, 1e-9);
+  EXPECT_NEAR(out.force_n[2], 0.5, 1e-6);
+}
+
+// The hazard-pointer handover: the real-time thread stalls after reading an offered link and
+// before announcing it; meanwhile the supervisor withdraws the link and, seeing linkInUse() !=
+// link, would free it. The tick must then not use it at all.
+TEST_F(HapticLoopTest, AWithdrawnLinkIsNeverUsedEvenIfTheTickStalledWhileAdoptingIt) {
+  const std::string other = name_ + "_b";
+  shared::Segment::remove(other);
+  shared::Segment sim_b =
+      shared::Segment::create(other, shared::SegmentCapacity::forContacts(4, true));
+  auto samples_b = sim_b.deviceReader();
+  auto link_b = std::make_unique<HapticLink>(shared::Segment::open(other));
+  struct Supervisor {
+    HapticLoop* loop;
+    HapticLink* link;
+    bool would_free = false;
+  } supervisor{&*loop_, link_b.get()};
+  loop_->setAdoptionHookForTest(
+      [](void* context) {
+        auto* s = static_cast<Supervisor*>(context);
+        s->loop->offerLink(nullptr);                       // withdraw
+        s->would_free = s->loop->linkInUse() != s->link;   // the supervisor's free test
+      },
+      &supervisor);
+  tickFor(2);                                             // on link_ (the fixture's)
+  loop_->offerLink(link_b.get());
+  tickFor(1);
+  EXPECT_TRUE(supervisor.would_free);
+  EXPECT_EQ(loop_->linkInUse(), nullptr);
+  tickFor(3);
+  EXPECT_EQ(samples_b.latest().seq, 0u) << "the tick wrote into a link that may be freed";
+  EXPECT_EQ(loop_->linkInUse(), nullptr);
+  // the check can see writes: offered and not withdrawn, the link is adopted and written
+  loop_->setAdoptionHookForTest(nullptr, nullptr);
+  loop_->offerLink(link_b.get());
+  tickFor(2);
+  EXPECT_EQ(loop_->linkInUse(), link_b.get());
+  EXPECT_GT(samples_b.latest().seq, 0u);
+  loop_->offerLink(nullptr);
+  tickFor(1);
+  EXPECT_EQ(loop_->linkInUse(), nullptr);
+  link_b.reset();
+  shared::Segment::remove(other);
+}
+
+// The protocol's event codes and flags are raised by the loop: force clamped (event, stats
+// flag, device-sample flag), solver not converged, device without data, overrun (a tick whose
+// work ends more than one period after its scheduled start).
+TEST_F(HapticLoopTest, ClampSolverNoDataAndOverrunRaiseTheirEventsAndFlags) {
+  auto drain = [this] {
+    std::vector<std::uint32_t> codes;
+    shared::RtEvent e;
+    while (loop_->events().tryPop(&e)) codes.push_back(e.code);
+    return codes;
+  };
+  auto samples = sim_->deviceReader();
+  // the simulated clock runs a second ahead of the real one: no tick ends late by accident
+  t_ = shared::monotonicNs() + 1'000'000'000;
+  device_.state.pos_m = {0.0, 0.0, 0.0};
+  publish(0.0, 1e-3, 0.0);
+  tickFor(10);
+  drain();
+  publish(-0.01, 1e-3, 0.0);                       // 10 N against a 5 N clamp
+  TickOutput out = tickFor(20);
+  EXPECT_NE(out.flags & shared::kStatsForceClamped, 0u);
+  tickFor(1);
+  EXPECT_NE(samples.latest().status & shared::kDeviceForceClamped, 0u);
+  std::vector<std::uint32_t> codes = drain();
+  EXPECT_EQ(std::count(codes.begin(), codes.end(), shared::kEventForceClamped), 1)
+      << "one event when the clamping starts, not one per tick";
+
+  device_.no_data = true;
+  out = tickFor(3);
+  EXPECT_NE(out.flags & shared::kStatsDeviceNoData, 0u);
+  codes = drain();
+  EXPECT_EQ(std::count(codes.begin(), codes.end(), shared::kEventDeviceNoData), 1);
+  device_.no_data = false;
+
+  EXPECT_EQ(loop_->counters().overruns.load(), 0u);
+  t_ += 1'000'000;
+  out = loop_->tick(shared::monotonicNs() - 10 * settings_.period_ns, t_);   // 10 periods late
+  EXPECT_EQ(loop_->counters().overruns.load(), 1u);
+  codes = drain();
+  EXPECT_EQ(std::count(codes.begin(), codes.end(), shared::kEventOverrun), 1);
+
+  // a loop allowed one sweep on a strongly coupled two-contact problem does not converge
+  loop_->offerLink(nullptr);
+  tickFor(1);
+  settings_.max_sweeps = 1;
+  loop_.emplace(device_, settings_);
+  loop_->offerLink(link_.get());
+  publishProblem({0, 1, 2}, {1e-3, 0.9e-3, 0.9e-3, 1e-3}, {-1e-3, -2e-3}, {0.0, 0.0},
+                 {{0.0, 0.0, 1.0}, {0.0, 0.0, 1.0}},
+                 shared::kSnapshotValid | shared::kSnapshotSymmetricW);
+  out = tickFor(1);
+  EXPECT_NE(out.flags & shared::kStatsSolverNotConverged, 0u);
+  tickFor(1);
+  codes = drain();
+  EXPECT_EQ(std::count(codes.begin(), codes.end(), shared::kEventSolverNotConverged), 1);
+}
+
+// The counter really sees the C allocator (otherwise the checks above could not fail).
+TEST(AllocCounter, CountsMallocCallocAndRealloc) {
+  test::AllocScope scope;
+  void* volatile a = std::malloc(16);
+  void* volatile b = std::calloc(4, 8);
+  void* volatile c = std::realloc(a, 64);
+  std::free(b);
+  std::free(c);
+  EXPECT_EQ(scope.cAllocations(), 3);
+  EXPECT_EQ(scope.allocations(), 3);
+  auto* p = new int(3);
+  delete p;
+  EXPECT_EQ(scope.allocations(), 4);
+  EXPECT_EQ(scope.cAllocations(), 3);
+}
+
+// A 150-contact frictional problem (450 rows, symmetric coupled W): every tick solves it with
+// NSGS, computes the wrench and runs the safety chain without any allocation.
+TEST(HapticLoopLarge, AFrictionalTickOf450RowsAllocatesNothing) {
+  constexpr int kContacts = 150;
+  constexpr int kRows = 3 * kContacts;
+  const std::string name = "tactus_haptic_large_" + std::to_string(::getpid());
+  shared::Segment::remove(name);
+  shared::Segment sim =
+      shared::Segment::create(name, shared::SegmentCapacity::forContacts(kContacts, true));
+  shared::SnapshotPublisher publisher = sim.snapshotPublisher();
+  ScriptedDevice device;
+  HapticSettings settings;
+  settings.solve_budget_ns = 1'000'000'000;   // sweeps bound the solve, not the clock
+  settings.max_sweeps = 20;
+  HapticLoop loop(device, settings);
+  auto link = std::make_unique<HapticLink>(shared::Segment::open(name));
+  loop.offerLink(link.get());
+  std::int64_t t = shared::monotonicNs();
+  std::uint64_t seq = 0;
+  auto publish = [&](double depth_m) {
+    auto slot = publisher.slot();
+    ASSERT_TRUE(slot.setSize(kRows, kContacts));
+    auto& h = slot.header();
+    h.seq = ++seq;
+    h.t_ns = t;
+    h.flags = shared::kSnapshotValid | shared::kSnapshotHasJacobian | shared::kSnapshotSymmetricW;
+    const int ld = slot.ld();
+    for (int c = 0; c <= kContacts; ++c) slot.rowOffset()[c] = 3 * c;
+    for (int c = 0; c < kContacts; ++c) {
+      slot.contactId()[c] = static_cast<std::uint64_t>(c + 1);
+      slot.mu()[c] = 0.5;
+      for (int k = 0; k < 3; ++k) {
+        slot.contactPoint()[3 * c + k] = k == 0 ? 1e-3 * c : 0.0;
+        slot.contactNormal()[3 * c + k] = k == 2 ? 1.0 : 0.0;
+        slot.contactTangent()[6 * c + k] = k == 0 ? 1.0 : 0.0;
+        slot.contactTangent()[6 * c + 3 + k] = k == 1 ? 1.0 : 0.0;
+      }
+    }
+    for (int i = 0; i < kRows; ++i) {
+      for (int j = 0; j < kRows; ++j) {
+        slot.W()[i * ld + j] = i == j ? 1e-3 : 0.5e-3 * std::exp(-std::abs(i - j));
+      }
+      const bool normal = i % 3 == 0;
+      slot.deltaFree()[i] = normal ? -depth_m : 1e-5 * ((i % 5) - 2);
+      slot.f()[i] = 0.0;
+      for (int k = 0; k < 6; ++k) slot.J()[6 * i + k] = (normal ? k == 2 : k == (i % 3) - 1);
+    }
+    publisher.publish();
+  };
+  device.state.pos_m = {0.0, 0.0, 0.0};
+  publish(1e-4);
+  for (int i = 0; i < 5; ++i) {
+    t += 1'000'000;
+    (void)loop.tick(t, t);
+  }
+  test::AllocScope scope;
+  TickOutput out;
+  for (int i = 0; i < 50; ++i) {
+    if (i % 10 == 0) publish(1e-4 * (1 + i % 3));
+    device.state.pos_m = {1e-5 * (i % 4), 0.0, -1e-5 * (i % 7)};
+    t += 1'000'000;
+    out = loop.tick(t, t);
+  }
+  EXPECT_EQ(scope.allocations(), 0);
+  EXPECT_EQ(scope.cAllocations(), 0);
+  // it did solve the large frictional problem every tick
+  EXPECT_EQ(out.contacts, kContacts);
+  EXPECT_GT(out.sweeps, 0);
+  EXPECT_GT(out.unlimited_force_norm_n, 0.0);
+  loop.offerLink(nullptr);
+  t += 1'000'000;
+  (void)loop.tick(t, t);
+  link.reset();
+  shared::Segment::remove(name);
 }
 
 }  // namespace

@@ -2,10 +2,12 @@
 //  * at the snapshot's own device pose, re-solving the published problem gives the simulation's
 //    contact forces;
 //  * for a small device displacement dx, delta_free* + J dx re-solved gives the force a full
-//    simulation step computes, to first order: the error shrinks like |dx|^2.
+//    simulation step computes: the error is a small fraction of the force change and shrinks
+//    like |dx| (measured order one; see the test for the figures).
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 #include <map>
 
 #include "tactus/shared/nsgs.h"
@@ -118,8 +120,23 @@ TEST_P(HapticConsistencyTest, ForASmallDeviceMotionTheLocalModelMatchesAFullStep
     EXPECT_GT(changes[i], 1e-3) << "scale index " << i;
     EXPECT_LT(errors[i], 1e-3 * changes[i]) << "scale index " << i;
   }
-  // and the error does not grow when dx shrinks
-  for (std::size_t i = 1; i < errors.size(); ++i) EXPECT_LE(errors[i], errors[i - 1] * 1.01);
+  for (std::size_t i = 0; i < errors.size(); ++i) {
+    std::printf("[consistency] mu=%.1f dx=%.2g m: |f_pred - f_full| = %.4e N (change %.4e N)\n",
+                mu, 4e-4 / static_cast<double>(1 << i), errors[i], changes[i]);
+  }
+  // The decay order, from the ratio of the errors at dx and dx/2. Measured (2026-11-24):
+  // |f_pred - f_full| = 1.77e-6, 8.43e-7, 4.11e-7 N at mu 0 and 2.05e-6, 9.72e-7, 4.73e-7 N at
+  // mu 0.5 for dx = 0.4, 0.2, 0.1 mm, ratios 2.05-2.11: the local model is exact to FIRST order
+  // only, with a tiny constant (the error is a steady 1.7e-5 of the force change), not to second
+  // order as an exact linearisation would be (ratio 4). So J misses a term of relative size
+  // ~1.7e-5 (e.g. the contact frame moving with the tool). Asserted: the order is one (band
+  // [1.8, 2.4]: 1 would be an error that does not shrink, 4 an exact Jacobian - then tighten this
+  // test to second order).
+  for (std::size_t i = 1; i < errors.size(); ++i) {
+    const double ratio = errors[i - 1] / errors[i];
+    EXPECT_GT(ratio, 1.8) << "scale index " << i << ": the error does not shrink like |dx|";
+    EXPECT_LT(ratio, 2.4) << "scale index " << i << ": decay order changed (exact Jacobian?)";
+  }
 }
 
 INSTANTIATE_TEST_SUITE_P(Friction, HapticConsistencyTest, ::testing::Values(0.0, 0.5));

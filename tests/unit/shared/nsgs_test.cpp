@@ -664,6 +664,81 @@ TEST(NsgsFaults, NonFiniteInputZeroesTheForce) {
   }
 }
 
+// A zero, negative, denormal or negligible diagonal entry of W cannot be divided by: such a
+// problem must never come back kConverged, and its error must be the real one.
+TEST(NsgsFaults, IllPosedDiagonalIsNeverReportedConverged) {
+  const FclibProblem base = readFclibText(kFclibDir / "problems/Rover1040.fc3d.txt");
+  const int m = base.rows();
+  NsgsWorkspace ws(m, base.contacts);
+  // the contact whose free normal velocity is the most negative (it must push)
+  int worst = 0;
+  for (int i = 1; i < base.contacts; ++i) {
+    if (base.q[base.row_offset[i]] < base.q[base.row_offset[worst]]) worst = i;
+  }
+  const int r = base.row_offset[worst];
+  ASSERT_LT(base.q[r], 0.0);
+  const double denormal = std::numeric_limits<double>::denorm_min() * 1e3;
+  ASSERT_EQ(std::fpclassify(denormal), FP_SUBNORMAL);
+  const double diag_cases[] = {0.0, -1.0, -1e-9, denormal, 1e-20 * base.W[r * m + r]};
+  for (int row = 0; row < 3; ++row) {
+    for (double d : diag_cases) {
+      FclibProblem p = base;
+      p.W[(r + row) * m + r + row] = d;
+      for (bool warm : {false, true}) {
+        std::vector<double> f(m, warm ? 0.5 : 0.0);
+        const NsgsResult res = solveNsgs(p.view(), NsgsSettings{}, ws, f.data());
+        SCOPED_TRACE(::testing::Message() << "row " << row << " diag " << d << " warm " << warm);
+        EXPECT_EQ(res.status, NsgsStatus::kIllPosed);
+        EXPECT_EQ(res.ill_posed_contacts, 1);
+        for (int k = 0; k < 3; ++k) EXPECT_EQ(f[r + k], 0.0);
+        // the error reported is the real one, and the unsolvable contact keeps it large
+        const double real = naturalMapError(p.view(), f.data());
+        EXPECT_NEAR(res.error, real, 1e-9 * real);
+        EXPECT_GT(res.error, 1e-3);
+      }
+    }
+  }
+  EXPECT_EQ(toString(NsgsStatus::kIllPosed), "ill_posed");
+  // non-finite diagonal entries stay kNonFinite (f zeroed)
+  FclibProblem p = base;
+  p.W[r * m + r] = std::numeric_limits<double>::infinity();
+  std::vector<double> f(m, 0.0);
+  EXPECT_EQ(solveNsgs(p.view(), NsgsSettings{}, ws, f.data()).status, NsgsStatus::kNonFinite);
+  // the unmodified problem is well posed and converges, with its real error
+  f.assign(m, 0.0);
+  const NsgsResult ok = solveNsgs(base.view(), NsgsSettings{}, ws, f.data());
+  EXPECT_EQ(ok.status, NsgsStatus::kConverged);
+  EXPECT_EQ(ok.ill_posed_contacts, 0);
+  EXPECT_LE(naturalMapError(base.view(), f.data()), NsgsSettings{}.tolerance);
+}
+
+// One-row contacts too: a zero or negative W_ii is ill-posed, frictionless 3-row contacts only
+// look at W_nn.
+TEST(NsgsFaults, IllPosedOneRowAndFrictionlessContacts) {
+  Problem p;
+  p.row_offset = {0, 1, 4};
+  p.W = {0.0, 0.0, 0.0, 0.0,
+         0.0, 2.0, 0.0, 0.0,
+         0.0, 0.0, 0.0, 0.0,    // W_t1t1 = 0, harmless when mu = 0
+         0.0, 0.0, 0.0, 0.0};
+  p.q = {-1.0, -1.0, 0.3, 0.0};
+  p.mu = {0.0, 0.0};
+  Solved s = solve(p);
+  EXPECT_EQ(s.result.status, NsgsStatus::kIllPosed);
+  EXPECT_EQ(s.result.ill_posed_contacts, 1);
+  EXPECT_EQ(s.f[0], 0.0);
+  EXPECT_NEAR(s.f[1], 0.5, 1e-12);   // the well-posed contact is still solved
+  EXPECT_NEAR(s.result.error, naturalMapError(p.view(), s.f.data()), 1e-12);
+  EXPECT_GT(s.result.error, 0.1);
+  p.W[0] = 1.0;
+  s = solve(p);
+  EXPECT_EQ(s.result.status, NsgsStatus::kConverged);
+  EXPECT_NEAR(s.f[0], 1.0, 1e-12);
+  p.mu[1] = 0.5;   // now the zero tangential diagonal matters
+  s = solve(p);
+  EXPECT_EQ(s.result.status, NsgsStatus::kIllPosed);
+}
+
 TEST(NsgsFaults, ProblemsLargerThanTheWorkspaceOrInconsistentAreRefused) {
   const FclibProblem p = boxStacks();
   NsgsWorkspace small(p.rows() - 3, p.contacts);

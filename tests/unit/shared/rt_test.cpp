@@ -8,7 +8,12 @@
 #include <gtest/gtest.h>
 #include <sys/mman.h>
 
+#include <sys/resource.h>
+
 #include <cerrno>
+#include <cstdlib>
+#include <fstream>
+#include <string>
 #include <thread>
 #include <vector>
 
@@ -53,28 +58,110 @@ TEST(Realtime, PinningToAnAllowedCpuWorksAndABadOneIsExplained) {
   t.join();
 }
 
-TEST(Realtime, FifoAndMlockEitherWorkOrSayWhy) {
-  std::thread t([] {
+// What the kernel will grant this process, read from its capabilities and rlimits, so each
+// environment has exactly one expected outcome (privileged: must succeed; unprivileged: must be
+// refused with the explanation).
+bool hasEffectiveCapability(int cap) {
+  std::ifstream status("/proc/self/status");
+  std::string line;
+  while (std::getline(status, line)) {
+    if (line.rfind("CapEff:", 0) == 0) {
+      const unsigned long long mask = std::stoull(line.substr(7), nullptr, 16);
+      return ((mask >> cap) & 1ULL) != 0;
+    }
+  }
+  return false;
+}
+
+long long statusKib(const char* key) {
+  std::ifstream status("/proc/self/status");
+  std::string line;
+  const std::string k = std::string(key) + ":";
+  while (std::getline(status, line)) {
+    if (line.rfind(k, 0) == 0) return std::stoll(line.substr(k.size()));
+  }
+  return -1;
+}
+
+// cgroup v1 with RT group scheduling: a group with no RT runtime refuses SCHED_FIFO even to root.
+bool cgroupDeniesRealtime() {
+  std::ifstream cg("/proc/self/cgroup");
+  std::string line;
+  while (std::getline(cg, line)) {
+    const auto colon = line.find(':');
+    const auto colon2 = line.find(':', colon + 1);
+    if (colon == std::string::npos || colon2 == std::string::npos) continue;
+    const std::string controllers = line.substr(colon + 1, colon2 - colon - 1);
+    if (controllers.find("cpu") == std::string::npos || controllers == "cpuset" ||
+        controllers == "cpuacct") {
+      continue;
+    }
+    std::ifstream rt("/sys/fs/cgroup/" + controllers + line.substr(colon2 + 1) +
+                     "/cpu.rt_runtime_us");
+    long long us = -1;
+    if (rt >> us) return us == 0;
+  }
+  return false;
+}
+
+constexpr int kCapIpcLock = 14;   // linux/capability.h
+constexpr int kCapSysNice = 23;
+
+TEST(Realtime, FifoIsGrantedExactlyWhenThePrivilegesAllowIt) {
+  rlimit rtprio{};
+  ASSERT_EQ(getrlimit(RLIMIT_RTPRIO, &rtprio), 0);
+  const bool privileged = hasEffectiveCapability(kCapSysNice) ||
+                          rtprio.rlim_cur == RLIM_INFINITY || rtprio.rlim_cur >= 10;
+  const bool expect_granted = privileged && !cgroupDeniesRealtime();
+  std::thread t([expect_granted] {
     const RtStatus fifo = setFifoPriority(10);
-    if (fifo.ok()) {
+    if (expect_granted) {
+      ASSERT_TRUE(fifo.ok()) << "CAP_SYS_NICE or RLIMIT_RTPRIO >= 10, yet refused: "
+                             << fifo.message();
       EXPECT_EQ(sched_getscheduler(0), SCHED_FIFO);
       EXPECT_TRUE(setNormalPriority().ok());
+      EXPECT_EQ(sched_getscheduler(0), SCHED_OTHER);
     } else {
+      ASSERT_FALSE(fifo.ok()) << "no CAP_SYS_NICE and RLIMIT_RTPRIO < 10, yet granted";
+      EXPECT_EQ(fifo.error, EPERM);
       EXPECT_THAT(fifo.message(), HasSubstr("sched_setscheduler failed"));
-      if (fifo.error == EPERM) {
-        EXPECT_THAT(fifo.message(), HasSubstr("rtprio"));
-      }
+      EXPECT_THAT(fifo.message(), HasSubstr("rtprio"));
+      EXPECT_EQ(sched_getscheduler(0), SCHED_OTHER);
     }
     EXPECT_EQ(setFifoPriority(1000).error, EINVAL);  // out of range, never applied
   });
   t.join();
+  prefaultStack(128);  // must simply not crash
+}
+
+TEST(Realtime, MlockallIsGrantedExactlyWhenTheLimitAllowsIt) {
+  // mlockall(MCL_CURRENT) succeeds iff CAP_IPC_LOCK or the mapped size fits RLIMIT_MEMLOCK
+  rlimit memlock{};
+  ASSERT_EQ(getrlimit(RLIMIT_MEMLOCK, &memlock), 0);
+  const long long vm_kib = statusKib("VmSize");
+  ASSERT_GT(vm_kib, 0);
+  const bool unlimited =
+      hasEffectiveCapability(kCapIpcLock) || memlock.rlim_cur == RLIM_INFINITY;
+  const long long limit_kib =
+      unlimited ? 0 : static_cast<long long>(memlock.rlim_cur / 1024);
+  // the mapped size can move by a few pages between the read and the call: no verdict there
+  constexpr long long kMarginKib = 4096;
+  if (!unlimited && std::llabs(vm_kib - limit_kib) < kMarginKib) {
+    GTEST_SKIP() << "VmSize " << vm_kib << " KiB is within " << kMarginKib
+                 << " KiB of RLIMIT_MEMLOCK " << limit_kib << " KiB: outcome not determined";
+  }
+  const bool expect_granted = unlimited || vm_kib < limit_kib;
   const RtStatus lock = lockMemory();
-  if (lock.ok()) {
+  if (expect_granted) {
+    ASSERT_TRUE(lock.ok()) << lock.message();
+    EXPECT_GT(statusKib("VmLck"), 0);
     munlockall();
   } else {
+    ASSERT_FALSE(lock.ok()) << "VmSize " << vm_kib << " KiB over RLIMIT_MEMLOCK " << limit_kib
+                            << " KiB without CAP_IPC_LOCK, yet mlockall succeeded";
+    EXPECT_EQ(lock.error, ENOMEM);
     EXPECT_THAT(lock.message(), HasSubstr("mlockall failed"));
   }
-  prefaultStack(128);  // must simply not crash
 }
 
 TEST(Realtime, SetupEnforceThrowsIgnoreReports) {

@@ -32,6 +32,11 @@ class OptionReader {
  public:
   OptionReader(std::string backend, const DeviceConfig& config);
   double number(const std::string& key, double fallback);
+  /// Same, and the value must lie in [lo, hi] (throws DeviceError naming key, value and range).
+  double number(const std::string& key, double fallback, double lo, double hi);
+  /// vec3 whose components each lie in [-max_abs, max_abs].
+  std::array<double, 3> vec3(const std::string& key, const std::array<double, 3>& fallback,
+                             double max_abs);
   std::array<double, 3> vec3(const std::string& key, const std::array<double, 3>& fallback);
   std::string text(const std::string& key, const std::string& fallback = "");
   bool flag(const std::string& key, bool fallback);
@@ -77,8 +82,8 @@ class Trajectory {
   std::vector<TrajectoryPoint> points_;
 };
 
-/// `null`: no device. Returns kNoData, or a fixed pose with option pose=x,y,z. Writes are
-/// accepted and discarded.
+/// `null`: no device. Returns kNoData, or a fixed pose with option pose=x,y,z (each within 10 m).
+/// Writes are accepted and discarded.
 class NullDevice final : public Device {
  public:
   explicit NullDevice(const DeviceConfig& config = {});
@@ -104,6 +109,10 @@ class NullDevice final : public Device {
 /// read (semi-implicit Euler, 0.25 ms sub-steps, at most 50 ms per read), so the rendered force
 /// changes the motion exactly as a hand holding a real device would feel it. Orientation and
 /// gripper follow the set point. Other options: max_force (N) reported by info().
+/// Ranges (DeviceError otherwise): mass [1e-3, 100] kg, stiffness [0, 1e6] N/m, damping
+/// [0, 1e4] N s/m, with stiffness/mass <= 1/0.25ms^2 and damping/mass <= 1/0.25ms (a stable
+/// integration), max_force [1e-3, 100] N, origin/axis components and amplitude within 10 m,
+/// period [1e-3, 1e5] s.
 class SimulatedDevice final : public Device {
  public:
   explicit SimulatedDevice(const DeviceConfig& config = {});
@@ -138,7 +147,8 @@ class SimulatedDevice final : public Device {
   std::array<double, 3> x_{}, v_{}, force_{};
 };
 
-/// `replay`: plays file=FILE.csv from open() on (options loop=true|false, speed=factor).
+/// `replay`: plays file=FILE.csv from open() on (options loop=true|false, speed=factor in
+/// [1e-3, 1e3]).
 /// read() interpolates at the elapsed monotonic time; after the end it holds the last pose (or
 /// loops). Writes are accepted and ignored (a replay cannot render force).
 class ReplayDevice final : public Device {

@@ -9,8 +9,15 @@
 // Real-time rules: tick() allocates nothing, takes no lock, logs nothing and never throws. Faults
 // go to counters and to an SPSC event ring that a non-real-time thread drains into spdlog. The
 // link to the simulation (the shared segment) is swapped by the non-real-time supervisor through
-// an atomic pointer with an acknowledgement, so the tick never waits for it.
+// an atomic pointer with a hazard-pointer acknowledgement, so the tick never waits for it.
+//
+// Safety: HapticSettings::validate() (called by the HapticLoop constructor) rejects settings that
+// are not finite or out of range; whatever the settings, the tick's last stage (guardWrench)
+// writes only finite forces and torques within the effective clamps (the smaller of the
+// settings' and the device's limit, never above HapticSettingsLimits::kMaxForceN /
+// kMaxTorqueNm), and counts every intervention in HapticCounters::guard_interventions.
 
+#include <array>
 #include <atomic>
 #include <cstdint>
 #include <memory>
@@ -27,6 +34,23 @@
 
 namespace tactus::haptic {
 
+/// Accepted ranges of HapticSettings (validate() and haptic_server's options use the same
+/// bounds). The force and torque ceilings also bound the tick's final guard.
+struct HapticSettingsLimits {
+  static constexpr double kMaxForceScale = 10.0;          ///< force_scale in [0, this]
+  static constexpr double kMaxForceN = 50.0;              ///< max_force_n in (0, this] N
+  static constexpr double kMaxTorqueNm = 5.0;             ///< max_torque_nm in (0, this] N m
+  static constexpr double kMaxSlewNPerS = 1e6;            ///< slew_n_per_s in (0, this] N/s
+  static constexpr double kMaxWatchdogMs = 10'000.0;      ///< watchdog_ms in (0, this] ms
+  static constexpr double kMaxFadeMs = 10'000.0;          ///< fade_ms in [0, this] ms
+  static constexpr int kMaxSweeps = 100'000;              ///< max_sweeps in [1, this]
+  static constexpr double kMaxTolerance = 1.0;            ///< tolerance in (0, this]
+  /// period_ns in (0, this] ns, solve_budget_ns in [0, this] ns (0: sweeps only)
+  static constexpr std::int64_t kMaxPeriodNs = 1'000'000'000;
+  /// Limits below this are treated as zero by the guard (no force rather than denormal maths).
+  static constexpr double kMinLimit = 1e-9;
+};
+
 /// Safety and solver settings of the loop.
 struct HapticSettings {
   double force_scale = 1.0;             ///< rendered = scale * contact wrench
@@ -38,10 +62,24 @@ struct HapticSettings {
   double fade_ms = 100.0;               ///< fade-out and fade-in ramp
   int max_sweeps = 50;                  ///< NSGS sweep budget per tick
   double tolerance = 1e-6;              ///< NSGS tolerance
-  std::int64_t solve_budget_ns = 400'000;  ///< NSGS time budget per tick
+  std::int64_t solve_budget_ns = 400'000;  ///< NSGS time budget per tick (0: sweeps only)
   std::int64_t period_ns = 1'000'000;   ///< tick period (a tick ending later is an overrun)
   bool render_torque = false;           ///< devices without rotational feedback: false
+
+  /// Throws tactus::Error naming the first setting that is not finite or outside its range
+  /// (HapticSettingsLimits; engage_threshold_n: finite and >= 0).
+  void validate() const;
 };
+
+/// The tick's last stage, a pure function: replaces a non-finite force or torque by zero and
+/// scales each so that its norm is at most its limit (a limit that is not finite, or below
+/// HapticSettingsLimits::kMinLimit, counts as zero; limits are capped at kMaxForceN /
+/// kMaxTorqueNm). Returns true when it changed anything. Real-time safe.
+bool guardWrench(std::array<double, 3>& force_n, std::array<double, 3>& torque_nm,
+                 double max_force_n, double max_torque_nm) noexcept;
+
+/// Euclidean norm without overflow or underflow in the squares (real-time safe).
+double wrenchNorm(const std::array<double, 3>& v) noexcept;
 
 /// Fault and event counters (read by the supervisor; relaxed atomics).
 struct HapticCounters {
@@ -56,6 +94,9 @@ struct HapticCounters {
   std::atomic<std::uint64_t> clamped{0};
   std::atomic<std::uint64_t> non_finite_input{0};
   std::atomic<std::uint64_t> events_dropped{0};
+  std::atomic<std::uint64_t> overruns{0};            ///< ticks flagged shared::kStatsOverrun
+  /// ticks where the final guard had to change the command (never with valid settings)
+  std::atomic<std::uint64_t> guard_interventions{0};
 };
 
 /// Event codes of the haptic loop beyond shared::EventCode (drained into spdlog outside the
@@ -101,19 +142,41 @@ struct TickOutput {
   std::uint64_t flags = 0;              ///< shared::StatsFlags
 };
 
+/// Tag for the test-only constructor that skips HapticSettings::validate().
+struct UncheckedSettingsForTest {};
+
 class HapticLoop {
  public:
-  /// `device` must be opened by the caller.
+  /// `device` must be opened by the caller. Validates `settings` (throws tactus::Error) and
+  /// reads device.info(): a max_force_n that is finite and > 0 lowers the force clamp; any other
+  /// non-zero value is ignored with a warning.
   HapticLoop(device::Device& device, const HapticSettings& settings);
+  /// Tests only: no validation, so the final guard can be exercised with nonsense settings.
+  HapticLoop(device::Device& device, const HapticSettings& settings, UncheckedSettingsForTest);
 
   /// One tick at time now_ns (scheduled_ns/woken_ns from the timer, for the stats record).
   /// Real-time: no allocation, lock, logging, exception.
   TickOutput tick(std::int64_t scheduled_ns, std::int64_t woken_ns) noexcept;
 
-  /// Offers a new link (or nullptr to detach). The tick switches to it at its next start and
-  /// acknowledges; the old link may be destroyed once linkInUse() != old.
+  /// Offers a new link (or nullptr to detach). The tick switches to it at its next start.
+  /// Hazard-pointer handshake: the tick publishes the link it is about to use in linkInUse()
+  /// before touching it and then re-reads the offer, using the link only if it is still offered.
+  /// So once the supervisor has withdrawn a link (offerLink of another one), a later
+  /// linkInUse() != old proves that the tick does not hold it and never will again: only then
+  /// may the old link be destroyed. Withdrawn links must never be offered again.
   void offerLink(HapticLink* link) noexcept;
   HapticLink* linkInUse() const noexcept;
+
+  /// The force and torque clamps in use (settings and device combined, see the constructor).
+  double forceLimitN() const noexcept { return force_limit_n_; }
+  double torqueLimitNm() const noexcept { return torque_limit_nm_; }
+
+  /// Tests only: called by the tick between its first read of the offered link and publishing
+  /// it as in use (to replay a supervisor acting while the real-time thread is stalled there).
+  void setAdoptionHookForTest(void (*hook)(void*), void* context) noexcept {
+    adoption_hook_ = hook;
+    adoption_context_ = context;
+  }
 
   HapticCounters& counters() noexcept { return counters_; }
   shared::EventRing& events() noexcept { return events_; }
@@ -123,6 +186,29 @@ class HapticLoop {
   void solveLocalModel(HapticLink& link, const shared::SnapshotView& snap,
                        const shared::Pose& device_pose, TickOutput& out) noexcept;
   void pushEvent(std::uint32_t code, double a = 0.0, double b = 0.0) noexcept;
+  /// Episode events that can recur every few ticks (no data, clamped, not converged, overrun):
+  /// pushed at most once per second each, so the ring and the log are not flooded.
+  enum NoisyEvent : int {
+    kNoisyNoData,
+    kNoisyClamped,
+    kNoisyNotConverged,
+    kNoisyOverrun,
+    kNoisyCount
+  };
+  void pushRateLimited(NoisyEvent which, std::uint32_t code, std::int64_t now_ns, double a = 0.0,
+                       double b = 0.0) noexcept;
+  // the tick's phases, in order
+  void adoptOfferedLink() noexcept;
+  device::IoStatus readDevice(std::int64_t now, TickOutput& out) noexcept;
+  void publishSample(std::int64_t now, device::IoStatus io) noexcept;
+  void takeSnapshot(std::int64_t now, TickOutput& out) noexcept;   // and the local model
+  void writeDevice(const std::array<double, 3>& force,
+                   const std::array<double, 3>& torque) noexcept;
+  void recordStats(std::int64_t scheduled_ns, std::int64_t woken_ns, const TickOutput& out,
+                   const std::array<double, 3>& force) noexcept;
+  void applySafetyChain(double dt, TickOutput& out, std::array<double, 3>& force,
+                        std::array<double, 3>& torque) noexcept;
+  void initLimits();
 
   device::Device& device_;
   HapticSettings settings_;
@@ -131,6 +217,11 @@ class HapticLoop {
   std::atomic<HapticLink*> offered_{nullptr};
   std::atomic<HapticLink*> in_use_{nullptr};
   HapticLink* link_ = nullptr;
+  void (*adoption_hook_)(void*) = nullptr;
+  void* adoption_context_ = nullptr;
+  double force_limit_n_ = 0.0;     ///< min(settings, device), what the chain and guard clamp to
+  double torque_limit_nm_ = 0.0;
+  std::int64_t watchdog_ns_ = 0;   ///< settings' watchdog (0 when not usable: always stale)
 
   std::uint64_t snapshot_seq_ = 0;
   std::uint64_t tick_index_ = 0;
@@ -141,6 +232,12 @@ class HapticLoop {
   bool engaged_ = false;
   bool stale_ = true;
   bool device_fault_ = false;
+  bool no_data_ = false;           ///< the last read returned kNoData (event on the transition)
+  bool clamped_ = false;           ///< the last command was clamped (sample flag, event)
+  bool not_converged_ = false;     ///< the last solve did not converge (event on the transition)
+  bool overrun_ = false;           ///< the last tick overran (event at the start of a burst)
+  std::array<std::int64_t, kNoisyCount> noisy_event_ns_{};   ///< last push per NoisyEvent
+  std::array<bool, kNoisyCount> noisy_pushed_{};             ///< pushed at least once
   double gain_ = 0.0;
   double last_force_norm_n_ = 0.0;
   std::array<double, 3> last_force_n_{};

@@ -34,10 +34,13 @@ enum SnapshotFlags : std::uint32_t {
   kSnapshotConverged = 1u << 1,     ///< the simulation's NSGS converged for this problem
   kSnapshotHasJacobian = 1u << 2,   ///< J is filled (else the haptic side must not move delta_free)
   kSnapshotShuttingDown = 1u << 3,  ///< the simulation is stopping: fade out
+  /// W is exactly symmetric (W[i][j] == W[j][i] bit for bit, checked by the publisher): the
+  /// haptic side may use the cheaper symmetric row-update sweep; without it, the column sweep
+  kSnapshotSymmetricW = 1u << 4,
 };
 
-/// Fixed part of the contact snapshot (the local model of DESIGN.md section 3, "haptic local
-/// model"), at offset 0 of its triple-buffer slot.
+/// Fixed part of the contact snapshot (the haptic local model of
+/// ../../../../docs/design.md#the-haptic-local-model), at offset 0 of its triple-buffer slot.
 struct ContactSnapshotHeader {
   std::uint64_t seq = 0;             ///< publish counter, 0 = nothing published yet
   std::int64_t t_ns = 0;             ///< monotonic time of publication
@@ -46,8 +49,8 @@ struct ContactSnapshotHeader {
   std::int32_t rows = 0;             ///< m = row_offset[contacts]
   std::int32_t contacts = 0;         ///< nc
   std::uint32_t flags = 0;           ///< SnapshotFlags
-  std::int32_t solver_sweeps = 0;    ///< sweeps the simulation's NSGS took
-  double solver_error = 0.0;         ///< its natural-map error
+  std::int32_t solver_sweeps = 0;    ///< sweeps the simulation's NSGS took (0: no solve)
+  double solver_error = 0.0;         ///< its natural-map error at exit (0: no solve)
   std::uint64_t device_seq = 0;      ///< seq of the DeviceSample the step used
   PoseSample device_pose;            ///< x_h*: the device pose used for this step (J's origin)
   PoseSample tool_pose;              ///< the instrument (god object) pose after the step
@@ -245,10 +248,11 @@ enum DeviceSampleStatus : std::uint32_t {
   kDeviceOk = 1u << 0,              ///< the last read returned data
   kDeviceNoData = 1u << 1,          ///< the last read returned no new data (pose held)
   kDeviceFault = 1u << 2,           ///< the backend reported a fault
-  kDeviceForcesEnabled = 1u << 3,
-  kDeviceForceClamped = 1u << 4,    ///< the rendered wrench was clamped to the device limits
-  kDeviceForceFading = 1u << 5,     ///< stale snapshot: the force is being faded out
-  kDeviceShuttingDown = 1u << 6,
+  kDeviceForcesEnabled = 1u << 3,   ///< forces engaged (the engage gate has opened)
+  kDeviceForceClamped = 1u << 4,    ///< the rendered wrench was clamped to the force limit
+  /// the fade gain is below 1: fading out (stale snapshot, device fault) or back in
+  kDeviceForceFading = 1u << 5,
+  // bit 6 (formerly "shutting down", never raised) is unused
 };
 
 /// The haptic side's device state and rendered wrench, published every tick (haptic -> sim).
@@ -271,7 +275,9 @@ static_assert(std::is_standard_layout_v<DeviceSample>);
 
 /// StatsRecord::flags bits.
 enum StatsFlags : std::uint32_t {
-  kStatsOverrun = 1u << 0,          ///< the tick started after its deadline
+  /// the tick's work finished more than one period after its scheduled start
+  /// (finished_ns - scheduled_ns > period): it ate into the next tick
+  kStatsOverrun = 1u << 0,
   kStatsSnapshotStale = 1u << 1,
   kStatsNoSnapshot = 1u << 2,
   kStatsSolverNotConverged = 1u << 3,

@@ -90,15 +90,25 @@ struct NsgsSettings {
   bool delta_is_current = false;
 };
 
-/// kConverged: error <= tolerance. kMaxSweeps / kTimeBudget: stopped first (f is the last
+/// kConverged: error <= tolerance, the error recomputed from W f + q afresh (not the running
+/// delta) when the solve claims it. kMaxSweeps / kTimeBudget: stopped first (f is the last
 /// iterate, error its error). kNonFinite: W, q, mu or the warm start holds NaN/Inf, or the
-/// iteration produced one; f is zeroed,
-/// error = +inf. kEmpty: no contacts, problem larger than the workspace,
-/// or an inconsistent view (null pointer, ld < rows, row_offset steps other than 1 or 3); f is
-/// left untouched.
-enum class NsgsStatus : std::uint8_t { kConverged, kMaxSweeps, kTimeBudget, kNonFinite, kEmpty };
+/// iteration produced one; f is zeroed, error = +inf. kEmpty: no contacts, problem larger than
+/// the workspace, or an inconsistent view (null pointer, ld < rows, row_offset steps other than
+/// 1 or 3); f is left untouched. kIllPosed: some contact's diagonal block cannot be solved by
+/// Gauss-Seidel - a diagonal entry of W that NSGS divides by (W_nn; W_tt too when mu > 0) is zero,
+/// negative, denormal or below kMinRelativeDiagonal times the largest diagonal entry. Those
+/// contacts' forces are held at zero, the others are solved as usual, and error is the real
+/// natural-map error of the whole problem (including the held contacts); the status is kIllPosed
+/// whatever that error is. Only kConverged means "solved"; every other status is a failure.
+enum class NsgsStatus : std::uint8_t {
+  kConverged, kMaxSweeps, kTimeBudget, kNonFinite, kEmpty, kIllPosed
+};
 
-/// "converged", "max_sweeps", "time_budget", "non_finite", "empty" (static strings).
+/// A diagonal entry of W below this fraction of the largest one makes its contact ill-posed.
+inline constexpr double kMinRelativeDiagonal = 1e-13;
+
+/// "converged", "max_sweeps", "time_budget", "non_finite", "empty", "ill_posed" (static strings).
 std::string_view toString(NsgsStatus status) noexcept;
 
 struct NsgsResult {
@@ -107,6 +117,7 @@ struct NsgsResult {
   double error = 0.0;                ///< normalised natural-map error at exit
   double sor = 1.0;                  ///< relaxation in use at exit (see NsgsSettings::stall_sweeps)
   int relaxations = 0;               ///< times the stagnation rule lowered sor in this call
+  int ill_posed_contacts = 0;        ///< contacts held at zero force (see kIllPosed)
   std::int64_t elapsed_ns = 0;       ///< wall time spent in solveNsgs (CLOCK_MONOTONIC)
 };
 
@@ -120,7 +131,7 @@ class NsgsWorkspace {
   int maxContacts() const;
   // (implementation-defined scratch below)
   std::vector<double> delta;         ///< m: W f + delta_free, kept up to date (valid on exit)
-  std::vector<double> scratch;       ///< m: reserved
+  std::vector<double> scratch;       ///< m: per-row marks (ill-posed contacts)
  private:
   int max_rows_ = 0;
   int max_contacts_ = 0;
@@ -130,7 +141,9 @@ class NsgsWorkspace {
 /// the solution on exit. Never allocates. Problems larger than the workspace return kEmpty.
 /// Costs one W pass to form delta = W f + q on entry, then one W pass per sweep. The error is
 /// checked after sweeps check_every, 2 check_every, ... and at exit, never before the first
-/// sweep (so a warm start that is already a solution costs exactly one sweep).
+/// sweep (so a warm start that is already a solution costs exactly one sweep). When a check
+/// meets the tolerance, delta is formed afresh (one more W pass) and the error re-checked before
+/// kConverged is returned. Ill-posed contacts (see kIllPosed) are zeroed in f on entry.
 /// On exit workspace.delta holds W f + q for the returned f.
 NsgsResult solveNsgs(const ContactProblemView& problem, const NsgsSettings& settings,
                      NsgsWorkspace& workspace, double* f) noexcept;

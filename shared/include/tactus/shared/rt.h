@@ -10,10 +10,11 @@
 // PeriodicTimer::wait() is real-time safe: noexcept, allocation-free; its only system call is the
 // absolute-deadline clock_nanosleep (plus vDSO clock reads while spinning).
 //
-// Timer method (DESIGN.md section 6): sleep with clock_nanosleep(TIMER_ABSTIME) until
-// (deadline - spin_margin), then spin on the clock until the deadline. A plain sleep wakes ~70 us
-// late on a virtual machine; sleep-then-spin ~0.1 us. Never spin through a whole period under
-// SCHED_FIFO (the kernel throttles a task that takes more than 95 % of a core).
+// Timer method (../../../../docs/design.md#real-time-rules-and-the-timer): sleep with
+// clock_nanosleep(TIMER_ABSTIME) until (deadline - spin_margin), then spin on the clock until
+// the deadline. A plain sleep wakes ~70 us late on a virtual machine; sleep-then-spin ~0.1 us.
+// Never spin through a whole period under SCHED_FIFO (the kernel throttles a task that takes
+// more than 95 % of a core).
 
 #include <cstddef>
 #include <cstdint>

@@ -7,8 +7,8 @@
 //   [ TripleBufferControl (64 B) | slot 0 | slot 1 | slot 2 ]     each slot: slot_stride bytes,
 //                                                                 a multiple of 64 (cache lines)
 //
-// Protocol (DESIGN.md section 2; HadrienG2/triple-buffer's idea). One atomic byte `state` holds the
-// three slot roles and a fresh bit:
+// Protocol (../../../../docs/design.md#the-triple-buffer; HadrienG2/triple-buffer's idea). One
+// atomic byte `state` holds the three slot roles and a fresh bit:
 //
 //   bits 0-1 back (the writer's slot), bits 2-3 middle (the hand-over slot),
 //   bits 4-5 front (the reader's slot), bit 6 fresh (middle holds data the reader has not taken).

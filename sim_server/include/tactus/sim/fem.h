@@ -22,6 +22,7 @@
 #include <cstdint>
 #include <memory>
 #include <optional>
+#include <string>
 #include <vector>
 
 #include "tactus/sim/mesh.h"
@@ -65,6 +66,10 @@ struct FemStepStats {
   /// tolerance (its last finite iterate is applied; cg_residual says how far it got).
   bool ok = true;
   double cg_residual = 0.0;                     ///< final relative residual (CG only)
+  /// Tetrahedra inverted at the start of the step (det F <= 0 at the positions the step starts
+  /// from). The corotational force pushes an inverted element back (see polarRotation); a count
+  /// that stays up at equilibrium means the mesh or material cannot carry the load.
+  int inverted_elements = 0;
 };
 
 class FemBody {
@@ -146,6 +151,12 @@ class FemBody {
   /// same groups.
   void nodeRotations(std::vector<Eigen::Matrix3d>& out) const;
 
+  /// Per-element volume ratio det F = current signed volume / rest volume at the current
+  /// positions (<= 0: inverted).
+  void volumeRatios(Eigen::VectorXd& out) const;
+  /// Elements with det F <= 0 at the current positions.
+  int invertedElementCount() const;
+
   /// Per-element von Mises stress [Pa] at the current positions.
   void vonMises(Eigen::VectorXd& out) const;
   /// Per-element stress tensor [Pa] at the current positions: the corotated linear stress
@@ -179,6 +190,25 @@ class FemBody {
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };
+
+/// Threads of the numeric libraries CHOLMOD brings into the process.
+struct NumericThreads {
+  int blas_threads = -1;            ///< openblas_get_num_threads(); -1: OpenBLAS not loaded
+  std::string blas_config;          ///< openblas_get_config() (e.g. "... SINGLE_THREADED ...")
+  int omp_max_active_levels = -1;   ///< omp_get_max_active_levels(); -1: libgomp not loaded
+};
+
+/// Runs CHOLMOD's numeric libraries on the calling process's thread only: OpenMP parallel
+/// regions off (omp_set_max_active_levels(0)) and OpenBLAS at one thread
+/// (openblas_set_num_threads(1)), both looked up with dlsym so neither is a link dependency.
+/// Setting OPENBLAS_NUM_THREADS from the program cannot work: OpenBLAS is loaded with CHOLMOD and
+/// reads it in its load-time constructor, before main. The first call applies the limit and logs
+/// it ("numeric threads: BLAS 1 (...)"); every CholmodSolver makes that call before CHOLMOD's
+/// first BLAS call. Later calls return the state it left.
+NumericThreads limitNumericThreads();
+
+/// The current state, without changing it.
+NumericThreads queryNumericThreads();
 
 /// Applies a scene transform (scale, then XYZ Euler rotation in degrees, then translation).
 /// The rotation is extrinsic x, then y, then z: R = Rz(rz) Ry(ry) Rx(rx).

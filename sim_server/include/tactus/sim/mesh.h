@@ -60,10 +60,13 @@ SurfaceMesh extractSurface(const TetMesh& mesh);
 
 /// Writes one VTK XML unstructured grid (.vtu, ASCII): the mesh at positions `positions`
 /// (3 x n), with point data "displacement" (3 x n, may be empty) and cell data "von_mises"
-/// (one per tet, may be empty). Throws tactus::Error on I/O failure.
+/// (one per tet, may be empty). `volume_ratio` (det F per tet, may be empty) adds the cell
+/// fields "volume_ratio" and "inverted" (UInt8, 1 where det F <= 0). Throws tactus::Error on
+/// I/O failure.
 void writeVtu(const std::filesystem::path& path, const TetMesh& mesh,
               const Eigen::Matrix3Xd& positions, const Eigen::Matrix3Xd& displacement,
-              const Eigen::VectorXd& von_mises);
+              const Eigen::VectorXd& von_mises,
+              const Eigen::VectorXd& volume_ratio = Eigen::VectorXd());
 
 /// Writes a ParaView collection (.pvd) listing `files` (relative to the .pvd) at `times_s`.
 void writePvd(const std::filesystem::path& path, const std::vector<std::string>& files,

@@ -50,6 +50,9 @@ struct StepReport {
   /// solver.contact_iterations > 1 (else 0)
   double geometric_penetration_m = 0.0;
   bool finite = true;                ///< every state value finite
+  /// Tetrahedra inverted (det F <= 0) at the start of the step, over all tissues
+  /// (FemStepStats::inverted_elements)
+  int inverted_elements = 0;
   StageTimes times;
 };
 
@@ -81,6 +84,7 @@ struct ContactProblemData {
   shared::Pose device_pose;                    ///< x_h* used for this step
   double device_gripper = 1.0;                 ///< opening (0..1) used for this step
   shared::Pose tool_pose;                      ///< god object after the step
+  shared::NsgsResult solve;                    ///< the step's NSGS result (kEmpty: no solve)
   /// The solver's view of this problem (pointers into this object).
   shared::ContactProblemView view() const;
 };
@@ -147,6 +151,18 @@ class Simulation {
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };
+
+/// The device-sample half of sim_server's haptic link (also used by tests that run the haptic
+/// loop beside an in-process simulation): a sample is fresh when it was published (seq != 0),
+/// is younger than watchdog_ns at now_ns and carries no device fault.
+bool deviceSampleFresh(const shared::DeviceSample& s, std::int64_t now_ns,
+                       std::int64_t watchdog_ns);
+/// Fills `target` from a sample (pose, twist, gripper opening = gripper_rad / max_opening_rad
+/// clamped to [0, 1]; max_opening_rad <= 0 counts as 1 rad); false, leaving `target` unchanged,
+/// when the pose is not finite or the orientation is zero. The quaternion is normalised without
+/// overflow and the twist bounded (haptic_link.h); jumps and the workspace are the link's.
+bool deviceTargetFromSample(const shared::DeviceSample& s, double max_opening_rad,
+                            DeviceTarget& target);
 
 /// Writes the last step's contact problem into a snapshot slot (what sim_server publishes each
 /// step; also used by tests and tools that run the haptic loop beside an in-process simulation).

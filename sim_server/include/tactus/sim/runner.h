@@ -54,6 +54,9 @@ class RunStatistics {
   double medianSweeps() const;
   int maxContacts() const;
   double maxPenetration() const { return max_penetration_m_; }
+  /// Inverted tetrahedra (StepReport::inverted_elements): most in one step, and in the last.
+  int maxInvertedElements() const { return max_inverted_; }
+  int lastInvertedElements() const { return last_inverted_; }
   /// Fixed-width table for the console.
   std::string table() const;
   /// JSON object (stages with percentiles, contacts, sweeps) for comparison between commits.
@@ -63,6 +66,8 @@ class RunStatistics {
   std::vector<double> free_motion_, collision_, w_build_, solve_, correction_, output_, total_;
   std::vector<double> contacts_, sweeps_;
   double max_penetration_m_ = 0.0;
+  int max_inverted_ = 0;
+  int last_inverted_ = 0;
 };
 
 /// Runs a scene until `stop`, the step count or the duration. Returns the process exit code.

@@ -1,0 +1,100 @@
+# tactus_forbid_links(TARGET <target> FORBIDDEN <item>... [FORBIDDEN_REGEX <regex>...])
+#
+# Fails the configuration (FATAL_ERROR) when <target> links, directly or transitively, any of
+# the FORBIDDEN items. Both sides are resolved through ALIAS targets (tactus::sim is tactus_sim),
+# and the walk follows LINK_LIBRARIES and INTERFACE_LINK_LIBRARIES of every target reached
+# (static, shared, object, INTERFACE and IMPORTED libraries alike), unwrapping the generator
+# expressions CMake itself writes for link items ($<LINK_ONLY:x>, $<BUILD_INTERFACE:x>,
+# ::@(directory-id)x); any other generator expression that mentions a forbidden name fails. Raw link
+# items that are not targets (paths, -lfoo, plain names) are compared by name and against each
+# FORBIDDEN_REGEX (e.g. "(^|/|-l)(lib)?cholmod([.].*)?$" catches a library linked by file).
+#
+# Transitive links are only complete once every target is defined and linked: call it at the
+# end of the top-level CMakeLists.txt, or defer it there:
+#   cmake_language(DEFER DIRECTORY ${CMAKE_SOURCE_DIR} CALL tactus_forbid_links ...)
+# The error names the path of links that reaches the forbidden item.
+
+function(_tactus_link_guard_resolve item out_var)
+  set(name "${item}")
+  # CMake records links made from another directory as "::@(<id>);<name>;::@" - keep <name>
+  string(REGEX REPLACE "^::@\\([^)]*\\)" "" name "${name}")
+  # $<LINK_ONLY:x> (a static library's private dependency) is still linked
+  while(name MATCHES "^\\$<(LINK_ONLY|BUILD_INTERFACE):(.*)>$")
+    set(name "${CMAKE_MATCH_2}")
+  endwhile()
+  if(TARGET "${name}")
+    get_target_property(aliased "${name}" ALIASED_TARGET)
+    if(aliased)
+      set(name "${aliased}")
+    endif()
+  endif()
+  set(${out_var} "${name}" PARENT_SCOPE)
+endfunction()
+
+function(tactus_forbid_links)
+  cmake_parse_arguments(PARSE_ARGV 0 G "" "TARGET" "FORBIDDEN;FORBIDDEN_REGEX")
+  if(NOT G_TARGET OR NOT TARGET "${G_TARGET}")
+    message(FATAL_ERROR "tactus_forbid_links: TARGET '${G_TARGET}' is not a target")
+  endif()
+  set(forbidden "")
+  foreach(f IN LISTS G_FORBIDDEN)
+    _tactus_link_guard_resolve("${f}" rf)
+    list(APPEND forbidden "${rf}")
+  endforeach()
+  _tactus_link_guard_resolve("${G_TARGET}" root)
+  # breadth-first walk; `via_<item>` holds the link path that reached it
+  set(queue "${root}")
+  set(seen "${root}")
+  set(via_${root} "${G_TARGET}")
+  while(queue)
+    list(POP_FRONT queue current)
+    set(deps "")
+    if(TARGET "${current}")
+      get_target_property(type "${current}" TYPE)
+      if(NOT type STREQUAL "INTERFACE_LIBRARY")
+        get_target_property(direct "${current}" LINK_LIBRARIES)
+        if(direct)
+          list(APPEND deps ${direct})
+        endif()
+      endif()
+      get_target_property(iface "${current}" INTERFACE_LINK_LIBRARIES)
+      if(iface)
+        list(APPEND deps ${iface})
+      endif()
+    endif()
+    foreach(dep IN LISTS deps)
+      if(dep STREQUAL "::@" OR dep STREQUAL "")
+        continue()
+      endif()
+      _tactus_link_guard_resolve("${dep}" rd)
+      set(path "${via_${current}} -> ${dep}")
+      set(bad FALSE)
+      if(rd IN_LIST forbidden)
+        set(bad TRUE)
+      elseif(rd MATCHES "\\$<")
+        # any other generator expression: forbidden if it names a forbidden item anywhere
+        # (conservative: a configuration error is the safe side)
+        foreach(f IN LISTS forbidden G_FORBIDDEN)
+          string(FIND "${rd}" "${f}" at)
+          if(at GREATER_EQUAL 0)
+            set(bad TRUE)
+          endif()
+        endforeach()
+      else()
+        foreach(rx IN LISTS G_FORBIDDEN_REGEX)
+          if(rd MATCHES "${rx}")
+            set(bad TRUE)
+          endif()
+        endforeach()
+      endif()
+      if(bad)
+        message(FATAL_ERROR "${G_TARGET} must not link ${rd} (link path: ${path})")
+      endif()
+      if(NOT rd IN_LIST seen)
+        list(APPEND seen "${rd}")
+        list(APPEND queue "${rd}")
+        set(via_${rd} "${path}")
+      endif()
+    endforeach()
+  endwhile()
+endfunction()
