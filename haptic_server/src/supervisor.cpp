@@ -77,17 +77,16 @@ void Supervisor::poll() {
   }
   last_open_message_.clear();
   if (!r.segment->creatorAlive()) return;  // a stale segment: wait for the simulation to replace it
-  // one haptic process per segment: a second one would fight over the device samples
-  const std::int64_t other = r.segment->header().haptic_pid.load(std::memory_order_relaxed);
-  if (other > 0 && other != static_cast<std::int64_t>(::getpid()) &&
-      ::kill(static_cast<pid_t>(other), 0) == 0) {
+  // one haptic process per segment (a second one would fight over the device samples): one
+  // compare-exchange claims it, so two racing haptic_servers cannot both win
+  const std::int64_t other = r.segment->claimHaptic(static_cast<std::int64_t>(::getpid()));
+  if (other != 0) {
     throw SegmentError("segment '" + name_ + "' is already served by haptic_server pid " +
                        std::to_string(other) + ": stop it first (scripts/stop.sh) or start this "
                        "one with another --segment");
   }
   link_ = std::make_unique<HapticLink>(std::move(*r.segment));
   creator_alive_ = true;
-  link_->segment.setHapticPid(static_cast<std::int64_t>(::getpid()));
   spdlog::info("attached to segment '{}' (generation {}, up to {} contacts / {} rows)", name_,
                link_->segment.generation(), link_->segment.capacity().max_contacts,
                link_->segment.capacity().max_rows);

@@ -1,6 +1,7 @@
 #include "tactus/shared/segment.h"
 
 #include <errno.h>
+#include <fcntl.h>
 #include <signal.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -11,6 +12,7 @@
 #include <cstdio>
 #include <cstring>
 #include <ctime>
+#include <limits>
 #include <new>
 #include <sstream>
 #include <utility>
@@ -40,10 +42,74 @@ std::string programName() {
 }
 
 bool pidAlive(std::int64_t pid) noexcept {
-  if (pid <= 0) return false;
+  // a header value out of pid_t range must not turn into kill(-1) or kill(0)
+  if (pid <= 0 || pid > std::numeric_limits<std::int32_t>::max()) return false;
   if (::kill(static_cast<pid_t>(pid), 0) == 0) return true;
   return errno == EPERM;
 }
+
+// The creator's ownership lock: an open-file-description write lock over the whole object, taken
+// right after the exclusive create and held for the creator's lifetime (the kernel drops it when
+// the last descriptor of that open file closes, i.e. when the process exits however it dies).
+// OFD locks conflict between open file descriptions even inside one process, and closing some
+// other descriptor of the same object does not drop them (unlike classic fcntl locks).
+bool takeOwnerLock(int fd) noexcept {
+  struct flock lk {};
+  lk.l_type = F_WRLCK;
+  lk.l_whence = SEEK_SET;
+  lk.l_start = 0;
+  lk.l_len = 0;
+  return ::fcntl(fd, F_OFD_SETLK, &lk) == 0;
+}
+
+// Whether some other open file description holds the ownership lock (the creator is alive,
+// running or stopped). A probe through a read-only descriptor is enough: a read lock conflicts
+// with the creator's write lock.
+bool ownerLockHeld(int fd) noexcept {
+  struct flock lk {};
+  lk.l_type = F_RDLCK;
+  lk.l_whence = SEEK_SET;
+  lk.l_start = 0;
+  lk.l_len = 0;
+  if (::fcntl(fd, F_OFD_GETLK, &lk) != 0) return true;  // cannot tell: assume alive (refuse)
+  return lk.l_type != F_UNLCK;
+}
+
+// segmentTrustProblem, also telling whether the problem is another user's ownership.
+std::string trustProblem(int fd, const std::string& name, bool* other_user) {
+  *other_user = false;
+  struct stat st {};
+  const std::string path = Segment::pathOf(name);
+  if (::fstat(fd, &st) != 0) {
+    return "cannot check '" + path + "' (fstat: " + std::strerror(errno) + ")";
+  }
+  if (!S_ISREG(st.st_mode)) {
+    return "'" + path + "' is not a shared-memory object (not a regular file): refusing it";
+  }
+  const uid_t me = ::geteuid();
+  if (st.st_uid != me) {
+    *other_user = true;
+    return "'" + path + "' belongs to uid " + std::to_string(st.st_uid) + ", not to this user (uid " +
+           std::to_string(me) + "): refusing a segment another user could have written; run "
+           "sim_server and haptic_server as the same user, or choose another --segment name";
+  }
+  if ((st.st_mode & 0077) != 0) {
+    char mode[8];
+    std::snprintf(mode, sizeof(mode), "%04o", static_cast<unsigned>(st.st_mode & 07777));
+    return "'" + path + "' has mode " + mode + ": other users can read or write it (Tactus creates "
+           "segments 0600); refusing it: remove it (rm " + path + ") and restart sim_server";
+  }
+  return {};
+}
+
+}  // namespace
+
+std::string segmentTrustProblem(int fd, const std::string& name) {
+  bool other_user = false;
+  return trustProblem(fd, name, &other_user);
+}
+
+namespace {
 
 std::uint64_t loadMagic(const SegmentHeader* h) noexcept {
   // acquire: pairs with the creator's release store of the magic (initialisation complete)
@@ -91,12 +157,21 @@ Existing inspectExisting(const std::string& name, std::int64_t stale_after_ns) {
                  "): it may belong to another user; choose another --segment name or remove it";
     return ex;
   }
+  const int fd = shm.get_mapping_handle().handle;
+  // never touch (not even replace) an object another user owns: same check as an attacher's
+  bool other_user = false;
+  if (const std::string why = trustProblem(fd, name, &other_user); other_user) {
+    ex.live = true;
+    ex.message = "segment '" + name + "': " + why;
+    return ex;
+  }
+  const bool lock_held = ownerLockHeld(fd);
   bip::offset_t size = 0;
   shm.get_size(size);
   const std::int64_t age_ns = objectAgeNs(name);
   // too small to hold even the stable prefix: being created right now, or a crashed creation
   if (size < static_cast<bip::offset_t>(kStablePrefixBytes)) {
-    if (age_ns > stale_after_ns) return ex;
+    if (!lock_held && age_ns > stale_after_ns) return ex;
     ex.live = true;
     ex.message = "segment '" + name + "' is being created by another process right now; wait for "
                  "it or choose another --segment name";
@@ -108,7 +183,7 @@ Existing inspectExisting(const std::string& name, std::int64_t stale_after_ns) {
   const std::int64_t pid = h->creator_pid;
   if (magic == 0) {
     // initialising (or its creator died while initialising)
-    if ((pid != 0 && !pidAlive(pid)) || age_ns > stale_after_ns) return ex;
+    if (!lock_held && ((pid != 0 && !pidAlive(pid)) || age_ns > stale_after_ns)) return ex;
     ex.live = true;
     ex.message = "segment '" + name + "' is being initialised by process " + std::to_string(pid) +
                  "; wait for it or choose another --segment name";
@@ -122,20 +197,30 @@ Existing inspectExisting(const std::string& name, std::int64_t stale_after_ns) {
   }
   ex.generation = h->generation;
   ex.creator = "dead process " + std::to_string(pid);
-  if (!pidAlive(pid)) return ex;
   // relaxed: a timestamp, no data depends on it
   const std::int64_t beat = h->sim_heartbeat_ns.load(std::memory_order_relaxed);
-  const std::int64_t last = std::max(beat, h->created_ns);
-  const std::int64_t since = monotonicNs() - last;
-  if (since > stale_after_ns) {
-    // hung creator or a recycled pid
-    ex.creator = "process " + std::to_string(pid) + ", silent for " + secondsText(since);
-    return ex;
-  }
+  const std::int64_t since = monotonicNs() - std::max(beat, h->created_ns);
+  // Since ABI 3 the creator holds the ownership lock: held means alive (running, hung or
+  // stopped), whatever its heartbeat says; free means dead. An older creator holds no lock:
+  // alive when its pid exists.
+  const bool locking_abi = h->abi_version >= 3;
+  const bool alive = locking_abi ? lock_held : (lock_held || pidAlive(pid));
+  if (!alive) return ex;
   ex.live = true;
-  ex.message = "segment '" + name + "' is in use by a live simulation (pid " + std::to_string(pid) +
-               ", last heartbeat " + secondsText(since) + " ago): stop that sim_server first or "
-               "pass another --segment name";
+  if (since <= stale_after_ns) {
+    ex.message = "segment '" + name + "' is in use by a live simulation (pid " +
+                 std::to_string(pid) + ", last heartbeat " + secondsText(since) +
+                 " ago): stop that sim_server first or pass another --segment name";
+  } else {
+    ex.message = "segment '" + name + "' is in use by a live simulation (pid " +
+                 std::to_string(pid) + ") that has been silent for " + secondsText(since) +
+                 " (stopped or hung): a segment whose owner is alive is never replaced; resume or "
+                 "stop it first (kill " + std::to_string(pid) + ") or pass another --segment name";
+  }
+  if (!locking_abi) {
+    ex.message += " (created by a build of segment ABI " + std::to_string(h->abi_version) +
+                  "; if pid " + std::to_string(pid) + " is not a sim_server, remove " + path + ")";
+  }
   return ex;
 }
 
@@ -267,6 +352,12 @@ Segment Segment::create(const std::string& name, SegmentCapacity capacity,
     try {
       impl->shm = bip::shared_memory_object(bip::create_only, name.c_str(), bip::read_write,
                                             owner_only);
+      if (!takeOwnerLock(impl->shm.get_mapping_handle().handle)) {
+        const int err = errno;
+        remove(name);
+        throw SegmentError("cannot lock new shared memory '" + pathOf(name) + "' (" +
+                           std::strerror(err) + ")");
+      }
       break;
     } catch (const bip::interprocess_exception& e) {
       if (e.get_error_code() != bip::already_exists_error || attempt >= 3) {
@@ -362,6 +453,13 @@ TryOpenResult Segment::tryOpen(const std::string& name, Access access) {
       r.message = "cannot open '" + path + "': " + e.what() +
                   " (segments are owner-only: run both daemons as the same user)";
     }
+    return r;
+  }
+  // trust: only this user's owner-only objects are attached (before anything is mapped)
+  if (std::string why = segmentTrustProblem(impl->shm.get_mapping_handle().handle, name);
+      !why.empty()) {
+    r.status = OpenStatus::kError;
+    r.message = std::move(why);
     return r;
   }
   bip::offset_t size = 0;
@@ -578,6 +676,22 @@ void Segment::setHapticPid(std::int64_t pid) noexcept {
   if (impl_->access == Access::kReadOnly) return;
   // relaxed: informational
   impl_->header->haptic_pid.store(pid, std::memory_order_relaxed);
+}
+
+std::int64_t Segment::claimHaptic(std::int64_t pid) noexcept {
+  if (impl_->access == Access::kReadOnly || pid <= 0) return -1;
+  std::atomic<std::int64_t>& claim = impl_->header->haptic_pid;
+  // acquire/release: a claimant that loses sees the winner's pid
+  std::int64_t seen = claim.load(std::memory_order_acquire);
+  for (;;) {
+    if (seen == pid) return 0;
+    if (seen > 0 && pidAlive(seen)) return seen;
+    // free (0) or a dead process's claim: take it only if nobody changed it meanwhile
+    if (claim.compare_exchange_weak(seen, pid, std::memory_order_acq_rel,
+                                    std::memory_order_acquire)) {
+      return 0;
+    }
+  }
 }
 
 bool Segment::creatorAlive(std::int64_t stale_after_ns) const noexcept {

@@ -37,7 +37,33 @@ double pdCompliance(double inertia, double b, double k, double h) {
   return 1.0 / (inertia / (h * h) + b / h + k);
 }
 
+// Scales `v` down to at most `max_norm` (a non-finite vector becomes zero). True if changed.
+bool boundNorm(Eigen::Ref<Eigen::Vector3d> v, double max_norm) {
+  if (!v.allFinite()) {
+    v.setZero();
+    return true;
+  }
+  // scale first so that the norm of a huge finite vector does not overflow
+  const double m = v.cwiseAbs().maxCoeff();
+  if (m <= max_norm / 2.0) return false;
+  const double n = m * (v / m).norm();
+  if (n <= max_norm) return false;
+  v *= max_norm / n;
+  return true;
+}
+
 }  // namespace
+
+BoxSpec instrumentWorkspace(const InstrumentSpec& spec, const Eigen::AlignedBox3d& scene_bounds) {
+  if (spec.workspace) return *spec.workspace;
+  Eigen::AlignedBox3d box = scene_bounds;
+  box.extend(spec.initial_pose.position_m);
+  for (const TrajectoryKey& k : spec.trajectory) box.extend(k.pose.position_m);
+  BoxSpec out;
+  out.min_m = box.min().array() - kWorkspaceMarginM;
+  out.max_m = box.max().array() + kWorkspaceMarginM;
+  return out;
+}
 
 Instrument::Instrument(const InstrumentSpec& spec) : spec_(spec) {
   requirePositive(spec.mass_kg, "mass_kg");
@@ -95,12 +121,34 @@ void Instrument::reset(const shared::Pose& pose, double gripper_opening) {
   updateFeatures();
 }
 
+void Instrument::setWorkspace(const BoxSpec& box) {
+  if (!box.min_m.allFinite() || !box.max_m.allFinite() ||
+      (box.min_m.array() > box.max_m.array()).any()) {
+    throw SceneError("instrument.workspace: must be a finite box with min <= max in every "
+                     "coordinate");
+  }
+  workspace_ = box;
+}
+
 void Instrument::freeMotion(double h_s, const shared::Pose& target, const Vector6d& target_twist,
                             double gripper_opening) {
   if (!(h_s > 0.0)) return;   // no time step: nothing moves
   h_s_ = h_s;
   target_ = target;
   target_twist_ = target_twist;
+  // bound the target (see the header comment): no absurd value reaches the dynamics
+  const Eigen::Vector3d bounded =
+      target.pos_m.cwiseMax(workspace_.min_m).cwiseMin(workspace_.max_m);
+  bool clamped = false;
+  for (int i = 0; i < 3; ++i) {
+    if (bounded[i] == target.pos_m[i]) continue;
+    clamped = true;
+    target_twist_[i] = 0.0;   // held at the wall: no velocity across it
+  }
+  target_.pos_m = bounded;
+  clamped = boundNorm(target_twist_.head<3>(), kMaxTargetSpeedMps) || clamped;
+  clamped = boundNorm(target_twist_.tail<3>(), kMaxTargetAngularSpeedRadps) || clamped;
+  if (clamped) ++clamped_targets_;
   const double h = h_s;
   if (grip_dynamic_) {
     // jaw angle, toward phi_h at rest
@@ -118,11 +166,11 @@ void Instrument::freeMotion(double h_s, const shared::Pose& target, const Vector
   // translation, error p_h - p; rotation, error log(R_h R^-1)
   const Eigen::Vector3d v_new = implicitPdRate<Eigen::Vector3d>(
       spec_.mass_kg, spec_.coupling_b_nspm, spec_.coupling_k_npm, h, twist_.head<3>(),
-      target.pos_m - pose_.pos_m, target_twist.head<3>());
-  theta0_ = shared::rotationVector(target.rot * pose_.rot.conjugate());
+      target_.pos_m - pose_.pos_m, target_twist_.head<3>());
+  theta0_ = shared::rotationVector(target_.rot * pose_.rot.conjugate());
   const Eigen::Vector3d w_new = implicitPdRate<Eigen::Vector3d>(
       spec_.inertia_kgm2, spec_.coupling_b_rot_nmsprad, spec_.coupling_k_rot_nmprad, h,
-      twist_.tail<3>(), theta0_, target_twist.tail<3>());
+      twist_.tail<3>(), theta0_, target_twist_.tail<3>());
   rot_step_ = h * w_new;
   twist_.head<3>() = v_new;
   twist_.tail<3>() = w_new;

@@ -8,7 +8,20 @@
 
 namespace tactus::sim {
 
-HapticLink::HapticLink(const std::string& name, const SceneSpec& spec)
+namespace {
+
+// Scales `v` down to at most `max_norm` without overflowing on huge components.
+Eigen::Vector3d boundedNorm(Eigen::Vector3d v, double max_norm) {
+  if (!v.allFinite()) return Eigen::Vector3d::Zero();
+  const double m = v.cwiseAbs().maxCoeff();
+  if (m <= max_norm / 2.0) return v;
+  const double n = m * (v / m).norm();
+  return n <= max_norm ? v : Eigen::Vector3d(v * (max_norm / n));
+}
+
+}  // namespace
+
+HapticLink::HapticLink(const std::string& name, const SceneSpec& spec, const BoxSpec& workspace)
     : segment_(shared::Segment::create(
           name, shared::SegmentCapacity::forContacts(spec.solver.max_contacts,
                                                      spec.instrument.friction_mu > 0.0))),
@@ -16,8 +29,10 @@ HapticLink::HapticLink(const std::string& name, const SceneSpec& spec)
       device_(segment_.deviceReader()),
       watchdog_ns_(static_cast<std::int64_t>(spec.haptics.watchdog_ms * 1e6)),
       max_opening_rad_(spec.instrument.max_opening_rad > 0.0 ? spec.instrument.max_opening_rad
-                                                             : 1.0) {
+                                                             : 1.0),
+      workspace_(workspace) {
   segment_.beat(shared::Side::kSim);
+  if (!segment_.creationNote().empty()) spdlog::info("{}", segment_.creationNote());
   spdlog::info("segment '{}' created ({:.1f} MiB, up to {} contacts / {} rows)", name,
                static_cast<double>(segment_.sizeBytes()) / (1024.0 * 1024.0),
                segment_.capacity().max_contacts, segment_.capacity().max_rows);
@@ -41,17 +56,22 @@ bool deviceSampleFresh(const shared::DeviceSample& s, std::int64_t now_ns,
 
 bool deviceTargetFromSample(const shared::DeviceSample& s, double max_opening_rad,
                             DeviceTarget& target) {
-  const bool finite = std::all_of(s.pos_m.begin(), s.pos_m.end(), [](double x) { return std::isfinite(x); }) &&
-                      std::all_of(s.quat_wxyz.begin(), s.quat_wxyz.end(), [](double x) { return std::isfinite(x); });
-  if (!finite) return false;
+  const auto finite = [](const auto& a) {
+    return std::all_of(a.begin(), a.end(), [](double x) { return std::isfinite(x); });
+  };
+  if (!finite(s.pos_m) || !finite(s.quat_wxyz)) return false;
+  // orientation: scaled before normalising, so that huge components cannot overflow
+  Eigen::Vector4d q(s.quat_wxyz[0], s.quat_wxyz[1], s.quat_wxyz[2], s.quat_wxyz[3]);
+  const double q_max = q.cwiseAbs().maxCoeff();
+  if (!(q_max > 0.0)) return false;
+  q /= q_max;
+  q.normalize();
   target.pose.pos_m = Eigen::Vector3d(s.pos_m[0], s.pos_m[1], s.pos_m[2]);
-  target.pose.rot = Eigen::Quaterniond(s.quat_wxyz[0], s.quat_wxyz[1], s.quat_wxyz[2], s.quat_wxyz[3]);
-  if (target.pose.rot.norm() < 1e-9) target.pose.rot = Eigen::Quaterniond::Identity();
-  target.pose.rot.normalize();
-  for (int i = 0; i < 3; ++i) {
-    target.twist[i] = std::isfinite(s.vel_mps[i]) ? s.vel_mps[i] : 0.0;
-    target.twist[3 + i] = std::isfinite(s.angvel_radps[i]) ? s.angvel_radps[i] : 0.0;
-  }
+  target.pose.rot = Eigen::Quaterniond(q[0], q[1], q[2], q[3]);
+  const Eigen::Vector3d v(s.vel_mps[0], s.vel_mps[1], s.vel_mps[2]);
+  const Eigen::Vector3d w(s.angvel_radps[0], s.angvel_radps[1], s.angvel_radps[2]);
+  target.twist.head<3>() = boundedNorm(v, kMaxDeviceSpeedMps);
+  target.twist.tail<3>() = boundedNorm(w, kMaxDeviceAngularSpeedRadps);
   // the device's gripper angle maps onto the jaws' opening range
   const double full_rad = max_opening_rad > 0.0 ? max_opening_rad : 1.0;
   const double opening = std::isfinite(s.gripper_rad) ? s.gripper_rad / full_rad : 1.0;
@@ -61,16 +81,74 @@ bool deviceTargetFromSample(const shared::DeviceSample& s, double max_opening_ra
 
 bool HapticLink::deviceTarget(DeviceTarget& target) {
   const shared::DeviceSample& s = device_.latest();
-  const bool fresh = deviceSampleFresh(s, shared::monotonicNs(), watchdog_ns_);
+  const std::int64_t now = shared::monotonicNs();
+  const bool fresh = deviceSampleFresh(s, now, watchdog_ns_);
   if (fresh != device_active_) {
     spdlog::info(fresh ? "device samples arriving: the instrument follows the device"
                        : "no fresh device sample: the instrument follows the scene's script");
     device_active_ = fresh;
   }
-  if (!fresh || !deviceTargetFromSample(s, max_opening_rad_, target)) return false;
+  if (!fresh) {
+    have_good_ = false;   // the script took over: the next device sample starts afresh
+    return false;
+  }
+  if (!have_good_) {
+    // the device takes over from the script: its first sample is judged against the script
+    last_good_ = target;
+    last_good_.twist.setZero();
+    last_good_ns_ = now;
+    have_good_ = true;
+  }
+  DeviceTarget candidate = target;
+  const bool usable = deviceTargetFromSample(s, max_opening_rad_, candidate);
+  // the raw position is judged (so 1e300 m never passes), the clamped one is used
+  const double dt_s = 1e-9 * static_cast<double>(std::max<std::int64_t>(0, now - last_good_ns_));
+  const double allowed_m = kJumpAllowanceM + kMaxDeviceSpeedMps * dt_s;
+  const Eigen::Vector3d jump = candidate.pose.pos_m - last_good_.pose.pos_m;
+  const double jump_scale = jump.cwiseAbs().maxCoeff();   // |jump| without overflow
+  const double jump_m = jump_scale > 0.0 ? jump_scale * (jump / jump_scale).norm() : 0.0;
+  if (!usable || jump_m > allowed_m) {
+    // hold the last accepted target, at rest
+    if (!rejecting_) {
+      if (usable) {
+        spdlog::warn("implausible device sample (a jump of {:.3g} m in {:.3g} ms): rejected, "
+                     "holding the last good target until samples are sane",
+                     jump_m, 1e3 * dt_s);
+      } else {
+        spdlog::warn("unusable device sample (non-finite pose or zero orientation): holding the "
+                     "last good target until samples are sane");
+      }
+      rejecting_ = true;
+    }
+    ++rejected_jumps_;
+    target = last_good_;
+    return true;
+  }
+  if (rejecting_) {
+    spdlog::info("device samples plausible again: the instrument follows the device");
+    rejecting_ = false;
+  }
+  const Eigen::Vector3d raw = candidate.pose.pos_m;
+  candidate.pose.pos_m = raw.cwiseMax(workspace_.min_m).cwiseMin(workspace_.max_m);
+  if (!(candidate.pose.pos_m == raw)) ++clamped_;
+  target = candidate;
   device_seq_ = s.seq;
   ++samples_used_;
+  last_good_ = target;
+  last_good_.twist.setZero();
+  last_good_ns_ = now;
   return true;
+}
+
+std::string HapticLink::displacedReason(std::int64_t now_ns) {
+  if (now_ns < next_displacement_check_ns_) return {};
+  next_displacement_check_ns_ = now_ns + kDisplacementCheckNs;
+  if (segment_.stillCurrent()) return {};
+  return "segment '" + segment_.name() + "' (" + shared::Segment::pathOf(segment_.name()) +
+         ") no longer refers to the segment this simulation created (generation " +
+         std::to_string(segment_.generation()) + "): it was removed or replaced, e.g. while this "
+         "process was stopped; the haptic side cannot see this simulation any more, so it stops. "
+         "Restart it (or pass another --segment name)";
 }
 
 bool writeSnapshot(const Simulation& sim, double max_opening_rad, std::uint64_t seq,
@@ -159,6 +237,12 @@ void HapticLink::logStatus() {
   spdlog::info("published {} snapshots; haptic heartbeat {:.1f} ms ago; {} device samples used",
                published_, 1e-6 * static_cast<double>(shared::monotonicNs() - beat), samples_used_);
   if (truncated_ > 0) spdlog::warn("{} snapshots exceeded the segment capacity", truncated_);
+  if (rejected_jumps_ > rejected_reported_) {
+    spdlog::warn("{} implausible device samples rejected so far (jumps faster than {} m/s or a "
+                 "zero orientation); {} clamped into the workspace",
+                 rejected_jumps_, kMaxDeviceSpeedMps, clamped_);
+    rejected_reported_ = rejected_jumps_;
+  }
 }
 
 }  // namespace tactus::sim

@@ -1,7 +1,27 @@
 #pragma once
 // Simulation side of the shared segment: creates it (capacity from the scene), publishes each
 // step's contact problem (the haptic local model) and reads the newest device sample.
+//
+// Device samples are untrusted input. A fresh sample drives the instrument only after:
+//  * per sample (deviceTargetFromSample, pipeline.h): a non-finite pose or a zero orientation
+//    makes it unusable; any other finite quaternion is normalised (scaled first, so huge
+//    components do not overflow); the twist is bounded to kMaxDeviceSpeedMps /
+//    kMaxDeviceAngularSpeedRadps (non-finite parts zeroed);
+//  * jumps: a device cannot move faster than kMaxDeviceSpeedMps. A raw position further than
+//    kJumpAllowanceM + kMaxDeviceSpeedMps * (time since the last accepted sample) from the last
+//    accepted one, or an unusable sample, is rejected (counted in rejectedJumps(), logged once
+//    per episode) and the last accepted target is held at rest. The first sample after the
+//    script drove is judged against the scripted target. The allowance grows with time, so a
+//    device that really is elsewhere (e.g. re-homed) is followed again after
+//    (distance / kMaxDeviceSpeedMps) s, a sane sample near the last good one at once, and
+//    1e300 m never;
+//  * position: clamped into the instrument's workspace (counted in clampedSamples()).
+//
+// Displacement: displacedReason() tells, at most every kDisplacementCheckNs (one stat() call, off
+// the hot path), whether the segment's name no longer refers to this simulation's object
+// (removed, or re-created while this process was stopped): the simulation must then stop.
 
+#include <Eigen/Core>
 #include <cstdint>
 #include <string>
 
@@ -10,19 +30,37 @@
 
 namespace tactus::sim {
 
+/// Fastest plausible device (hand) motion [m/s] and rotation [rad/s].
+inline constexpr double kMaxDeviceSpeedMps = 10.0;
+inline constexpr double kMaxDeviceAngularSpeedRadps = 100.0;
+/// Jump allowed between two samples regardless of their time difference [m].
+inline constexpr double kJumpAllowanceM = 0.02;
+/// Period of the displacement check [ns].
+inline constexpr std::int64_t kDisplacementCheckNs = 200'000'000;
+
 class HapticLink {
  public:
-  /// Creates the segment `name` (replacing a stale one). Throws tactus::SegmentError.
-  HapticLink(const std::string& name, const SceneSpec& spec);
+  /// Creates the segment `name` (replacing a stale one). Device positions are bounded to
+  /// `workspace` (the instrument's, see instrumentWorkspace). Throws tactus::SegmentError.
+  HapticLink(const std::string& name, const SceneSpec& spec, const BoxSpec& workspace);
   ~HapticLink();
 
-  /// Replaces `target` by the newest device sample when one arrived within the watchdog period;
-  /// otherwise leaves the scripted target (the simulation holds or follows its script).
+  /// Replaces `target` by the newest device sample when one arrived within the watchdog period
+  /// (bounded as described above; a rejected jump holds the last accepted target); otherwise
+  /// leaves the scripted target (the simulation holds or follows its script). True when the
+  /// device drives the target.
   bool deviceTarget(DeviceTarget& target);
   /// Publishes the last step's contact problem and beats the heartbeat.
   void publish(const Simulation& sim);
   /// One log line: haptic heartbeat age, device samples seen, snapshots published.
   void logStatus();
+  /// Non-empty (why) when the segment's name no longer refers to the segment this simulation
+  /// created; checked at most every kDisplacementCheckNs of `now_ns` (empty in between).
+  std::string displacedReason(std::int64_t now_ns);
+
+  std::uint64_t rejectedJumps() const { return rejected_jumps_; }
+  std::uint64_t clampedSamples() const { return clamped_; }
+  const shared::Segment& segment() const { return segment_; }
 
  private:
   shared::Segment segment_;
@@ -30,11 +68,20 @@ class HapticLink {
   shared::TripleReader<shared::DeviceSample> device_;
   std::int64_t watchdog_ns_ = 50'000'000;
   double max_opening_rad_ = 1.0;                 ///< device gripper angle of a fully open grasper
+  BoxSpec workspace_;
   std::uint64_t published_ = 0;
   std::uint64_t device_seq_ = 0;
   std::uint64_t samples_used_ = 0;
   std::uint64_t truncated_ = 0;
+  std::uint64_t rejected_jumps_ = 0;
+  std::uint64_t clamped_ = 0;
+  std::uint64_t rejected_reported_ = 0;          ///< rejected_jumps_ at the last status line
   bool device_active_ = false;
+  bool have_good_ = false;                        ///< an accepted sample exists
+  bool rejecting_ = false;                        ///< in an episode of rejected samples (logged once)
+  DeviceTarget last_good_;                        ///< the last accepted target (held on a jump)
+  std::int64_t last_good_ns_ = 0;                 ///< when it was accepted (this clock)
+  std::int64_t next_displacement_check_ns_ = 0;
 };
 
 }  // namespace tactus::sim

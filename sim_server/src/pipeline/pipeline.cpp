@@ -171,6 +171,13 @@ Simulation::Simulation(const SceneSpec& spec) : impl_(std::make_unique<Impl>()) 
   s.buildTissues();
   if (spec.instrument.present) {
     s.instrument = std::make_unique<Instrument>(spec.instrument);
+    // the device target stays within a box around the scene (instrument.h "Workspace")
+    Eigen::AlignedBox3d bounds;
+    for (const TissueState& ts : s.tissues) {
+      const Eigen::VectorXd& x = ts.body->positions();
+      for (Eigen::Index i = 0; i + 2 < x.size(); i += 3) bounds.extend(x.segment<3>(i));
+    }
+    s.instrument->setWorkspace(instrumentWorkspace(spec.instrument, bounds));
     s.target = scriptedTarget(0.0);
     s.instrument->reset(s.target.pose, s.target.gripper_opening);
     const int max_rows = (spec.instrument.friction_mu > 0.0 ? 3 : 1) * spec.solver.max_contacts;

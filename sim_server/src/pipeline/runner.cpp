@@ -186,7 +186,7 @@ int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
 
   std::unique_ptr<HapticLink> link;
   if (spec.haptics.enabled && sim.hasInstrument()) {
-    link = std::make_unique<HapticLink>(options.segment, spec);
+    link = std::make_unique<HapticLink>(options.segment, spec, sim.instrument()->workspace());
   }
   auto display = link ? std::make_unique<DisplayLink>(options.segment, sim) : nullptr;
 
@@ -210,7 +210,15 @@ int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
     }
     const StepReport report = sim.step();
     stats.add(report);
-    if (link) link->publish(sim);
+    if (link) {
+      // a simulation whose segment was removed or replaced publishes into nothing: stop
+      if (const std::string why = link->displacedReason(nowNs()); !why.empty()) {
+        spdlog::error("{}", why);
+        exit_code = 3;
+        break;
+      }
+      link->publish(sim);
+    }
     if (display) display->publish(sim, report);
     sim.writeOutputIfDue();
     if (!report.finite) {

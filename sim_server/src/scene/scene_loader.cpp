@@ -2,6 +2,7 @@
 // file, line, column and field path) and reported at once in one SceneError.
 
 #include <spdlog/fmt/fmt.h>
+#include <spdlog/spdlog.h>
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>
@@ -16,6 +17,8 @@
 #include "tactus/shared/error.h"
 #include "tactus/shared/file_io.h"
 #include "tactus/sim/scene.h"
+// the contact problem's size limit (max_contacts)
+#include "tactus/shared/segment.h"
 
 namespace tactus::sim {
 namespace {
@@ -42,6 +45,19 @@ struct Range {
 constexpr Range kPositive{0.0, kInf, true, false};
 constexpr Range kNonNegative{0.0, kInf, false, false};
 constexpr Range kAny{};
+
+// Physical sanity (scenes/README.md "Value ranges"): a value outside its hard range is an error
+// (impossible, or it would exhaust memory or time); outside its plausible range, a warning.
+constexpr Range kAtMost(double hi) { return Range{-kInf, hi, false, false}; }
+constexpr Range kPositiveUpTo(double hi) { return Range{0.0, hi, true, false}; }
+constexpr Range kNonNegativeUpTo(double hi) { return Range{0.0, hi, false, false}; }
+constexpr Range kSymmetric(double bound) { return Range{-bound, bound, false, false}; }
+constexpr double kMaxCoordinateM = 1e3;      ///< any position or length in a scene [m]
+constexpr double kUsualCoordinateM = 10.0;   ///< a surgical scene fits in a few metres
+constexpr Range kCoordinate = kSymmetric(kMaxCoordinateM);
+constexpr Range kUsualCoordinate = kSymmetric(kUsualCoordinateM);
+/// Largest shared-memory segment / contact problem sim_server sets up (W is rows x rows doubles).
+constexpr std::size_t kMaxContactProblemBytes = std::size_t{2} << 30;
 
 std::string kindOf(const YAML::Node& n) {
   switch (n.Type()) {
@@ -98,6 +114,10 @@ class SceneParser {
       }
       throw SceneError(message);
     }
+    std::stable_sort(warnings_.begin(), warnings_.end(), [](const Problem& a, const Problem& b) {
+      return std::tie(a.line, a.column) < std::tie(b.line, b.column);
+    });
+    for (const Problem& p : warnings_) spec.warnings.push_back(p.text);
     return spec;
   }
 
@@ -107,6 +127,22 @@ class SceneParser {
     int column;
     std::string text;
   };
+
+  void warning(const YAML::Node& at, const std::string& path, const std::string& what) {
+    const YAML::Mark m = at.Mark();
+    const int line = std::max(1, m.line + 1);
+    const int column = std::max(1, m.column + 1);
+    warnings_.push_back({line, column, fmt::format("{}:{}:{}: {}: {}", name_, line, column, path,
+                                                   what)});
+  }
+
+  // Warns when a valid value lies outside its plausible range.
+  void plausible(const YAML::Node& at, const std::string& path, double v, Range usual) {
+    if (!usual.contains(v)) {
+      warning(at, path, fmt::format("unusual value {} (plausible: {}); check the units", v,
+                                    usual.describe().substr(std::string("must be ").size())));
+    }
+  }
 
   void error(const YAML::Node& at, const std::string& path, const std::string& what) {
     const YAML::Mark m = at.Mark();
@@ -167,8 +203,10 @@ class SceneParser {
   }
 
   // Optional number with a range; `out` is left unchanged when absent or invalid.
+  // `usual`: the plausible range (a warning outside it).
+  // `range`: what the field means; `hard`: physically possible (both errors outside).
   bool number(const YAML::Node& map, const std::string& path, const char* key, double* out,
-              Range range = kAny) {
+              Range range = kAny, Range hard = kAny, Range usual = kAny) {
     const YAML::Node n = map[key];
     if (!n.IsDefined()) return false;
     double v = 0.0;
@@ -177,12 +215,20 @@ class SceneParser {
       error(n, join(path, key), fmt::format("{} (got {})", range.describe(), v));
       return false;
     }
+    if (!hard.contains(v)) {
+      error(n, join(path, key), fmt::format("{} (got {}): not a physically sensible value",
+                                            hard.describe(), v));
+      return false;
+    }
+    plausible(n, join(path, key), v, usual);
     *out = v;
     return true;
   }
 
+  // At most `max_value` (error above), plausible up to `usual_max` (warning above).
   bool integer(const YAML::Node& map, const std::string& path, const char* key, int* out,
-               int min_value) {
+               int min_value, int max_value = std::numeric_limits<int>::max(),
+               int usual_max = std::numeric_limits<int>::max()) {
     const YAML::Node n = map[key];
     if (!n.IsDefined()) return false;
     long long v = 0;
@@ -190,9 +236,17 @@ class SceneParser {
       error(n, join(path, key), "must be an integer (got " + kindOf(n) + ")");
       return false;
     }
-    if (v < min_value || v > std::numeric_limits<int>::max()) {
+    if (v < min_value) {
       error(n, join(path, key), fmt::format("must be >= {} (got {})", min_value, v));
       return false;
+    }
+    if (v > max_value) {
+      error(n, join(path, key), fmt::format("must be in [{}, {}] (got {})", min_value, max_value, v));
+      return false;
+    }
+    if (v > usual_max) {
+      warning(n, join(path, key), fmt::format("unusual value {} (plausible: [{}, {}])", v,
+                                              min_value, usual_max));
     }
     *out = static_cast<int>(v);
     return true;
@@ -240,9 +294,10 @@ class SceneParser {
     return false;
   }
 
+  // Each component within `range` (error) and `usual` (warning).
   template <int N>
   bool vector(const YAML::Node& map, const std::string& path, const char* key,
-              Eigen::Matrix<double, N, 1>* out) {
+              Eigen::Matrix<double, N, 1>* out, Range range = kAny, Range usual = kAny) {
     const YAML::Node n = map[key];
     if (!n.IsDefined()) return false;
     if (!n.IsSequence() || n.size() != N) {
@@ -254,8 +309,17 @@ class SceneParser {
     Eigen::Matrix<double, N, 1> v;
     bool ok = true;
     for (int i = 0; i < N; ++i) {
-      ok = parseNumber(n[static_cast<std::size_t>(i)], fmt::format("{}[{}]", join(path, key), i),
-                       &v[i]) && ok;
+      const YAML::Node item = n[static_cast<std::size_t>(i)];
+      const std::string item_path = fmt::format("{}[{}]", join(path, key), i);
+      if (!parseNumber(item, item_path, &v[i])) {
+        ok = false;
+      } else if (!range.contains(v[i])) {
+        error(item, item_path, fmt::format("{} (got {}): not a physically sensible value",
+                                           range.describe(), v[i]));
+        ok = false;
+      } else {
+        plausible(item, item_path, v[i], usual);
+      }
     }
     if (ok) *out = v;
     return ok;
@@ -298,10 +362,12 @@ class SceneParser {
     checkKeys(root, "", {"time_step", "duration", "gravity", "tissues", "instrument", "solver",
                          "haptics", "output"});
     require(root, "", "time_step");
-    number(root, "", "time_step", &spec->time_step_s, kPositive);
-    number(root, "", "duration", &spec->duration_s, kNonNegative);
+    number(root, "", "time_step", &spec->time_step_s, kPositive, kAtMost(1.0), Range{1e-5, 0.05});
+    number(root, "", "duration", &spec->duration_s, kNonNegative, kAtMost(1e7), Range{0.0, 86400.0});
     Eigen::Vector3d g;
-    if (vector<3>(root, "", "gravity", &g)) spec->gravity_mps2 = g;
+    if (vector<3>(root, "", "gravity", &g, kSymmetric(1e3), kSymmetric(20.0))) {
+      spec->gravity_mps2 = g;
+    }
     readTissues(root, spec);
     YAML::Node n;
     if (section(root, "", "instrument", &n)) readInstrument(n, &spec->instrument);
@@ -367,25 +433,27 @@ class SceneParser {
     if (section(t, path, "transform", &n)) {
       const std::string p = join(path, "transform");
       checkKeys(n, p, {"scale", "rotation_deg", "translation"});
-      number(n, p, "scale", &tissue->scale, kPositive);
-      vector<3>(n, p, "rotation_deg", &tissue->rotation_deg);
-      vector<3>(n, p, "translation", &tissue->translation_m);
+      number(n, p, "scale", &tissue->scale, kPositive, Range{1e-9, 1e6}, Range{1e-4, 1e3});
+      vector<3>(n, p, "rotation_deg", &tissue->rotation_deg, kSymmetric(1e6), kSymmetric(360.0));
+      vector<3>(n, p, "translation", &tissue->translation_m, kCoordinate, kUsualCoordinate);
     }
     if (section(t, path, "material", &n)) {
       const std::string p = join(path, "material");
       checkKeys(n, p, {"law", "young_modulus", "poisson_ratio", "density"});
       choice(n, p, "law", &tissue->law,
              {{"linear", MaterialLaw::kLinear}, {"corotational", MaterialLaw::kCorotational}});
-      number(n, p, "young_modulus", &tissue->young_pa, kPositive);
+      number(n, p, "young_modulus", &tissue->young_pa, kPositive, kAtMost(1e12), Range{10.0, 1e9});
       number(n, p, "poisson_ratio", &tissue->poisson, Range{-1.0, 0.5, true, true});
-      number(n, p, "density", &tissue->density_kgpm3, kPositive);
+      number(n, p, "density", &tissue->density_kgpm3, kPositive, kAtMost(1e5), Range{100.0, 1e4});
     }
     if (section(t, path, "damping", &n)) {
       const std::string p = join(path, "damping");
       checkKeys(n, p, {"rayleigh_mass", "rayleigh_stiffness"});
       RayleighSpec r;
-      number(n, p, "rayleigh_mass", &r.mass_alpha_per_s, kNonNegative);
-      number(n, p, "rayleigh_stiffness", &r.stiffness_beta_s, kNonNegative);
+      number(n, p, "rayleigh_mass", &r.mass_alpha_per_s, kNonNegative, kAtMost(1e6),
+             kNonNegativeUpTo(1e3));
+      number(n, p, "rayleigh_stiffness", &r.stiffness_beta_s, kNonNegative, kAtMost(10.0),
+             kNonNegativeUpTo(1.0));
       tissue->damping = r;
     }
     if (section(t, path, "fixed", &n)) readFixed(n, join(path, "fixed"), tissue);
@@ -441,8 +509,8 @@ class SceneParser {
         require(b, p, "min");
         require(b, p, "max");
         BoxSpec box;
-        const bool ok_min = vector<3>(b, p, "min", &box.min_m);
-        const bool ok_max = vector<3>(b, p, "max", &box.max_m);
+        const bool ok_min = vector<3>(b, p, "min", &box.min_m, kCoordinate);
+        const bool ok_max = vector<3>(b, p, "max", &box.max_m, kCoordinate);
         if (ok_min && ok_max) {
           if ((box.min_m.array() > box.max_m.array()).any()) {
             error(b["max"], join(p, "max"), "must be >= min in every coordinate");
@@ -455,7 +523,7 @@ class SceneParser {
   }
 
   void readPose(const YAML::Node& map, const std::string& path, PoseSpec* pose) {
-    vector<3>(map, path, "position", &pose->position_m);
+    vector<3>(map, path, "position", &pose->position_m, kCoordinate, kUsualCoordinate);
     orientation(map, path, &pose->orientation);
   }
 
@@ -464,46 +532,54 @@ class SceneParser {
     in->present = true;
     checkKeys(n, p, {"type", "mass", "inertia", "coupling", "friction", "alarm_distance",
                      "contact_distance", "face_contacts", "probe", "grasper", "initial_pose",
-                     "trajectory"});
+                     "trajectory", "workspace"});
     choice(n, p, "type", &in->kind,
            {{"probe", InstrumentKind::kProbe}, {"grasper", InstrumentKind::kGrasper}});
-    number(n, p, "mass", &in->mass_kg, kPositive);
-    number(n, p, "inertia", &in->inertia_kgm2, kPositive);
-    number(n, p, "friction", &in->friction_mu, kNonNegative);
-    number(n, p, "alarm_distance", &in->alarm_distance_m, kNonNegative);
-    number(n, p, "contact_distance", &in->contact_distance_m, kNonNegative);
+    number(n, p, "mass", &in->mass_kg, kPositive, kAtMost(1e3), Range{1e-4, 10.0});
+    number(n, p, "inertia", &in->inertia_kgm2, kPositive, kAtMost(1e3), kPositiveUpTo(1.0));
+    number(n, p, "friction", &in->friction_mu, kNonNegative, kAtMost(100.0), kNonNegativeUpTo(2.0));
+    number(n, p, "alarm_distance", &in->alarm_distance_m, kNonNegative, kAtMost(1.0),
+           kNonNegativeUpTo(0.05));
+    number(n, p, "contact_distance", &in->contact_distance_m, kNonNegative, kAtMost(1.0),
+           kNonNegativeUpTo(0.01));
     boolean(n, p, "face_contacts", &in->face_contacts);
     YAML::Node s;
     if (section(n, p, "coupling", &s)) {
       const std::string q = join(p, "coupling");
       checkKeys(s, q, {"stiffness", "damping", "rotational_stiffness", "rotational_damping"});
-      number(s, q, "stiffness", &in->coupling_k_npm, kPositive);
-      number(s, q, "damping", &in->coupling_b_nspm, kNonNegative);
-      number(s, q, "rotational_stiffness", &in->coupling_k_rot_nmprad, kNonNegative);
-      number(s, q, "rotational_damping", &in->coupling_b_rot_nmsprad, kNonNegative);
+      number(s, q, "stiffness", &in->coupling_k_npm, kPositive, kAtMost(1e9), Range{1.0, 1e6});
+      number(s, q, "damping", &in->coupling_b_nspm, kNonNegative, kAtMost(1e7), kNonNegativeUpTo(1e4));
+      number(s, q, "rotational_stiffness", &in->coupling_k_rot_nmprad, kNonNegative, kAtMost(1e7),
+             kNonNegativeUpTo(1e4));
+      number(s, q, "rotational_damping", &in->coupling_b_rot_nmsprad, kNonNegative, kAtMost(1e5),
+             kNonNegativeUpTo(1e2));
     }
     if (section(n, p, "probe", &s)) {
       const std::string q = join(p, "probe");
       checkKeys(s, q, {"tip_radius", "shaft_length"});
-      number(s, q, "tip_radius", &in->tip_radius_m, kPositive);
-      number(s, q, "shaft_length", &in->shaft_length_m, kNonNegative);
+      number(s, q, "tip_radius", &in->tip_radius_m, kPositive, kAtMost(1.0), Range{1e-5, 0.05});
+      number(s, q, "shaft_length", &in->shaft_length_m, kNonNegative, kAtMost(10.0),
+             kNonNegativeUpTo(1.0));
     }
     if (section(n, p, "grasper", &s)) {
       const std::string q = join(p, "grasper");
       checkKeys(s, q, {"jaw_length", "jaw_radius", "max_opening_deg", "samples", "width",
                        "width_samples", "grip_stiffness", "grip_damping", "grip_inertia"});
-      number(s, q, "jaw_length", &in->jaw_length_m, kPositive);
-      number(s, q, "jaw_radius", &in->jaw_radius_m, kPositive);
+      number(s, q, "jaw_length", &in->jaw_length_m, kPositive, kAtMost(1.0), Range{1e-4, 0.2});
+      number(s, q, "jaw_radius", &in->jaw_radius_m, kPositive, kAtMost(0.5), Range{1e-5, 0.02});
       double deg = 0.0;
       if (number(s, q, "max_opening_deg", &deg, Range{0.0, 90.0, true, false})) {
         in->max_opening_rad = deg * kDegToRad;
       }
-      integer(s, q, "samples", &in->jaw_samples, 1);
-      number(s, q, "width", &in->jaw_width_m, kNonNegative);
-      integer(s, q, "width_samples", &in->jaw_rows, 1);
-      number(s, q, "grip_stiffness", &in->grip_k_nmprad, kNonNegative);
-      number(s, q, "grip_damping", &in->grip_b_nmsprad, kNonNegative);
-      number(s, q, "grip_inertia", &in->grip_inertia_kgm2, kPositive);
+      integer(s, q, "samples", &in->jaw_samples, 1, 10000, 200);
+      number(s, q, "width", &in->jaw_width_m, kNonNegative, kAtMost(1.0), kNonNegativeUpTo(0.05));
+      integer(s, q, "width_samples", &in->jaw_rows, 1, 1000, 20);
+      number(s, q, "grip_stiffness", &in->grip_k_nmprad, kNonNegative, kAtMost(1e6),
+             kNonNegativeUpTo(1e3));
+      number(s, q, "grip_damping", &in->grip_b_nmsprad, kNonNegative, kAtMost(1e4),
+             kNonNegativeUpTo(10.0));
+      number(s, q, "grip_inertia", &in->grip_inertia_kgm2, kPositive, kAtMost(1.0),
+             kPositiveUpTo(1e-2));
     }
     if (section(n, p, "initial_pose", &s)) {
       const std::string q = join(p, "initial_pose");
@@ -512,6 +588,22 @@ class SceneParser {
     }
     const YAML::Node traj = n["trajectory"];
     if (traj.IsDefined()) readTrajectory(traj, join(p, "trajectory"), in);
+    if (section(n, p, "workspace", &s)) {
+      const std::string q = join(p, "workspace");
+      checkKeys(s, q, {"min", "max"});
+      require(s, q, "min");
+      require(s, q, "max");
+      BoxSpec box;
+      const bool ok_min = vector<3>(s, q, "min", &box.min_m, kCoordinate, kUsualCoordinate);
+      const bool ok_max = vector<3>(s, q, "max", &box.max_m, kCoordinate, kUsualCoordinate);
+      if (ok_min && ok_max) {
+        if ((box.min_m.array() > box.max_m.array()).any()) {
+          error(s["max"], join(q, "max"), "must be >= min in every coordinate");
+        } else {
+          in->workspace = box;
+        }
+      }
+    }
   }
 
   void readTrajectory(const YAML::Node& list, const std::string& path, InstrumentSpec* in) {
@@ -532,7 +624,7 @@ class SceneParser {
       require(k, p, "t");
       require(k, p, "position");
       TrajectoryKey key;
-      if (number(k, p, "t", &key.t_s, kNonNegative)) {
+      if (number(k, p, "t", &key.t_s, kNonNegative, kAtMost(1e7), Range{0.0, 86400.0})) {
         if (key.t_s <= previous_t) {
           error(k["t"], join(p, "t"),
                 fmt::format("must be greater than the previous key's t ({})", previous_t));
@@ -552,14 +644,39 @@ class SceneParser {
                      "penetration_tolerance", "contact_detection"});
     choice(n, p, "linear", &s->linear,
            {{"cholmod", LinearSolverKind::kCholmod}, {"pcg", LinearSolverKind::kPcg}});
-    number(n, p, "cg_tolerance", &s->cg_tolerance, kPositive);
-    integer(n, p, "cg_max_iterations", &s->cg_max_iterations, 1);
-    number(n, p, "nsgs_tolerance", &s->nsgs_tolerance, kPositive);
-    integer(n, p, "nsgs_max_sweeps", &s->nsgs_max_sweeps, 1);
+    number(n, p, "cg_tolerance", &s->cg_tolerance, kPositive, Range{-kInf, 1.0, false, true},
+           kPositiveUpTo(1e-2));
+    integer(n, p, "cg_max_iterations", &s->cg_max_iterations, 1, 100'000'000, 1'000'000);
+    number(n, p, "nsgs_tolerance", &s->nsgs_tolerance, kPositive, Range{-kInf, 1.0, false, true},
+           kPositiveUpTo(1e-2));
+    integer(n, p, "nsgs_max_sweeps", &s->nsgs_max_sweeps, 1, 10'000'000, 100'000);
     number(n, p, "nsgs_sor", &s->nsgs_sor, Range{0.0, 2.0, true, true});
-    integer(n, p, "max_contacts", &s->max_contacts, 1);
-    integer(n, p, "contact_iterations", &s->contact_iterations, 1);
-    number(n, p, "penetration_tolerance", &s->penetration_tolerance_m, kPositive);
+    // the contact problem's W (rows x rows doubles, 3 rows per frictional contact) lives in
+    // the shared segment's triple buffer: refuse what cannot be allocated, before trying
+    if (integer(n, p, "max_contacts", &s->max_contacts, 1, std::numeric_limits<int>::max(),
+                2000)) {
+      // (the layout is computed only for counts whose row count fits an int)
+      const std::size_t bytes =
+          s->max_contacts > 1'000'000
+              ? std::numeric_limits<std::size_t>::max()
+              : shared::SegmentLayout::forCapacity(
+                    shared::SegmentCapacity::forContacts(s->max_contacts))
+                    .total_bytes;
+      if (bytes > kMaxContactProblemBytes) {
+        error(n["max_contacts"], join(p, "max_contacts"),
+              fmt::format("{} contacts need {} MiB for the contact problem (W is rows x rows "
+                          "doubles, 3 rows per contact), more than the {} MiB limit: lower it "
+                          "(at most about 3000)",
+                          s->max_contacts,
+                          s->max_contacts > 1'000'000 ? std::string("too many")
+                                                      : std::to_string(bytes >> 20),
+                          kMaxContactProblemBytes >> 20));
+        s->max_contacts = SolverSpec{}.max_contacts;
+      }
+    }
+    integer(n, p, "contact_iterations", &s->contact_iterations, 1, 1000, 20);
+    number(n, p, "penetration_tolerance", &s->penetration_tolerance_m, kPositive, kAtMost(1.0),
+           kPositiveUpTo(0.01));
     choice(n, p, "contact_detection", &s->contact_detection,
            {{"free_state", ContactDetection::kFreeState},
             {"step_start", ContactDetection::kStepStart}});
@@ -571,13 +688,14 @@ class SceneParser {
                      "max_sweeps_per_tick", "nsgs_tolerance"});
     h->enabled = true;  // a haptics section turns haptics on unless it says otherwise
     boolean(n, p, "enabled", &h->enabled);
-    number(n, p, "rate", &h->rate_hz, kPositive);
+    number(n, p, "rate", &h->rate_hz, kPositive, kAtMost(1e5), Range{100.0, 1e4});
     string(n, p, "device", &h->device);
-    number(n, p, "force_scale", &h->force_scale, kNonNegative);
-    number(n, p, "max_force", &h->max_force_n, kPositive);
-    number(n, p, "watchdog_ms", &h->watchdog_ms, kPositive);
-    integer(n, p, "max_sweeps_per_tick", &h->max_sweeps_per_tick, 1);
-    number(n, p, "nsgs_tolerance", &h->nsgs_tolerance, kPositive);
+    number(n, p, "force_scale", &h->force_scale, kNonNegative, kAtMost(1e3), kNonNegativeUpTo(10.0));
+    number(n, p, "max_force", &h->max_force_n, kPositive, kAtMost(1e3), kPositiveUpTo(40.0));
+    number(n, p, "watchdog_ms", &h->watchdog_ms, kPositive, kAtMost(1e5), kPositiveUpTo(1e3));
+    integer(n, p, "max_sweeps_per_tick", &h->max_sweeps_per_tick, 1, 1'000'000, 10'000);
+    number(n, p, "nsgs_tolerance", &h->nsgs_tolerance, kPositive, Range{-kInf, 1.0, false, true},
+           kPositiveUpTo(1e-2));
   }
 
   void readOutput(const YAML::Node& n, OutputSpec* o) {
@@ -589,19 +707,22 @@ class SceneParser {
       o->enabled = true;
       o->directory = dir;
     }
-    integer(n, p, "every", &o->every_n_steps, 1);
+    integer(n, p, "every", &o->every_n_steps, 1, std::numeric_limits<int>::max(), 1'000'000);
   }
 
   std::string name_;
   std::filesystem::path base_dir_;
   std::vector<Problem> errors_;
+  std::vector<Problem> warnings_;
 };
 
 }  // namespace
 
 SceneSpec parseScene(const std::string& yaml, const std::string& name,
                      const std::filesystem::path& base_dir) {
-  return SceneParser(name, base_dir).parse(yaml);
+  SceneSpec spec = SceneParser(name, base_dir).parse(yaml);
+  for (const std::string& w : spec.warnings) spdlog::warn("{}", w);
+  return spec;
 }
 
 SceneSpec loadScene(const std::filesystem::path& path) {

@@ -367,6 +367,89 @@ TEST(Scene, CorruptedInputGivesSceneErrorOnly) {
   EXPECT_GT(rejected, 100);
 }
 
+// Physical sanity: impossible or memory-exhausting values are errors naming file:line:col and the
+// field; merely unusual ones are warnings in the same form.
+std::vector<std::string> sceneWarnings(const std::string& yaml) {
+  return parseScene(yaml, "s.yaml", kScenes).warnings;
+}
+
+TEST(Scene, AbsurdValuesAreErrorsWithFileLineColumnAndField) {
+  using ::testing::HasSubstr;
+  using ::testing::StartsWith;
+  EXPECT_THAT(sceneError(kHead + "solver: {max_contacts: 2000000000}\n"),
+              StartsWith("s.yaml:4:24: solver.max_contacts: 2000000000 contacts need too many MiB "
+                         "for the contact problem"));
+  EXPECT_THAT(sceneError(kHead + "solver: {max_contacts: 5000}\n"),
+              StartsWith("s.yaml:4:24: solver.max_contacts: 5000 contacts need "));
+  EXPECT_THAT(sceneError(kHead + "gravity: [0, 0, -1e300]\n"),
+              StartsWith("s.yaml:4:17: gravity[2]: must be in [-1000, 1000] (got -1e+300): not a "
+                         "physically sensible value"));
+  EXPECT_THAT(sceneError(kHead + "instrument: {probe: {tip_radius: 1e6}}\n"),
+              StartsWith("s.yaml:4:34: instrument.probe.tip_radius: must be <= 1 (got"));
+  EXPECT_THAT(sceneError("time_step: 1e9\ntissues:\n  - mesh: ../meshes/liver.msh\n"),
+              StartsWith("s.yaml:1:12: time_step: must be <= 1 (got"));
+  EXPECT_THAT(sceneError(kHead + "instrument: {initial_pose: {position: [0, 1e300, 0]}}\n"),
+              StartsWith("s.yaml:4:43: instrument.initial_pose.position[1]: must be in [-1000, "
+                         "1000]"));
+  EXPECT_THAT(sceneError(kHead + "    material: {young_modulus: 1e20, density: 1e9}\n"),
+              HasSubstr("tissues[0].material.young_modulus: must be <= 1000000000000 (got"));
+  EXPECT_THAT(sceneError(kHead + "    material: {young_modulus: 1e20, density: 1e9}\n"),
+              HasSubstr("tissues[0].material.density: must be <= 100000 (got"));
+  EXPECT_THAT(sceneError(kHead + "instrument: {grasper: {samples: 1000000}}\n"),
+              StartsWith("s.yaml:4:33: instrument.grasper.samples: must be in [1, 10000] (got "
+                         "1000000)"));
+  EXPECT_THAT(sceneError(kHead + "instrument: {mass: 1e30}\n"),
+              StartsWith("s.yaml:4:20: instrument.mass: must be <= 1000"));
+  EXPECT_THAT(sceneError(kHead + "haptics: {max_force: 1e9}\n"),
+              StartsWith("s.yaml:4:22: haptics.max_force: must be <= 1000"));
+  EXPECT_THAT(sceneError(kHead + "haptics: {rate: 1e12}\n"),
+              StartsWith("s.yaml:4:17: haptics.rate: must be <= 100000"));
+  EXPECT_THAT(sceneError(kHead + "duration: 1e300\n"),
+              StartsWith("s.yaml:4:11: duration: must be <= 10000000"));
+  EXPECT_THAT(sceneError(kHead + "solver: {nsgs_max_sweeps: 2000000000}\n"),
+              StartsWith("s.yaml:4:27: solver.nsgs_max_sweeps: must be in [1, 10000000]"));
+  EXPECT_THAT(sceneError(kHead + "instrument: {workspace: {min: [0, 0, 0], max: [1, 1e9, 1]}}\n"),
+              StartsWith("s.yaml:4:51: instrument.workspace.max[1]: must be in [-1000, 1000]"));
+  EXPECT_THAT(sceneError(kHead + "instrument: {workspace: {min: [0, 0, 0], max: [1, -1, 1]}}\n"),
+              StartsWith("s.yaml:4:47: instrument.workspace.max: must be >= min in every "
+                         "coordinate"));
+}
+
+TEST(Scene, UnusualValuesAreWarningsWithFileLineColumnAndField) {
+  using ::testing::ElementsAre;
+  using ::testing::HasSubstr;
+  using ::testing::StartsWith;
+  EXPECT_THAT(sceneWarnings("time_step: 0.5\ntissues:\n  - mesh: ../meshes/liver.msh\n"),
+              ElementsAre(StartsWith("s.yaml:1:12: time_step: unusual value 0.5 (plausible: in "
+                                     "[1e-05, 0.05])")));
+  EXPECT_THAT(sceneWarnings(kHead + "gravity: [0, 0, -98.1]\n"),
+              ElementsAre(StartsWith("s.yaml:4:17: gravity[2]: unusual value -98.1")));
+  EXPECT_THAT(sceneWarnings(kHead + "instrument: {probe: {tip_radius: 0.3}}\n"),
+              ElementsAre(StartsWith("s.yaml:4:34: instrument.probe.tip_radius: unusual value "
+                                     "0.3")));
+  EXPECT_THAT(sceneWarnings(kHead + "solver: {max_contacts: 3000}\n"),
+              ElementsAre(StartsWith("s.yaml:4:24: solver.max_contacts: unusual value 3000")));
+  EXPECT_THAT(sceneWarnings(kHead + "haptics: {max_force: 100}\n"),
+              ElementsAre(HasSubstr("haptics.max_force: unusual value 100")));
+  // warnings come in document order, and a usual scene has none
+  EXPECT_THAT(sceneWarnings(kHead + "    material: {young_modulus: 2, density: 50000}\n"),
+              ElementsAre(StartsWith("s.yaml:4:31: tissues[0].material.young_modulus"),
+                          StartsWith("s.yaml:4:43: tissues[0].material.density")));
+  EXPECT_TRUE(sceneWarnings(kHead).empty());
+  EXPECT_TRUE(loadScene(kScenes / "full_scene.yaml").warnings.empty());
+}
+
+TEST(Scene, InstrumentWorkspace) {
+  const SceneSpec s = parseScene(
+      kHead + "instrument: {workspace: {min: [-0.1, -0.2, -0.3], max: [0.1, 0.2, 0.3]}}\n",
+      "s.yaml", kScenes);
+  ASSERT_TRUE(s.instrument.workspace.has_value());
+  EXPECT_EQ(s.instrument.workspace->min_m, Eigen::Vector3d(-0.1, -0.2, -0.3));
+  EXPECT_EQ(s.instrument.workspace->max_m, Eigen::Vector3d(0.1, 0.2, 0.3));
+  EXPECT_FALSE(parseScene(kHead + "instrument: {}\n", "s.yaml", kScenes)
+                   .instrument.workspace.has_value());
+}
+
 TEST(Scene, ShippedScenesLoad) {
   int count = 0;
   for (const auto& entry :
@@ -375,6 +458,7 @@ TEST(Scene, ShippedScenesLoad) {
     SCOPED_TRACE(entry.path().string());
     const SceneSpec s = loadScene(entry.path());
     EXPECT_FALSE(s.tissues.empty());
+    EXPECT_TRUE(s.warnings.empty()) << s.warnings.front();
     ++count;
   }
   EXPECT_GE(count, 1);

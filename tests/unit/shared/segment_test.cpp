@@ -292,7 +292,7 @@ TEST(Segment, StaleSegmentOfADeadCreatorIsReplaced) {
   EXPECT_FALSE(Segment::exists(g.name));  // the creator removed it on destruction
 }
 
-TEST(Segment, LiveButSilentCreatorIsReplacedAfterTheStaleThreshold) {
+TEST(Segment, LiveButSilentCreatorIsNeverReplaced) {
   NameGuard g(uniqueName("hung"));
   int ready[2];
   ASSERT_EQ(::pipe(ready), 0);
@@ -315,14 +315,22 @@ TEST(Segment, LiveButSilentCreatorIsReplacedAfterTheStaleThreshold) {
   // fresh heartbeat: refused
   EXPECT_THROW(Segment::create(g.name, SegmentCapacity::forContacts(1)), SegmentError);
   ::usleep(100'000);
+  // silent past the stale threshold but alive (it holds the ownership lock): still refused
   CreateOptions impatient;
   impatient.stale_after_ns = 50 * kNsPerMs;
-  Segment fresh = Segment::create(g.name, SegmentCapacity::forContacts(1), impatient);
-  EXPECT_EQ(fresh.generation(), 2u);
-  EXPECT_THAT(fresh.creationNote(), HasSubstr("process " + std::to_string(child) +
-                                              ", silent for"));
+  try {
+    Segment::create(g.name, SegmentCapacity::forContacts(1), impatient);
+    ADD_FAILURE() << "the segment of a live creator was replaced";
+  } catch (const SegmentError& e) {
+    EXPECT_THAT(e.what(), HasSubstr("in use by a live simulation (pid " + std::to_string(child) +
+                                    ") that has been silent for"));
+  }
+  // once it is gone (SIGKILL: no cleanup), its segment is stale and replaced
   ::kill(child, SIGKILL);
   ::waitpid(child, nullptr, 0);
+  Segment fresh = Segment::create(g.name, SegmentCapacity::forContacts(1), impatient);
+  EXPECT_EQ(fresh.generation(), 2u);
+  EXPECT_THAT(fresh.creationNote(), HasSubstr("dead process " + std::to_string(child)));
 }
 
 TEST(Segment, ReadOnlyAttachCannotWrite) {

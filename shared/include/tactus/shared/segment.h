@@ -15,13 +15,30 @@
 // every offset/size against what this build computes from the stored capacity, and refuses a
 // mismatch with a message naming what differs and what to do.
 //
-// Lifetime: the segment is owner-only (0600). Either daemon may start first (the haptic side polls
-// tryOpen(), which never blocks). A segment left by a dead creator is stale: create() replaces it
-// (creator pid gone, or its heartbeat older than CreateOptions::stale_after_ns) and bumps the
-// generation; a live creator is refused. An attached side detects re-creation with stillCurrent()
-// (the name now refers to another object) and re-opens.
+// Trust: the segment is owner-only (0600, created exclusively). Every attach (tryOpen/open) and
+// create()'s look at an existing object first fstat()s the descriptor it opened, before mapping
+// anything (segmentTrustProblem): an object of another user, or one group/others may read or
+// write, is refused with a message; create() never replaces an object of another user.
 //
-// Not real-time: create/open/remove/stillCurrent allocate and make system calls. The accessors
+// Lifetime. Either daemon may start first (the haptic side polls tryOpen(), which never blocks).
+//  * Alive = holds the ownership lock. Right after its exclusive create, the creator takes an
+//    open-file-description write lock (fcntl F_OFD_SETLK) over the whole object and keeps it for
+//    its lifetime; the kernel releases it when the process ends, however it ends (SIGKILL, crash).
+//    A stopped (SIGSTOP) or hung creator still holds it, and a recycled pid does not. create()
+//    probes the lock (F_OFD_GETLK) of an existing segment: held -> refused, whatever the
+//    heartbeat says ("in use by a live simulation", with how long it has been silent); free ->
+//    the segment is stale and is replaced, bumping the generation. A segment of an older ABI
+//    (< 3, no lock) counts as alive while its creator pid exists.
+//  * Displacement. The name can still be removed by hand (rm /dev/shm/<name>) and re-created
+//    while a creator is stopped. stillCurrent() tells any holder, creator included, whether the
+//    name still refers to the object it mapped (stat of the name: same device and inode; a
+//    re-created object is a new inode even under the same name). The simulation checks it a few
+//    times a second off the hot path and stops with a message when it was displaced; the haptic
+//    side detaches and re-opens.
+//  * One haptic process per segment: claimHaptic() is one compare-exchange on haptic_pid, so of
+//    two racing claimants exactly one wins; a dead process's claim can be taken over.
+//
+// Not real-time: create/open/remove/stillCurrent/claimHaptic allocate and make system calls. The accessors
 // (header, heartbeats, shutdown flags) and the endpoints they return are real-time safe.
 
 #include <atomic>
@@ -41,8 +58,9 @@
 namespace tactus::shared {
 
 inline constexpr std::uint64_t kSegmentMagic = 0x3147'4553'5554'4354ULL;  // "TCTUSEG1" (LE)
-/// Bump on any change of SegmentHeader, the messages or the part layout.
-inline constexpr std::uint32_t kSegmentAbiVersion = 2;
+/// Bump on any change of SegmentHeader, the messages, the part layout or the ownership protocol
+/// (3: the creator holds the ownership lock, see the file comment).
+inline constexpr std::uint32_t kSegmentAbiVersion = 3;
 /// Stats ring capacity: 8192 records (8 s at 1 kHz).
 inline constexpr std::uint64_t kStatsRingCapacity = 8192;
 /// A creator whose heartbeat (or creation time) is older than this is considered gone.
@@ -101,7 +119,7 @@ struct SegmentHeader {
   std::uint32_t reserved0 = 0;
   std::atomic<std::uint32_t> sim_shutdown{0};     ///< 1: the simulation is asked to stop
   std::atomic<std::uint32_t> haptic_shutdown{0};  ///< 1: the haptic loop is asked to stop
-  std::atomic<std::int64_t> haptic_pid{0};        ///< set by the haptic side on attach
+  std::atomic<std::int64_t> haptic_pid{0};        ///< the haptic side's claim (claimHaptic)
   // display part (since ABI 2; all zero when absent)
   std::int32_t display_max_vertices = 0;
   std::int32_t display_max_triangles = 0;
@@ -217,7 +235,13 @@ class Segment {
   /// Asks `side` to stop (e.g. the simulation asks the haptic loop to fade out and stop).
   void requestShutdown(Side side) noexcept;
   bool shutdownRequested(Side side) const noexcept;
+  /// Unconditional store of haptic_pid (tests and tools; a daemon uses claimHaptic).
   void setHapticPid(std::int64_t pid) noexcept;
+  /// Claims the haptic side of this segment for `pid` with one compare-exchange on haptic_pid:
+  /// succeeds (returns 0) when the claim is free, already `pid`'s, or held by a process that no
+  /// longer exists; otherwise returns the live holder's pid. Of concurrent claimants exactly one
+  /// wins. -1 on a read-only segment or pid <= 0. Not real-time (kill(pid, 0)).
+  std::int64_t claimHaptic(std::int64_t pid) noexcept;
 
   /// The creator process exists and its heartbeat (or creation time if it never beat) is at most
   /// stale_after_ns old. Not real-time (kill(pid, 0)).
@@ -232,6 +256,11 @@ class Segment {
   unsigned char* writableBase(const char* what);
   std::unique_ptr<Impl> impl_;
 };
+
+/// Why the object open on `fd` (the segment `name`, for messages) must not be trusted: not a
+/// regular file, owned by another user than the effective uid, or readable/writable by group or
+/// others. Empty when it is fine. Uses fstat, so it judges exactly the object that was opened.
+std::string segmentTrustProblem(int fd, const std::string& name);
 
 /// Result of Segment::tryOpen.
 struct TryOpenResult {

@@ -18,6 +18,14 @@
 //        x <- x [+] dx,  [v; w] += dx / h.
 // The force rendered to the hand is -(F_c, tau_c) at the current state and the last target.
 //
+// Workspace. Whatever the device or a caller sends, the target the god object follows is
+// bounded: freeMotion clamps the target position into the workspace box (setWorkspace; the scene's
+// instrument.workspace, else the scene's bounds grown by kWorkspaceMarginM, see
+// instrumentWorkspace; the target velocity across a wall it was clamped to is zeroed) and the
+// target twist to kMaxTargetSpeedMps / kMaxTargetAngularSpeedRadps, and counts the steps it had
+// to clamp. A finite but absurd target (1e300 m) then parks the god
+// object at the workspace's edge, finite, and it comes back as soon as the target does.
+//
 // Geometry (tool frame: origin at the tool point / hinge, z along the instrument):
 //  * probe:   feature 0 = sphere of tip_radius at the origin (queried against tissue
 //             triangles); feature 1 (only if shaft_length > 0) = capsule of radius tip_radius
@@ -85,6 +93,19 @@ struct ToolFeature {
   double opening_sign = 0.0;
 };
 
+/// Margin around the scene's bounds of the default workspace [m] (a haptic device's whole reach).
+inline constexpr double kWorkspaceMarginM = 0.5;
+/// Workspace before setWorkspace: a cube of this half-size around the origin [m].
+inline constexpr double kDefaultWorkspaceHalfM = 10.0;
+/// Bounds of the target twist: faster than any hand moves a tool.
+inline constexpr double kMaxTargetSpeedMps = 10.0;
+inline constexpr double kMaxTargetAngularSpeedRadps = 100.0;
+
+/// The workspace of the scene's instrument: spec.workspace when the scene gives one, else the box
+/// around `scene_bounds` (e.g. the tissues' rest positions; may be empty), the initial pose and
+/// every trajectory key, grown by kWorkspaceMarginM on every side.
+BoxSpec instrumentWorkspace(const InstrumentSpec& spec, const Eigen::AlignedBox3d& scene_bounds);
+
 /// PoseSpec (scene file) -> Pose.
 inline shared::Pose toPose(const PoseSpec& spec) {
   shared::Pose p;
@@ -105,9 +126,16 @@ class Instrument {
   /// Places the god object at `pose` with zero twist; the target becomes that pose.
   void reset(const shared::Pose& pose, double gripper_opening = 1.0);
 
+  /// Bounds the target position to `box` (see the header comment). Throws tactus::SceneError
+  /// when the box is not finite or min > max in some coordinate.
+  void setWorkspace(const BoxSpec& box);
+  const BoxSpec& workspace() const { return workspace_; }
+  /// Free motions whose target position or twist had to be clamped (see the header comment).
+  long clampedTargets() const { return clamped_targets_; }
+
   /// Free motion over h_s toward the device target (pose, world twist [v; w]) and gripper
-  /// opening (clamped to [0, 1]). Updates pose, twist and features. No allocation. h_s <= 0:
-  /// no-op.
+  /// opening (clamped to [0, 1]), the target bounded to the workspace first. Updates pose, twist
+  /// and features. No allocation. h_s <= 0: no-op.
   void freeMotion(double h_s, const shared::Pose& target, const Vector6d& target_twist,
                   double gripper_opening);
 
@@ -162,6 +190,9 @@ class Instrument {
   void updateFeatures();
 
   InstrumentSpec spec_;
+  BoxSpec workspace_{Eigen::Vector3d::Constant(-kDefaultWorkspaceHalfM),
+                     Eigen::Vector3d::Constant(kDefaultWorkspaceHalfM)};
+  long clamped_targets_ = 0;
   shared::Pose pose_;
   Vector6d twist_ = Vector6d::Zero();
   shared::Pose target_;

@@ -110,6 +110,9 @@ struct InstrumentSpec {
   double grip_inertia_kgm2 = 1e-6;              ///< inertia of the jaw angle [kg m^2]
   PoseSpec initial_pose;
   std::vector<TrajectoryKey> trajectory;        ///< scripted device target when no device drives it
+  /// Where the device target may be (instrument.workspace {min, max}); absent: a box around the
+  /// scene (instrumentWorkspace in instrument.h).
+  std::optional<BoxSpec> workspace;
 };
 
 struct SolverSpec {
@@ -164,11 +167,16 @@ struct SceneSpec {
   HapticsSpec haptics;
   OutputSpec output;
   double duration_s = 0.0;                      ///< scripted length (0: until stopped)
+  /// Values outside their plausible range (scenes/README.md "Value ranges"), one line each as
+  /// `file:line:col: field: unusual value ...`; also logged as warnings by parseScene/loadScene.
+  std::vector<std::string> warnings;
 };
 
 /// Reads and validates a scene file. Throws tactus::SceneError listing every problem found
 /// (unknown keys, wrong types, out-of-range values, missing mesh), each with file, line, column
 /// and the field path (e.g. `scene.yaml:12:5: tissues[0].material.poisson: must be < 0.5`).
+/// Every number has a hard range (impossible or memory-exhausting values are errors) and a
+/// plausible one (outside it: a warning in SceneSpec::warnings, also logged).
 SceneSpec loadScene(const std::filesystem::path& path);
 
 /// Same from a string; relative paths resolve against `base_dir`, `name` is used in messages.
