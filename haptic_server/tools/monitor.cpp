@@ -75,7 +75,7 @@ int main(int argc, char** argv) {
   std::signal(SIGHUP, onSignal);
 
   std::optional<Segment> seg;
-  std::optional<StatsRingReader> reader;
+  StatsRingReader reader;  // detached (default) until the segment is open
   std::vector<StatsRecord> buf(8192);
   std::vector<double> ticks_us, period_err_us;
   const std::int64_t t0 = monotonicNs();
@@ -88,7 +88,7 @@ int main(int argc, char** argv) {
     const std::int64_t now = monotonicNs();
     if (duration_s > 0.0 && now - t0 > static_cast<std::int64_t>(duration_s * 1e9)) break;
     if (seg && !seg->stillCurrent()) {
-      reader.reset();
+      reader = StatsRingReader{};
       seg.reset();
       absent_since = now;
     }
@@ -105,7 +105,7 @@ int main(int argc, char** argv) {
         continue;
       }
       seg.emplace(std::move(*r.segment));
-      reader.emplace(seg->statsReader(StatsRingReader::Start::kNewest));
+      reader = seg->statsReader(StatsRingReader::Start::kNewest);
       last = now;
       last_snapshot = 0;
       continue;
@@ -114,7 +114,7 @@ int main(int argc, char** argv) {
     period_err_us.clear();
     std::size_t count = 0;
     StatsRecord newest{};
-    for (std::size_t got; (got = reader->poll(buf.data(), buf.size())) > 0;) {
+    for (std::size_t got; (got = reader.poll(buf.data(), buf.size())) > 0;) {
       for (std::size_t i = 0; i < got; ++i) {
         const StatsRecord& r = buf[i];
         ticks_us.push_back(1e-3 * static_cast<double>(r.finished_ns - r.woken_ns));
