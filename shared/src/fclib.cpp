@@ -217,15 +217,16 @@ FclibReference readFclibReference(const std::filesystem::path& path) {
 }
 
 void writeFclibSolution(const std::filesystem::path& path, const std::vector<double>& r,
-                        const std::vector<double>& u, const std::string& comment) {
+                        const std::vector<double>& u, const std::string& comment,
+                        bool overwrite) {
   std::ostringstream out;
   std::istringstream lines(comment);
   std::string line;
   while (std::getline(lines, line)) out << "# " << line << '\n';
   out << std::setprecision(17);
   for (std::size_t j = 0; j < r.size() && j < u.size(); ++j) out << r[j] << ' ' << u[j] << '\n';
-  // the solver tool's output: replaced like before, but through a checked temporary file
-  writeFileChecked(path, out.str(), "FCLIB solution", {.overwrite = true});
+  writeFileChecked(path, out.str(), "FCLIB solution",
+                   {.overwrite = overwrite, .overwrite_hint = "pass --overwrite"});
 }
 
 }  // namespace tactus::shared

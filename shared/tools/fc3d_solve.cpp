@@ -65,6 +65,8 @@ int run(int argc, char** argv) {
       ->capture_default_str();
   app.add_flag("--row-gather", row_gather, "gather b_i from W's rows instead of column updates");
   app.add_option("--output", output_path, "write `r u` per row (reference format) to FILE");
+  bool overwrite = false;
+  app.add_flag("--overwrite", overwrite, "replace an existing --output file");
   CLI11_PARSE(app, argc, argv);
 
   settings.time_budget_ns = static_cast<std::int64_t>(budget_ms * 1e6);
@@ -96,7 +98,7 @@ int run(int argc, char** argv) {
                   "max(|q|,|r|,|u|)), %d sweeps, status %s; columns: r u",
                   problem.name.c_str(), error, result.sweeps,
                   std::string(toString(result.status)).c_str());
-    tactus::shared::writeFclibSolution(output_path, r, u, comment);
+    tactus::shared::writeFclibSolution(output_path, r, u, comment, overwrite);
     std::printf("output    %s\n", output_path.c_str());
   }
   return result.status == tactus::shared::NsgsStatus::kConverged ? 0 : 2;

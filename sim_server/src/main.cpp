@@ -44,7 +44,8 @@ int main(int argc, char** argv) {
   app.add_option("--export-trajectory", opt.export_trajectory,
                  "Write the scene's scripted instrument trajectory as a device CSV and exit");
   app.add_flag("--overwrite", opt.overwrite,
-               "Replace existing --stats-json / --export-trajectory files");
+               "Replace existing --stats-json / --export-trajectory files and an earlier "
+               "run's VTK series in the --output folder");
   app.add_option("--log-level", log_level, "trace, debug, info, warn, error")
       ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error"}));
   CLI11_PARSE(app, argc, argv);

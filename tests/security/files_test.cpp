@@ -420,6 +420,40 @@ TEST_F(FilesTest, ExportTrajectoryChecksWritesAndRefusesOverwrite) {
   EXPECT_THAT(readAll(csv), HasSubstr("t_s,x,y,z"));
 }
 
+// A VTK series replaces its own files as it grows, but an earlier run's series in the --output
+// folder is kept unless --overwrite is given; the same for tactus-fc3d-solve's --output.
+TEST_F(FilesTest, EarlierVtkSeriesAndSolverOutputAreNotReplacedUnlessAsked) {
+  const fs::path scene = cubeScene();
+  const fs::path out_dir = dir_ / "vtk";
+  fs::create_directories(out_dir);
+  const fs::path pvd = out_dir / "series.pvd";
+  { std::ofstream(pvd) << "precious"; }
+  RunResult r = run({kSim, scene.string(), "--steps", "2", "--output", out_dir.string()});
+  ASSERT_TRUE(r.exited) << r.output;
+  EXPECT_NE(r.code, 0);
+  EXPECT_THAT(r.output, HasSubstr("earlier run"));
+  EXPECT_THAT(r.output, HasSubstr("--overwrite"));
+  EXPECT_EQ(readAll(pvd), "precious");
+  r = run({kSim, scene.string(), "--steps", "2", "--output", out_dir.string(), "--overwrite"});
+  ASSERT_TRUE(r.exited) << r.output;
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_THAT(readAll(pvd), HasSubstr("VTKFile"));
+
+  const std::string solver = std::string(TACTUS_BINARY_DIR) + "/shared/tools/tactus-fc3d-solve";
+  const std::string problem =
+      std::string(TACTUS_TEST_DATA_DIR) + "/fclib/problems/Box_Stacks-i0122-82-5.local.fc3d.txt";
+  const fs::path solution = write("solution.ref.txt", "precious");
+  r = run({solver, problem, "--output", solution.string()});
+  ASSERT_TRUE(r.exited) << r.output;
+  EXPECT_NE(r.code, 0);
+  EXPECT_THAT(r.output, HasSubstr("--overwrite"));
+  EXPECT_EQ(readAll(solution), "precious");
+  r = run({solver, problem, "--output", solution.string(), "--overwrite"});
+  ASSERT_TRUE(r.exited) << r.output;
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(readAll(solution), "precious");
+}
+
 TEST_F(FilesTest, RecordOntoAnExistingFileIsRefusedUnlessAsked) {
   const fs::path input = write("input.csv", std::string(device::Trajectory::kCsvHeader) +
                                                 "\n0,0,0,0,1,0,0,0,0\n0.5,0.01,0,0,1,0,0,0,0\n");

@@ -132,6 +132,22 @@ std::string RunStatistics::json(const std::string& scene) const {
   return out;
 }
 
+// A VTK series replaces its own files as it grows; an earlier run's series in the same folder is
+// only replaced when asked (--overwrite).
+static void refuseExistingSeries(const std::filesystem::path& dir) {
+  std::error_code ec;
+  if (!std::filesystem::is_directory(dir, ec)) return;
+  for (const auto& entry : std::filesystem::directory_iterator(dir, ec)) {
+    const auto ext = entry.path().extension();
+    if (entry.path().filename() == "series.pvd" || ext == ".vtu") {
+      throw FileError(fmt::format(
+          "{}: holds a VTK series from an earlier run ({}); choose another --output folder or "
+          "pass --overwrite", shared::printable(dir.string(), 200),
+          shared::printable(entry.path().filename().string())));
+    }
+  }
+}
+
 void exportTrajectory(const SceneSpec& spec, const std::filesystem::path& csv, double dt_s,
                       bool overwrite) {
   if (!spec.instrument.present) throw SceneError(spec.source.string() + ": no instrument to export");
@@ -176,6 +192,7 @@ int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
     spec.output.directory = options.output_dir;
   }
   if (options.output_every > 0) spec.output.every_n_steps = options.output_every;
+  if (spec.output.enabled && !options.overwrite) refuseExistingSeries(spec.output.directory);
   const bool offline = options.steps > 0;
   if (offline || options.no_haptics) spec.haptics.enabled = false;
 

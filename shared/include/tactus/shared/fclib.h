@@ -56,8 +56,10 @@ FclibProblem readFclibText(const std::filesystem::path& path);
 FclibReference readFclibReference(const std::filesystem::path& path);
 
 /// Writes `r u` per row (17 significant digits) in the reference format, with `comment` (may
-/// hold several lines) as '#' lines first. Throws tactus::Error when the file cannot be written.
+/// hold several lines) as '#' lines first, through a checked temporary file. Throws
+/// tactus::Error when the file cannot be written, or exists and `overwrite` is false.
 void writeFclibSolution(const std::filesystem::path& path, const std::vector<double>& r,
-                        const std::vector<double>& u, const std::string& comment);
+                        const std::vector<double>& u, const std::string& comment,
+                        bool overwrite = false);
 
 }  // namespace tactus::shared

@@ -23,7 +23,8 @@ struct RunOptions {
   bool status = false;               ///< log a status line every second
   std::string stats_json;            ///< write per-stage statistics here at the end
   std::string export_trajectory;     ///< write the scripted trajectory (device CSV) and exit
-  bool overwrite = false;            ///< replace an existing stats_json / export_trajectory file
+  bool overwrite = false;            ///< replace an existing stats_json / export_trajectory file,
+                                     ///< or an earlier run's VTK series in the output folder
 };
 
 /// Writes the scene's instrument trajectory in the replay device's CSV format
