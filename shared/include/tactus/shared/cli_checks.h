@@ -10,6 +10,7 @@
 
 #include <cerrno>
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <string>
 
@@ -25,9 +26,16 @@ inline bool parseFiniteDouble(const std::string& text, double& value) {
   return errno == 0 && end == text.c_str() + text.size() && std::isfinite(value);
 }
 
+/// Shortest readable text of a bound (1e+06, 0.05, 4000), for messages.
+inline std::string boundText(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof(buf), "%g", v);
+  return buf;
+}
+
 /// Finite and within [lo, hi]. `what` names the unit in the help text (for example "N").
 inline CLI::Validator finiteRange(double lo, double hi, const std::string& unit = "") {
-  const std::string range = "[" + std::to_string(lo) + ", " + std::to_string(hi) + "]" +
+  const std::string range = "[" + boundText(lo) + ", " + boundText(hi) + "]" +
                             (unit.empty() ? "" : " " + unit);
   return CLI::Validator(
       [lo, hi, range](std::string& text) -> std::string {
@@ -41,7 +49,7 @@ inline CLI::Validator finiteRange(double lo, double hi, const std::string& unit 
 
 /// Finite and strictly greater than lo (and at most hi).
 inline CLI::Validator finiteAbove(double lo, double hi, const std::string& unit = "") {
-  const std::string range = "(" + std::to_string(lo) + ", " + std::to_string(hi) + "]" +
+  const std::string range = "(" + boundText(lo) + ", " + boundText(hi) + "]" +
                             (unit.empty() ? "" : " " + unit);
   return CLI::Validator(
       [lo, hi, range](std::string& text) -> std::string {
