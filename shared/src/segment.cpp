@@ -53,12 +53,18 @@ bool pidAlive(std::int64_t pid) noexcept {
 // the last descriptor of that open file closes, i.e. when the process exits however it dies).
 // OFD locks conflict between open file descriptions even inside one process, and closing some
 // other descriptor of the same object does not drop them (unlike classic fcntl locks).
-bool takeOwnerLock(int fd) noexcept {
+// A lock request of `type` over the whole object.
+struct flock wholeObjectLock(short type) noexcept {
   struct flock lk {};
-  lk.l_type = F_WRLCK;
+  lk.l_type = type;
   lk.l_whence = SEEK_SET;
   lk.l_start = 0;
   lk.l_len = 0;
+  return lk;
+}
+
+bool takeOwnerLock(int fd) noexcept {
+  struct flock lk = wholeObjectLock(F_WRLCK);
   return ::fcntl(fd, F_OFD_SETLK, &lk) == 0;
 }
 
@@ -66,11 +72,7 @@ bool takeOwnerLock(int fd) noexcept {
 // running or stopped). A probe through a read-only descriptor is enough: a read lock conflicts
 // with the creator's write lock.
 bool ownerLockHeld(int fd) noexcept {
-  struct flock lk {};
-  lk.l_type = F_RDLCK;
-  lk.l_whence = SEEK_SET;
-  lk.l_start = 0;
-  lk.l_len = 0;
+  struct flock lk = wholeObjectLock(F_RDLCK);
   if (::fcntl(fd, F_OFD_GETLK, &lk) != 0) return true;  // cannot tell: assume alive (refuse)
   return lk.l_type != F_UNLCK;
 }

@@ -33,32 +33,29 @@ inline std::string boundText(double v) {
   return buf;
 }
 
-/// Finite and within [lo, hi]. `what` names the unit in the help text (for example "N").
-inline CLI::Validator finiteRange(double lo, double hi, const std::string& unit = "") {
-  const std::string range = "[" + boundText(lo) + ", " + boundText(hi) + "]" +
+/// Finite and within the interval from lo to hi; `open_low` excludes lo itself.
+inline CLI::Validator finiteInterval(double lo, double hi, const std::string& unit, bool open_low) {
+  const std::string range = (open_low ? "(" : "[") + boundText(lo) + ", " + boundText(hi) + "]" +
                             (unit.empty() ? "" : " " + unit);
   return CLI::Validator(
-      [lo, hi, range](std::string& text) -> std::string {
+      [lo, hi, open_low, range](std::string& text) -> std::string {
         double value = 0.0;
         if (!parseFiniteDouble(text, value)) return "must be a finite number (got '" + text + "')";
-        if (value < lo || value > hi) return "must be in " + range + " (got " + text + ")";
+        const bool below = open_low ? !(value > lo) : value < lo;
+        if (below || value > hi) return "must be in " + range + " (got " + text + ")";
         return {};
       },
       "FINITE in " + range);
 }
 
-/// Finite and strictly greater than lo (and at most hi).
+/// Finite and within [lo, hi]. `unit` names the unit in the help text (for example "N").
+inline CLI::Validator finiteRange(double lo, double hi, const std::string& unit = "") {
+  return finiteInterval(lo, hi, unit, false);
+}
+
+/// Finite, strictly greater than lo and at most hi.
 inline CLI::Validator finiteAbove(double lo, double hi, const std::string& unit = "") {
-  const std::string range = "(" + boundText(lo) + ", " + boundText(hi) + "]" +
-                            (unit.empty() ? "" : " " + unit);
-  return CLI::Validator(
-      [lo, hi, range](std::string& text) -> std::string {
-        double value = 0.0;
-        if (!parseFiniteDouble(text, value)) return "must be a finite number (got '" + text + "')";
-        if (!(value > lo) || value > hi) return "must be in " + range + " (got " + text + ")";
-        return {};
-      },
-      "FINITE in " + range);
+  return finiteInterval(lo, hi, unit, true);
 }
 
 }  // namespace tactus::shared
