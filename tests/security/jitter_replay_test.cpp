@@ -310,8 +310,8 @@ int runBounded(const std::string& cmd, int timeout_s) {
 }
 
 // A 1 s run of the cube pressed by the probe (tests/data/scenes/press_cube.yaml with a scripted
-// press), recorded by tactus-bench.
-fs::path recordPressCube(const TempDir& dir) {
+// press), recorded by tactus-bench. writePressScene() writes the scene.
+fs::path writePressScene(const TempDir& dir) {
   const std::string scene_text = readAll(fs::path(TACTUS_TEST_DATA_DIR) / "scenes/press_cube.yaml");
   std::string scene = scene_text;
   const std::string mesh_rel = "../meshes/cube_low_res.msh";
@@ -329,12 +329,41 @@ fs::path recordPressCube(const TempDir& dir) {
                "    - {t: 0.5, position: [0.004, 0.003, 0.035], quaternion: [1, 0, 0, 0]}\n");
   const fs::path scene_file = dir.path() / "press.yaml";
   writeAll(scene_file, scene);
+  return scene_file;
+}
+
+fs::path recordPressCube(const TempDir& dir) {
+  const fs::path scene_file = writePressScene(dir);
   const fs::path snap = dir.path() / "press.snap";
   const std::string cmd = std::string(TACTUS_BINARY_DIR) + "/sim_server/tools/tactus-bench '" +
                           scene_file.string() + "' --record-snapshots '" + snap.string() +
                           "' > '" + (dir.path() / "bench.log").string() + "' 2>&1";
   EXPECT_EQ(runBounded(cmd, 120), 0) << readAll(dir.path() / "bench.log");
   return snap;
+}
+
+TEST(JitterReplay, SimServerRecordsEveryStepAndKeepsAnExistingFile) {
+  TempDir dir;
+  const fs::path scene = writePressScene(dir);
+  const fs::path snap = dir.path() / "sim.snap";
+  const fs::path log = dir.path() / "sim.log";
+  const std::string base = std::string(TACTUS_BINARY_DIR) + "/sim_server/sim_server --steps 60 "
+                           "--record-snapshots '" + snap.string() + "' '" + scene.string() + "'";
+  ASSERT_EQ(runBounded(base + " > '" + log.string() + "' 2>&1", 120), 0) << readAll(log);
+  const auto snaps = shared::readSnapshotFile(snap);
+  ASSERT_EQ(snaps.size(), 60u);
+  EXPECT_EQ(snaps.back().t_ns, 600'000'000);
+  std::size_t in_contact = 0;
+  for (const auto& s : snaps) in_contact += s.contacts() > 0 ? 1 : 0;
+  EXPECT_GT(in_contact, 0u);
+  // a second run refuses to replace the recording; --overwrite replaces it
+  const std::string before = readAll(snap);
+  EXPECT_NE(runBounded(base + " > '" + log.string() + "' 2>&1", 120), 0);
+  EXPECT_NE(readAll(log).find("--overwrite"), std::string::npos) << readAll(log);
+  EXPECT_EQ(readAll(snap), before);
+  EXPECT_EQ(runBounded(base + " --overwrite > '" + log.string() + "' 2>&1", 120), 0)
+      << readAll(log);
+  EXPECT_EQ(shared::readSnapshotFile(snap).size(), 60u);
 }
 
 TEST(JitterReplay, RecordedPressReplaysThroughTheHapticLoop) {
