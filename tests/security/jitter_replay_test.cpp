@@ -236,7 +236,7 @@ TEST(SnapshotFile, EveryTruncationIsRejected) {
   }
   EXPECT_GT(tested, 200u);
   writeAll(cut, bytes.substr(0, bytes.size() - 1));
-  EXPECT_NE(readError(cut).find("truncated"), std::string::npos) << readError(cut);
+  EXPECT_NE(readError(cut).find("bytes of arrays needed"), std::string::npos) << readError(cut);
 }
 
 TEST(SnapshotFile, CorruptFilesAreRejectedWithClearMessages) {
@@ -272,7 +272,7 @@ TEST(SnapshotFile, CorruptFilesAreRejectedWithClearMessages) {
     b.replace(rows_at, 4, reinterpret_cast<const char*>(&rows), 4);
     b.replace(contacts_at, 4, reinterpret_cast<const char*>(&contacts), 4);
     writeAll(bad, b);
-    EXPECT_NE(readError(bad).find("truncated"), std::string::npos) << readError(bad);
+    EXPECT_NE(readError(bad).find("bytes of arrays needed"), std::string::npos) << readError(bad);
     const std::int32_t too_many = 1 << 30;
     EXPECT_NE(patched(rows_at, &too_many, 4).find("out of range"), std::string::npos);
     const std::int32_t negative = -3;
