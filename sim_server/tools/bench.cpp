@@ -68,6 +68,7 @@ struct BenchOptions {
   std::string json;
   std::string trace;
   std::string record_snapshots;
+  bool overwrite = false;  ///< replace an existing --record-snapshots file
   double budget_us = 0.0;
   int tick_sweeps = 0;
   double displacement_mm = 0.2;
@@ -125,7 +126,8 @@ int run(const BenchOptions& o) {
   std::unique_ptr<shared::SnapshotFileWriter> recorder;
   if (!o.record_snapshots.empty()) {
     shared::OutputOptions oo;
-    oo.overwrite_hint = "remove it first or choose another name";
+    oo.overwrite = o.overwrite;
+    oo.overwrite_hint = "pass --overwrite";
     recorder = std::make_unique<shared::SnapshotFileWriter>(o.record_snapshots, oo);
   }
   std::FILE* trace = nullptr;
@@ -296,6 +298,7 @@ int main(int argc, char** argv) {
   app.add_option("--record-snapshots", o.record_snapshots,
                  "Write every published contact snapshot (stamped with the simulated time) to a "
                  "new FILE, for tactus-jitter --replay FILE");
+  app.add_flag("--overwrite", o.overwrite, "Replace an existing --record-snapshots file");
   app.add_option("--budget-us", o.budget_us,
                  "Haptic solve time budget [us] (default: 40 % of the scene's haptic period)");
   app.add_option("--tick-sweeps", o.tick_sweeps,
