@@ -1,5 +1,6 @@
 // tactus-jitter: timing of the haptic tick. Attach mode follows a running haptic_server's stats
-// ring read-only; synthetic mode runs the real haptic loop in-process on synthetic snapshots.
+// ring read-only; synthetic mode runs the real haptic loop in-process on synthetic snapshots, and
+// replay mode (--replay FILE) on the snapshots a run recorded, published at their recorded times.
 // Prints a line per second and a percentile table at the end; optional CSV, plot and a bare-loop
 // baseline (same core, priority, timer method and period) for ratios.
 //
@@ -29,10 +30,12 @@
 #include <thread>
 
 #include "jitter_core.h"
+#include "jitter_replay.h"
 #include "jitter_synthetic.h"
 #include "tactus/shared/clock.h"
 #include "tactus/shared/error.h"
 #include "tactus/shared/rt.h"
+#include "tactus/shared/snapshot_file.h"
 
 #ifndef TACTUS_SOURCE_DIR
 #define TACTUS_SOURCE_DIR "."
@@ -54,6 +57,8 @@ struct Options {
   bool baseline = false;
   std::string baseline_mode = "interleaved";
   int synthetic_rows = 0;
+  std::string replay;
+  bool loop_replay = false;
   double rate_hz = 1000.0;
   double sim_rate_hz = 100.0;
   int core = -1;
@@ -122,22 +127,49 @@ std::string plotScript() {
 }
 
 int run(const Options& o) {
-  const bool synthetic = o.synthetic_rows > 0;
+  const bool replay = !o.replay.empty();
+  if (replay && o.synthetic_rows > 0) throw Error("--replay and --synthetic exclude each other");
+  if (!replay && o.loop_replay) throw Error("--loop needs --replay FILE");
+  // synthetic or replay: the haptic loop runs in-process
+  const bool synthetic = o.synthetic_rows > 0 || replay;
   const int core = o.core >= 0 ? o.core : shared::availableCpuCount() - 1;
   if (!synthetic && o.reader == "none") {
-    throw Error("--reader none needs --synthetic (attach mode is the reader)");
+    throw Error("--reader none needs --synthetic or --replay (attach mode is the reader)");
   }
   if (!synthetic && o.baseline && o.baseline_mode == "after") {
     throw Error(
-        "--baseline-mode after needs --synthetic: in attach mode the daemon keeps its core "
-        "busy, so the bare loop is interleaved half a period after its ticks");
+        "--baseline-mode after needs --synthetic or --replay: in attach mode the daemon keeps "
+        "its core busy, so the bare loop is interleaved half a period after its ticks");
   }
 
   // the measured loop: a running daemon's segment, or the in-process synthetic rig
   std::unique_ptr<SyntheticRig> rig;
+  std::unique_ptr<ReplayRig> replay_rig;
   std::optional<shared::Segment> attached;
   std::int64_t period_ns = o.period_us > 0.0 ? static_cast<std::int64_t>(o.period_us * 1e3) : 0;
-  if (synthetic) {
+  if (replay) {
+    std::vector<shared::RecordedSnapshot> snaps = shared::readSnapshotFile(o.replay);
+    ReplayOptions ro;
+    ro.loop = o.loop_replay;
+    ro.rate_hz = o.rate_hz;
+    ro.core = core;
+    ro.priority = o.priority;
+    ro.max_sweeps = o.sweeps;
+    replay_rig = std::make_unique<ReplayRig>(std::move(snaps), ro);
+    period_ns = replay_rig->periodNs();
+    std::printf(
+        "replay: %zu snapshots from %s (%.2f s per pass%s), up to %d rows (%d contacts); "
+        "loop %.0f Hz on core %d, SCHED_FIFO %d, %d sweeps max, budget %.0f us; reader: %s\n",
+        replay_rig->snapshotCount(), o.replay.c_str(), 1e-9 * static_cast<double>(replay_rig->passNs()),
+        o.loop_replay ? ", looping" : "", replay_rig->maxRows(), replay_rig->maxContacts(),
+        o.rate_hz, core, o.priority, o.sweeps, 0.4 * 1e-3 * static_cast<double>(period_ns),
+        o.reader.c_str());
+    if (!o.loop_replay && shared::secondsToNs(o.duration_s) > replay_rig->passNs()) {
+      std::printf(
+          "note: the recording is shorter than --duration: after it the snapshot goes stale "
+          "and forces fade (--loop replays it again)\n");
+    }
+  } else if (synthetic) {
     SyntheticOptions so;
     so.problem.rows = o.synthetic_rows;
     so.problem.seed = o.seed;
@@ -160,7 +192,8 @@ int run(const Options& o) {
     std::printf("attached read-only to '%s' (generation %llu)\n", o.segment.c_str(),
                 static_cast<unsigned long long>(attached->generation()));
   }
-  const shared::Segment& seg = synthetic ? rig->segment() : *attached;
+  const shared::Segment& seg =
+      replay_rig ? replay_rig->segment() : (rig ? rig->segment() : *attached);
   // synthetic: read everything from the first tick; attach: from now on
   RingFollower follower(seg, synthetic ? shared::StatsRingReader::Start::kOldest
                                        : shared::StatsRingReader::Start::kNewest);
@@ -179,6 +212,12 @@ int run(const Options& o) {
     rig->start();
     if (!rig->rtSummary().empty()) {
       std::printf("real-time set-up incomplete: %s\n", rig->rtSummary().c_str());
+    }
+  }
+  if (replay_rig) {
+    replay_rig->start();
+    if (!replay_rig->rtSummary().empty()) {
+      std::printf("real-time set-up incomplete: %s\n", replay_rig->rtSummary().c_str());
     }
   }
 
@@ -230,6 +269,7 @@ int run(const Options& o) {
   }
   if (baseline_started) baseline.finish();
   if (rig) rig->stop();
+  if (replay_rig) replay_rig->stop();
   follower.drain({&total}, csv.get());
   total.setLost(follower.lost());
   const JitterReport report = total.report();
@@ -242,7 +282,11 @@ int run(const Options& o) {
   }
 
   std::string title;
-  if (synthetic) {
+  if (replay_rig) {
+    title = fmt::format("replay of {} ({} snapshots, up to {} rows), {:.0f} Hz, core {}, priority {}",
+                        o.replay, replay_rig->snapshotCount(), replay_rig->maxRows(), o.rate_hz,
+                        core, o.priority);
+  } else if (rig) {
     title = fmt::format("synthetic {} rows ({} contacts), {:.0f} Hz, core {}, priority {}",
                         rig->problem().rows, rig->problem().contacts, o.rate_hz, core, o.priority);
   } else {
@@ -299,6 +343,8 @@ int main(int argc, char** argv) {
       "  tactus-jitter --segment tactus --duration 10 --baseline --plot jitter.png\n"
       "  tactus-jitter --synthetic 450 --duration 10 --baseline\n"
       "  tactus-jitter --synthetic 900 --baseline --baseline-mode after\n"
+      "  tactus-jitter --replay grasp.snap --loop --duration 10 --baseline   (tactus-bench "
+      "--record-snapshots)\n"
       "  tactus-jitter --synthetic 450 --duration 7 --reader none   (vs --reader live / busy)");
   Options o;
   app.add_option("--segment", o.segment, "Segment to attach to (attach mode)")
@@ -320,7 +366,12 @@ int main(int argc, char** argv) {
                  "Synthetic mode: run the haptic loop in-process on snapshots of ROWS rows "
                  "(150, 450, 900 typical)")
       ->check(CLI::Range(3, 3000));
-  app.add_option("--rate", o.rate_hz, "Synthetic: haptic loop rate [Hz]")
+  app.add_option("--replay", o.replay,
+                 "Replay mode: run the haptic loop in-process on the snapshots recorded in FILE "
+                 "(tactus-bench SCENE --record-snapshots FILE), published at their recorded times")
+      ->check(CLI::ExistingFile);
+  app.add_flag("--loop", o.loop_replay, "Replay: start the recording over after its end");
+  app.add_option("--rate", o.rate_hz, "Synthetic/replay: haptic loop rate [Hz]")
       ->check(CLI::Range(50.0, 4000.0))
       ->capture_default_str();
   app.add_option("--sim-rate", o.sim_rate_hz, "Synthetic: snapshot rate [Hz]")
@@ -333,7 +384,7 @@ int main(int argc, char** argv) {
   app.add_option("--priority", o.priority, "SCHED_FIFO priority (0: do not ask)")
       ->check(CLI::Range(0, 99))
       ->capture_default_str();
-  app.add_option("--sweeps", o.sweeps, "Synthetic: NSGS sweeps per tick")
+  app.add_option("--sweeps", o.sweeps, "Synthetic/replay: NSGS sweeps per tick")
       ->check(CLI::Range(1, 10000))
       ->capture_default_str();
   app.add_option("--period-us", o.period_us,

@@ -43,8 +43,12 @@ int main(int argc, char** argv) {
   app.add_option("--stats-json", opt.stats_json, "Write per-stage statistics as JSON to FILE");
   app.add_option("--export-trajectory", opt.export_trajectory,
                  "Write the scene's scripted instrument trajectory as a device CSV and exit");
+  app.add_option("--record-snapshots", opt.record_snapshots,
+                 "Record every step's contact snapshot (simulated time stamps) to FILE, written "
+                 "at the end of the run, for tactus-jitter --replay FILE");
   app.add_flag("--overwrite", opt.overwrite,
-               "Replace existing --stats-json / --export-trajectory files and an earlier "
+               "Replace existing --stats-json / --export-trajectory / --record-snapshots files "
+               "and an earlier "
                "run's VTK series in the --output folder");
   app.add_option("--log-level", log_level, "trace, debug, info, warn, error")
       ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error"}));

@@ -5,7 +5,8 @@
 // snapshot slot exactly as sim_server does, is re-solved from the slot as the haptic loop would
 // (delta_free moved by J times a small device displacement, warm-started NSGS from the
 // simulation's f, the loop's sweep and time budget). --json writes everything for comparison
-// between commits.
+// between commits. --record-snapshots FILE writes every published snapshot, stamped with the
+// simulated time, for tactus-jitter --replay FILE.
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 #include <unistd.h>
@@ -15,6 +16,7 @@
 #include <cmath>
 #include <cstdio>
 #include <ctime>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -23,6 +25,7 @@
 #include "tactus/shared/nsgs.h"
 #include "tactus/shared/pose.h"
 #include "tactus/shared/segment.h"
+#include "tactus/shared/snapshot_file.h"
 #include "tactus/sim/pipeline.h"
 #include "tactus/sim/scene.h"
 
@@ -64,6 +67,8 @@ struct BenchOptions {
   long steps = 0;
   std::string json;
   std::string trace;
+  std::string record_snapshots;
+  bool overwrite = false;  ///< replace an existing --record-snapshots file
   double budget_us = 0.0;
   int tick_sweeps = 0;
   double displacement_mm = 0.2;
@@ -118,6 +123,13 @@ int run(const BenchOptions& o) {
   std::vector<double> contacts, rows, sim_sweeps, tick_us, tick_cpu_us, tick_sweeps_v, tick_err, passes,
       geometric_pen_mm;
   long tick_converged = 0;
+  std::unique_ptr<shared::SnapshotFileWriter> recorder;
+  if (!o.record_snapshots.empty()) {
+    shared::OutputOptions oo;
+    oo.overwrite = o.overwrite;
+    oo.overwrite_hint = "pass --overwrite";
+    recorder = std::make_unique<shared::SnapshotFileWriter>(o.record_snapshots, oo);
+  }
   std::FILE* trace = nullptr;
   if (!o.trace.empty()) {
     trace = std::fopen(o.trace.c_str(), "w");
@@ -133,6 +145,7 @@ int run(const BenchOptions& o) {
     publishProblem(sim, pub, static_cast<std::uint64_t>(k + 1), spec.instrument.max_opening_rad);
     seg.beat(shared::Side::kSim);
     const double publish_s = 1e-9 * static_cast<double>(shared::monotonicNs() - tp);
+    if (recorder) recorder->append(sub.latest(), std::llround(sim.time() * 1e9));
     stages[0].v.push_back(r.times.free_motion_s);
     stages[1].v.push_back(r.times.collision_s);
     stages[2].v.push_back(r.times.w_build_s);
@@ -185,6 +198,11 @@ int run(const BenchOptions& o) {
     }
   }
   if (trace != nullptr) std::fclose(trace);
+  if (recorder) {
+    recorder->commit();
+    std::printf("%llu snapshots recorded to %s\n",
+                static_cast<unsigned long long>(recorder->count()), o.record_snapshots.c_str());
+  }
   const double wall_s = 1e-9 * static_cast<double>(shared::monotonicNs() - t0);
 
   // table
@@ -277,6 +295,10 @@ int main(int argc, char** argv) {
   app.add_option("--steps", o.steps, "Steps to run (default: the scene's duration / time step)");
   app.add_option("--json", o.json, "Write the results as JSON");
   app.add_option("--trace", o.trace, "Write one CSV row per step (contacts, sweeps, timings)");
+  app.add_option("--record-snapshots", o.record_snapshots,
+                 "Write every published contact snapshot (stamped with the simulated time) to a "
+                 "new FILE, for tactus-jitter --replay FILE");
+  app.add_flag("--overwrite", o.overwrite, "Replace an existing --record-snapshots file");
   app.add_option("--budget-us", o.budget_us,
                  "Haptic solve time budget [us] (default: 40 % of the scene's haptic period)");
   app.add_option("--tick-sweeps", o.tick_sweeps,

@@ -7,13 +7,17 @@
 #include <algorithm>
 #include <cmath>
 #include <fmt/format.h>
+#include <memory>
 #include <sstream>
+#include <vector>
 
 #include "display_publisher.h"
 #include "haptic_link.h"
 #include "tactus/sim/instrument.h"
 #include "tactus/shared/error.h"
 #include "tactus/shared/file_io.h"
+#include "tactus/shared/segment.h"
+#include "tactus/shared/snapshot_file.h"
 
 namespace tactus::sim {
 namespace {
@@ -207,6 +211,22 @@ int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
   }
   auto display = link ? std::make_unique<DisplayLink>(options.segment, sim) : nullptr;
 
+  // --record-snapshots: each step's snapshot, written into a private slot of the capacity the
+  // segment has, then appended (the target is checked now, before the run)
+  std::unique_ptr<shared::SnapshotFileWriter> recorder;
+  shared::SnapshotLayout record_layout;
+  std::vector<double> record_slot;  // doubles: 8-byte aligned for every array of the layout
+  if (!options.record_snapshots.empty()) {
+    recorder = std::make_unique<shared::SnapshotFileWriter>(
+        options.record_snapshots,
+        shared::OutputOptions{.overwrite = options.overwrite,
+                              .overwrite_hint = "pass --overwrite to replace it"});
+    const shared::SegmentCapacity cap = shared::SegmentCapacity::forContacts(
+        spec.solver.max_contacts, spec.instrument.friction_mu > 0.0);
+    record_layout = shared::SnapshotLayout::forCapacity(cap.max_rows, cap.max_contacts);
+    record_slot.assign(record_layout.total_bytes / sizeof(double) + 1, 0.0);
+  }
+
   const double h = spec.time_step_s;
   // a daemon runs until stopped (or --duration); the scene's duration is for offline tools
   const double duration = options.duration_s;
@@ -237,6 +257,12 @@ int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
       link->publish(sim);
     }
     if (display) display->publish(sim, report);
+    if (recorder && sim.hasInstrument()) {
+      shared::SnapshotWriter slot(record_slot.data(), record_layout);
+      writeSnapshot(sim, spec.instrument.max_opening_rad, static_cast<std::uint64_t>(k + 1),
+                    std::llround(sim.time() * 1e9), 0, slot);
+      recorder->append(slot.view(), std::llround(sim.time() * 1e9));
+    }
     sim.writeOutputIfDue();
     if (!report.finite) {
       spdlog::error("step {}: the state became non-finite; stopping", k);
@@ -275,6 +301,10 @@ int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
     }
   }
   sim.finishOutput();
+  if (recorder) {
+    recorder->commit();
+    spdlog::info("{} snapshots recorded to {}", recorder->count(), options.record_snapshots);
+  }
   const double wall_s = 1e-9 * static_cast<double>(nowNs() - t0);
   spdlog::info("{} steps, simulated {:.3f} s in {:.3f} s wall", stats.steps(), sim.time(), wall_s);
   std::printf("%s", stats.table().c_str());

@@ -25,6 +25,9 @@ struct RunOptions {
   std::string export_trajectory;     ///< write the scripted trajectory (device CSV) and exit
   bool overwrite = false;            ///< replace an existing stats_json / export_trajectory file,
                                      ///< or an earlier run's VTK series in the output folder
+  /// Record every step's contact snapshot (shared/snapshot_file.h, stamped with the simulated
+  /// time) to this file, for tactus-jitter --replay; written at the end of the run.
+  std::string record_snapshots;
 };
 
 /// Writes the scene's instrument trajectory in the replay device's CSV format
