@@ -20,6 +20,8 @@
 #include "tactus/sim/compliance.h"
 #include "tactus/sim/fem.h"
 #include "tactus/sim/mesh_gen.h"
+#include "tactus/shared/error.h"
+#include "tactus/sim/scene.h"
 
 namespace fs = std::filesystem;
 using namespace tactus::sim;
@@ -177,6 +179,21 @@ TEST_P(CacheReject, TruncatedPaddedCorruptOrOldFilesAreRejectedAndRebuilt) {
     auto again = makeCompliance(ComplianceKind::kWarped, *body_, opt_);
     EXPECT_TRUE(again->buildInfo().loaded_from_cache) << again->buildInfo().cache_message;
   }
+}
+
+// The scene asks for a float C0 with compliance.c0_precision; anything else is refused.
+TEST(CacheScene, C0PrecisionKeySelectsFloat) {
+  const fs::path scenes = fs::path(TACTUS_TEST_DATA_DIR) / "scenes";
+  const auto parse = [&](const std::string& compliance) {
+    return parseScene("time_step: 0.005\ntissues:\n  - mesh: ../meshes/liver.msh\n"
+                      "    compliance: " +
+                          compliance + "\n",
+                      "s.yaml", scenes);
+  };
+  EXPECT_FALSE(parse("{model: warped}").tissues.at(0).c0_single_precision);
+  EXPECT_FALSE(parse("{model: warped, c0_precision: double}").tissues.at(0).c0_single_precision);
+  EXPECT_TRUE(parse("{model: warped, c0_precision: float}").tissues.at(0).c0_single_precision);
+  EXPECT_THROW(parse("{model: warped, c0_precision: half}"), tactus::SceneError);
 }
 
 INSTANTIATE_TEST_SUITE_P(Precision, CacheLoad, ::testing::Values(false, true),
