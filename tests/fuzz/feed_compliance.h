@@ -6,7 +6,7 @@
 //
 // Input layout: byte 0 holds flags, the rest is the cache file.
 //   bit 0: overwrite the header hash (bytes 16..23 of the file) with this body's valid hash;
-//   bit 1: recompute the trailing FNV-1a checksum over the payload (bytes 40..size-8);
+//   bit 1: recompute the trailing payload checksum (bytes 40..size-8; see checksum());
 //   bit 2: ask for a single-precision (float) model instead of double.
 // Without bits 0/1 almost every mutation stops at the hash or checksum check; with them the
 // fuzzer reaches the size, node-list and finiteness checks behind.
@@ -85,7 +85,7 @@ class ComplianceCacheTarget {
       std::memcpy(file.data() + kHashOffset, valid.data() + kHashOffset, 8);
     }
     if ((flags & kFixChecksum) && file.size() >= kHeaderBytes + 8) {
-      const std::uint64_t sum = fnv1a(file.data() + kHeaderBytes, file.size() - kHeaderBytes - 8);
+      const std::uint64_t sum = checksum(file.data() + kHeaderBytes, file.size() - kHeaderBytes - 8);
       std::memcpy(file.data() + file.size() - 8, &sum, 8);
     }
     const auto opt = options(single);
@@ -130,14 +130,32 @@ class ComplianceCacheTarget {
     std::ifstream in(path, std::ios::binary);
     return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
   }
-  // 64-bit FNV-1a, the cache's checksum
-  static std::uint64_t fnv1a(const char* data, std::size_t bytes) {
-    std::uint64_t h = 0xcbf29ce484222325ull;
+  // 64-bit FNV-1a
+  static std::uint64_t fnv1a(const void* data, std::size_t bytes,
+                             std::uint64_t h = 0xcbf29ce484222325ull) {
+    const auto* p = static_cast<const unsigned char*>(data);
     for (std::size_t i = 0; i < bytes; ++i) {
-      h ^= static_cast<unsigned char>(data[i]);
+      h ^= p[i];
       h *= 0x100000001b3ull;
     }
     return h;
+  }
+  // The cache's payload checksum (format 2): four lanes over 8-byte words, lane i taking words
+  // i, i + 4, ...; the 0-31 tail bytes, and the byte count, folded in with FNV-1a.
+  static std::uint64_t checksum(const char* data, std::size_t bytes) {
+    std::uint64_t lane[4] = {0xcbf29ce484222325ull, 0x84222325cbf29ce4ull, 0x9e3779b97f4a7c15ull,
+                             0xc2b2ae3d27d4eb4full};
+    const std::size_t whole = bytes / 32 * 32;
+    for (std::size_t at = 0; at < whole; at += 8) {
+      std::uint64_t w = 0;
+      std::memcpy(&w, data + at, 8);
+      auto& l = lane[(at / 8) % 4];
+      l = (l ^ w) * 0x100000001b3ull;
+    }
+    std::uint64_t h = fnv1a(lane, sizeof(lane));
+    h = fnv1a(data + whole, bytes - whole, h);
+    const std::uint64_t count = bytes;
+    return fnv1a(&count, sizeof(count), h);
   }
 
   std::filesystem::path dir_;

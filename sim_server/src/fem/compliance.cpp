@@ -1,5 +1,6 @@
 #include "tactus/sim/compliance.h"
 
+#include <sys/mman.h>
 #include <unistd.h>
 
 #include <spdlog/spdlog.h>
@@ -8,6 +9,7 @@
 #include <chrono>
 #include <cstdio>
 #include <cstring>
+#include <new>
 #include <string>
 #include <vector>
 
@@ -20,7 +22,10 @@ namespace tactus::sim {
 namespace {
 
 constexpr char kMagic[8] = {'T', 'A', 'C', 'T', 'C', '0', '\0', '\1'};
-constexpr std::uint32_t kVersion = 1;
+// 2: payload checksum is PayloadChecksum (1 was byte-wise FNV-1a, too slow for GB files)
+constexpr std::uint32_t kVersion = 2;
+// Bytes read, checksummed and checked per step of a cache load (stays cache-resident).
+constexpr std::size_t kLoadChunkBytes = std::size_t{4} << 20;
 
 struct CacheHeader {
   char magic[8];
@@ -31,32 +36,137 @@ struct CacheHeader {
   std::uint64_t surface_count;
 };
 
+// Checksum of the cache payload (surface node list, then C0), fed in pieces of any
+// size. Four interleaved FNV-style lanes over 8-byte words: a change in any one word
+// always changes its lane (xor and the odd multiplier are bijections), and the lanes
+// run in parallel, so it keeps up with the disk cache where byte-wise FNV-1a did not.
+// Lanes, tail bytes and length are folded with FNV-1a.
+class PayloadChecksum {
+public:
+  void add(const void *data, std::size_t n) {
+    const auto *p = static_cast<const unsigned char *>(data);
+    bytes_ += n;
+    if (pending_n_ > 0) {
+      const std::size_t take = std::min(kBlock - pending_n_, n);
+      std::memcpy(pending_ + pending_n_, p, take);
+      pending_n_ += take;
+      p += take;
+      n -= take;
+      if (pending_n_ < kBlock)
+        return;
+      blocks(pending_, 1);
+      pending_n_ = 0;
+    }
+    blocks(p, n / kBlock);
+    p += n / kBlock * kBlock;
+    n %= kBlock;
+    std::memcpy(pending_, p, n);
+    pending_n_ = n;
+  }
+  std::uint64_t finish() const {
+    std::uint64_t h = fem_detail::fnv1a(lane_, sizeof(lane_));
+    h = fem_detail::fnv1a(pending_, pending_n_, h);
+    return fem_detail::fnv1a(&bytes_, sizeof(bytes_), h);
+  }
+
+private:
+  static constexpr std::size_t kBlock = 32;
+  static constexpr std::uint64_t kPrime = 0x100000001b3ull;
+  // Whole blocks; the lanes live in locals (bytes may alias the members).
+  void blocks(const unsigned char *p, std::size_t count) {
+    std::uint64_t l0 = lane_[0], l1 = lane_[1], l2 = lane_[2], l3 = lane_[3];
+    for (std::size_t b = 0; b < count; ++b, p += kBlock) {
+      std::uint64_t w[4];
+      std::memcpy(w, p, sizeof(w));
+      l0 = (l0 ^ w[0]) * kPrime;
+      l1 = (l1 ^ w[1]) * kPrime;
+      l2 = (l2 ^ w[2]) * kPrime;
+      l3 = (l3 ^ w[3]) * kPrime;
+    }
+    lane_[0] = l0;
+    lane_[1] = l1;
+    lane_[2] = l2;
+    lane_[3] = l3;
+  }
+  std::uint64_t lane_[4] = {0xcbf29ce484222325ull, 0x84222325cbf29ce4ull,
+                            0x9e3779b97f4a7c15ull, 0xc2b2ae3d27d4eb4full};
+  unsigned char pending_[kBlock] = {};
+  std::size_t pending_n_ = 0;
+  std::uint64_t bytes_ = 0;
+};
+
 std::uint64_t cacheHash(const FemBody &body, double h) {
   const std::uint64_t base = body.restHash();
   return fem_detail::fnv1a(&h, sizeof(h), base);
 }
+
+// Page-aligned anonymous memory for the large C0 block, asked for in transparent
+// huge pages and populated in one call: filling 1.6 GB through 4 KiB page faults
+// (one trap each) cost more than reading the file itself. Falls back silently to
+// ordinary pages where huge pages or MADV_POPULATE_WRITE are not available.
+class LargeBuffer {
+public:
+  LargeBuffer() = default;
+  LargeBuffer(const LargeBuffer &) = delete;
+  LargeBuffer &operator=(const LargeBuffer &) = delete;
+  ~LargeBuffer() { reset(); }
+  // Throws std::bad_alloc when the memory cannot be had.
+  void allocate(std::size_t bytes) {
+    reset();
+    if (bytes == 0)
+      return;
+    constexpr std::size_t kHuge = std::size_t{2} << 20;
+    const std::size_t mapped = (bytes + kHuge - 1) / kHuge * kHuge;
+    void *p = ::mmap(nullptr, mapped, PROT_READ | PROT_WRITE,
+                     MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+    if (p == MAP_FAILED)
+      throw std::bad_alloc();
+#ifdef MADV_HUGEPAGE
+    (void)::madvise(p, mapped, MADV_HUGEPAGE);
+#endif
+#ifdef MADV_POPULATE_WRITE
+    (void)::madvise(p, mapped, MADV_POPULATE_WRITE);
+#endif
+    data_ = p;
+    mapped_ = mapped;
+  }
+  void reset() {
+    if (data_ != nullptr)
+      ::munmap(data_, mapped_);
+    data_ = nullptr;
+    mapped_ = 0;
+  }
+  void *data() const { return data_; }
+
+private:
+  void *data_ = nullptr;
+  std::size_t mapped_ = 0;
+};
 
 // Rest compliance block on the surface DOFs, with the surface numbering.
 struct RestBlock {
   std::vector<int> surface; // sorted surface node indices
   std::vector<int> local;   // node -> surface index, -1 inside the volume
   bool single = false;      // stored in float (c0f) instead of double (c0)
-  Eigen::MatrixXd c0;       // 3s x 3s
-  Eigen::MatrixXf c0f;
+  LargeBuffer storage;      // memory of c0 / c0f
+  Eigen::Map<Eigen::MatrixXd> c0{nullptr, 0, 0}; // 3s x 3s
+  Eigen::Map<Eigen::MatrixXf> c0f{nullptr, 0, 0};
   std::size_t scalarBytes() const {
     return single ? sizeof(float) : sizeof(double);
   }
   void resize(Eigen::Index d) {
+    release();
+    storage.allocate(static_cast<std::size_t>(d * d) * scalarBytes());
+    // re-seating an Eigen::Map is done by placement new
     if (single)
-      c0f.resize(d, d);
+      new (&c0f) Eigen::Map<Eigen::MatrixXf>(
+          static_cast<float *>(storage.data()), d, d);
     else
-      c0.resize(d, d);
+      new (&c0) Eigen::Map<Eigen::MatrixXd>(
+          static_cast<double *>(storage.data()), d, d);
   }
-  void *data() { return single ? static_cast<void *>(c0f.data()) : c0.data(); }
-  const void *data() const {
-    return single ? static_cast<const void *>(c0f.data()) : c0.data();
-  }
-  bool allFinite() const { return single ? c0f.allFinite() : c0.allFinite(); }
+  void *data() { return storage.data(); }
+  const void *data() const { return storage.data(); }
   Eigen::Matrix3d block(int a, int b) const {
     if (single)
       return c0f.block<3, 3>(3 * a, 3 * b).cast<double>();
@@ -67,8 +177,9 @@ struct RestBlock {
            static_cast<std::size_t>(single ? c0f.size() : c0.size());
   }
   void release() {
-    c0.resize(0, 0);
-    c0f.resize(0, 0);
+    new (&c0) Eigen::Map<Eigen::MatrixXd>(nullptr, 0, 0);
+    new (&c0f) Eigen::Map<Eigen::MatrixXf>(nullptr, 0, 0);
+    storage.reset();
   }
 };
 
@@ -152,15 +263,37 @@ bool readCache(const std::filesystem::path &path, std::uint64_t hash,
             std::to_string(expected) + " (truncated or corrupt)";
       return false;
     }
+    // One pass: read a chunk straight into C0's storage, checksum it and check it
+    // while it is still in the CPU cache (no second copy, no per-element conversion).
     std::vector<int> nodes(s);
     blk.resize(static_cast<Eigen::Index>(d));
-    std::uint64_t checksum = 0;
+    PayloadChecksum sum;
     in.readExact(nodes.data(), s * sizeof(int));
-    in.readExact(blk.data(), d * d * blk.scalarBytes());
+    sum.add(nodes.data(), s * sizeof(int));
+    auto *payload = static_cast<unsigned char *>(blk.data());
+    const std::uint64_t payload_bytes = d * d * blk.scalarBytes();
+    bool finite = true;
+    for (std::uint64_t at = 0; at < payload_bytes;) {
+      const std::size_t n = static_cast<std::size_t>(
+          std::min<std::uint64_t>(kLoadChunkBytes, payload_bytes - at));
+      in.readExact(payload + at, n);
+      sum.add(payload + at, n);
+      const auto count = static_cast<Eigen::Index>(n / blk.scalarBytes());
+      if (blk.single)
+        finite = finite && Eigen::Map<const Eigen::ArrayXf>(
+                               reinterpret_cast<const float *>(payload + at),
+                               count)
+                               .allFinite();
+      else
+        finite = finite && Eigen::Map<const Eigen::ArrayXd>(
+                               reinterpret_cast<const double *>(payload + at),
+                               count)
+                               .allFinite();
+      at += n;
+    }
+    std::uint64_t checksum = 0;
     in.readExact(&checksum, sizeof(checksum));
-    std::uint64_t sum = fem_detail::fnv1a(nodes.data(), s * sizeof(int));
-    sum = fem_detail::fnv1a(blk.data(), d * d * blk.scalarBytes(), sum);
-    if (sum != checksum) {
+    if (sum.finish() != checksum) {
       why = "checksum mismatch (corrupt)";
       return false;
     }
@@ -168,7 +301,7 @@ bool readCache(const std::filesystem::path &path, std::uint64_t hash,
       why = "surface nodes differ";
       return false;
     }
-    if (!blk.allFinite()) {
+    if (!finite) {
       why = "non-finite values";
       return false;
     }
@@ -196,9 +329,10 @@ void writeCache(const std::filesystem::path &path, std::uint64_t hash,
     hdr.node_count = static_cast<std::uint64_t>(body.nodeCount());
     hdr.surface_count = blk.surface.size();
     const std::uint64_t d = 3 * hdr.surface_count;
-    std::uint64_t sum =
-        fem_detail::fnv1a(blk.surface.data(), blk.surface.size() * sizeof(int));
-    sum = fem_detail::fnv1a(blk.data(), d * d * blk.scalarBytes(), sum);
+    PayloadChecksum checksum;
+    checksum.add(blk.surface.data(), blk.surface.size() * sizeof(int));
+    checksum.add(blk.data(), d * d * blk.scalarBytes());
+    const std::uint64_t sum = checksum.finish();
     const auto bytes = [](const void *p, std::size_t n) {
       return std::string_view(static_cast<const char *>(p), n);
     };
@@ -395,6 +529,7 @@ private:
     const auto path = complianceCachePath(body, opt_);
     const std::uint64_t hash = cacheHash(body, opt_.h_s);
     bool loaded = false;
+    const auto load_t0 = std::chrono::steady_clock::now();
     if (!path.empty() && std::filesystem::exists(path)) {
       std::string why;
       loaded = readCache(path, hash, body, blk_, why);
@@ -407,8 +542,13 @@ private:
     }
     if (loaded) {
       info_.loaded_from_cache = true;
-      spdlog::info("compliance cache {} loaded ({} surface nodes)",
-                   path.string(), blk_.surface.size());
+      const double load_s = std::chrono::duration<double>(
+                                std::chrono::steady_clock::now() - load_t0)
+                                .count();
+      spdlog::info("compliance cache {} loaded ({} surface nodes, {:.1f} MB in "
+                   "{:.2f} s)",
+                   path.string(), blk_.surface.size(),
+                   static_cast<double>(blk_.bytes()) / 1e6, load_s);
     } else {
       const auto t0 = std::chrono::steady_clock::now();
       computeRestBlock(body, opt_, blk_);

@@ -149,6 +149,7 @@ void Simulation::Impl::buildTissues() {
       copt.cache_dir = ts.compliance_cache_dir;
       copt.cache_name = ts.name;
       copt.exact_correction = ts.exact_correction;
+      copt.c0_single_precision = ts.c0_single_precision;
       state.compliance = makeCompliance(ts.compliance, *state.body, copt);
       spdlog::info("tissue '{}': {} compliance, {:.1f} MiB", ts.name, toString(ts.compliance),
                    static_cast<double>(state.compliance->memoryBytes()) / (1024.0 * 1024.0));

@@ -459,13 +459,15 @@ class SceneParser {
     if (section(t, path, "fixed", &n)) readFixed(n, join(path, "fixed"), tissue);
     if (section(t, path, "compliance", &n)) {
       const std::string p = join(path, "compliance");
-      checkKeys(n, p, {"model", "cache_dir", "correction"});
+      checkKeys(n, p, {"model", "cache_dir", "correction", "c0_precision"});
       choice(n, p, "model", &tissue->compliance,
              {{"exact", ComplianceKind::kExact}, {"warped", ComplianceKind::kWarped},
               {"rest", ComplianceKind::kRest}, {"uncoupled", ComplianceKind::kUncoupled}});
       std::string dir;
       if (string(n, p, "cache_dir", &dir)) tissue->compliance_cache_dir = resolve(dir);
       choice(n, p, "correction", &tissue->exact_correction, {{"model", false}, {"exact", true}});
+      choice(n, p, "c0_precision", &tissue->c0_single_precision,
+             {{"double", false}, {"float", true}});
     }
   }
 

@@ -56,6 +56,8 @@ struct TissueSpec {
   std::filesystem::path compliance_cache_dir;      ///< empty: no on-disk cache
   /// compliance.correction: exact -> ComplianceOptions::exact_correction
   bool exact_correction = false;
+  /// compliance.c0_precision: float -> ComplianceOptions::c0_single_precision
+  bool c0_single_precision = false;
 };
 
 /// A pose: position [m] and orientation (unit quaternion), world frame.
