@@ -608,7 +608,10 @@ NsgsResult solveNsgs(const ContactProblemView& problem, const NsgsSettings& sett
       const int checks = (sweep - window_start) / check_every;
       const bool stalled = best_error > settings.stall_ratio * window_best;
       const bool oscillating = 2 * window_repeats >= checks;
-      if (stalled && oscillating && sor > settings.min_sor) {
+      // past 3/4 of the sweep budget, any stagnation counts (the budget is the harder limit)
+      const bool late =
+          4 * static_cast<std::int64_t>(sweep) > 3 * static_cast<std::int64_t>(max_sweeps);
+      if (stalled && (oscillating || late) && sor > settings.min_sor) {
         sor = std::max(settings.min_sor, sor * settings.stall_sor_factor);
         ++result.relaxations;
       }

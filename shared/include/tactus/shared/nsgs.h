@@ -77,11 +77,13 @@ struct NsgsSettings {
   /// <= 4), sor is multiplied by `stall_sor_factor`, down to `min_sor` (a solution is a fixed
   /// point for any sor, so this only changes the path). Slow convergence and long plateaus (rigid
   /// sphere piles: 1000-12000 sweeps to 1e-9) drift, so they keep sor: an earlier rule without
-  /// the repeat test lowered sor there and cost 4-8x more sweeps or never converged. The window
-  /// counts sweeps of one call: the haptic loop's 40-sweep ticks never trigger it.
+  /// the repeat test lowered sor there and cost 4-8x more sweeps or never converged. Past 3/4 of
+  /// max_sweeps any stalled window lowers sor (the budget is then the nearer limit: the
+  /// simulation's 500-sweep solves on the mu = 2 drag keep their budget-stop residual so). The
+  /// window counts sweeps of one call: the haptic loop's 40-sweep ticks never trigger it.
   /// stall_sweeps = 0 disables it.
   int stall_sweeps = 50;
-  double stall_ratio = 0.99;
+  double stall_ratio = 0.9;
   double stall_sor_factor = 0.7;
   double min_sor = 0.2;
   std::int64_t time_budget_ns = 0;   ///< 0: none; else stop after the sweep that crosses it
