@@ -430,6 +430,12 @@ double naturalMapError(const ContactProblemView& problem, const double* f,
   return normalisedError(total, q2);
 }
 
+// Stagnation rule (see NsgsSettings::stall_sweeps): a check "repeats" when its error equals one
+// of the last kCyclePeriods errors to kCycleRelTol; a window is a limit cycle when at least half
+// of its checks repeat. Slow convergence and plateaus drift, so they never qualify.
+constexpr int kCyclePeriods = 4;
+constexpr double kCycleRelTol = 1e-6;
+
 NsgsResult solveNsgs(const ContactProblemView& problem, const NsgsSettings& settings,
                      NsgsWorkspace& workspace, double* f) noexcept {
   NsgsResult result;
@@ -490,7 +496,12 @@ NsgsResult solveNsgs(const ContactProblemView& problem, const NsgsSettings& sett
   // stagnation watch (see NsgsSettings::stall_sweeps)
   double best_error = std::numeric_limits<double>::infinity();
   double window_best = best_error;   // best error when the current window opened
+  // errors of the last kCyclePeriods checks (ring, newest at recent[(checks_done - 1) % K])
+  double recent[kCyclePeriods];
+  for (double& e : recent) e = best_error;
+  int checks_done = 0;
   int window_start = 0;
+  int window_repeats = 0;            // checks in the window whose error repeats a recent one
   result.sor = sor;
   Local3 loc{};
   for (int sweep = 1; sweep <= max_sweeps; ++sweep) {
@@ -586,13 +597,27 @@ NsgsResult solveNsgs(const ContactProblemView& problem, const NsgsSettings& sett
       break;
     }
     best_error = std::min(best_error, result.error);
+    bool repeats = false;
+    for (const double e : recent) {
+      repeats = repeats || std::abs(result.error - e) <= kCycleRelTol * result.error;
+    }
+    if (repeats) ++window_repeats;
+    recent[checks_done % kCyclePeriods] = result.error;
+    ++checks_done;
     if (settings.stall_sweeps > 0 && sweep - window_start >= settings.stall_sweeps) {
-      if (best_error > settings.stall_ratio * window_best && sor > settings.min_sor) {
+      const int checks = (sweep - window_start) / check_every;
+      const bool stalled = best_error > settings.stall_ratio * window_best;
+      const bool oscillating = 2 * window_repeats >= checks;
+      // past 3/4 of the sweep budget, any stagnation counts (the budget is the harder limit)
+      const bool late =
+          4 * static_cast<std::int64_t>(sweep) > 3 * static_cast<std::int64_t>(max_sweeps);
+      if (stalled && (oscillating || late) && sor > settings.min_sor) {
         sor = std::max(settings.min_sor, sor * settings.stall_sor_factor);
         ++result.relaxations;
       }
       window_start = sweep;
       window_best = best_error;
+      window_repeats = 0;
     }
   }
   if (result.ill_posed_contacts > 0) result.status = NsgsStatus::kIllPosed;
