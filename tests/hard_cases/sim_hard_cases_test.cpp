@@ -502,8 +502,8 @@ DragResult runDrag(const std::string& file, StepWatch* watch_out) {
   return out;
 }
 
+// (mu = 2 used to stop at the sweep budget: plain Gauss-Seidel cycled on one step's redundant
 // contacts; NsgsSettings::stall_sweeps lowers the relaxation on such a cycle.)
-// contacts; NsgsSettings::stall_sweeps lowers the relaxation when the error stagnates.)
 TEST(HardCases, FrictionlessAndMuTwo) {
   StepWatch w0(loadCase("drag_mu0.yaml"));
   StepWatch w2(loadCase("drag_mu2.yaml"));
