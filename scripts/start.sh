@@ -121,7 +121,7 @@ if [[ $view -eq 1 ]]; then
 fi
 
 mon_args=(--segment "$segment")
-"$build/haptic_server/tactus-monitor" "${mon_args[@]}" --wait 600 &
+"$build/tools/monitor/tactus-monitor" "${mon_args[@]}" --wait 600 &
 monitor_pid=$!
 
 start=$(date +%s)

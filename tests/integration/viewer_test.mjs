@@ -132,7 +132,7 @@ let failed = false;
 try {
   let sim = startSim();
   if (args.haptic === '1') await startHaptic();
-  const viewer = start('viewer', path.join(build, 'haptic_server/tools/viewer/tactus-viewer'),
+  const viewer = start('viewer', path.join(build, 'tools/viewer/tactus-viewer'),
     ['--segment', segment, '--port', '0']);
   const url = await until('the viewer URL', () => (viewer.stdoutText.match(/http:\/\/127\.0\.0\.1:\d+\//) || [])[0], 10000);
   log('viewer at', url);

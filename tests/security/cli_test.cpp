@@ -16,7 +16,7 @@ namespace {
 
 const std::string kSim = TACTUS_BINARY_DIR "/sim_server/sim_server";
 const std::string kHaptic = TACTUS_BINARY_DIR "/haptic_server/haptic_server";
-const std::string kMonitor = TACTUS_BINARY_DIR "/haptic_server/tactus-monitor";
+const std::string kMonitor = TACTUS_BINARY_DIR "/tools/monitor/tactus-monitor";
 const std::string kScene = TACTUS_TEST_DATA_DIR "/scenes/press_cube.yaml";
 
 class CliTest : public ::testing::Test {

@@ -38,7 +38,7 @@ class ViewerSecurity : public ::testing::Test {
     ASSERT_EQ(::mkfifo((dir_ / "web/style.css").c_str(), 0600), 0);
     segment_ = "tactus_sec_viewer_nosim_" + std::to_string(::getpid());
     viewer_ = std::make_unique<ChildProcess>(
-        std::vector<std::string>{TACTUS_BINARY_DIR "/haptic_server/tools/viewer/tactus-viewer",
+        std::vector<std::string>{TACTUS_BINARY_DIR "/tools/viewer/tactus-viewer",
                                  "--segment", segment_, "--port", "0", "--web-dir",
                                  (dir_ / "web").string(), "--nice", "0"},
         dir_ / "viewer.out", dir_ / "viewer.err");
@@ -175,7 +175,7 @@ TEST_F(ViewerSecurity, OverLongRequestsAreRefused) {
 
 TEST_F(ViewerSecurity, SighupStopsTheViewerCleanly) {
   // a viewer of its own (the suite's keeps serving)
-  ChildProcess v({TACTUS_BINARY_DIR "/haptic_server/tools/viewer/tactus-viewer", "--segment",
+  ChildProcess v({TACTUS_BINARY_DIR "/tools/viewer/tactus-viewer", "--segment",
                   segment_, "--port", "0", "--web-dir", (dir_ / "web").string()},
                  dir_ / "hup.out", dir_ / "hup.err");
   ASSERT_TRUE(tactus::test::waitFor([&] { return v.out().find("http://") != std::string::npos; },

@@ -32,6 +32,11 @@ inline timespec toTimespec(std::int64_t t_ns) noexcept {
 }
 
 inline double nsToSeconds(std::int64_t t_ns) noexcept { return static_cast<double>(t_ns) * 1e-9; }
+/// Seconds elapsed since the monotonicNs() reading t0_ns (the one stopwatch of the tools and the
+/// simulation's stage timers).
+inline double secondsSinceNs(std::int64_t t0_ns) noexcept {
+  return nsToSeconds(monotonicNs() - t0_ns);
+}
 inline std::int64_t secondsToNs(double t_s) noexcept {
   return static_cast<std::int64_t>(t_s * 1e9 + (t_s >= 0 ? 0.5 : -0.5));
 }

@@ -1,4 +1,4 @@
-// Decoding of the viewer's binary WebSocket messages (see haptic_server/tools/viewer/
+// Decoding of the viewer's binary WebSocket messages (see tools/viewer/
 // segment_watcher.h for the layout). Little-endian 4-byte words throughout.
 
 export const MSG_TOPOLOGY = 1;

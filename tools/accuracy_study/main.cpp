@@ -1,0 +1,318 @@
+// tactus-accuracy: the study's plans (quick and full), its run cache, the output files and the
+// command line (what is measured and how: study.h).
+#include <CLI/CLI.hpp>
+#include <fmt/format.h>
+#include <fmt/ranges.h>
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <ctime>
+#include <map>
+#include <memory>
+#include <sstream>
+
+#include "study.h"
+#include "tactus/shared/clock.h"
+#include "tactus/shared/error.h"
+#include "tactus/shared/file_io.h"
+
+namespace tactus::study {
+namespace {
+
+struct SimPlan {
+  std::string main_mesh = "liver2";
+  std::vector<std::string> meshes;
+  double duration_s = 8.0;
+  std::vector<sim::ComplianceKind> compliances;
+  std::vector<double> tolerances;          // warped, sweep cap = reference's
+  std::vector<int> budgets;                // warped, tolerance 1e-12 (the budget binds)
+  std::vector<double> time_steps_s;        // besides the scene's
+};
+
+class RunCache {
+ public:
+  RunCache(const Options& o, double duration_s) : o_(o), duration_s_(duration_s) {}
+  const SimRun& get(const sim::SceneSpec& base, const SimConfig& cfg, double duration_s = 0.0,
+                    bool probe_w = false) {
+    auto it = runs_.find(cfg.key());
+    if (it != runs_.end()) return *it->second;
+    fmt::print("  run {:<10} h {:>5.1f} ms  {:<9}  tol {:.0e}  sweeps {:>5} ... ", cfg.mesh,
+               1e3 * cfg.h_s, complianceName(cfg.compliance), cfg.tol, cfg.sweeps);
+    std::fflush(stdout);
+    auto run = std::make_unique<SimRun>(
+        runSim(o_, base, cfg, duration_s > 0.0 ? duration_s : duration_s_, probe_w));
+    fmt::print("{:.1f} s (set-up {:.1f} s), step median {:.2f} ms\n", run->wall_s, run->setup_s,
+               1e3 * median(run->step_s));
+    std::fflush(stdout);
+    const SimRun& ref = *run;
+    runs_.emplace(cfg.key(), std::move(run));
+    return ref;
+  }
+
+ private:
+  const Options& o_;
+  double duration_s_;
+  std::map<std::string, std::unique_ptr<SimRun>> runs_;
+};
+
+std::string tolLabel(double tol) { return fmt::format("{:.0e}", tol); }
+
+int run(Options& o) {
+  const std::int64_t t_all = shared::monotonicNs();
+  const bool quick = o.mode == "quick";
+  SimPlan sp;
+  HapticPlan hp;
+  if (quick) {
+    // under 2 minutes: the coarse liver, a short span, one point per axis
+    sp.main_mesh = "liver";
+    sp.meshes = {"liver"};
+    sp.duration_s = 3.5;
+    sp.compliances = {sim::ComplianceKind::kExact, sim::ComplianceKind::kWarped,
+                      sim::ComplianceKind::kRest, sim::ComplianceKind::kUncoupled};
+    sp.tolerances = {1e-3};
+    sp.budgets = {10};
+    sp.time_steps_s = {0.02};
+    hp.mesh = "liver";
+    hp.rates_hz = {500.0, 1000.0};
+    hp.budgets = {0, 10};
+    hp.sim_h_s = {0.01};
+    hp.t0_s = 2.6;
+    hp.window_s = 0.3;
+  } else {
+    sp.main_mesh = "liver2";
+    sp.meshes = {"liver", "liver2"};
+    if (o.with_23k) sp.meshes.push_back("liver_23k");
+    sp.duration_s = 8.0;
+    sp.compliances = {sim::ComplianceKind::kExact, sim::ComplianceKind::kWarped,
+                      sim::ComplianceKind::kRest, sim::ComplianceKind::kUncoupled};
+    sp.tolerances = {1e-2, 1e-3, 1e-4, 1e-6, 1e-8};
+    sp.budgets = {3, 10, 30, 100};
+    sp.time_steps_s = {0.0025, 0.005, 0.02};
+    hp.mesh = "liver2";
+    hp.rates_hz = {500.0, 1000.0, 2000.0, 4000.0};
+    hp.budgets = {0, 1, 3, 10, 40};
+    hp.sim_h_s = {0.01, 0.02};
+    hp.t0_s = 2.0;
+    hp.window_s = 2.5;
+  }
+  if (o.duration_s > 0.0) sp.duration_s = o.duration_s;
+  if (o.haptic_t0_s > 0.0) hp.t0_s = o.haptic_t0_s;
+  if (o.haptic_window_s > 0.0) hp.window_s = o.haptic_window_s;
+  fs::create_directories(o.out);
+  fs::create_directories(o.cache_dir);
+
+  // ---- part 1: the simulation step
+  fmt::print("part 1: simulation step ({} s of the script per run)\n", sp.duration_s);
+  RunCache cache(o, sp.duration_s);
+  std::vector<SimRow> rows;
+  std::map<std::string, sim::SceneSpec> bases;
+  for (const std::string& m : sp.meshes) bases[m] = meshScene(o, m);
+  const sim::SceneSpec& main_base = bases.at(sp.main_mesh);
+  const double h_main = main_base.time_step_s;
+  const double scene_tol = main_base.solver.nsgs_tolerance;
+  const int scene_sweeps = main_base.solver.nsgs_max_sweeps;
+  const SimRun* main_ref = nullptr;
+  std::vector<const SimRun*> w_probes;
+  for (const std::string& m : sp.meshes) {
+    const sim::SceneSpec& base = bases.at(m);
+    // liver_23k (opt-in): ~0.4 s per step here, so a shorter span and no second exact run
+    const bool big = m == "liver_23k";
+    const double dur = big ? o.duration_23k_s : 0.0;
+    const SimRun& ref = cache.get(base, {m, h_main, sim::ComplianceKind::kExact, o.ref_tolerance,
+                                         o.ref_sweeps}, dur, true);
+    w_probes.push_back(&ref);
+    if (m == sp.main_mesh) main_ref = &ref;
+    rows.push_back({"compliance", "reference", &ref, &ref});
+    for (const sim::ComplianceKind k : sp.compliances) {
+      if (big && k == sim::ComplianceKind::kExact) continue;
+      const SimRun& r = cache.get(base, {m, h_main, k, scene_tol, scene_sweeps}, dur);
+      rows.push_back({"compliance", complianceName(k), &r, &ref});
+    }
+  }
+  for (const double tol : sp.tolerances) {
+    const SimRun& r = cache.get(main_base, {sp.main_mesh, h_main, sim::ComplianceKind::kWarped,
+                                            tol, o.ref_sweeps});
+    rows.push_back({"tolerance", "tol " + tolLabel(tol), &r, main_ref});
+  }
+  for (const int b : sp.budgets) {
+    const SimRun& r = cache.get(main_base, {sp.main_mesh, h_main, sim::ComplianceKind::kWarped,
+                                            1e-12, b});
+    rows.push_back({"sweeps", fmt::format("{} sweeps", b), &r, main_ref});
+  }
+  {
+    std::vector<double> hs = sp.time_steps_s;
+    hs.push_back(h_main);
+    std::sort(hs.begin(), hs.end());
+    hs.erase(std::unique(hs.begin(), hs.end()), hs.end());
+    const SimRun& ref = cache.get(main_base, {sp.main_mesh, hs.front(),
+                                              sim::ComplianceKind::kExact, o.ref_tolerance,
+                                              o.ref_sweeps});
+    for (const double h : hs) {
+      const SimRun& ex = cache.get(main_base, {sp.main_mesh, h, sim::ComplianceKind::kExact,
+                                               o.ref_tolerance, o.ref_sweeps});
+      rows.push_back({"time_step", &ex == &ref ? "reference" : fmt::format("exact h {} ms",
+                                                                           1e3 * h),
+                      &ex, &ref});
+      const SimRun& wa = cache.get(main_base, {sp.main_mesh, h, sim::ComplianceKind::kWarped,
+                                               scene_tol, scene_sweeps});
+      rows.push_back({"time_step", fmt::format("warped h {} ms", 1e3 * h), &wa, &ref});
+    }
+  }
+  writeOutput(o, "sim_accuracy.csv", simCsv(rows, o.early_until_s));
+  {
+    std::ostringstream w;
+    w << "mesh,tets,compliance,samples,w_rel_err_median,w_rel_err_max\n";
+    for (const SimRun* r : w_probes) {
+      for (const auto& [name, v] : r->w_error) {
+        w << r->cfg.mesh << ',' << r->tets << ',' << name << ',' << v.size() << ','
+          << fmtG(median(v)) << ',' << fmtG(v.empty() ? 0.0 : *std::max_element(v.begin(),
+                                                                                 v.end()))
+          << '\n';
+      }
+    }
+    writeOutput(o, "w_accuracy.csv", w.str());
+  }
+  {
+    std::string ts = "series,t_s,fx_n,fy_n,fz_n\n";
+    for (const SimRow& r : rows) {
+      if (r.study != "compliance" || r.run->cfg.mesh != sp.main_mesh) continue;
+      appendSeries(ts, r.label, r.run->t, r.run->force);
+    }
+    writeOutput(o, "sim_timeseries.csv", ts);
+  }
+  const double part1_s = shared::secondsSinceNs(t_all);
+
+  // ---- part 2: the haptic local model
+  fmt::print("part 2: haptic local model ({} mesh, window {} .. {} s, rates {}, sweeps per tick "
+             "{})\n",
+             hp.mesh, hp.t0_s, hp.t0_s + hp.window_s, fmt::join(hp.rates_hz, "/"),
+             fmt::join(hp.budgets, "/"));
+  const std::int64_t t_h = shared::monotonicNs();
+  const std::vector<HapticRow> hrows = runHaptic(o, hp);
+  writeOutput(o, "haptic_accuracy.csv", hapticCsv(hrows, hp));
+  {
+    std::string ts = "series,t_s,fx_n,fy_n,fz_n\n";
+    const double rate = hp.rates_hz.size() > 1 ? hp.rates_hz[1] : hp.rates_hz[0];
+    for (const HapticRow& r : hrows) {
+      if (r.rate_hz != rate) continue;
+      if (r.kind != "reference" && std::abs(r.sim_h_s - hp.sim_h_s.front()) > 1e-12) continue;
+      std::vector<double> t(r.series.force.size());
+      for (std::size_t j = 0; j < t.size(); ++j) t[j] = hp.t0_s + static_cast<double>(j) / rate;
+      const std::string name = r.kind == "reference" ? "reference"
+                               : r.kind == "hold"    ? "hold"
+                                                     : fmt::format("local {} sweeps", r.sweeps);
+      appendSeries(ts, name, t, r.series.force, &r.series.valid);
+    }
+    writeOutput(o, "haptic_timeseries.csv", ts);
+  }
+  const double part2_s = shared::secondsSinceNs(t_h);
+
+  // ---- meta
+  {
+    std::ostringstream meta;
+    const std::time_t now = std::time(nullptr);
+    char date[64];
+    std::strftime(date, sizeof date, "%Y-%m-%d %H:%M", std::localtime(&now));
+    meta << "key,value\n"
+         << "date," << date << '\n'
+         << "mode," << o.mode << '\n'
+         << "machine," << "loaded 2-core VM (shared with other builds; timings are indicative)\n"
+         << "sim_duration_s," << sp.duration_s << '\n'
+         << "sim_main_mesh," << sp.main_mesh << '\n'
+         << "early_until_s," << o.early_until_s << '\n'
+         << "reference_tolerance," << o.ref_tolerance << '\n'
+         << "reference_max_sweeps," << o.ref_sweeps << '\n'
+         << "scene_tolerance," << scene_tol << '\n'
+         << "scene_max_sweeps," << scene_sweeps << '\n'
+         << "haptic_mesh," << hp.mesh << '\n'
+         << "haptic_t0_s," << hp.t0_s << '\n'
+         << "haptic_window_s," << hp.window_s << '\n'
+         << "haptic_latency_steps," << o.latency_steps << '\n'
+         << "haptic_tolerance," << bases.begin()->second.haptics.nsgs_tolerance << '\n'
+         << "haptic_reference_compliance," << o.haptic_ref_compliance << '\n'
+         << "tremor_mm," << o.tremor_mm << '\n'
+         << "tremor_hz," << o.tremor_hz << '\n'
+         << "with_23k," << (o.with_23k ? 1 : 0) << '\n'
+         << "duration_23k_s," << o.duration_23k_s << '\n'
+         << "part1_s," << fmtG(part1_s) << '\n'
+         << "part2_s," << fmtG(part2_s) << '\n'
+         << "total_s," << fmtG(shared::secondsSinceNs(t_all)) << '\n';
+    writeOutput(o, "meta.csv", meta.str());
+  }
+  fmt::print("done in {:.0f} s (simulation step {:.0f} s, haptic {:.0f} s); CSV in {}\n",
+             shared::secondsSinceNs(t_all), part1_s, part2_s, o.out.string());
+  return 0;
+}
+
+}  // namespace
+}  // namespace tactus::study
+
+int main(int argc, char** argv) {
+  CLI::App app{"tactus-accuracy: accuracy against time of the contact pipeline (compliance "
+               "model, NSGS tolerance and sweeps, time step, mesh) and of the haptic local model "
+               "(rate, sweeps per tick), each against a reference computed in the same run. "
+               "Writes sim_accuracy.csv, haptic_accuracy.csv, *_timeseries.csv and meta.csv."};
+  using tactus::study::Options;
+  Options o;
+  bool quick = false;
+  std::string root;
+#ifdef TACTUS_SOURCE_DIR
+  root = TACTUS_SOURCE_DIR;
+#endif
+  std::string out, cache;
+  app.add_option("--out", out, "Output directory for the CSV files")->required();
+  app.add_flag("--overwrite", o.overwrite,
+               "Replace the CSV files an earlier run left in --out (refused otherwise)");
+  app.add_flag("--quick", quick, "Quick mode (< 2 min): coarse liver, short spans, few points");
+  app.add_flag("--with-23k", o.with_23k,
+               "Add liver_23k to the mesh study (precomputes a 1.6 GB warped compliance; slow)");
+  app.add_option("--root", root, "Repository root (scenes/ is read from it)")
+      ->capture_default_str();
+  app.add_option("--cache-dir", cache,
+                 "Compliance cache directory (default: <root>/.cache/accuracy)");
+  app.add_option("--duration", o.duration_s, "Seconds of the script per simulation run "
+                                             "(default: 8 full, 3.5 quick)");
+  app.add_option("--duration-23k", o.duration_23k_s,
+                 "Seconds of the script per liver_23k run (--with-23k)")
+      ->capture_default_str();
+  app.add_option("--early-until", o.early_until_s,
+                 "End of the second force-error window [s] (the grasp and the start of the lift, "
+                 "before the exact reference's grasp slips)")
+      ->capture_default_str();
+  app.add_option("--ref-tolerance", o.ref_tolerance, "NSGS tolerance of the references")
+      ->capture_default_str();
+  app.add_option("--ref-sweeps", o.ref_sweeps, "NSGS sweep cap of the references")
+      ->capture_default_str();
+  app.add_option("--haptic-t0", o.haptic_t0_s, "Start of the haptic window [s] (default: 2 full, "
+                                               "2.6 quick)");
+  app.add_option("--haptic-window", o.haptic_window_s,
+                 "Length of the haptic window [s] (default: 2.5 full, 0.3 quick)");
+  app.add_option("--latency-steps", o.latency_steps,
+                 "Simulation periods between a step's device sample and its snapshot's use")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 10));
+  app.add_option("--tremor-mm", o.tremor_mm, "Tremor amplitude added to the device path [mm]")
+      ->capture_default_str();
+  app.add_option("--tremor-hz", o.tremor_hz, "Tremor frequency [Hz]")->capture_default_str();
+  app.add_option("--haptic-ref-compliance", o.haptic_ref_compliance,
+                 "Compliance of the haptic reference: scene (the scene's model, isolating the "
+                 "multi-rate error) or exact, warped, rest, uncoupled")
+      ->capture_default_str();
+  app.add_option("--log-level", o.log_level, "spdlog level")
+      ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error"}))
+      ->capture_default_str();
+  CLI11_PARSE(app, argc, argv);
+  spdlog::set_level(spdlog::level::from_str(o.log_level));
+  o.mode = quick ? "quick" : "full";
+  o.out = out;
+  o.root = root;
+  o.cache_dir = cache.empty() ? o.root / ".cache/accuracy" : std::filesystem::path(cache);
+  try {
+    return tactus::study::run(o);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "tactus-accuracy: %s\n", e.what());
+    return 1;
+  }
+}
