@@ -38,6 +38,13 @@ TetMesh finalizeMesh(RawMesh&& raw, const std::string& name, MeshReport* report)
 bool parseDouble(std::string_view token, double* out);
 bool parseInt(std::string_view token, std::int64_t* out);
 
+/// A printable excerpt of a token for messages (bounded, no control characters).
+std::string excerpt(std::string_view s);
+/// ASCII case-insensitive equality (format keywords).
+bool equalsNoCase(std::string_view a, std::string_view b);
+/// `s` without leading and trailing blanks (space, tab, CR, VT, FF).
+std::string_view trim(std::string_view s);
+
 /// Splits a line into whitespace-separated tokens (views into the line).
 void splitTokens(std::string_view line, std::vector<std::string_view>* tokens);
 
