@@ -1,0 +1,87 @@
+// The rest compliance block's precomputation (rest_compliance_block.h).
+#include <unistd.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <string>
+
+#include "rest_compliance_block.h"
+#include "tactus/shared/file_io.h"
+
+namespace tactus::sim::c0_detail {
+
+namespace {
+
+// In-place (A + A^T) / 2 without a full-size temporary.
+template <class Mat> void symmetrise(Mat &a) {
+  for (Eigen::Index j = 0; j < a.cols(); ++j)
+    for (Eigen::Index i = j + 1; i < a.rows(); ++i) {
+      const auto v = (a(i, j) + a(j, i)) / 2;
+      a(i, j) = v;
+      a(j, i) = v;
+    }
+}
+
+void progress(bool show, int done, int total) {
+  if (!show)
+    return;
+  const int percent = total > 0 ? 100 * done / total : 100;
+  if (!isatty(fileno(stderr))) {
+    // logs and pipes: one line per quarter instead of a redrawn bar
+    static int last_quarter = -1;
+    const int quarter = percent / 25;
+    if (done == 0) last_quarter = -1;
+    if (quarter == last_quarter) return;
+    last_quarter = quarter;
+    std::fprintf(stderr, "[tactus] C0 precompute %3d%% (%d/%d DOFs)\n", percent, done, total);
+    return;
+  }
+  const int width = 40;
+  const int filled = total > 0 ? width * done / total : width;
+  std::fprintf(stderr, "\r[tactus] C0 precompute [%s%s] %3d%% (%d/%d DOFs)",
+               std::string(filled, '#').c_str(),
+               std::string(width - filled, ' ').c_str(), percent, done, total);
+  if (done == total)
+    std::fprintf(stderr, "\n");
+  std::fflush(stderr);
+}
+
+} // namespace
+
+void computeRestBlock(FemBody &body, const ComplianceOptions &opt,
+                      RestBlock &blk) {
+  const int n = body.nodeCount();
+  const int s = static_cast<int>(blk.surface.size());
+  const int d = 3 * s;
+  blk.resize(d);
+  const int batch = std::max(1, opt.solve_batch);
+  Eigen::MatrixXd rhs, sol;
+  progress(opt.show_progress, 0, d);
+  for (int c0 = 0; c0 < d; c0 += batch) {
+    const int k = std::min(batch, d - c0);
+    rhs.setZero(3 * n, k);
+    for (int j = 0; j < k; ++j) {
+      const int col = c0 + j;
+      rhs(3 * blk.surface[col / 3] + col % 3, j) = 1.0;
+    }
+    shared::throwIfStopRequested("precomputing the rest compliance C0");
+    body.solveRestComplianceBatch(opt.h_s, rhs, sol);
+    for (int j = 0; j < k; ++j)
+      for (int a = 0; a < s; ++a) {
+        if (blk.single)
+          blk.c0f.block<3, 1>(3 * a, c0 + j) =
+              sol.block<3, 1>(3 * blk.surface[a], j).cast<float>();
+        else
+          blk.c0.block<3, 1>(3 * a, c0 + j) =
+              sol.block<3, 1>(3 * blk.surface[a], j);
+      }
+    progress(opt.show_progress, c0 + k, d);
+  }
+  // remove the solver's round-off asymmetry
+  if (blk.single)
+    symmetrise(blk.c0f);
+  else
+    symmetrise(blk.c0);
+}
+
+} // namespace tactus::sim::c0_detail

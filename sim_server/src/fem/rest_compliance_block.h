@@ -1,0 +1,123 @@
+#pragma once
+// The rest compliance block C0 on a tissue's surface DOFs (docs/design.md, "Compliance
+// warping"): its memory, its precomputation (one rest factorisation, one solve per surface DOF)
+// and its on-disk cache (compliance_cache.cpp: checked header, checksum, temp + rename writes).
+// Private to the fem module; the models that use it are in compliance.cpp.
+
+#include <sys/mman.h>
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <filesystem>
+#include <new>
+#include <string>
+#include <vector>
+
+#include "tactus/sim/compliance.h"
+#include "tactus/sim/fem.h"
+
+namespace tactus::sim::c0_detail {
+
+// Page-aligned anonymous memory for the large C0 block, asked for in transparent
+// huge pages and populated in one call: filling 1.6 GB through 4 KiB page faults
+// (one trap each) cost more than reading the file itself. Falls back silently to
+// ordinary pages where huge pages or MADV_POPULATE_WRITE are not available.
+class LargeBuffer {
+public:
+  LargeBuffer() = default;
+  LargeBuffer(const LargeBuffer &) = delete;
+  LargeBuffer &operator=(const LargeBuffer &) = delete;
+  ~LargeBuffer() { reset(); }
+  // Throws std::bad_alloc when the memory cannot be had.
+  void allocate(std::size_t bytes) {
+    reset();
+    if (bytes == 0)
+      return;
+    constexpr std::size_t kHuge = std::size_t{2} << 20;
+    const std::size_t mapped = (bytes + kHuge - 1) / kHuge * kHuge;
+    void *p = ::mmap(nullptr, mapped, PROT_READ | PROT_WRITE,
+                     MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+    if (p == MAP_FAILED)
+      throw std::bad_alloc();
+#ifdef MADV_HUGEPAGE
+    (void)::madvise(p, mapped, MADV_HUGEPAGE);
+#endif
+#ifdef MADV_POPULATE_WRITE
+    (void)::madvise(p, mapped, MADV_POPULATE_WRITE);
+#endif
+    data_ = p;
+    mapped_ = mapped;
+  }
+  void reset() {
+    if (data_ != nullptr)
+      ::munmap(data_, mapped_);
+    data_ = nullptr;
+    mapped_ = 0;
+  }
+  void *data() const { return data_; }
+
+private:
+  void *data_ = nullptr;
+  std::size_t mapped_ = 0;
+};
+
+// Rest compliance block on the surface DOFs, with the surface numbering.
+struct RestBlock {
+  std::vector<int> surface; // sorted surface node indices
+  std::vector<int> local;   // node -> surface index, -1 inside the volume
+  bool single = false;      // stored in float (c0f) instead of double (c0)
+  LargeBuffer storage;      // memory of c0 / c0f
+  Eigen::Map<Eigen::MatrixXd> c0{nullptr, 0, 0}; // 3s x 3s
+  Eigen::Map<Eigen::MatrixXf> c0f{nullptr, 0, 0};
+  std::size_t scalarBytes() const {
+    return single ? sizeof(float) : sizeof(double);
+  }
+  void resize(Eigen::Index d) {
+    release();
+    storage.allocate(static_cast<std::size_t>(d * d) * scalarBytes());
+    // re-seating an Eigen::Map is done by placement new
+    if (single)
+      new (&c0f) Eigen::Map<Eigen::MatrixXf>(
+          static_cast<float *>(storage.data()), d, d);
+    else
+      new (&c0) Eigen::Map<Eigen::MatrixXd>(
+          static_cast<double *>(storage.data()), d, d);
+  }
+  void *data() { return storage.data(); }
+  const void *data() const { return storage.data(); }
+  Eigen::Matrix3d block(int a, int b) const {
+    if (single)
+      return c0f.block<3, 3>(3 * a, 3 * b).cast<double>();
+    return c0.block<3, 3>(3 * a, 3 * b);
+  }
+  std::size_t bytes() const {
+    return scalarBytes() *
+           static_cast<std::size_t>(single ? c0f.size() : c0.size());
+  }
+  void release() {
+    new (&c0) Eigen::Map<Eigen::MatrixXd>(nullptr, 0, 0);
+    new (&c0f) Eigen::Map<Eigen::MatrixXf>(nullptr, 0, 0);
+    storage.reset();
+  }
+};
+
+/// The cache's identity of a body's C0: FemBody::restHash combined with the time step h.
+std::uint64_t cacheHash(const FemBody &body, double h);
+
+/// Reads and validates a cache file into `blk` (whose `single` selects the precision); returns
+/// false with a reason unless every check passes. The file must be a regular file of exactly the
+/// size the mesh implies (checked before reading). Throws tactus::Cancelled on a stop request.
+bool readCache(const std::filesystem::path &path, std::uint64_t hash,
+               const FemBody &body, RestBlock &blk, std::string &why);
+
+/// Writes the cache through a temporary file (fsync + rename): a reader never sees a
+/// half-written file under the final name. Failures only warn.
+void writeCache(const std::filesystem::path &path, std::uint64_t hash,
+                const FemBody &body, const RestBlock &blk);
+
+/// C0 on the surface DOFs: one rest factorisation, one (batched) solve per surface DOF, with
+/// progress on stderr when opt.show_progress; symmetrised. Throws tactus::Cancelled on a stop
+/// request.
+void computeRestBlock(FemBody &body, const ComplianceOptions &opt, RestBlock &blk);
+
+} // namespace tactus::sim::c0_detail
