@@ -58,6 +58,7 @@ void JitterCollector::add(const shared::StatsRecord& r) {
   flagged_.push_back(flagged ? 1 : 0);
   if (flagged) ++overrun_flags_;
   if ((r.flags & shared::kStatsSolverNotConverged) != 0) ++not_converged_;
+  if ((r.flags & (shared::kStatsSnapshotStale | shared::kStatsNoSnapshot)) != 0) ++stale_;
   // the period: scheduled-time steps between consecutive tick indices
   if (previous_ && r.tick == previous_->tick + 1 && r.scheduled_ns > previous_->scheduled_ns) {
     steps_ns_.push_back(r.scheduled_ns - previous_->scheduled_ns);
@@ -81,6 +82,7 @@ JitterReport JitterCollector::report() const {
   rep.lost = lost_;
   rep.period_ns = periodNs();
   rep.overrun_flags = overrun_flags_;
+  rep.stale = stale_;
   rep.not_converged = not_converged_;
   rep.non_finite_residuals = non_finite_;
   rep.solved = static_cast<std::uint64_t>(solve_us_.size());

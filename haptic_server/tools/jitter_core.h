@@ -50,6 +50,9 @@ struct JitterReport {
   std::uint64_t overruns = 0;       ///< kStatsOverrun flag or tick duration > period
   std::uint64_t overrun_flags = 0;  ///< records with the loop's own kStatsOverrun flag
   std::uint64_t solved = 0;         ///< records with contacts > 0
+  /// records flagged kStatsSnapshotStale or kStatsNoSnapshot (no snapshot to solve: the
+  /// publisher was late past the watchdog, e.g. starved of CPU)
+  std::uint64_t stale = 0;
   std::uint64_t not_converged = 0;  ///< records flagged kStatsSolverNotConverged
   std::uint64_t non_finite_residuals = 0;
   std::int64_t period_ns = 0;  ///< given, or the median scheduled-time step
@@ -88,6 +91,7 @@ class JitterCollector {
   std::vector<std::int64_t> steps_ns_;
   std::uint64_t overrun_flags_ = 0;
   std::uint64_t not_converged_ = 0;
+  std::uint64_t stale_ = 0;
   std::uint64_t non_finite_ = 0;
   std::uint64_t lost_ = 0;
   std::int64_t first_woken_ns_ = 0;

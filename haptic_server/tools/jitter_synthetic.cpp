@@ -190,114 +190,36 @@ void writeSnapshot(const SyntheticProblem& p, shared::SnapshotWriter slot, std::
   std::copy(p.J.begin(), p.J.end(), slot.J());
 }
 
-ScriptedDevice::ScriptedDevice(const shared::PoseSample& centre, double radius_m, double freq_hz)
-    : centre_(centre),
-      radius_m_(radius_m),
-      omega_(2.0 * kPi * freq_hz),
-      t0_ns_(shared::monotonicNs()) {}
-
-device::DeviceInfo ScriptedDevice::info() const {
-  device::DeviceInfo i;
-  i.model = "jitter scripted device";
-  i.max_force_n = 8.0;
-  i.max_stiffness_npm = 2000.0;
-  i.workspace_radius_m = 0.1;
-  return i;
-}
-
-device::IoStatus ScriptedDevice::read(device::DeviceState* out) noexcept {
-  const std::int64_t now = shared::monotonicNs();
-  const double t = 1e-9 * static_cast<double>(now - t0_ns_);
-  const double c = std::cos(omega_ * t);
-  const double s = std::sin(omega_ * t);
-  // a small circle starting at the centre, pressing in by up to one radius
-  out->t_ns = now;
-  out->pos_m = {centre_.pos_m[0] + radius_m_ * (c - 1.0), centre_.pos_m[1] + radius_m_ * s,
-                centre_.pos_m[2] - 0.5 * radius_m_ * (1.0 - c)};
-  out->vel_mps = {-radius_m_ * omega_ * s, radius_m_ * omega_ * c, -0.5 * radius_m_ * omega_ * s};
-  out->quat_wxyz = centre_.quat_wxyz;
-  out->angvel_radps = {0.0, 0.0, 0.0};
-  out->gripper_rad = centre_.gripper_rad;
-  out->buttons = 0;
-  return device::IoStatus::kOk;
-}
-
-device::IoStatus ScriptedDevice::write(const device::DeviceCommand&) noexcept {
-  // relaxed: a counter read after the threads stop
-  writes_.fetch_add(1, std::memory_order_relaxed);
-  return device::IoStatus::kOk;
-}
-
 SyntheticRig::SyntheticRig(const SyntheticOptions& options)
     : options_(options),
       problem_(makeSyntheticProblem(options.problem)),
-      segment_(shared::Segment::create(
-          fmt::format("tactus-jitter-{}-{}", static_cast<long>(::getpid()), g_rig_counter++),
-          shared::SegmentCapacity{problem_.rows, problem_.contacts})),
-      publisher_(segment_.snapshotPublisher()) {
-  settings_.period_ns = static_cast<std::int64_t>(std::llround(1e9 / options.rate_hz));
-  settings_.solve_budget_ns = static_cast<std::int64_t>(options.solve_budget_fraction *
-                                                        static_cast<double>(settings_.period_ns));
-  settings_.max_sweeps = options.max_sweeps;
-  // engage at once: the whole safety chain runs on every tick, as in a session in contact
-  settings_.engage_threshold_n = 1e9;
-  settings_.watchdog_ms = std::max(50.0, 3e3 / options.sim_rate_hz);
-  device_ = std::make_unique<ScriptedDevice>(problem_.device_pose);
-  loop_ = std::make_unique<HapticLoop>(*device_, settings_);
-  link_ = std::make_unique<HapticLink>(
-      shared::Segment::open(segment_.name(), shared::Access::kReadWrite));
-  core_ = options.core >= 0 ? options.core : shared::availableCpuCount() - 1;
-  t0_ns_ = shared::monotonicNs();
+      t0_ns_(shared::monotonicNs()),
+      rig_(fmt::format("tactus-jitter-{}-{}", static_cast<long>(::getpid()), g_rig_counter++),
+           shared::SegmentCapacity{problem_.rows, problem_.contacts},
+           std::make_unique<CircleDevice>(std::vector<shared::PoseSample>{problem_.device_pose},
+                                          "jitter scripted device"),
+           RigLoopOptions{options.rate_hz, options.core, options.priority, options.max_sweeps,
+                          options.solve_budget_fraction,
+                          std::max(50.0, 3e3 / options.sim_rate_hz)}) {
   publish(0.0);
 }
 
-SyntheticRig::~SyntheticRig() { stop(); }
-
 void SyntheticRig::publish(double t_s) {
-  writeSnapshot(problem_, publisher_.slot(), published_.load(std::memory_order_relaxed) + 1, t_s,
-                options_.drift_m);
-  publisher_.publish();
-  // relaxed: an informational counter
-  published_.fetch_add(1, std::memory_order_relaxed);
-  segment_.beat(shared::Side::kSim);
+  rig_.publish([&](shared::SnapshotWriter slot, std::uint64_t seq) {
+    writeSnapshot(problem_, slot, seq, t_s, options_.drift_m);
+  });
 }
 
 void SyntheticRig::start() {
-  if (running_) return;
-  running_ = true;
-  stop_.store(false);
-  loop_->offerLink(link_.get());
-  std::atomic<bool> ready{false};
-  haptic_thread_ = std::thread([this, &ready] {
-    rt_summary_ =
-        shared::setupRealtimeThread(core_, options_.priority, shared::RealtimeConfig::kIgnore);
-    ready.store(true);
-    shared::PeriodicTimer timer(settings_.period_ns);
-    // relaxed: the stop request only needs to be seen eventually
-    while (!stop_.load(std::memory_order_relaxed)) {
-      const shared::TimerTick t = timer.wait();
-      loop_->tick(t.scheduled_ns, t.woken_ns);
-    }
-    (void)device_->write(device::DeviceCommand{});
-  });
-  while (!ready.load()) std::this_thread::sleep_for(std::chrono::milliseconds(1));
-  publisher_thread_ = std::thread([this] {
+  rig_.start([this] {
     const auto period = static_cast<std::int64_t>(std::llround(1e9 / options_.sim_rate_hz));
     std::int64_t next = shared::monotonicNs() + period;
-    while (!stop_.load(std::memory_order_relaxed)) {
+    while (!rig_.stopRequested()) {
       shared::sleepUntilNs(next);
       next += period;
       publish(1e-9 * static_cast<double>(shared::monotonicNs() - t0_ns_));
     }
   });
-}
-
-void SyntheticRig::stop() {
-  if (!running_) return;
-  stop_.store(true);
-  if (haptic_thread_.joinable()) haptic_thread_.join();
-  if (publisher_thread_.joinable()) publisher_thread_.join();
-  running_ = false;
 }
 
 }  // namespace tactus::haptic::jitter

@@ -22,6 +22,7 @@
 #include <thread>
 #include <vector>
 
+#include "jitter_rig.h"
 #include "tactus/device/device.h"
 #include "tactus/haptic/haptic_loop.h"
 #include "tactus/shared/messages.h"
@@ -66,29 +67,6 @@ SyntheticProblem makeSyntheticProblem(const SyntheticProblemOptions& options);
 void writeSnapshot(const SyntheticProblem& problem, shared::SnapshotWriter slot, std::uint64_t seq,
                    double t_s, double drift_m);
 
-/// A scripted in-process device: a slow small circle (radius_m at freq_hz) about a centre pose,
-/// sampled from the monotonic clock on every read. Real-time safe.
-class ScriptedDevice : public device::Device {
- public:
-  ScriptedDevice(const shared::PoseSample& centre, double radius_m = 2e-4, double freq_hz = 1.0);
-  device::DeviceInfo info() const override;
-  void open() override {}
-  void calibrate() override {}
-  void enableForces(bool) override {}
-  void close() noexcept override {}
-  [[nodiscard]] device::IoStatus read(device::DeviceState* out) noexcept override;
-  [[nodiscard]] device::IoStatus write(const device::DeviceCommand& cmd) noexcept override;
-  /// Commands written so far.
-  std::uint64_t writes() const noexcept { return writes_.load(std::memory_order_relaxed); }
-
- private:
-  shared::PoseSample centre_;
-  double radius_m_;
-  double omega_;
-  std::int64_t t0_ns_;
-  std::atomic<std::uint64_t> writes_{0};
-};
-
 struct SyntheticOptions {
   SyntheticProblemOptions problem;
   double sim_rate_hz = 100.0;          ///< snapshot publication rate
@@ -100,48 +78,37 @@ struct SyntheticOptions {
   double solve_budget_fraction = 0.4;  ///< NSGS time budget as a fraction of the period
 };
 
-/// The synthetic set-up: private segment, snapshot publisher thread, haptic loop thread.
+/// The synthetic set-up: private segment, snapshot publisher thread, haptic loop thread
+/// (jitter_rig.h), the device circling about the problem's device pose.
 class SyntheticRig {
  public:
   /// Builds the problem, creates the segment "tactus-jitter-<pid>-<n>" and publishes the first
   /// snapshot. Throws tactus::Error subclasses.
   explicit SyntheticRig(const SyntheticOptions& options);
-  ~SyntheticRig();
   SyntheticRig(const SyntheticRig&) = delete;
   SyntheticRig& operator=(const SyntheticRig&) = delete;
 
   /// Starts the publisher and the real-time haptic thread; returns once the latter is set up.
   void start();
   /// Stops both threads (idempotent).
-  void stop();
+  void stop() { rig_.stop(); }
 
-  const shared::Segment& segment() const { return segment_; }
+  const shared::Segment& segment() const { return rig_.segment(); }
   const SyntheticProblem& problem() const { return problem_; }
-  std::int64_t periodNs() const { return settings_.period_ns; }
-  int core() const { return core_; }
+  std::int64_t periodNs() const { return rig_.periodNs(); }
+  int core() const { return rig_.core(); }
   /// What the real-time set-up refused (empty: pinned, SCHED_FIFO, memory locked).
-  const std::string& rtSummary() const { return rt_summary_; }
-  HapticLoop& loop() { return *loop_; }
-  std::uint64_t published() const { return published_.load(std::memory_order_relaxed); }
+  const std::string& rtSummary() const { return rig_.rtSummary(); }
+  HapticLoop& loop() { return rig_.loop(); }
+  std::uint64_t published() const { return rig_.published(); }
 
  private:
   void publish(double t_s);
 
   SyntheticOptions options_;
   SyntheticProblem problem_;
-  shared::Segment segment_;
-  shared::SnapshotPublisher publisher_;
-  HapticSettings settings_;
-  std::unique_ptr<ScriptedDevice> device_;
-  std::unique_ptr<HapticLoop> loop_;
-  std::unique_ptr<HapticLink> link_;
-  int core_ = -1;
-  std::string rt_summary_;
-  std::thread haptic_thread_, publisher_thread_;
-  std::atomic<bool> stop_{false};
-  std::atomic<std::uint64_t> published_{0};
   std::int64_t t0_ns_ = 0;
-  bool running_ = false;
+  LoopRig rig_;
 };
 
 }  // namespace tactus::haptic::jitter
