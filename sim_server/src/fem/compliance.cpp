@@ -5,7 +5,6 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
-#include <chrono>
 #include <cstdio>
 #include <cstring>
 #include <new>
@@ -14,6 +13,7 @@
 
 #include "fem_internal.h"
 #include "rest_compliance_block.h"
+#include "tactus/shared/clock.h"
 #include "tactus/shared/error.h"
 #include "tactus/shared/file_io.h"
 
@@ -168,7 +168,7 @@ private:
     const auto path = complianceCachePath(body, opt_);
     const std::uint64_t hash = c0_detail::cacheHash(body, opt_.h_s);
     bool loaded = false;
-    const auto load_t0 = std::chrono::steady_clock::now();
+    const std::int64_t load_t0 = shared::monotonicNs();
     if (!path.empty() && std::filesystem::exists(path)) {
       std::string why;
       loaded = c0_detail::readCache(path, hash, body, blk_, why);
@@ -181,19 +181,15 @@ private:
     }
     if (loaded) {
       info_.loaded_from_cache = true;
-      const double load_s = std::chrono::duration<double>(
-                                std::chrono::steady_clock::now() - load_t0)
-                                .count();
+      const double load_s = shared::secondsSinceNs(load_t0);
       spdlog::info("compliance cache {} loaded ({} surface nodes, {:.1f} MB in "
                    "{:.2f} s)",
                    path.string(), blk_.surface.size(),
                    static_cast<double>(blk_.bytes()) / 1e6, load_s);
     } else {
-      const auto t0 = std::chrono::steady_clock::now();
+      const std::int64_t t0 = shared::monotonicNs();
       c0_detail::computeRestBlock(body, opt_, blk_);
-      info_.precompute_s =
-          std::chrono::duration<double>(std::chrono::steady_clock::now() - t0)
-              .count();
+      info_.precompute_s = shared::secondsSinceNs(t0);
       if (!path.empty())
         c0_detail::writeCache(path, hash, body, blk_);
     }

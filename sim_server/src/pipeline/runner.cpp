@@ -2,7 +2,6 @@
 #include "tactus/sim/runner.h"
 
 #include <spdlog/spdlog.h>
-#include <time.h>
 
 #include <algorithm>
 #include <cmath>
@@ -14,6 +13,7 @@
 #include "display_publisher.h"
 #include "haptic_link.h"
 #include "tactus/sim/instrument.h"
+#include "tactus/shared/clock.h"
 #include "tactus/shared/error.h"
 #include "tactus/shared/file_io.h"
 #include "tactus/shared/segment.h"
@@ -59,20 +59,6 @@ std::string jsonEscape(const std::string& s) {
     }
   }
   return out;
-}
-
-std::int64_t nowNs() {
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return static_cast<std::int64_t>(ts.tv_sec) * 1000000000LL + ts.tv_nsec;
-}
-
-void sleepUntilNs(std::int64_t t_ns) {
-  timespec ts{};
-  ts.tv_sec = t_ns / 1000000000LL;
-  ts.tv_nsec = t_ns % 1000000000LL;
-  while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
-  }
 }
 
 }  // namespace
@@ -231,7 +217,7 @@ int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
   // a daemon runs until stopped (or --duration); the scene's duration is for offline tools
   const double duration = options.duration_s;
   RunStatistics stats;
-  const std::int64_t t0 = nowNs();
+  const std::int64_t t0 = shared::monotonicNs();
   long late_steps = 0;
   std::int64_t last_report_ns = t0;
   std::int64_t last_status_ns = t0;
@@ -249,7 +235,7 @@ int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
     stats.add(report);
     if (link) {
       // a simulation whose segment was removed or replaced publishes into nothing: stop
-      if (const std::string why = link->displacedReason(nowNs()); !why.empty()) {
+      if (const std::string why = link->displacedReason(shared::monotonicNs()); !why.empty()) {
         spdlog::error("{}", why);
         exit_code = 3;
         break;
@@ -270,8 +256,8 @@ int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
       break;
     }
     if (offline) continue;
-    if (options.status && nowNs() - last_status_ns >= 1'000'000'000LL) {
-      last_status_ns = nowNs();
+    if (options.status && shared::monotonicNs() - last_status_ns >= 1'000'000'000LL) {
+      last_status_ns = shared::monotonicNs();
       if (sim.hasInstrument()) {
         const Eigen::Vector3d p = sim.instrument()->pose().pos_m;
         spdlog::info("status t={:.2f} s tool=({:.4f}, {:.4f}, {:.4f}) m contacts={} |F|={:.3f} N "
@@ -284,11 +270,11 @@ int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
     }
     // pace to real time; report when the step cannot keep up
     const std::int64_t deadline = t0 + static_cast<std::int64_t>(std::llround((k + 1) * h * 1e9));
-    const std::int64_t now = nowNs();
+    const std::int64_t now = shared::monotonicNs();
     if (now > deadline) {
       ++late_steps;
     } else {
-      sleepUntilNs(deadline);
+      shared::sleepUntilNs(deadline);
     }
     if (now - last_report_ns > 5'000'000'000LL) {
       last_report_ns = now;
@@ -305,7 +291,7 @@ int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
     recorder->commit();
     spdlog::info("{} snapshots recorded to {}", recorder->count(), options.record_snapshots);
   }
-  const double wall_s = 1e-9 * static_cast<double>(nowNs() - t0);
+  const double wall_s = 1e-9 * static_cast<double>(shared::monotonicNs() - t0);
   spdlog::info("{} steps, simulated {:.3f} s in {:.3f} s wall", stats.steps(), sim.time(), wall_s);
   std::printf("%s", stats.table().c_str());
   if (stats_file) {
