@@ -10,6 +10,7 @@
 // Only the page's bundled files are served, from memory (loaded once at start-up; http_guard.h),
 // and only to requests whose Host (and Origin, when sent) name this server: a web page elsewhere
 // cannot read the view or open its WebSocket. Over-long request lines get 414, headers are bounded.
+// (About 500 lines: the HTTP and WebSocket sessions and the status JSON are one server's parts.)
 //
 // Single-threaded (one Asio io_context): a timer polls the segment at --rate Hz and broadcasts.
 // A client that cannot keep up loses frames, never the topology, and never slows the others.
