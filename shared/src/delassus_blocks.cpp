@@ -1,0 +1,138 @@
+#include "tactus/shared/delassus_blocks.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+
+#include "tactus/shared/nsgs.h"
+
+namespace tactus::shared {
+namespace {
+
+// Whether the k_i x k_j block at (r_i, r_j) of the row-major W holds a non-zero (or NaN).
+bool blockNonZero(const double* w, std::ptrdiff_t ld, int ri, int ki, int rj, int kj) noexcept {
+  for (int a = 0; a < ki; ++a) {
+    const double* row = w + (ri + a) * ld + rj;
+    for (int c = 0; c < kj; ++c) {
+      if (row[c] != 0.0) return true;   // NaN != 0 as well
+    }
+  }
+  return false;
+}
+
+// The storable number of blocks for nc contacts at a fill (at least the diagonal).
+std::int64_t blockLimit(int nc, double max_fill) noexcept {
+  const double limit = std::floor(max_fill * static_cast<double>(nc) * static_cast<double>(nc));
+  return std::max<std::int64_t>(nc, static_cast<std::int64_t>(std::min(limit, 4e18)));
+}
+
+}  // namespace
+
+DelassusBlocks::DelassusBlocks(int max_rows, int max_contacts, double max_fill) {
+  reserve(max_rows, max_contacts, max_fill);
+}
+
+void DelassusBlocks::reserve(int max_rows, int max_contacts, double max_fill) {
+  max_rows = std::max(max_rows, 0);
+  max_contacts = std::max(max_contacts, 0);
+  max_fill = std::clamp(std::isfinite(max_fill) ? max_fill : 1.0, 0.0, 1.0);
+  const std::int64_t nb = blockLimit(max_contacts, max_fill);
+  // values: fill x m^2 for uniform contacts, plus the diagonal blocks
+  const std::int64_t nv =
+      static_cast<std::int64_t>(std::floor(max_fill * static_cast<double>(max_rows) *
+                                           static_cast<double>(max_rows))) +
+      9 * static_cast<std::int64_t>(max_contacts);
+  const auto n1 = static_cast<std::size_t>(max_contacts) + 1;
+  row_offset_.assign(n1, 0);
+  row_start_.assign(n1, 0);
+  column_start_.assign(n1, 0);
+  diagonal_block_.assign(static_cast<std::size_t>(max_contacts), 0);
+  block_column_.assign(static_cast<std::size_t>(nb), 0);
+  value_start_.assign(static_cast<std::size_t>(nb), 0);
+  column_block_.assign(static_cast<std::size_t>(nb), 0);
+  column_row_.assign(static_cast<std::size_t>(nb), 0);
+  values_.assign(static_cast<std::size_t>(nv), 0.0);
+  max_rows_ = max_rows;
+  max_contacts_ = max_contacts;
+  clear();
+}
+
+void DelassusBlocks::clear() noexcept {
+  contacts_ = 0;
+  rows_ = 0;
+  blocks_ = 0;
+}
+
+double DelassusBlocks::fill() const noexcept {
+  if (contacts_ == 0) return 0.0;
+  return static_cast<double>(blocks_) /
+         (static_cast<double>(contacts_) * static_cast<double>(contacts_));
+}
+
+bool DelassusBlocks::assign(const ContactProblemView& dense, double max_fill) noexcept {
+  clear();
+  const int nc = dense.contacts;
+  const int m = dense.rows;
+  const int* ro = dense.row_offset;
+  if (nc <= 0 || m <= 0 || ro == nullptr || dense.W == nullptr || dense.ld < m) return false;
+  if (nc > max_contacts_ || m > max_rows_) return false;
+  if (ro[0] != 0 || ro[nc] != m) return false;
+  for (int i = 0; i < nc; ++i) {
+    const int k = ro[i + 1] - ro[i];
+    if (k != 1 && k != 3) return false;
+  }
+  const std::int64_t max_blocks = std::min<std::int64_t>(
+      blockLimit(nc, std::isfinite(max_fill) ? max_fill : 1.0),
+      static_cast<std::int64_t>(block_column_.size()));
+  const auto max_values = static_cast<std::int64_t>(values_.size());
+  const std::ptrdiff_t ld = dense.ld;
+  std::int64_t nb = 0;
+  std::int64_t nv = 0;
+  for (int i = 0; i < nc; ++i) {
+    const int ri = ro[i], ki = ro[i + 1] - ri;
+    row_offset_[static_cast<std::size_t>(i)] = ri;
+    row_start_[static_cast<std::size_t>(i)] = static_cast<int>(nb);
+    for (int j = 0; j < nc; ++j) {
+      const int rj = ro[j], kj = ro[j + 1] - rj;
+      if (j != i && !blockNonZero(dense.W, ld, ri, ki, rj, kj)) continue;
+      if (nb >= max_blocks || nv + ki * kj > max_values) return false;   // too full: dense
+      if (j == i) diagonal_block_[static_cast<std::size_t>(i)] = static_cast<int>(nb);
+      block_column_[static_cast<std::size_t>(nb)] = j;
+      value_start_[static_cast<std::size_t>(nb)] = nv;
+      for (int a = 0; a < ki; ++a) {
+        const double* row = dense.W + (ri + a) * ld + rj;
+        for (int c = 0; c < kj; ++c) values_[static_cast<std::size_t>(nv++)] = row[c];
+      }
+      ++nb;
+    }
+  }
+  row_offset_[static_cast<std::size_t>(nc)] = m;
+  row_start_[static_cast<std::size_t>(nc)] = static_cast<int>(nb);
+  // by-column index (counting sort of the blocks by column; rows stay increasing)
+  std::fill_n(column_start_.begin(), nc + 1, 0);
+  for (std::int64_t b = 0; b < nb; ++b) ++column_start_[static_cast<std::size_t>(block_column_[b]) + 1];
+  for (int j = 0; j < nc; ++j) column_start_[j + 1] += column_start_[j];
+  for (int i = 0; i < nc; ++i) {
+    for (int b = row_start_[i]; b < row_start_[i + 1]; ++b) {
+      // column_start_[j] serves as the cursor of column j, restored below
+      const int t = column_start_[block_column_[b]]++;
+      column_block_[t] = b;
+      column_row_[t] = i;
+    }
+  }
+  for (int j = nc; j > 0; --j) column_start_[j] = column_start_[j - 1];
+  column_start_[0] = 0;
+  contacts_ = nc;
+  rows_ = m;
+  blocks_ = static_cast<int>(nb);
+  return true;
+}
+
+ContactProblemView chooseStorage(const ContactProblemView& dense,
+                                 DelassusBlocks& storage) noexcept {
+  ContactProblemView view = dense;
+  view.blocks = storage.assign(dense) ? &storage : nullptr;
+  return view;
+}
+
+}  // namespace tactus::shared
