@@ -20,7 +20,7 @@ bool blockNonZero(const double* w, std::ptrdiff_t ld, int ri, int ki, int rj, in
   return false;
 }
 
-// The storable number of blocks for nc contacts at a fill (at least the diagonal).
+// The capacity in blocks for nc contacts at a fill (at least the diagonal blocks).
 std::int64_t blockLimit(int nc, double max_fill) noexcept {
   const double limit = std::floor(max_fill * static_cast<double>(nc) * static_cast<double>(nc));
   return std::max<std::int64_t>(nc, static_cast<std::int64_t>(std::min(limit, 4e18)));
@@ -81,8 +81,11 @@ bool DelassusBlocks::assign(const ContactProblemView& dense, double max_fill) no
     const int k = ro[i + 1] - ro[i];
     if (k != 1 && k != 3) return false;
   }
+  // the fill rule (stored blocks <= max_fill nc^2, diagonals included) and the capacity
+  const double fill_limit =
+      std::floor((std::isfinite(max_fill) ? max_fill : 1.0) * static_cast<double>(nc) * nc);
   const std::int64_t max_blocks = std::min<std::int64_t>(
-      blockLimit(nc, std::isfinite(max_fill) ? max_fill : 1.0),
+      static_cast<std::int64_t>(std::clamp(fill_limit, 0.0, 4e18)),
       static_cast<std::int64_t>(block_column_.size()));
   const auto max_values = static_cast<std::int64_t>(values_.size());
   const std::ptrdiff_t ld = dense.ld;
