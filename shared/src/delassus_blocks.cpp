@@ -89,6 +89,8 @@ bool DelassusBlocks::assign(const ContactProblemView& dense, double max_fill) no
       static_cast<std::int64_t>(block_column_.size()));
   const auto max_values = static_cast<std::int64_t>(values_.size());
   const std::ptrdiff_t ld = dense.ld;
+  // pass 1: the non-zero blocks' columns (a dense W stops here after max_fill of its blocks,
+  // one comparison each, without copying values)
   std::int64_t nb = 0;
   std::int64_t nv = 0;
   for (int i = 0; i < nc; ++i) {
@@ -102,18 +104,30 @@ bool DelassusBlocks::assign(const ContactProblemView& dense, double max_fill) no
       if (j == i) diagonal_block_[static_cast<std::size_t>(i)] = static_cast<int>(nb);
       block_column_[static_cast<std::size_t>(nb)] = j;
       value_start_[static_cast<std::size_t>(nb)] = nv;
-      for (int a = 0; a < ki; ++a) {
-        const double* row = dense.W + (ri + a) * ld + rj;
-        for (int c = 0; c < kj; ++c) values_[static_cast<std::size_t>(nv++)] = row[c];
-      }
+      nv += ki * kj;
       ++nb;
     }
   }
   row_offset_[static_cast<std::size_t>(nc)] = m;
   row_start_[static_cast<std::size_t>(nc)] = static_cast<int>(nb);
+  // pass 2: their values
+  for (int i = 0; i < nc; ++i) {
+    const int ri = ro[i], ki = ro[i + 1] - ri;
+    for (int b = row_start_[i]; b < row_start_[i + 1]; ++b) {
+      const int j = block_column_[static_cast<std::size_t>(b)];
+      const int rj = ro[j], kj = ro[j + 1] - rj;
+      double* out = values_.data() + value_start_[static_cast<std::size_t>(b)];
+      for (int a = 0; a < ki; ++a) {
+        const double* row = dense.W + (ri + a) * ld + rj;
+        for (int c = 0; c < kj; ++c) out[a * kj + c] = row[c];
+      }
+    }
+  }
   // by-column index (counting sort of the blocks by column; rows stay increasing)
   std::fill_n(column_start_.begin(), nc + 1, 0);
-  for (std::int64_t b = 0; b < nb; ++b) ++column_start_[static_cast<std::size_t>(block_column_[b]) + 1];
+  for (std::int64_t b = 0; b < nb; ++b) {
+    ++column_start_[static_cast<std::size_t>(block_column_[static_cast<std::size_t>(b)]) + 1];
+  }
   for (int j = 0; j < nc; ++j) column_start_[j + 1] += column_start_[j];
   for (int i = 0; i < nc; ++i) {
     for (int b = row_start_[i]; b < row_start_[i + 1]; ++b) {
