@@ -1,6 +1,7 @@
 #include "tactus/shared/delassus_blocks.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <cstddef>
 
@@ -47,6 +48,7 @@ void DelassusBlocks::reserve(int max_rows, int max_contacts, double max_fill) {
   row_start_.assign(n1, 0);
   column_start_.assign(n1, 0);
   diagonal_block_.assign(static_cast<std::size_t>(max_contacts), 0);
+  row_bits_.assign(static_cast<std::size_t>(max_rows), 0);
   block_column_.assign(static_cast<std::size_t>(nb), 0);
   value_start_.assign(static_cast<std::size_t>(nb), 0);
   column_block_.assign(static_cast<std::size_t>(nb), 0);
@@ -93,13 +95,29 @@ bool DelassusBlocks::assign(const ContactProblemView& dense, double max_fill) no
   // one comparison each, without copying values)
   std::int64_t nb = 0;
   std::int64_t nv = 0;
+  const bool all3 = m == 3 * nc;
+  std::uint64_t* bits = row_bits_.data();
   for (int i = 0; i < nc; ++i) {
     const int ri = ro[i], ki = ro[i + 1] - ri;
     row_offset_[static_cast<std::size_t>(i)] = ri;
     row_start_[static_cast<std::size_t>(i)] = static_cast<int>(nb);
+    if (all3) {
+      // 3 rows per contact: per column, the OR of the 3 rows' bit patterns without the sign
+      // bit (non-zero for any value but +-0, NaN included), in one contiguous branch-free pass
+      const double* w0 = dense.W + ri * ld;
+      const double* w1 = w0 + ld;
+      const double* w2 = w1 + ld;
+      for (int k = 0; k < m; ++k) {
+        bits[k] = (std::bit_cast<std::uint64_t>(w0[k]) | std::bit_cast<std::uint64_t>(w1[k]) |
+                   std::bit_cast<std::uint64_t>(w2[k])) << 1;
+      }
+    }
     for (int j = 0; j < nc; ++j) {
       const int rj = ro[j], kj = ro[j + 1] - rj;
-      if (j != i && !blockNonZero(dense.W, ld, ri, ki, rj, kj)) continue;
+      const bool stored =
+          j == i || (all3 ? (bits[rj] | bits[rj + 1] | bits[rj + 2]) != 0
+                          : blockNonZero(dense.W, ld, ri, ki, rj, kj));
+      if (!stored) continue;
       if (nb >= max_blocks || nv + ki * kj > max_values) return false;   // too full: dense
       if (j == i) diagonal_block_[static_cast<std::size_t>(i)] = static_cast<int>(nb);
       block_column_[static_cast<std::size_t>(nb)] = j;

@@ -82,6 +82,7 @@ class DelassusBlocks {
   std::vector<int> column_block_;        // per block, grouped by column
   std::vector<int> column_row_;          // per block, grouped by column
   std::vector<double> values_;
+  std::vector<std::uint64_t> row_bits_;  // scratch of assign(): per column of a block row, m
 };
 
 /// The view NSGS should solve: `dense` with .blocks = &storage when storage.assign(dense)
