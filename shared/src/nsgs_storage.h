@@ -52,6 +52,34 @@ inline void dot3(const double* x0, const double* x1, const double* x2, const dou
   out[2] = c0 + c1;
 }
 
+// y += B x for a rows x cols block B (row-major; 3x3 unrolled).
+inline void addBlockTimes(const double* w, int rows, int cols, const double* x,
+                          double* y) noexcept {
+  if (rows == 3 && cols == 3) {
+    y[0] += w[0] * x[0] + w[1] * x[1] + w[2] * x[2];
+    y[1] += w[3] * x[0] + w[4] * x[1] + w[5] * x[2];
+    y[2] += w[6] * x[0] + w[7] * x[1] + w[8] * x[2];
+    return;
+  }
+  for (int a = 0; a < rows; ++a) {
+    for (int c = 0; c < cols; ++c) y[a] += w[a * cols + c] * x[c];
+  }
+}
+
+// y += B^T x for a rows x cols block B (row-major; 3x3 unrolled).
+inline void addBlockTransposedTimes(const double* w, int rows, int cols, const double* x,
+                                    double* y) noexcept {
+  if (rows == 3 && cols == 3) {
+    y[0] += w[0] * x[0] + w[3] * x[1] + w[6] * x[2];
+    y[1] += w[1] * x[0] + w[4] * x[1] + w[7] * x[2];
+    y[2] += w[2] * x[0] + w[5] * x[1] + w[8] * x[2];
+    return;
+  }
+  for (int c = 0; c < cols; ++c) {
+    for (int a = 0; a < rows; ++a) y[c] += w[a * cols + c] * x[a];
+  }
+}
+
 class DenseW {
  public:
   explicit DenseW(const ContactProblemView& p) noexcept
@@ -125,60 +153,27 @@ class BlockW {
     return v_ + value_start_[diag_[i]];
   }
 
-  void gatherRows(int i, int r, int k, const double* f, double* d) const noexcept {
+  void gatherRows(int i, int /*r*/, int k, const double* f, double* d) const noexcept {
     d[0] = d[1] = d[2] = 0.0;
     for (int b = row_start_[i]; b < row_start_[i + 1]; ++b) {
       const int j = column_[b];
-      const int rj = ro_[j], kj = ro_[j + 1] - rj;
-      const double* w = v_ + value_start_[b];
-      const double* fj = f + rj;
-      if (k == 3 && kj == 3) {
-        d[0] += w[0] * fj[0] + w[1] * fj[1] + w[2] * fj[2];
-        d[1] += w[3] * fj[0] + w[4] * fj[1] + w[5] * fj[2];
-        d[2] += w[6] * fj[0] + w[7] * fj[1] + w[8] * fj[2];
-        continue;
-      }
-      for (int a = 0; a < k; ++a) {
-        for (int c = 0; c < kj; ++c) d[a] += w[a * kj + c] * fj[c];
-      }
+      addBlockTimes(v_ + value_start_[b], k, ro_[j + 1] - ro_[j], f + ro_[j], d);
     }
-    (void)r;
   }
 
   void addColumns(int i, int /*r*/, int k, const double* df, double* delta) const noexcept {
     for (int t = column_start_[i]; t < column_start_[i + 1]; ++t) {
-      const int j = column_row_[t];
-      const int rj = ro_[j], kj = ro_[j + 1] - rj;
-      const double* w = v_ + value_start_[column_block_[t]];   // W(rows_j, rows_i), kj x k
-      double* dj = delta + rj;
-      if (k == 3 && kj == 3) {
-        dj[0] += w[0] * df[0] + w[1] * df[1] + w[2] * df[2];
-        dj[1] += w[3] * df[0] + w[4] * df[1] + w[5] * df[2];
-        dj[2] += w[6] * df[0] + w[7] * df[1] + w[8] * df[2];
-        continue;
-      }
-      for (int a = 0; a < kj; ++a) {
-        for (int c = 0; c < k; ++c) dj[a] += w[a * k + c] * df[c];
-      }
+      const int j = column_row_[t];   // block W(rows_j, rows_i), kj x k
+      addBlockTimes(v_ + value_start_[column_block_[t]], ro_[j + 1] - ro_[j], k, df,
+                    delta + ro_[j]);
     }
   }
 
   void addRowsTransposed(int i, int /*r*/, int k, const double* df,
                          double* delta) const noexcept {
     for (int b = row_start_[i]; b < row_start_[i + 1]; ++b) {
-      const int j = column_[b];
-      const int rj = ro_[j], kj = ro_[j + 1] - rj;
-      const double* w = v_ + value_start_[b];   // W(rows_i, rows_j), k x kj
-      double* dj = delta + rj;
-      if (k == 3 && kj == 3) {
-        dj[0] += w[0] * df[0] + w[3] * df[1] + w[6] * df[2];
-        dj[1] += w[1] * df[0] + w[4] * df[1] + w[7] * df[2];
-        dj[2] += w[2] * df[0] + w[5] * df[1] + w[8] * df[2];
-        continue;
-      }
-      for (int c = 0; c < kj; ++c) {
-        for (int a = 0; a < k; ++a) dj[c] += w[a * kj + c] * df[a];
-      }
+      const int j = column_[b];   // block W(rows_i, rows_j), k x kj
+      addBlockTransposedTimes(v_ + value_start_[b], k, ro_[j + 1] - ro_[j], df, delta + ro_[j]);
     }
   }
 

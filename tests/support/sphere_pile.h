@@ -63,7 +63,9 @@ inline DenseProblem spherePile(int n, unsigned seed, double mu_max, int cols = 3
   for (int i = 0; i < n; ++i) {
     for (int j = i + 1; j < n; ++j) {
       const Eigen::Vector3d d = x[j] - x[i];
-      if (d.norm() < 2 * r * 1.05) touches.push_back({i, j, x[i] + r * d.normalized(), d.normalized()});
+      if (d.norm() < 2 * r * 1.05) {
+        touches.push_back({i, j, x[i] + r * d.normalized(), d.normalized()});
+      }
     }
   }
   const int nc = static_cast<int>(touches.size()), m = 3 * nc, nd = 6 * n;
@@ -71,7 +73,8 @@ inline DenseProblem spherePile(int n, unsigned seed, double mu_max, int cols = 3
   for (int c = 0; c < nc; ++c) {
     const Touch& t = touches[c];
     const Eigen::Vector3d& nrm = t.normal;
-    const Eigen::Vector3d aux = std::abs(nrm.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
+    const Eigen::Vector3d aux =
+        std::abs(nrm.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
     const Eigen::Vector3d t1 = nrm.cross(aux).normalized(), t2 = nrm.cross(t1);
     const Eigen::Vector3d frame[3] = {nrm, t1, t2};
     for (int side = 0; side < 2; ++side) {

@@ -20,6 +20,7 @@
 #include "tactus/shared/error.h"
 #include "tactus/shared/fclib.h"
 #include "tactus/shared/nsgs.h"
+#include "tactus/shared/snapshot_file.h"
 #ifdef TACTUS_HAVE_HDF5
 #include "fclib_hdf5.h"
 #include "sphere_pile.h"
@@ -53,6 +54,34 @@ FclibProblem load(const fs::path& path) {
 #endif
   }
   return tactus::shared::readFclibText(path);
+}
+
+/// The `count` largest frictional problems (3 rows per contact, most contacts first, earliest on
+/// ties) of a snapshot file recorded by tactus-bench --record-snapshots: the simulation's own
+/// contact problems (one tissue's dense W), named FILE#INDEX.
+std::vector<FclibProblem> loadSnapshots(const fs::path& path, int count) {
+  const std::vector<tactus::shared::RecordedSnapshot> all = tactus::shared::readSnapshotFile(path);
+  std::vector<std::size_t> order;
+  for (std::size_t k = 0; k < all.size(); ++k) {
+    if (all[k].contacts() > 0 && all[k].rows() == 3 * all[k].contacts()) order.push_back(k);
+  }
+  std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
+    return all[a].contacts() > all[b].contacts();
+  });
+  if (order.size() > static_cast<std::size_t>(count)) order.resize(static_cast<std::size_t>(count));
+  std::vector<FclibProblem> out;
+  for (const std::size_t k : order) {
+    const tactus::shared::RecordedSnapshot& r = all[k];
+    FclibProblem p;
+    p.contacts = r.contacts();
+    p.mu = r.mu;
+    p.q = r.delta_free;
+    p.W = r.W;
+    p.row_offset.assign(r.row_offset.begin(), r.row_offset.end());
+    p.name = path.filename().string() + "#" + std::to_string(k);
+    out.push_back(std::move(p));
+  }
+  return out;
 }
 
 bool isText(const fs::path& p) { return p.filename().string().ends_with(".fc3d.txt"); }
@@ -295,8 +324,9 @@ int run(int argc, char** argv) {
   Settings s;
   std::string csv_path;
   app.add_option("inputs", inputs,
-                 "FCLIB problem files (.fc3d.txt, .hdf5) or directories (searched recursively "
-                 "for .fc3d.txt, and .hdf5 without a text twin); default tests/data/fclib");
+                 "FCLIB problem files (.fc3d.txt, .hdf5), directories (searched recursively "
+                 "for .fc3d.txt, and .hdf5 without a text twin) or snapshot files (.snap, "
+                 "see --snapshots-per-file); default tests/data/fclib");
   app.add_option("--tol", s.tolerance, "tolerance of both solvers")
       ->capture_default_str()
       ->check(CLI::Range(1e-16, 1.0));
@@ -317,6 +347,12 @@ int run(int argc, char** argv) {
                  "conversion is done once per problem outside the timed solve (column conv ms)")
       ->capture_default_str()
       ->check(CLI::IsMember({"auto", "dense", "blocks"}));
+  int snapshot_count = 3;
+  app.add_option("--snapshots-per-file", snapshot_count,
+                 "for .snap inputs (tactus-bench --record-snapshots): how many of the file's "
+                 "largest frictional problems to run")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 100000));
   std::vector<int> piles;
   app.add_option("--sphere-piles", piles,
                  "also generate rigid sphere piles of these sphere counts (tests/support/"
@@ -327,18 +363,25 @@ int run(int argc, char** argv) {
   CLI11_PARSE(app, argc, argv);
 
   if (inputs.empty() && piles.empty()) inputs.push_back(TACTUS_DEFAULT_FCLIB_DIR);
-  std::vector<fs::path> files;
+  std::vector<fs::path> files, snapshot_files;
   for (const auto& in : inputs) {
     std::error_code ec;
-    if (fs::is_directory(in, ec)) {
+    if (fs::path(in).extension() == ".snap") {
+      snapshot_files.emplace_back(in);
+    } else if (fs::is_directory(in, ec)) {
       auto found = scanDirectory(in);
       files.insert(files.end(), found.begin(), found.end());
     } else {
       files.emplace_back(in);
     }
   }
-  if (files.empty() && piles.empty()) throw tactus::Error("no FCLIB problem found in the inputs");
+  if (files.empty() && piles.empty() && snapshot_files.empty()) {
+    throw tactus::Error("no FCLIB problem found in the inputs");
+  }
   std::vector<FclibProblem> generated;
+  for (const fs::path& f : snapshot_files) {
+    for (FclibProblem& p : loadSnapshots(f, snapshot_count)) generated.push_back(std::move(p));
+  }
   for (const int n : piles) {
     const tactus::test::DenseProblem d = tactus::test::spherePile(n, 1, 0.3);
     FclibProblem p;

@@ -19,6 +19,11 @@
 // kBlockSparseMaxFill is solved on the blocks, any other on the dense W; see the constant for the
 // measurement behind it. Both storages give the same iterates up to rounding.
 //
+// Where the conversion happens: the simulation builds W dense (H C H^T) and the shared segment
+// carries it dense; the haptic loop converts once per adopted snapshot into its preallocated
+// DelassusBlocks (haptic_loop.h, HapticLink) - one scan of W, about the entry pass the first
+// solve on a new snapshot makes anyway - so the segment format is unchanged.
+//
 // Real-time: reserve() allocates; assign() and chooseStorage() never allocate, lock or throw.
 
 #include <cstdint>
@@ -30,9 +35,13 @@ struct ContactProblemView;
 
 /// Block fill (stored blocks / nc^2) at or below which NSGS uses DelassusBlocks. Measured
 /// (tests/bench/nsgs_bench.cpp, BM_NsgsStorage: the dense surface problem with its coupling cut
-/// beyond a radius, 450 rows): a sweep on the blocks costs as much as one on the dense W at a fill
-/// of about 0.5-0.6 (the block path's indirection costs about twice the dense row's streaming per
-/// stored value); 0.3 keeps a margin, and its conversion (one pass over W) is paid once per W.
+/// beyond a radius, 450 rows, symmetric row update on both storages, best-of CPU time): a sweep
+/// on the blocks costs 0.44x the dense sweep at fill 0.03, 0.52x at 0.11, 0.70x at 0.21,
+/// 0.88-0.94x at 0.32, 1.1-1.4x at 0.45 and 1.6-2.0x at 0.7-1 (a sweep has a fixed cost of the
+/// 150 local solves, about 15 us, and a block costs about twice a dense row's streaming per
+/// value). So the crossover lies between 0.32 and 0.45; 0.3 picks the blocks only where they
+/// were measured faster. The conversion costs 51-88 us at fills 0.03-0.21 (1.4-2.4 dense W
+/// streams); a fuller W is given up after 17-41 us.
 inline constexpr double kBlockSparseMaxFill = 0.3;
 
 class DelassusBlocks {
