@@ -56,14 +56,16 @@ FclibProblem load(const fs::path& path) {
   return tactus::shared::readFclibText(path);
 }
 
-/// The `count` largest frictional problems (3 rows per contact, most contacts first, earliest on
-/// ties) of a snapshot file recorded by tactus-bench --record-snapshots: the simulation's own
-/// contact problems (one tissue's dense W), named FILE#INDEX.
-std::vector<FclibProblem> loadSnapshots(const fs::path& path, int count) {
+/// The `count` largest frictional problems (3 rows per contact) with at most max_contacts
+/// contacts (most contacts first, earliest on ties) of a snapshot file recorded by tactus-bench
+/// --record-snapshots: the simulation's own contact problems (one tissue's dense W), named
+/// FILE#INDEX.
+std::vector<FclibProblem> loadSnapshots(const fs::path& path, int count, int max_contacts) {
   const std::vector<tactus::shared::RecordedSnapshot> all = tactus::shared::readSnapshotFile(path);
   std::vector<std::size_t> order;
   for (std::size_t k = 0; k < all.size(); ++k) {
-    if (all[k].contacts() > 0 && all[k].rows() == 3 * all[k].contacts()) order.push_back(k);
+    const int nc = all[k].contacts();
+    if (nc > 0 && nc <= max_contacts && all[k].rows() == 3 * nc) order.push_back(k);
   }
   std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
     return all[a].contacts() > all[b].contacts();
@@ -353,6 +355,10 @@ int run(int argc, char** argv) {
                  "largest frictional problems to run")
       ->capture_default_str()
       ->check(CLI::Range(1, 100000));
+  int snapshot_max_contacts = 100000;
+  app.add_option("--snapshot-max-contacts", snapshot_max_contacts,
+                 "for .snap inputs: only problems with at most this many contacts")
+      ->check(CLI::Range(1, 100000));
   std::vector<int> piles;
   app.add_option("--sphere-piles", piles,
                  "also generate rigid sphere piles of these sphere counts (tests/support/"
@@ -380,7 +386,7 @@ int run(int argc, char** argv) {
   }
   std::vector<FclibProblem> generated;
   for (const fs::path& f : snapshot_files) {
-    for (FclibProblem& p : loadSnapshots(f, snapshot_count)) generated.push_back(std::move(p));
+    for (FclibProblem& p : loadSnapshots(f, snapshot_count, snapshot_max_contacts)) generated.push_back(std::move(p));
   }
   for (const int n : piles) {
     const tactus::test::DenseProblem d = tactus::test::spherePile(n, 1, 0.3);
