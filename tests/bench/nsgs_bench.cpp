@@ -37,10 +37,9 @@ using tactus::shared::NsgsWorkspace;
 // definite surface-compliance kernel), S a 3x3 SPD normal/tangent compliance with a little
 // coupling, R per-contact rotations of the tangent plane. So W is dense and SPD, as the
 // condensed FEM compliance H C H^T of a tissue is.
-struct SurfaceProblem {
+struct SurfaceProblem : tactus::test::DenseProblem {
   int nc = 0;
-  std::vector<int> row_offset;
-  std::vector<double> W, q0, dq, q, mu;
+  std::vector<double> q0, dq;
 
   // cutoff_radius: contacts farther apart than this are not coupled (W's block fill falls with
   // it: about pi r^2 of the blocks are non-zero); infinite by default (every block non-zero).
@@ -97,24 +96,10 @@ struct SurfaceProblem {
     for (int i = 0; i <= nc; ++i) row_offset[i] = 3 * i;
   }
 
-  int rows() const { return 3 * nc; }
-
   // Free velocity at haptic tick k (1 ms): a slow oscillation of the indenter.
   void setTick(int k) {
     const double a = 0.02 * std::sin(2.0 * std::numbers::pi * k / 500.0);
     for (std::size_t j = 0; j < q.size(); ++j) q[j] = q0[j] + a * dq[j];
-  }
-
-  ContactProblemView view() const {
-    ContactProblemView v;
-    v.contacts = nc;
-    v.rows = rows();
-    v.row_offset = row_offset.data();
-    v.W = W.data();
-    v.ld = rows();
-    v.delta_free = q.data();
-    v.mu = mu.data();
-    return v;
   }
 };
 

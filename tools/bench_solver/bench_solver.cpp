@@ -1,5 +1,7 @@
 // tactus-bench-solver: Tactus' NSGS and Siconos' fc3d NSGS (SICONOS_FRICTION_3D_NSGS) side by
-// side on FCLIB problems: same tolerance, cold start, alternating runs, median times. Benchmark
+// side on FCLIB problems, generated sphere piles (multi-body, block-sparse W) and recorded
+// simulation snapshots (one tissue, dense W): same tolerance, cold start, alternating runs,
+// median times; Tactus on the storage of W chooseStorage picks (or the one forced). Benchmark
 // tool only: nothing else in the project links Siconos.
 
 #include <spdlog/spdlog.h>
