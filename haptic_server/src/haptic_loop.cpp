@@ -160,7 +160,8 @@ HapticLink::HapticLink(shared::Segment&& s)
       workspace(segment.capacity().max_rows, segment.capacity().max_contacts),
       delta_free(static_cast<std::size_t>(segment.capacity().max_rows), 0.0),
       f(static_cast<std::size_t>(segment.capacity().max_rows), 0.0),
-      last_delta_free(static_cast<std::size_t>(segment.capacity().max_rows), 0.0) {}
+      last_delta_free(static_cast<std::size_t>(segment.capacity().max_rows), 0.0),
+      blocks(segment.capacity().max_rows, segment.capacity().max_contacts) {}
 
 HapticLoop::HapticLoop(device::Device& device, const HapticSettings& settings)
     : device_(device), settings_(settings) {
@@ -278,8 +279,14 @@ void HapticLoop::solveLocalModel(HapticLink& link, const shared::SnapshotView& s
     for (int r = 0; r < m; ++r) delta[r] += delta_free[r] - link.last_delta_free[r];
     ns.delta_is_current = true;
   }
-  const shared::NsgsResult res =
-      shared::solveNsgs(snap.problem(delta_free.data()), ns, workspace, f.data());
+  // W's storage, chosen once per snapshot: dense (one tissue) or blocks (several bodies)
+  shared::ContactProblemView problem = snap.problem(delta_free.data());
+  if (link.blocks_seq != hdr.seq) {
+    link.use_blocks = shared::chooseStorage(problem, link.blocks).blocks != nullptr;
+    link.blocks_seq = hdr.seq;
+  }
+  if (link.use_blocks) problem.blocks = &link.blocks;
+  const shared::NsgsResult res = shared::solveNsgs(problem, ns, workspace, f.data());
   link.delta_seq = res.status == shared::NsgsStatus::kEmpty ? 0 : hdr.seq;
   std::copy_n(delta_free.begin(), m, link.last_delta_free.begin());
   out.sweeps = res.sweeps;

@@ -11,16 +11,21 @@
 
 #include <algorithm>
 #include <ctime>
+#include <limits>
 #include <cmath>
 #include <numbers>
 #include <random>
 #include <vector>
 
+#include "tactus/shared/delassus_blocks.h"
 #include "tactus/shared/nsgs.h"
+
+#include "../support/sphere_pile.h"
 
 namespace {
 
 using tactus::shared::ContactProblemView;
+using tactus::shared::DelassusBlocks;
 using tactus::shared::NsgsCoupling;
 using tactus::shared::NsgsResult;
 using tactus::shared::NsgsSettings;
@@ -32,12 +37,15 @@ using tactus::shared::NsgsWorkspace;
 // definite surface-compliance kernel), S a 3x3 SPD normal/tangent compliance with a little
 // coupling, R per-contact rotations of the tangent plane. So W is dense and SPD, as the
 // condensed FEM compliance H C H^T of a tissue is.
-struct SurfaceProblem {
+struct SurfaceProblem : tactus::test::DenseProblem {
   int nc = 0;
-  std::vector<int> row_offset;
-  std::vector<double> W, q0, dq, q, mu;
+  std::vector<double> q0, dq;
 
-  explicit SurfaceProblem(int contacts, unsigned seed = 1) : nc(contacts) {
+  // cutoff_radius: contacts farther apart than this are not coupled (W's block fill falls with
+  // it: about pi r^2 of the blocks are non-zero); infinite by default (every block non-zero).
+  explicit SurfaceProblem(int contacts, unsigned seed = 1,
+                          double cutoff_radius = std::numeric_limits<double>::infinity())
+      : nc(contacts) {
     const int m = 3 * nc;
     std::mt19937 rng(seed);
     std::uniform_real_distribution<double> u01(0.0, 1.0);
@@ -52,6 +60,7 @@ struct SurfaceProblem {
     for (int i = 0; i < nc; ++i) {
       for (int j = 0; j < nc; ++j) {
         const double r = std::hypot(px[i] - px[j], py[i] - py[j]);
+        if (r > cutoff_radius) continue;
         const double c = std::exp(-r / 0.15) + (i == j ? 0.5 : 0.0);
         // R_i^T S R_j with R = rotation of (t1, t2) by phi about n
         double ri[3][3] = {{1, 0, 0}, {0, std::cos(phi[i]), -std::sin(phi[i])},
@@ -87,24 +96,10 @@ struct SurfaceProblem {
     for (int i = 0; i <= nc; ++i) row_offset[i] = 3 * i;
   }
 
-  int rows() const { return 3 * nc; }
-
   // Free velocity at haptic tick k (1 ms): a slow oscillation of the indenter.
   void setTick(int k) {
     const double a = 0.02 * std::sin(2.0 * std::numbers::pi * k / 500.0);
     for (std::size_t j = 0; j < q.size(); ++j) q[j] = q0[j] + a * dq[j];
-  }
-
-  ContactProblemView view() const {
-    ContactProblemView v;
-    v.contacts = nc;
-    v.rows = rows();
-    v.row_offset = row_offset.data();
-    v.W = W.data();
-    v.ld = rows();
-    v.delta_free = q.data();
-    v.mu = mu.data();
-    return v;
   }
 };
 
@@ -202,8 +197,98 @@ void BM_NsgsSequence(benchmark::State& state, int contacts, bool warm) {
   state.counters["not_converged"] = static_cast<double>(failures);
 }
 
+// CPU time per sweep (ns) of 20 sweeps from a mid-solve state, no error checks in between.
+double sweepNs(const ContactProblemView& v, NsgsCoupling coupling, int reps) {
+  NsgsWorkspace ws(v.rows, v.contacts);
+  std::vector<double> f0(v.rows, 0.0), f(v.rows);
+  NsgsSettings s;
+  s.max_sweeps = 3;
+  s.tolerance = 0.0;
+  tactus::shared::solveNsgs(v, s, ws, f0.data());
+  constexpr int kSweeps = 20;
+  s.max_sweeps = kSweeps;
+  s.check_every = 1000;
+  s.coupling = coupling;
+  std::vector<double> times;
+  for (int rep = 0; rep < reps; ++rep) {
+    std::copy(f0.begin(), f0.end(), f.begin());
+    const double t0 = cpuNs();
+    benchmark::DoNotOptimize(tactus::shared::solveNsgs(v, s, ws, f.data()));
+    times.push_back((cpuNs() - t0) / kSweeps);
+  }
+  std::sort(times.begin(), times.end());
+  return times[times.size() / 2];
+}
+
+// Dense against block storage on the same problem, whose block fill the cutoff radius sets
+// (range(0) = radius in thousandths; 450 rows): the crossover fill behind kBlockSparseMaxFill.
+// Counters: fill, dense_us (symmetric row update, the dense path's fastest), blocks_us (same
+// coupling on the blocks), blocks_column_us, ratio = blocks_us / dense_us, convert_us (one
+// conversion of the dense W to blocks), choose_us (chooseStorage: converts, or stops once the
+// fill passes kBlockSparseMaxFill), chosen_blocks. Best-of CPU times.
+void BM_NsgsStorage(benchmark::State& state, int contacts) {
+  const SurfaceProblem p(contacts, 1, 1e-3 * static_cast<double>(state.range(0)));
+  const ContactProblemView dense = p.view();
+  DelassusBlocks blocks(p.rows(), p.nc, 1.0);
+  double convert_ns = 1e30;
+  for (int rep = 0; rep < 20; ++rep) {
+    const double t0 = cpuNs();
+    blocks.assign(dense, 1.0);
+    convert_ns = std::min(convert_ns, cpuNs() - t0);
+  }
+  // the automatic choice (kBlockSparseMaxFill): converts, or gives up early on a fuller W
+  DelassusBlocks chosen(p.rows(), p.nc);
+  double choose_ns = 1e30;
+  for (int rep = 0; rep < 20; ++rep) {
+    const double t0 = cpuNs();
+    benchmark::DoNotOptimize(tactus::shared::chooseStorage(dense, chosen));
+    choose_ns = std::min(choose_ns, cpuNs() - t0);
+  }
+  ContactProblemView sparse = dense;
+  sparse.blocks = &blocks;
+  double dense_ns = 0, blocks_ns = 0, column_ns = 0;
+  for (auto _ : state) {
+    dense_ns = sweepNs(dense, NsgsCoupling::kSymmetricRowUpdate, 15);
+    blocks_ns = sweepNs(sparse, NsgsCoupling::kSymmetricRowUpdate, 15);
+    column_ns = sweepNs(sparse, NsgsCoupling::kColumnUpdate, 15);
+  }
+  state.counters["fill"] = blocks.fill();
+  state.counters["dense_us"] = dense_ns * 1e-3;
+  state.counters["blocks_us"] = blocks_ns * 1e-3;
+  state.counters["blocks_column_us"] = column_ns * 1e-3;
+  state.counters["ratio"] = blocks_ns / dense_ns;
+  state.counters["convert_us"] = convert_ns * 1e-3;
+  state.counters["choose_us"] = choose_ns * 1e-3;
+  state.counters["chosen_blocks"] = chosen.holds();
+}
+
+// A multi-body problem (rigid sphere pile, tests/support/sphere_pile.h; range(0) spheres):
+// sweep time on each storage, and which one chooseStorage picks.
+void BM_NsgsPile(benchmark::State& state) {
+  const tactus::test::DenseProblem p =
+      tactus::test::spherePile(static_cast<int>(state.range(0)), 1, 0.3);
+  const ContactProblemView dense = p.view();
+  DelassusBlocks blocks(p.rows(), p.contacts());
+  const ContactProblemView chosen = tactus::shared::chooseStorage(dense, blocks);
+  double dense_ns = 0, blocks_ns = 0;
+  for (auto _ : state) {
+    dense_ns = sweepNs(dense, NsgsCoupling::kSymmetricRowUpdate, 5);
+    blocks_ns = sweepNs(chosen, NsgsCoupling::kSymmetricRowUpdate, 15);
+  }
+  state.counters["contacts"] = p.contacts();
+  state.counters["fill"] = blocks.fill();
+  state.counters["chosen_blocks"] = chosen.blocks != nullptr;
+  state.counters["dense_us"] = dense_ns * 1e-3;
+  state.counters["chosen_us"] = blocks_ns * 1e-3;
+}
+
 }  // namespace
 
+BENCHMARK_CAPTURE(BM_NsgsStorage, 450rows, 150)
+    ->Arg(100)->Arg(150)->Arg(200)->Arg(300)->Arg(400)->Arg(500)->Arg(700)->Arg(2000)
+    ->Iterations(1);
+BENCHMARK_CAPTURE(BM_NsgsStorage, Small, 10)->Arg(300)->Iterations(1);
+BENCHMARK(BM_NsgsPile)->Arg(60)->Arg(90)->Arg(150)->Iterations(1)->Unit(benchmark::kMillisecond);
 BENCHMARK_CAPTURE(BM_StreamW, 450rows, 150);
 BENCHMARK_CAPTURE(BM_NsgsSweep, 450rows_column, 150, NsgsCoupling::kColumnUpdate);
 BENCHMARK_CAPTURE(BM_NsgsSweep, 450rows_row, 150, NsgsCoupling::kRowGather);

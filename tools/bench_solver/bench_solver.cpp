@@ -1,5 +1,7 @@
 // tactus-bench-solver: Tactus' NSGS and Siconos' fc3d NSGS (SICONOS_FRICTION_3D_NSGS) side by
-// side on FCLIB problems: same tolerance, cold start, alternating runs, median times. Benchmark
+// side on FCLIB problems, generated sphere piles (multi-body, block-sparse W) and recorded
+// simulation snapshots (one tissue, dense W): same tolerance, cold start, alternating runs,
+// median times; Tactus on the storage of W chooseStorage picks (or the one forced). Benchmark
 // tool only: nothing else in the project links Siconos.
 
 #include <spdlog/spdlog.h>
@@ -16,11 +18,14 @@
 #include <string>
 #include <vector>
 
+#include "tactus/shared/delassus_blocks.h"
 #include "tactus/shared/error.h"
 #include "tactus/shared/fclib.h"
 #include "tactus/shared/nsgs.h"
+#include "tactus/shared/snapshot_file.h"
 #ifdef TACTUS_HAVE_HDF5
 #include "fclib_hdf5.h"
+#include "sphere_pile.h"
 #endif
 
 #include <siconos/numerics/FrictionContactProblem.h>
@@ -51,6 +56,36 @@ FclibProblem load(const fs::path& path) {
 #endif
   }
   return tactus::shared::readFclibText(path);
+}
+
+/// The `count` largest frictional problems (3 rows per contact) with at most max_contacts
+/// contacts (most contacts first, earliest on ties) of a snapshot file recorded by tactus-bench
+/// --record-snapshots: the simulation's own contact problems (one tissue's dense W), named
+/// FILE#INDEX.
+std::vector<FclibProblem> loadSnapshots(const fs::path& path, int count, int max_contacts) {
+  const std::vector<tactus::shared::RecordedSnapshot> all = tactus::shared::readSnapshotFile(path);
+  std::vector<std::size_t> order;
+  for (std::size_t k = 0; k < all.size(); ++k) {
+    const int nc = all[k].contacts();
+    if (nc > 0 && nc <= max_contacts && all[k].rows() == 3 * nc) order.push_back(k);
+  }
+  std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
+    return all[a].contacts() > all[b].contacts();
+  });
+  if (order.size() > static_cast<std::size_t>(count)) order.resize(static_cast<std::size_t>(count));
+  std::vector<FclibProblem> out;
+  for (const std::size_t k : order) {
+    const tactus::shared::RecordedSnapshot& r = all[k];
+    FclibProblem p;
+    p.contacts = r.contacts();
+    p.mu = r.mu;
+    p.q = r.delta_free;
+    p.W = r.W;
+    p.row_offset.assign(r.row_offset.begin(), r.row_offset.end());
+    p.name = path.filename().string() + "#" + std::to_string(k);
+    out.push_back(std::move(p));
+  }
+  return out;
 }
 
 bool isText(const fs::path& p) { return p.filename().string().ends_with(".fc3d.txt"); }
@@ -145,6 +180,7 @@ struct Settings {
   int reps = 5;
   bool sparse_block = false;
   bool light_error = false;
+  std::string tactus_storage = "auto";   ///< auto (chooseStorage), dense or blocks
 };
 
 /// Siconos NSGS options: same tolerance and iteration cap as Tactus; the full natural-map error
@@ -169,13 +205,31 @@ struct Row {
   double norm_q = 0, norm_r_s = 0, norm_u_s = 0;  ///< 2-norms of q and Siconos' r, u
   int t_sweeps = 0, s_iters = 0;
   bool t_conv = false, s_conv = false;
+  double fill = 0;       ///< block fill of W (stored blocks / nc^2)
+  bool blocks = false;   ///< Tactus solved on W's blocks
+  double convert_ms = 0; ///< median time of the block conversion (once per W, untimed in t_ms)
 };
 
 Row benchOne(const FclibProblem& p, const Settings& s) {
   using Clock = std::chrono::steady_clock;
-  const auto view = p.view();
+  const auto dense = p.view();
   const int m = p.rows();
   tactus::shared::NsgsWorkspace workspace(m, p.contacts);
+  // W's storage for Tactus, chosen (converted) once per W like the haptic loop does per snapshot
+  tactus::shared::DelassusBlocks blocks(m, p.contacts, 1.0);
+  tactus::shared::DelassusBlocks measure(m, p.contacts, 1.0);
+  measure.assign(dense, 1.0);
+  auto choose = [&] {
+    if (s.tactus_storage == "dense") return dense;
+    if (s.tactus_storage == "blocks") {
+      auto v = dense;
+      v.blocks = blocks.assign(dense, 1.0) ? &blocks : nullptr;
+      return v;
+    }
+    return tactus::shared::chooseStorage(dense, blocks);
+  };
+  auto view = choose();
+  std::vector<double> convert_ms;
   tactus::shared::NsgsSettings ts;
   ts.tolerance = s.tolerance;
   ts.max_sweeps = s.max_sweeps;
@@ -188,6 +242,9 @@ Row benchOne(const FclibProblem& p, const Settings& s) {
   int s_info = 1;
   // rep -1: one untimed warm-up run of each (first-touch page faults, cold caches)
   for (int rep = -1; rep < s.reps; ++rep) {
+    const auto tc = Clock::now();
+    view = choose();
+    const auto tc1 = Clock::now();
     std::fill(r_t.begin(), r_t.end(), 0.0);
     const auto t0 = Clock::now();
     t_result = tactus::shared::solveNsgs(view, ts, workspace, r_t.data());
@@ -198,6 +255,7 @@ Row benchOne(const FclibProblem& p, const Settings& s) {
     s_info = fc3d_driver(sp.get(), r_s.data(), u_s.data(), options);
     const auto t3 = Clock::now();
     if (rep < 0) continue;
+    convert_ms.push_back(std::chrono::duration<double, std::milli>(tc1 - tc).count());
     t_ms.push_back(std::chrono::duration<double, std::milli>(t1 - t0).count());
     s_ms.push_back(std::chrono::duration<double, std::milli>(t3 - t2).count());
   }
@@ -205,6 +263,9 @@ Row benchOne(const FclibProblem& p, const Settings& s) {
   Row row;
   row.name = p.name;
   row.contacts = p.contacts;
+  row.fill = measure.fill();
+  row.blocks = view.blocks != nullptr;
+  row.convert_ms = row.blocks ? median(convert_ms) : 0.0;
   // Both solutions scored by one function: the natural-map error normalised by
   // max(|q|, |r|, |u|) (tactus::shared::naturalMapError), u recomputed as W r + q for both.
   std::vector<double> u_t(m), u_s_check(m);
@@ -267,8 +328,9 @@ int run(int argc, char** argv) {
   Settings s;
   std::string csv_path;
   app.add_option("inputs", inputs,
-                 "FCLIB problem files (.fc3d.txt, .hdf5) or directories (searched recursively "
-                 "for .fc3d.txt, and .hdf5 without a text twin); default tests/data/fclib");
+                 "FCLIB problem files (.fc3d.txt, .hdf5), directories (searched recursively "
+                 "for .fc3d.txt, and .hdf5 without a text twin) or snapshot files (.snap, "
+                 "see --snapshots-per-file); default tests/data/fclib");
   app.add_option("--tol", s.tolerance, "tolerance of both solvers")
       ->capture_default_str()
       ->check(CLI::Range(1e-16, 1.0));
@@ -283,20 +345,62 @@ int run(int argc, char** argv) {
   app.add_flag("--siconos-light-error", s.light_error,
                "keep Siconos' default error evaluation (incremental, full check at the end)");
   app.add_option("--csv", csv_path, "also write the table to FILE (must not exist)");
+  app.add_option("--tactus-storage", s.tactus_storage,
+                 "W's storage for Tactus: auto (tactus::shared::chooseStorage: 3x3 blocks when at "
+                 "most kBlockSparseMaxFill of the blocks are non-zero), dense or blocks; the "
+                 "conversion is done once per problem outside the timed solve (column conv ms)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"auto", "dense", "blocks"}));
+  int snapshot_count = 3;
+  app.add_option("--snapshots-per-file", snapshot_count,
+                 "for .snap inputs (tactus-bench --record-snapshots): how many of the file's "
+                 "largest frictional problems to run")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 100000));
+  int snapshot_max_contacts = 100000;
+  app.add_option("--snapshot-max-contacts", snapshot_max_contacts,
+                 "for .snap inputs: only problems with at most this many contacts")
+      ->check(CLI::Range(1, 100000));
+  std::vector<int> piles;
+  app.add_option("--sphere-piles", piles,
+                 "also generate rigid sphere piles of these sphere counts (tests/support/"
+                 "sphere_pile.h: 3 x 3 spheres per layer, seed 1, mu in [0.2, 0.3]; 60 -> 228 "
+                 "contacts, 90 -> 354, 150 -> ~590; 4-7 % of W's blocks non-zero)")
+      ->delimiter(',')
+      ->check(CLI::Range(2, 400));
   CLI11_PARSE(app, argc, argv);
 
-  if (inputs.empty()) inputs.push_back(TACTUS_DEFAULT_FCLIB_DIR);
-  std::vector<fs::path> files;
+  if (inputs.empty() && piles.empty()) inputs.push_back(TACTUS_DEFAULT_FCLIB_DIR);
+  std::vector<fs::path> files, snapshot_files;
   for (const auto& in : inputs) {
     std::error_code ec;
-    if (fs::is_directory(in, ec)) {
+    if (fs::path(in).extension() == ".snap") {
+      snapshot_files.emplace_back(in);
+    } else if (fs::is_directory(in, ec)) {
       auto found = scanDirectory(in);
       files.insert(files.end(), found.begin(), found.end());
     } else {
       files.emplace_back(in);
     }
   }
-  if (files.empty()) throw tactus::Error("no FCLIB problem found in the inputs");
+  if (files.empty() && piles.empty() && snapshot_files.empty()) {
+    throw tactus::Error("no FCLIB problem found in the inputs");
+  }
+  std::vector<FclibProblem> generated;
+  for (const fs::path& f : snapshot_files) {
+    for (FclibProblem& p : loadSnapshots(f, snapshot_count, snapshot_max_contacts)) generated.push_back(std::move(p));
+  }
+  for (const int n : piles) {
+    const tactus::test::DenseProblem d = tactus::test::spherePile(n, 1, 0.3);
+    FclibProblem p;
+    p.contacts = d.contacts();
+    p.mu = d.mu;
+    p.q = d.q;
+    p.W = d.W;
+    p.row_offset = d.row_offset;
+    p.name = "sphere_pile_" + std::to_string(n);
+    generated.push_back(std::move(p));
+  }
 
   std::FILE* csv = nullptr;
   if (!csv_path.empty()) {
@@ -308,24 +412,25 @@ int run(int argc, char** argv) {
                  "problem,nc,tactus_error,tactus_sweeps,tactus_ms,tactus_converged,"
                  "siconos_error,siconos_reported_error,siconos_iterations,siconos_ms,"
                  "siconos_converged,time_ratio,sweep_time_ratio,u_rel_diff,norm_q,siconos_norm_r,"
-                 "siconos_norm_u\n");
+                 "siconos_norm_u,block_fill,tactus_blocks,convert_ms\n");
   }
 
   std::printf("tol %.1e, max sweeps %d, %d runs each (median), Siconos W %s, Siconos error "
               "evaluation %s\n",
               s.tolerance, s.max_sweeps, s.reps, s.sparse_block ? "sparse-block" : "dense",
               s.light_error ? "default (light)" : "full every sweep");
-  std::printf("%-44s %5s | %9s %6s %9s %4s | %9s %6s %9s %4s | %7s %7s | %9s\n", "problem", "nc",
-              "T error", "sweeps", "T ms", "conv", "S error", "iters", "S ms", "conv", "t T/S",
-              "swp T/S", "u diff");
+  std::printf("%-44s %5s | %9s %6s %9s %4s | %9s %6s %9s %4s | %7s %7s | %9s | %6s %6s %7s\n",
+              "problem", "nc", "T error", "sweeps", "T ms", "conv", "S error", "iters", "S ms",
+              "conv", "t T/S", "swp T/S", "u diff", "fill", "T W", "conv ms");
   std::vector<double> time_ratios, sweep_ratios;
   double worst_u = 0.0;
   int t_conv = 0, s_conv = 0, both = 0, failed = 0, total = 0;
-  for (const auto& file : files) {
+  const std::size_t jobs = files.size() + generated.size();
+  for (std::size_t job = 0; job < jobs; ++job) {
     Row row;
     try {
-      const FclibProblem p = load(file);
-      row = benchOne(p, s);
+      row = job < files.size() ? benchOne(load(files[job]), s)
+                               : benchOne(generated[job - files.size()], s);
     } catch (const std::exception& e) {
       spdlog::error("{}", e.what());
       ++failed;
@@ -343,17 +448,21 @@ int run(int argc, char** argv) {
       sweep_ratios.push_back(sr);
       worst_u = std::max(worst_u, row.u_diff);
     }
-    std::printf("%-44s %5d | %9.2e %6d %9.3f %4s | %9.2e %6d %9.3f %4s | %7.2f %7.2f | %9.2e\n",
+    std::printf("%-44s %5d | %9.2e %6d %9.3f %4s | %9.2e %6d %9.3f %4s | %7.2f %7.2f | %9.2e | "
+                "%6.3f %6s %7.3f\n",
                 row.name.c_str(), row.contacts, row.t_error, row.t_sweeps, row.t_ms,
                 row.t_conv ? "yes" : "no", row.s_error, row.s_iters, row.s_ms,
-                row.s_conv ? "yes" : "no", tr, sr, row.u_diff);
+                row.s_conv ? "yes" : "no", tr, sr, row.u_diff, row.fill,
+                row.blocks ? "blocks" : "dense", row.convert_ms);
     std::fflush(stdout);
     if (csv != nullptr &&
         std::fprintf(csv,
-                     "%s,%d,%.6e,%d,%.6f,%d,%.6e,%.6e,%d,%.6f,%d,%.6f,%.6f,%.6e,%.6e,%.6e,%.6e\n",
+                     "%s,%d,%.6e,%d,%.6f,%d,%.6e,%.6e,%d,%.6f,%d,%.6f,%.6f,%.6e,%.6e,%.6e,%.6e,"
+                     "%.6f,%d,%.6f\n",
                      row.name.c_str(), row.contacts, row.t_error, row.t_sweeps, row.t_ms,
                      row.t_conv, row.s_error, row.s_reported, row.s_iters, row.s_ms, row.s_conv,
-                     tr, sr, row.u_diff, row.norm_q, row.norm_r_s, row.norm_u_s) < 0) {
+                     tr, sr, row.u_diff, row.norm_q, row.norm_r_s, row.norm_u_s, row.fill,
+                     row.blocks ? 1 : 0, row.convert_ms) < 0) {
       std::fclose(csv);
       throw tactus::Error(csv_path + ": write failed");
     }

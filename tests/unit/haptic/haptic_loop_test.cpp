@@ -451,31 +451,40 @@ TEST(AllocCounter, CountsMallocCallocAndRealloc) {
   EXPECT_EQ(scope.cAllocations(), 3);
 }
 
-// A 150-contact frictional problem (450 rows, symmetric coupled W): every tick solves it with
-// NSGS, computes the wrench and runs the safety chain without any allocation.
-TEST(HapticLoopLarge, AFrictionalTickOf450RowsAllocatesNothing) {
-  constexpr int kContacts = 150;
-  constexpr int kRows = 3 * kContacts;
-  const std::string name = "tactus_haptic_large_" + std::to_string(::getpid());
-  shared::Segment::remove(name);
-  shared::Segment sim =
-      shared::Segment::create(name, shared::SegmentCapacity::forContacts(kContacts, true));
-  shared::SnapshotPublisher publisher = sim.snapshotPublisher();
-  ScriptedDevice device;
-  HapticSettings settings;
-  settings.solve_budget_ns = 1'000'000'000;   // sweeps bound the solve, not the clock
-  settings.max_sweeps = 20;
-  HapticLoop loop(device, settings);
-  auto link = std::make_unique<HapticLink>(shared::Segment::open(name));
-  loop.offerLink(link.get());
-  std::int64_t t = shared::monotonicNs();
-  std::uint64_t seq = 0;
-  auto publish = [&](double depth_m) {
-    auto slot = publisher.slot();
+// A 150-contact frictional problem (450 rows, symmetric W = coupling(i, j) between rows i, j) in
+// a segment, published at a depth, with the haptic loop attached to it.
+class LargeProblemRig {
+ public:
+  static constexpr int kContacts = 150;
+  static constexpr int kRows = 3 * kContacts;
+  using Coupling = double (*)(int i, int j);
+
+  LargeProblemRig(const std::string& tag, Coupling coupling)
+      : name_("tactus_haptic_large_" + tag + std::to_string(::getpid())), coupling_(coupling) {
+    shared::Segment::remove(name_);
+    sim_.emplace(
+        shared::Segment::create(name_, shared::SegmentCapacity::forContacts(kContacts, true)));
+    publisher_ = sim_->snapshotPublisher();
+    settings_.solve_budget_ns = 1'000'000'000;   // sweeps bound the solve, not the clock
+    settings_.max_sweeps = 20;
+    loop_.emplace(device_, settings_);
+    link_ = std::make_unique<HapticLink>(shared::Segment::open(name_));
+    loop_->offerLink(link_.get());
+  }
+  ~LargeProblemRig() {
+    loop_->offerLink(nullptr);
+    tick();
+    link_.reset();
+    sim_.reset();
+    shared::Segment::remove(name_);
+  }
+
+  void publish(double depth_m) {
+    auto slot = publisher_.slot();
     ASSERT_TRUE(slot.setSize(kRows, kContacts));
     auto& h = slot.header();
-    h.seq = ++seq;
-    h.t_ns = t;
+    h.seq = ++seq_;
+    h.t_ns = t_;
     h.flags = shared::kSnapshotValid | shared::kSnapshotHasJacobian | shared::kSnapshotSymmetricW;
     const int ld = slot.ld();
     for (int c = 0; c <= kContacts; ++c) slot.rowOffset()[c] = 3 * c;
@@ -490,41 +499,126 @@ TEST(HapticLoopLarge, AFrictionalTickOf450RowsAllocatesNothing) {
       }
     }
     for (int i = 0; i < kRows; ++i) {
-      for (int j = 0; j < kRows; ++j) {
-        slot.W()[i * ld + j] = i == j ? 1e-3 : 0.5e-3 * std::exp(-std::abs(i - j));
-      }
+      for (int j = 0; j < kRows; ++j) slot.W()[i * ld + j] = coupling_(i, j);
       const bool normal = i % 3 == 0;
       slot.deltaFree()[i] = normal ? -depth_m : 1e-5 * ((i % 5) - 2);
       slot.f()[i] = 0.0;
       for (int k = 0; k < 6; ++k) slot.J()[6 * i + k] = (normal ? k == 2 : k == (i % 3) - 1);
     }
-    publisher.publish();
-  };
-  device.state.pos_m = {0.0, 0.0, 0.0};
-  publish(1e-4);
-  for (int i = 0; i < 5; ++i) {
-    t += 1'000'000;
-    (void)loop.tick(t, t);
+    publisher_.publish();
   }
+
+  TickOutput tick() {
+    t_ += 1'000'000;
+    return loop_->tick(t_, t_);
+  }
+
+  ScriptedDevice& device() { return device_; }
+  HapticLink& link() { return *link_; }
+
+ private:
+  std::string name_;
+  Coupling coupling_;
+  std::optional<shared::Segment> sim_;
+  shared::SnapshotPublisher publisher_;
+  ScriptedDevice device_;
+  HapticSettings settings_;
+  std::optional<HapticLoop> loop_;
+  std::unique_ptr<HapticLink> link_;
+  std::uint64_t seq_ = 0;
+  std::int64_t t_ = shared::monotonicNs();
+};
+
+// Publishes a new snapshot every 10 ticks while the device moves: 50 ticks without allocation.
+TickOutput tickWithoutAllocating(LargeProblemRig& rig) {
+  rig.device().state.pos_m = {0.0, 0.0, 0.0};
+  rig.publish(1e-4);
+  for (int i = 0; i < 5; ++i) (void)rig.tick();
   test::AllocScope scope;
   TickOutput out;
   for (int i = 0; i < 50; ++i) {
-    if (i % 10 == 0) publish(1e-4 * (1 + i % 3));
-    device.state.pos_m = {1e-5 * (i % 4), 0.0, -1e-5 * (i % 7)};
-    t += 1'000'000;
-    out = loop.tick(t, t);
+    if (i % 10 == 0) rig.publish(1e-4 * (1 + i % 3));
+    rig.device().state.pos_m = {1e-5 * (i % 4), 0.0, -1e-5 * (i % 7)};
+    out = rig.tick();
   }
   EXPECT_EQ(scope.allocations(), 0);
   EXPECT_EQ(scope.cAllocations(), 0);
+  return out;
+}
+
+// One tissue: every row coupled with every other (dense W, the dense storage).
+double tissueCoupling(int i, int j) {
+  return i == j ? 1e-3 : 0.5e-3 * std::exp(-std::abs(i - j));
+}
+
+// Ten bodies of 15 contacts: rows coupled only within a body (10 % of the blocks: the blocks).
+double bodiesCoupling(int i, int j) {
+  return i / 45 == j / 45 ? tissueCoupling(i, j) : 0.0;
+}
+
+// Every tick solves the large frictional problem with NSGS, computes the wrench and runs the
+// safety chain without any allocation.
+TEST(HapticLoopLarge, AFrictionalTickOf450RowsAllocatesNothing) {
+  LargeProblemRig rig("dense", tissueCoupling);
+  const TickOutput out = tickWithoutAllocating(rig);
   // it did solve the large frictional problem every tick
-  EXPECT_EQ(out.contacts, kContacts);
+  EXPECT_EQ(out.contacts, LargeProblemRig::kContacts);
   EXPECT_GT(out.sweeps, 0);
   EXPECT_GT(out.unlimited_force_norm_n, 0.0);
-  loop.offerLink(nullptr);
-  t += 1'000'000;
-  (void)loop.tick(t, t);
-  link.reset();
-  shared::Segment::remove(name);
+  EXPECT_FALSE(rig.link().use_blocks);   // one tissue: dense
+}
+
+// Several bodies: the tick converts each new snapshot's W to blocks (in the tick, without
+// allocating) and solves on them; the rendered force is the dense solution's.
+TEST(HapticLoopLarge, ASeveralBodiesTickSolvesOnTheBlocksWithoutAllocating) {
+  LargeProblemRig rig("blocks", bodiesCoupling);
+  const TickOutput out = tickWithoutAllocating(rig);
+  EXPECT_EQ(out.contacts, LargeProblemRig::kContacts);
+  EXPECT_GT(out.sweeps, 0);
+  EXPECT_TRUE(rig.link().use_blocks);
+  EXPECT_EQ(rig.link().blocks.blocks(), 10 * 15 * 15);
+  // at the snapshot's pose, many warm-started ticks on one problem (republished within the
+  // 50 ms watchdog): the force is the dense solve's
+  rig.device().state.pos_m = {0.0, 0.0, 0.0};
+  TickOutput settled;
+  for (int i = 0; i < 400; ++i) {
+    if (i % 40 == 0) rig.publish(2e-4);
+    settled = rig.tick();
+  }
+  const int m = LargeProblemRig::kRows;
+  std::vector<double> W(static_cast<std::size_t>(m) * m), q(m);
+  std::vector<double> mu(LargeProblemRig::kContacts, 0.5);
+  std::vector<int> ro(LargeProblemRig::kContacts + 1);
+  for (int c = 0; c <= LargeProblemRig::kContacts; ++c) ro[c] = 3 * c;
+  for (int i = 0; i < m; ++i) {
+    for (int j = 0; j < m; ++j) W[static_cast<std::size_t>(i) * m + j] = bodiesCoupling(i, j);
+    q[i] = i % 3 == 0 ? -2e-4 : 1e-5 * ((i % 5) - 2);
+  }
+  shared::ContactProblemView v;
+  v.contacts = LargeProblemRig::kContacts;
+  v.rows = m;
+  v.row_offset = ro.data();
+  v.W = W.data();
+  v.ld = m;
+  v.delta_free = q.data();
+  v.mu = mu.data();
+  shared::NsgsWorkspace ws(m, v.contacts);
+  std::vector<double> f(m, 0.0);
+  shared::NsgsSettings s;
+  s.tolerance = 1e-10;
+  s.max_sweeps = 10000;
+  ASSERT_EQ(shared::solveNsgs(v, s, ws, f.data()).status, shared::NsgsStatus::kConverged);
+  double fx = 0.0, fy = 0.0, fz = 0.0;
+  for (int c = 0; c < v.contacts; ++c) {
+    fz += f[3 * c];
+    fx += f[3 * c + 1];
+    fy += f[3 * c + 2];
+  }
+  const double scale = std::hypot(fx, fy, fz);
+  EXPECT_GT(scale, 0.0);
+  EXPECT_EQ(settled.flags & shared::kStatsSolverNotConverged, 0u);
+  // the contact wrench before the safety chain's clamp (normals +z, tangents x and y)
+  EXPECT_NEAR(settled.unlimited_force_norm_n, scale, 1e-4 * scale);
 }
 
 }  // namespace

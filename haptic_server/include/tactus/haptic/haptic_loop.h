@@ -25,6 +25,7 @@
 #include <vector>
 
 #include "tactus/device/device.h"
+#include "tactus/shared/delassus_blocks.h"
 #include "tactus/shared/event_ring.h"
 #include "tactus/shared/stats_ring.h"
 #include "tactus/shared/messages.h"
@@ -131,6 +132,12 @@ struct HapticLink {
   std::vector<double> last_delta_free;  ///< delta_free of the last solve (capacity rows)
   std::uint64_t delta_seq = 0;          ///< snapshot whose W f + delta_free workspace.delta holds
   std::uint64_t ill_posed_seq = 0;      ///< last snapshot reported ill-posed (one event each)
+  /// W's block form (shared::chooseStorage's rule), converted once per adopted snapshot in the
+  /// tick that first solves it (one pass over W, allocation-free: sized for the capacity at
+  /// shared::kBlockSparseMaxFill). The segment keeps carrying W dense (see docs/design.md).
+  shared::DelassusBlocks blocks;
+  std::uint64_t blocks_seq = 0;         ///< snapshot whose W `blocks` was chosen for (0: none)
+  bool use_blocks = false;              ///< blocks_seq's W is solved on `blocks`
   explicit HapticLink(shared::Segment&& s);
 };
 

@@ -7,7 +7,10 @@
 // sliding opposite to the tangential velocity (De Saxce: delta_hat = delta + mu ||delta_t|| n).
 //
 // W is dense, row-major with leading dimension `ld` (>= rows), so a fixed-capacity buffer (the
-// shared segment) can hold it in place. It need not be exactly symmetric.
+// shared segment) can hold it in place. It need not be exactly symmetric. When the view also
+// points at W's block-sparse form (`blocks`, see delassus_blocks.h and chooseStorage there), the
+// solver reads the blocks instead (W may then be null): same algorithm, same iterates up to
+// rounding, a sweep costing the stored blocks instead of all m^2 entries.
 //
 // Real-time: solveNsgs and naturalMapError never allocate, lock or throw; all scratch memory is
 // in NsgsWorkspace, sized once for a capacity (rows, contacts).
@@ -35,6 +38,8 @@
 
 namespace tactus::shared {
 
+class DelassusBlocks;
+
 struct ContactProblemView {
   int contacts = 0;                  ///< nc
   int rows = 0;                      ///< m = row_offset[nc]
@@ -43,6 +48,8 @@ struct ContactProblemView {
   int ld = 0;
   const double* delta_free = nullptr;  ///< m (FCLIB's q)
   const double* mu = nullptr;        ///< nc friction coefficients (ignored for 1-row contacts)
+  /// W's block form (same contacts, rows and row offsets); when set, read instead of W
+  const DelassusBlocks* blocks = nullptr;
 };
 
 /// How the solver keeps the coupling between contacts (all give the same iterates up to
@@ -101,7 +108,7 @@ struct NsgsSettings {
 /// iterate, error its error). kNonFinite: W, q, mu or the warm start holds NaN/Inf, or the
 /// iteration produced one; f is zeroed, error = +inf. kEmpty: no contacts, problem larger than
 /// the workspace, or an inconsistent view (null pointer, ld < rows, row_offset steps other than
-/// 1 or 3); f is left untouched. kIllPosed: some contact's diagonal block cannot be solved by
+/// 1 or 3, blocks holding another problem's sizes or row offsets); f is left untouched. kIllPosed: some contact's diagonal block cannot be solved by
 /// Gauss-Seidel - a diagonal entry of W that NSGS divides by (W_nn; W_tt too when mu > 0) is zero,
 /// negative, denormal or below kMinRelativeDiagonal times the largest diagonal entry. Those
 /// contacts' forces are held at zero, the others are solved as usual, and error is the real
