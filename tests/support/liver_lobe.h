@@ -5,6 +5,7 @@
 #include <vector>
 
 #include "tactus/sim/fem.h"
+#include "tactus/sim/scene.h"
 
 namespace tactus::test_support {
 
@@ -26,5 +27,21 @@ class LiverLobe {
   const sim::FemBody& liver_;
   std::vector<int> nodes_;
 };
+
+/// liver_grasp's grasper as it was before the flat pads (issue 15): round kinematic jaws of
+/// radius 2 mm with 8 samples each, closing to 0.25, no contact compliance. The tests of the
+/// contact passes, the grip DOF and the display were written for it.
+inline void useRoundKinematicJaws(sim::SceneSpec& spec) {
+  sim::InstrumentSpec& in = spec.instrument;
+  in.pad_width_m = 0.0;
+  in.contact_compliance_mpn = 0.0;
+  in.jaw_radius_m = 0.002;
+  in.jaw_samples = 8;
+  in.grip_k_nmprad = 0.0;
+  in.grip_b_nmsprad = 0.0;
+  for (sim::TrajectoryKey& k : in.trajectory) {
+    if (k.gripper_opening < 1.0) k.gripper_opening = 0.25;
+  }
+}
 
 }  // namespace tactus::test_support

@@ -95,7 +95,14 @@ Instrument::Instrument(const InstrumentSpec& spec) : spec_(spec) {
       throw SceneError("instrument.jaw_width_m: " + std::to_string(spec.jaw_rows) +
                        " rows of jaw samples need a width > 0");
     }
-    features_.resize(static_cast<std::size_t>(2 * spec.jaw_rows * (spec.jaw_samples + 1)));
+    requireNonNegative(spec.pad_width_m, "pad_width_m");
+    if (spec.pad_columns < 1) {
+      throw SceneError("instrument.pad_columns: must be >= 1 (got " +
+                       std::to_string(spec.pad_columns) + ")");
+    }
+    features_.resize(spec.pad_width_m > 0.0
+                         ? static_cast<std::size_t>(2 * (1 + spec.jaw_samples * spec.pad_columns))
+                         : static_cast<std::size_t>(2 * spec.jaw_rows * (spec.jaw_samples + 1)));
     requireNonNegative(spec.grip_k_nmprad, "grip_k_nmprad");
     requireNonNegative(spec.grip_b_nmsprad, "grip_b_nmsprad");
     grip_dynamic_ = spec.grip_k_nmprad > 0.0;
@@ -283,6 +290,10 @@ void Instrument::updateFeatures() {
     }
     return;
   }
+  if (spec_.pad_width_m > 0.0) {
+    updatePadFeatures();
+    return;
+  }
   // grasper: per jaw and row one capsule then its sample spheres
   const int n = spec_.jaw_samples;
   const int rows = spec_.jaw_rows;
@@ -322,6 +333,51 @@ void Instrument::updateFeatures() {
       s.skip_cap_a = false;
       s.hinge_m = a;
       s.opening_sign = side;
+    }
+  }
+}
+
+// Flat pads: per jaw the pad rectangle, then its grid of sample spheres (see the header comment).
+void Instrument::updatePadFeatures() {
+  const Eigen::Matrix3d rot = pose_.rot.toRotationMatrix();
+  const int n = spec_.jaw_samples;
+  const int k = spec_.pad_columns;
+  const double phi = opening_ * spec_.max_opening_rad;
+  const double r = spec_.jaw_radius_m;
+  const Eigen::Vector3d half_width = rot.col(0) * (0.5 * spec_.pad_width_m);
+  for (int j = 0; j < 2; ++j) {
+    const double side = j == 0 ? 1.0 : -1.0;
+    const Eigen::Vector3d a = pose_.pos_m + rot * Eigen::Vector3d(0.0, side * r, 0.0);
+    const Eigen::Vector3d dir_local(0.0, std::sin(side * phi), -std::cos(side * phi));
+    const Eigen::Vector3d b = a + rot * (spec_.jaw_length_m * dir_local);
+    const int base = j * (1 + n * k);
+    ToolFeature& pad = features_[static_cast<std::size_t>(base)];
+    pad = ToolFeature{};
+    pad.id = base;
+    pad.shape = FeatureShape::kPad;
+    pad.part = j;
+    pad.a_m = a;
+    pad.b_m = b;
+    pad.radius_m = r;
+    pad.half_width_m = half_width;
+    pad.hinge_m = a;
+    pad.opening_sign = side;
+    for (int i = 0; i < n; ++i) {
+      const double t = n == 1 ? 1.0 : static_cast<double>(i) / (n - 1);
+      for (int c = 0; c < k; ++c) {
+        const double x = k == 1 ? 0.0 : 2.0 * (static_cast<double>(c) / (k - 1) - 0.5);
+        ToolFeature& s = features_[static_cast<std::size_t>(base + 1 + i * k + c)];
+        s = ToolFeature{};
+        s.id = base + 1 + i * k + c;
+        s.shape = FeatureShape::kSphere;
+        s.part = j;
+        s.a_m = a + t * (b - a) + x * half_width;
+        s.b_m = s.a_m;
+        s.radius_m = r;
+        s.face_only = true;
+        s.hinge_m = a;
+        s.opening_sign = side;
+      }
     }
   }
 }
