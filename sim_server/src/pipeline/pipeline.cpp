@@ -102,6 +102,7 @@ struct Simulation::Impl {
   void buildTissues();
   void solveContacts(StepReport& report);
   double queryContacts();
+  double min_excess_gap = 0.0;                    ///< of the last queryContacts
   double detectContacts(StepReport& report);
   /// Where the contacts assembleProblem uses were detected.
   enum class FoundAt { kFreeState, kStepStart, kCorrectedState };
@@ -302,12 +303,24 @@ DeviceTarget Simulation::scriptedTarget(double t_s) const {
 bool Simulation::hasInstrument() const { return impl_->instrument != nullptr; }
 
 // Refits and queries every tissue at the current state; the smallest gap (+inf if none).
+// min_excess_gap: the smallest gap + c f_n, with f_n the normal force the contact (by id) had in
+// the last solve: the penetration beyond what the contact compliance c allows.
 double Simulation::Impl::queryContacts() {
   double min_gap = std::numeric_limits<double>::infinity();
+  min_excess_gap = min_gap;
+  const double c = spec.instrument.contact_compliance_mpn;
   for (TissueState& ts : tissues) {
     ts.collision->refit(ts.body->positions());
     ts.found = &ts.collision->detect(*instrument);
-    for (const Contact& c : *ts.found) min_gap = std::min(min_gap, c.gap_m);
+    for (const Contact& k : *ts.found) {
+      min_gap = std::min(min_gap, k.gap_m);
+      double allowed = 0.0;
+      if (c > 0.0) {
+        const auto it = previous_f.find(k.id);
+        if (it != previous_f.end()) allowed = c * it->second[0];
+      }
+      min_excess_gap = std::min(min_excess_gap, k.gap_m + allowed);
+    }
   }
   return min_gap;
 }
@@ -345,8 +358,11 @@ void Simulation::Impl::solveContacts(StepReport& report) {
     report.contact_passes = pass + 1;
     if (passes == 1) break;
     // the nonlinear gaps at the corrected state
-    double min_gap = detectContacts(report);
-    report.geometric_penetration_m = std::isfinite(min_gap) ? std::max(0.0, -min_gap) : 0.0;
+    const double geometric_gap = detectContacts(report);
+    report.geometric_penetration_m =
+        std::isfinite(geometric_gap) ? std::max(0.0, -geometric_gap) : 0.0;
+    // with a contact compliance a contact may penetrate by c f_n: the passes look at the rest
+    const double min_gap = min_excess_gap;
     if (!(min_gap < -spec.solver.penetration_tolerance_m) || pass + 1 >= passes) break;
     const double pass_gap = min_gap;
     if (pass > 0 && min_gap < previous_gap) {

@@ -138,6 +138,8 @@ struct SolverSpec {
   /// Contact passes per step: after the constrained motion, contacts are detected again at the
   /// corrected state and, while some gap is below -penetration_tolerance_m, the contact problem
   /// is linearised there and solved again from the free motion (1: the paper's single pass).
+  /// With a contact compliance c a contact's gap counts as gap + c f_n (f_n its normal force in
+  /// the pass just solved): the penetration the compliance allows is not a linearisation error.
   int contact_iterations = 1;
   double penetration_tolerance_m = 1e-4;        ///< geometric gap accepted by the passes [m]
   /// Where the first pass detects its contacts. kFreeState (default): at the free state, so the
