@@ -2,6 +2,7 @@
 // Test support shared by the grasp tests: the tip of liver2's right lobe in the liver_grasp
 // frame (rest x > 0.088 m), whose mean height tells whether a grasp lifted it.
 
+#include <cmath>
 #include <vector>
 
 #include "tactus/sim/fem.h"
@@ -28,9 +29,10 @@ class LiverLobe {
   std::vector<int> nodes_;
 };
 
-/// liver_grasp's grasper as it was before the flat pads (issue 15): round kinematic jaws of
-/// radius 2 mm with 8 samples each, closing to 0.25, no contact compliance. The tests of the
-/// contact passes, the grip DOF and the display were written for it.
+/// liver_grasp's grasper and approach as they were before the flat pads (issue 15): round
+/// kinematic jaws of radius 2 mm with 8 samples each, closing to 0.25, no contact compliance,
+/// the hinge at x = 0.107 m (the pads go 7 mm deeper). The tests of the contact passes, the grip
+/// DOF and the display were written for it.
 inline void useRoundKinematicJaws(sim::SceneSpec& spec) {
   sim::InstrumentSpec& in = spec.instrument;
   in.pad_width_m = 0.0;
@@ -41,6 +43,7 @@ inline void useRoundKinematicJaws(sim::SceneSpec& spec) {
   in.grip_b_nmsprad = 0.0;
   for (sim::TrajectoryKey& k : in.trajectory) {
     if (k.gripper_opening < 1.0) k.gripper_opening = 0.25;
+    if (std::abs(k.pose.position_m.x() - 0.100) < 1e-9) k.pose.position_m.x() = 0.107;
   }
 }
 

@@ -52,6 +52,29 @@ bool boundNorm(Eigen::Ref<Eigen::Vector3d> v, double max_norm) {
   return true;
 }
 
+// Jaw with opening side `side` (+1 jaw 0, -1 jaw 1) at half-angle phi: its axis a..b, a at
+// (x, side r, 0) in the tool frame (see instrument.h).
+void jawAxis(const shared::Pose& pose, const Eigen::Matrix3d& rot, double side, double phi,
+             double x, double r, double length, Eigen::Vector3d& a, Eigen::Vector3d& b) {
+  a = pose.pos_m + rot * Eigen::Vector3d(x, side * r, 0.0);
+  // Rx(side phi) (0, 0, -1) = (0, sin(side phi), -cos(side phi))
+  b = a + rot * (length * Eigen::Vector3d(0.0, std::sin(side * phi), -std::cos(side * phi)));
+}
+
+// A jaw feature: everything else at its default (ToolFeature{}).
+void setJawFeature(ToolFeature& f, int id, FeatureShape shape, int part, const Eigen::Vector3d& a,
+                   const Eigen::Vector3d& b, double r, const Eigen::Vector3d& hinge, double side) {
+  f = ToolFeature{};
+  f.id = id;
+  f.shape = shape;
+  f.part = part;
+  f.a_m = a;
+  f.b_m = b;
+  f.radius_m = r;
+  f.hinge_m = hinge;
+  f.opening_sign = side;
+}
+
 }  // namespace
 
 BoxSpec instrumentWorkspace(const InstrumentSpec& spec, const Eigen::AlignedBox3d& scene_bounds) {
@@ -303,36 +326,16 @@ void Instrument::updateFeatures() {
     const int j = jr / rows;
     const int row = jr % rows;
     const double side = j == 0 ? 1.0 : -1.0;
-    const double angle = side * phi;
     const double x = rows == 1 ? 0.0 : spec_.jaw_width_m * (static_cast<double>(row) / (rows - 1) - 0.5);
-    const Eigen::Vector3d a_local(x, side * r, 0.0);
-    // Rx(angle) * (0, 0, -1) = (0, sin(angle), -cos(angle))
-    const Eigen::Vector3d dir_local(0.0, std::sin(angle), -std::cos(angle));
-    const Eigen::Vector3d a = o + rot * a_local;
-    const Eigen::Vector3d b = a + rot * (spec_.jaw_length_m * dir_local);
+    Eigen::Vector3d a, b;
+    jawAxis(pose_, rot, side, phi, x, r, spec_.jaw_length_m, a, b);
     const int base = jr * (n + 1);
-    ToolFeature& cap = features_[base];
-    cap.id = base;
-    cap.shape = FeatureShape::kCapsule;
-    cap.part = j;
-    cap.a_m = a;
-    cap.b_m = b;
-    cap.radius_m = r;
-    cap.skip_cap_a = false;
-    cap.hinge_m = a;
-    cap.opening_sign = side;
+    setJawFeature(features_[base], base, FeatureShape::kCapsule, j, a, b, r, a, side);
     for (int i = 0; i < n; ++i) {
       const double t = n == 1 ? 1.0 : static_cast<double>(i) / (n - 1);
-      ToolFeature& s = features_[base + 1 + i];
-      s.id = base + 1 + i;
-      s.shape = FeatureShape::kSphere;
-      s.part = j;
-      s.a_m = a + t * (b - a);
-      s.b_m = s.a_m;
-      s.radius_m = r;
-      s.skip_cap_a = false;
-      s.hinge_m = a;
-      s.opening_sign = side;
+      const Eigen::Vector3d c = a + t * (b - a);
+      setJawFeature(features_[base + 1 + i], base + 1 + i, FeatureShape::kSphere, j, c, c, r, a,
+                    side);
     }
   }
 }
@@ -347,36 +350,21 @@ void Instrument::updatePadFeatures() {
   const Eigen::Vector3d half_width = rot.col(0) * (0.5 * spec_.pad_width_m);
   for (int j = 0; j < 2; ++j) {
     const double side = j == 0 ? 1.0 : -1.0;
-    const Eigen::Vector3d a = pose_.pos_m + rot * Eigen::Vector3d(0.0, side * r, 0.0);
-    const Eigen::Vector3d dir_local(0.0, std::sin(side * phi), -std::cos(side * phi));
-    const Eigen::Vector3d b = a + rot * (spec_.jaw_length_m * dir_local);
+    Eigen::Vector3d a, b;
+    jawAxis(pose_, rot, side, phi, 0.0, r, spec_.jaw_length_m, a, b);
     const int base = j * (1 + n * k);
     ToolFeature& pad = features_[static_cast<std::size_t>(base)];
-    pad = ToolFeature{};
-    pad.id = base;
-    pad.shape = FeatureShape::kPad;
-    pad.part = j;
-    pad.a_m = a;
-    pad.b_m = b;
-    pad.radius_m = r;
+    setJawFeature(pad, base, FeatureShape::kPad, j, a, b, r, a, side);
     pad.half_width_m = half_width;
-    pad.hinge_m = a;
-    pad.opening_sign = side;
     for (int i = 0; i < n; ++i) {
       const double t = n == 1 ? 1.0 : static_cast<double>(i) / (n - 1);
       for (int c = 0; c < k; ++c) {
         const double x = k == 1 ? 0.0 : 2.0 * (static_cast<double>(c) / (k - 1) - 0.5);
-        ToolFeature& s = features_[static_cast<std::size_t>(base + 1 + i * k + c)];
-        s = ToolFeature{};
-        s.id = base + 1 + i * k + c;
-        s.shape = FeatureShape::kSphere;
-        s.part = j;
-        s.a_m = a + t * (b - a) + x * half_width;
-        s.b_m = s.a_m;
-        s.radius_m = r;
-        s.face_only = true;
-        s.hinge_m = a;
-        s.opening_sign = side;
+        const int id = base + 1 + i * k + c;
+        const Eigen::Vector3d centre = a + t * (b - a) + x * half_width;
+        ToolFeature& sample = features_[static_cast<std::size_t>(id)];
+        setJawFeature(sample, id, FeatureShape::kSphere, j, centre, centre, r, a, side);
+        sample.face_only = true;
       }
     }
   }

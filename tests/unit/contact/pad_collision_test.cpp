@@ -35,6 +35,18 @@ InstrumentSpec padGrasper(double opening) {
   return spec;
 }
 
+// A pad sample sphere at (t along the length, x across the width in [-1, 1]) of `pad`.
+ToolFeature padSample(int id, const ToolFeature& pad, double t, double x) {
+  ToolFeature sample;
+  sample.id = id;
+  sample.shape = FeatureShape::kSphere;
+  sample.a_m = pad.a_m + t * (pad.b_m - pad.a_m) + x * pad.half_width_m;
+  sample.b_m = sample.a_m;
+  sample.radius_m = pad.radius_m;
+  sample.face_only = true;
+  return sample;
+}
+
 TEST(PadGeometry, FeaturesFormTwoRectanglesWithTheirSampleGrids) {
   const Instrument tool(padGrasper(0.0));
   const auto f = tool.features();
@@ -74,15 +86,7 @@ TEST(PadCollision, PadOnAGridGivesOneContactPerVertexAndDistinctFacePoints) {
   std::vector<ToolFeature> features{pad};
   for (int i = 0; i < 10; ++i) {
     for (int c = 0; c < 4; ++c) {
-      ToolFeature sample;
-      sample.id = 1 + 4 * i + c;
-      sample.shape = FeatureShape::kSphere;
-      sample.a_m = pad.a_m + (i / 9.0) * (pad.b_m - pad.a_m) +
-                   (2.0 * c / 3.0 - 1.0) * pad.half_width_m;
-      sample.b_m = sample.a_m;
-      sample.radius_m = pad.radius_m;
-      sample.face_only = true;
-      features.push_back(sample);
+      features.push_back(padSample(1 + 4 * i + c, pad, i / 9.0, 2.0 * c / 3.0 - 1.0));
     }
   }
   CollisionOptions o;
@@ -138,14 +142,7 @@ TEST(PadCollision, ContactComplianceMakesTheRedundantRowsPositiveDefinite) {
   pad.radius_m = 0.0015;
   std::vector<ToolFeature> features{pad};
   for (int i = 0; i < 10; ++i) {
-    ToolFeature sample;
-    sample.id = 1 + i;
-    sample.shape = FeatureShape::kSphere;
-    sample.a_m = pad.a_m + (i / 9.0) * (pad.b_m - pad.a_m) + 0.3 * pad.half_width_m;
-    sample.b_m = sample.a_m;
-    sample.radius_m = pad.radius_m;
-    sample.face_only = true;
-    features.push_back(sample);
+    features.push_back(padSample(1 + i, pad, i / 9.0, 0.3));
   }
   CollisionOptions o;
   o.alarm_distance_m = 0.0;
