@@ -134,16 +134,7 @@ sim::SceneSpec meshScene(const Options& o, const std::string& mesh) {
   // scenes' former round kinematic jaws closing to 0.25 at x = 0.107 m, not the flat pads. (With
   // the pads on the 596-tet liver, NSGS at 1e-6 leaves the exact model's force 1.3 % rms from its
   // 1e-9 reference: README.md "Flat jaw pads and contact compliance".)
-  sim::InstrumentSpec& in = spec.instrument;
-  in.pad_width_m = 0.0;
-  in.contact_compliance_mpn = 0.0;
-  in.jaw_radius_m = 0.002;
-  in.jaw_samples = 8;
-  in.grip_k_nmprad = 0.0;
-  for (sim::TrajectoryKey& k : in.trajectory) {
-    if (k.gripper_opening < 1.0) k.gripper_opening = 0.25;
-    if (std::abs(k.pose.position_m.x() - 0.100) < 1e-9) k.pose.position_m.x() = 0.107;
-  }
+  sim::useFormerRoundJaws(spec);
   return spec;
 }
 

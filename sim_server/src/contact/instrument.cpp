@@ -77,6 +77,20 @@ void setJawFeature(ToolFeature& f, int id, FeatureShape shape, int part, const E
 
 }  // namespace
 
+void useFormerRoundJaws(SceneSpec& spec) {
+  InstrumentSpec& in = spec.instrument;
+  in.pad_width_m = 0.0;
+  in.contact_compliance_mpn = 0.0;
+  in.jaw_radius_m = 0.002;
+  in.jaw_samples = 8;
+  in.grip_k_nmprad = 0.0;
+  in.grip_b_nmsprad = 0.0;
+  for (TrajectoryKey& k : in.trajectory) {
+    if (k.gripper_opening < 1.0) k.gripper_opening = 0.25;
+    if (std::abs(k.pose.position_m.x() - 0.100) < 1e-9) k.pose.position_m.x() = 0.107;
+  }
+}
+
 BoxSpec instrumentWorkspace(const InstrumentSpec& spec, const Eigen::AlignedBox3d& scene_bounds) {
   if (spec.workspace) return *spec.workspace;
   Eigen::AlignedBox3d box = scene_bounds;

@@ -126,6 +126,12 @@ inline constexpr double kMaxTargetAngularSpeedRadps = 100.0;
 /// every trajectory key, grown by kWorkspaceMarginM on every side.
 BoxSpec instrumentWorkspace(const InstrumentSpec& spec, const Eigen::AlignedBox3d& scene_bounds);
 
+/// The liver scenes' grasper and approach before the flat pads (issue 15), for the tests and the
+/// accuracy study calibrated on it: round kinematic jaws of radius 2 mm with 8 samples each,
+/// closing to 0.25, no contact compliance, and the trajectory keys at x = 0.100 m (the pads'
+/// grasp point) moved back to the former 0.107 m.
+void useFormerRoundJaws(SceneSpec& spec);
+
 /// PoseSpec (scene file) -> Pose.
 inline shared::Pose toPose(const PoseSpec& spec) {
   shared::Pose p;
