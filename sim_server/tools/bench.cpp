@@ -78,6 +78,8 @@ struct BenchOptions {
   double jaw_width_mm = -1.0;          ///< >= 0: overrides instrument.grasper.width
   double grip_stiffness = -1.0;        ///< >= 0: overrides instrument.grasper.grip_stiffness
   int min_contacts = 0;                ///< > 0: a second table over the steps with this many
+  double contact_compliance = -1.0;    ///< >= 0: overrides instrument.contact_compliance [m/N]
+  double pad_width_mm = -1.0;          ///< >= 0: overrides instrument.grasper.pad_width
 };
 
 int run(const BenchOptions& o) {
@@ -88,6 +90,8 @@ int run(const BenchOptions& o) {
   if (o.jaw_rows > 0) spec.instrument.jaw_rows = o.jaw_rows;
   if (o.jaw_width_mm >= 0.0) spec.instrument.jaw_width_m = 1e-3 * o.jaw_width_mm;
   if (o.grip_stiffness >= 0.0) spec.instrument.grip_k_nmprad = o.grip_stiffness;
+  if (o.contact_compliance >= 0.0) spec.instrument.contact_compliance_mpn = o.contact_compliance;
+  if (o.pad_width_mm >= 0.0) spec.instrument.pad_width_m = 1e-3 * o.pad_width_mm;
   const double h = spec.time_step_s;
   const long steps = o.steps > 0 ? o.steps : static_cast<long>(std::llround(spec.duration_s / h));
   if (steps <= 0) throw Error(o.scene + ": no duration in the scene; pass --steps N");
@@ -121,8 +125,13 @@ int run(const BenchOptions& o) {
   std::vector<Series> busy = stages;   // the steps with at least o.min_contacts contacts
   std::vector<double> busy_contacts;
   std::vector<double> contacts, rows, sim_sweeps, tick_us, tick_cpu_us, tick_sweeps_v, tick_err, passes,
-      geometric_pen_mm;
+      geometric_pen_mm, distinct_nodes, total_fn;
   long tick_converged = 0;
+  long sim_converged = 0;
+  int max_contacts_step = -1, max_contacts_nodes = 0;
+  double load_at_max_fn = 0.0, max_load = 0.0, max_fn = -1.0;   // contact force on the tool against gravity [N]
+  const Eigen::Vector3d up =
+      spec.gravity_mps2 ? Eigen::Vector3d(-spec.gravity_mps2->normalized()) : Eigen::Vector3d::UnitZ();
   std::unique_ptr<shared::SnapshotFileWriter> recorder;
   if (!o.record_snapshots.empty()) {
     shared::OutputOptions oo;
@@ -164,6 +173,19 @@ int run(const BenchOptions& o) {
       sim_sweeps.push_back(r.nsgs.sweeps);
       passes.push_back(r.contact_passes);
       geometric_pen_mm.push_back(1e3 * r.geometric_penetration_m);
+      distinct_nodes.push_back(r.distinct_tissue_nodes);
+      const double load = -r.tool_wrench.head<3>().dot(up);   // the tissue pulls the tool down
+      if (r.total_normal_force_n > max_fn) {
+        max_fn = r.total_normal_force_n;
+        load_at_max_fn = load;
+      }
+      max_load = std::max(max_load, load);
+      total_fn.push_back(r.total_normal_force_n);
+      if (r.nsgs.status == shared::NsgsStatus::kConverged) ++sim_converged;
+      if (r.contacts > max_contacts_step) {
+        max_contacts_step = r.contacts;
+        max_contacts_nodes = r.distinct_tissue_nodes;
+      }
     }
     if (trace != nullptr && r.contacts <= 0) {
       std::fprintf(trace, "%ld,%.4f,0,0,0,%.4f,0,0\n", k, sim.time(), 1e3 * stages[6].v.back());
@@ -229,6 +251,13 @@ int run(const BenchOptions& o) {
       "median %.0f, max %.0f); sim NSGS sweeps median %.0f\n",
       contacts.size(), steps, pct(contacts, 0.5), pct(contacts, 1.0), pct(rows, 0.5),
       pct(rows, 1.0), pct(sim_sweeps, 0.5));
+  std::printf(
+      "sim NSGS: converged %ld / %zu, sweeps p90 %.0f, max %.0f; distinct tissue nodes median "
+      "%.0f, max %.0f (%d at the %d-contact step); total normal force median %.3f N, max %.3f N "
+      "(the tissue's pull on the tool against gravity at that step %.3f N, at most %.3f N)\n",
+      sim_converged, contacts.size(), pct(sim_sweeps, 0.9), pct(sim_sweeps, 1.0),
+      pct(distinct_nodes, 0.5), pct(distinct_nodes, 1.0), max_contacts_nodes, max_contacts_step,
+      pct(total_fn, 0.5), pct(total_fn, 1.0), load_at_max_fn, max_load);
   if (spec.solver.contact_iterations > 1) {
     const auto extra = std::count_if(passes.begin(), passes.end(), [](double p) { return p > 1; });
     std::printf(
@@ -314,6 +343,10 @@ int main(int argc, char** argv) {
                  "Override the grasper's pad width (span of the sample rows) [mm]");
   app.add_option("--grip-stiffness", o.grip_stiffness,
                  "Override the grasper's grip stiffness [N m/rad] (0: kinematic jaws)");
+  app.add_option("--contact-compliance", o.contact_compliance,
+                 "Override the instrument's contact compliance [m/N]");
+  app.add_option("--pad-width-mm", o.pad_width_mm,
+                 "Override the grasper's flat pad width [mm] (0: round jaws)");
   app.add_option("--min-contacts", o.min_contacts,
                  "Also report the stages over the steps with at least this many contacts");
   app.add_option("--log-level", o.log_level, "spdlog level of the simulation library")

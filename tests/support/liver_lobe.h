@@ -5,6 +5,8 @@
 #include <vector>
 
 #include "tactus/sim/fem.h"
+#include "tactus/sim/instrument.h"
+#include "tactus/sim/scene.h"
 
 namespace tactus::test_support {
 
@@ -26,5 +28,9 @@ class LiverLobe {
   const sim::FemBody& liver_;
   std::vector<int> nodes_;
 };
+
+/// liver_grasp's grasper and approach as they were before the flat pads (issue 15): the tests
+/// of the contact passes, the grip DOF and the display were written for it.
+inline void useRoundKinematicJaws(sim::SceneSpec& spec) { sim::useFormerRoundJaws(spec); }
 
 }  // namespace tactus::test_support

@@ -149,6 +149,11 @@ struct Collision::Impl {
     Eigen::Vector3d n;
   };
   std::vector<FeatureSide> side_prev, side_next;
+  // pad side memory, per (jaw part & 1, node): the side (+1: the face normal's side) of the
+  // vertex's last pad contact and the detect() count it was set at
+  std::vector<std::int8_t> pad_side;
+  std::vector<long> pad_side_detect;
+  long detect_count = 2;   // pad_side_detect starts at 0: nothing remembered
 
   const Eigen::Vector3d* previousSide(int feature) const {
     for (const FeatureSide& fs : side_prev) {
@@ -282,6 +287,19 @@ struct Collision::Impl {
     contacts.push_back(c);
   }
 
+  // A triangle contact of another sample at the same tissue point (within 1 nm: the same point
+  // of a triangle, or of an edge seen from either of its triangles), among the contacts before
+  // `end`.
+  bool pointTaken(std::size_t end, const Eigen::Vector3d& p) const {
+    for (std::size_t i = 0; i < end; ++i) {
+      const Contact& c = contacts[i];
+      if (c.kind == ContactKind::kSphereTriangle && (c.tissue_point_m - p).squaredNorm() < 1e-18) {
+        return true;
+      }
+    }
+    return false;
+  }
+
   void vertexCapsule(const ToolFeature& f, const shared::Pose& tool_pose) {
     const double cd = options.contact_distance_m;
     const double reach = f.radius_m + cd + options.alarm_distance_m;
@@ -308,6 +326,64 @@ struct Collision::Impl {
     } else {
       vertex_tree.query(
           [&](const Box& box) { return segmentHitsGrownBox(f.a_m, f.b_m, reach, box); }, visit);
+    }
+  }
+
+  // Tissue vertices against a pad (collision.h (c)): over the rectangle the normal is the pad's
+  // face normal on the side the vertex touched at the previous detect() (so a vertex pushed past
+  // the pad's mid-plane is pushed back, not through); at the rim the radial normal of the
+  // rounded edge, as for a capsule.
+  void vertexPad(const ToolFeature& f, const shared::Pose& tool_pose) {
+    const double cd = options.contact_distance_m;
+    const double reach = f.radius_m + cd + options.alarm_distance_m;
+    const Eigen::Vector3d len = f.b_m - f.a_m;
+    const double len2 = len.squaredNorm(), hw2 = f.half_width_m.squaredNorm();
+    if (!(len2 > 0.0) || !(hw2 > 0.0)) return;
+    const Eigen::Vector3d face_n = len.cross(f.half_width_m).normalized();
+    const std::size_t slot_base = static_cast<std::size_t>(f.part & 1) * static_cast<std::size_t>(node_count);
+    auto visit = [&](int prim) {
+      ++stats.candidates;
+      const int node = surface.nodes[prim];
+      const Eigen::Vector3d v = pos(node);
+      const Eigen::Vector3d rel = v - f.a_m;
+      const double t = rel.dot(len) / len2, x = rel.dot(f.half_width_m) / hw2;
+      const double height = rel.dot(face_n);   // signed, from the mid-plane
+      const std::size_t slot = slot_base + static_cast<std::size_t>(node);
+      const bool remembered = pad_side_detect[slot] == detect_count - 1;
+      Eigen::Vector3d n;
+      double gap;
+      Eigen::Vector3d tool_point;
+      if (t >= 0.0 && t <= 1.0 && std::abs(x) <= 1.0) {
+        const double side = remembered ? pad_side[slot] : (height >= 0.0 ? 1.0 : -1.0);
+        gap = side * height - f.radius_m - cd;
+        if (gap > options.alarm_distance_m) return;
+        n = -side * face_n;
+        if (!remembered && !(n.dot(vertexNormal(node)) > 0.0)) return;   // not facing the pad
+        tool_point = v - height * face_n - f.radius_m * n;
+      } else {
+        const Eigen::Vector3d c = f.a_m + std::clamp(t, 0.0, 1.0) * len +
+                                  std::clamp(x, -1.0, 1.0) * f.half_width_m;
+        const Eigen::Vector3d diff = c - v;
+        const double d = diff.norm();
+        if (d > reach) return;
+        const Eigen::Vector3d nv = vertexNormal(node);
+        n = d > kTinyDistance_m ? Eigen::Vector3d(diff / d) : nv;
+        if (!(n.dot(nv) > 0.0)) return;
+        gap = d - f.radius_m - cd;
+        if (gap > options.alarm_distance_m) return;
+        tool_point = c - f.radius_m * n;
+      }
+      pad_side[slot] = static_cast<std::int8_t>(n.dot(face_n) < 0.0 ? 1 : -1);
+      pad_side_detect[slot] = detect_count;
+      emit(ContactKind::kVertexCapsule, f, node, {node, -1, -1}, {1.0, 0.0, 0.0}, v, tool_point,
+           n, gap, tool_pose);
+    };
+    const double grown = reach + std::sqrt(hw2);
+    if (options.brute_force) {
+      for (int i = 0; i < static_cast<int>(surface.nodes.size()); ++i) visit(i);
+    } else {
+      vertex_tree.query(
+          [&](const Box& box) { return segmentHitsGrownBox(f.a_m, f.b_m, grown, box); }, visit);
     }
   }
 
@@ -371,6 +447,11 @@ struct Collision::Impl {
       tri_stamp[cand.tri] = stamp;
       for (int k = 0; k < 3; ++k) node_stamp[tri[k]] = stamp;
       if (duplicate) continue;
+      // pad samples: no vertex (the pad feature's), one contact per tissue point
+      if (f.face_only && ((cand.cp.region != kFace && cand.cp.region < kEdge0) ||
+                          pointTaken(first_contact, cand.cp.p))) {
+        continue;
+      }
       // 3. side filter, normal and gap
       const Eigen::Vector3d pn = pseudoNormal(cand);
       const double pn_len = pn.norm();
@@ -439,6 +520,8 @@ Collision::Collision(const SurfaceMesh& surface, const Eigen::VectorXd& q,
   s.tri_boxes.resize(nt);
   s.vertex_boxes.resize(s.surface.nodes.size());
   s.tri_stamp.assign(nt, 0);
+  s.pad_side.assign(2 * static_cast<std::size_t>(s.node_count), 0);
+  s.pad_side_detect.assign(2 * static_cast<std::size_t>(s.node_count), 0);
   s.node_stamp.assign(s.node_count, 0);
   s.buildAdjacency();
   s.updateGeometry();
@@ -479,7 +562,9 @@ const std::vector<Contact>& Collision::detect(std::span<const ToolFeature> featu
   s.stats.candidates = 0;
   s.side_next.clear();
   for (const ToolFeature& f : features) {
-    if (f.shape == FeatureShape::kCapsule) {
+    if (f.shape == FeatureShape::kPad) {
+      if (s.options.vertex_vs_capsule) s.vertexPad(f, tool_pose);
+    } else if (f.shape == FeatureShape::kCapsule) {
       if (s.options.vertex_vs_capsule) s.vertexCapsule(f, tool_pose);
     } else {
       if (s.options.sphere_vs_triangle) s.sphereTriangles(f, tool_pose);
@@ -487,6 +572,7 @@ const std::vector<Contact>& Collision::detect(std::span<const ToolFeature> featu
     }
   }
   std::swap(s.side_prev, s.side_next);
+  ++s.detect_count;
   // cap: keep the smallest gaps (ties: smaller id), count the rest
   const int found = static_cast<int>(s.contacts.size());
   s.stats.max_contacts_seen = std::max(s.stats.max_contacts_seen, found);

@@ -52,7 +52,44 @@ bool boundNorm(Eigen::Ref<Eigen::Vector3d> v, double max_norm) {
   return true;
 }
 
+// Jaw with opening side `side` (+1 jaw 0, -1 jaw 1) at half-angle phi: its axis a..b, a at
+// (x, side r, 0) in the tool frame (see instrument.h).
+void jawAxis(const shared::Pose& pose, const Eigen::Matrix3d& rot, double side, double phi,
+             double x, double r, double length, Eigen::Vector3d& a, Eigen::Vector3d& b) {
+  a = pose.pos_m + rot * Eigen::Vector3d(x, side * r, 0.0);
+  // Rx(side phi) (0, 0, -1) = (0, sin(side phi), -cos(side phi))
+  b = a + rot * (length * Eigen::Vector3d(0.0, std::sin(side * phi), -std::cos(side * phi)));
+}
+
+// A jaw feature: everything else at its default (ToolFeature{}).
+void setJawFeature(ToolFeature& f, int id, FeatureShape shape, int part, const Eigen::Vector3d& a,
+                   const Eigen::Vector3d& b, double r, const Eigen::Vector3d& hinge, double side) {
+  f = ToolFeature{};
+  f.id = id;
+  f.shape = shape;
+  f.part = part;
+  f.a_m = a;
+  f.b_m = b;
+  f.radius_m = r;
+  f.hinge_m = hinge;
+  f.opening_sign = side;
+}
+
 }  // namespace
+
+void useFormerRoundJaws(SceneSpec& spec) {
+  InstrumentSpec& in = spec.instrument;
+  in.pad_width_m = 0.0;
+  in.contact_compliance_mpn = 0.0;
+  in.jaw_radius_m = 0.002;
+  in.jaw_samples = 8;
+  in.grip_k_nmprad = 0.0;
+  in.grip_b_nmsprad = 0.0;
+  for (TrajectoryKey& k : in.trajectory) {
+    if (k.gripper_opening < 1.0) k.gripper_opening = 0.25;
+    if (std::abs(k.pose.position_m.x() - 0.100) < 1e-9) k.pose.position_m.x() = 0.107;
+  }
+}
 
 BoxSpec instrumentWorkspace(const InstrumentSpec& spec, const Eigen::AlignedBox3d& scene_bounds) {
   if (spec.workspace) return *spec.workspace;
@@ -95,7 +132,14 @@ Instrument::Instrument(const InstrumentSpec& spec) : spec_(spec) {
       throw SceneError("instrument.jaw_width_m: " + std::to_string(spec.jaw_rows) +
                        " rows of jaw samples need a width > 0");
     }
-    features_.resize(static_cast<std::size_t>(2 * spec.jaw_rows * (spec.jaw_samples + 1)));
+    requireNonNegative(spec.pad_width_m, "pad_width_m");
+    if (spec.pad_columns < 1) {
+      throw SceneError("instrument.pad_columns: must be >= 1 (got " +
+                       std::to_string(spec.pad_columns) + ")");
+    }
+    features_.resize(spec.pad_width_m > 0.0
+                         ? static_cast<std::size_t>(2 * (1 + spec.jaw_samples * spec.pad_columns))
+                         : static_cast<std::size_t>(2 * spec.jaw_rows * (spec.jaw_samples + 1)));
     requireNonNegative(spec.grip_k_nmprad, "grip_k_nmprad");
     requireNonNegative(spec.grip_b_nmsprad, "grip_b_nmsprad");
     grip_dynamic_ = spec.grip_k_nmprad > 0.0;
@@ -283,6 +327,10 @@ void Instrument::updateFeatures() {
     }
     return;
   }
+  if (spec_.pad_width_m > 0.0) {
+    updatePadFeatures();
+    return;
+  }
   // grasper: per jaw and row one capsule then its sample spheres
   const int n = spec_.jaw_samples;
   const int rows = spec_.jaw_rows;
@@ -292,36 +340,46 @@ void Instrument::updateFeatures() {
     const int j = jr / rows;
     const int row = jr % rows;
     const double side = j == 0 ? 1.0 : -1.0;
-    const double angle = side * phi;
     const double x = rows == 1 ? 0.0 : spec_.jaw_width_m * (static_cast<double>(row) / (rows - 1) - 0.5);
-    const Eigen::Vector3d a_local(x, side * r, 0.0);
-    // Rx(angle) * (0, 0, -1) = (0, sin(angle), -cos(angle))
-    const Eigen::Vector3d dir_local(0.0, std::sin(angle), -std::cos(angle));
-    const Eigen::Vector3d a = o + rot * a_local;
-    const Eigen::Vector3d b = a + rot * (spec_.jaw_length_m * dir_local);
+    Eigen::Vector3d a, b;
+    jawAxis(pose_, rot, side, phi, x, r, spec_.jaw_length_m, a, b);
     const int base = jr * (n + 1);
-    ToolFeature& cap = features_[base];
-    cap.id = base;
-    cap.shape = FeatureShape::kCapsule;
-    cap.part = j;
-    cap.a_m = a;
-    cap.b_m = b;
-    cap.radius_m = r;
-    cap.skip_cap_a = false;
-    cap.hinge_m = a;
-    cap.opening_sign = side;
+    setJawFeature(features_[base], base, FeatureShape::kCapsule, j, a, b, r, a, side);
     for (int i = 0; i < n; ++i) {
       const double t = n == 1 ? 1.0 : static_cast<double>(i) / (n - 1);
-      ToolFeature& s = features_[base + 1 + i];
-      s.id = base + 1 + i;
-      s.shape = FeatureShape::kSphere;
-      s.part = j;
-      s.a_m = a + t * (b - a);
-      s.b_m = s.a_m;
-      s.radius_m = r;
-      s.skip_cap_a = false;
-      s.hinge_m = a;
-      s.opening_sign = side;
+      const Eigen::Vector3d c = a + t * (b - a);
+      setJawFeature(features_[base + 1 + i], base + 1 + i, FeatureShape::kSphere, j, c, c, r, a,
+                    side);
+    }
+  }
+}
+
+// Flat pads: per jaw the pad rectangle, then its grid of sample spheres (see the header comment).
+void Instrument::updatePadFeatures() {
+  const Eigen::Matrix3d rot = pose_.rot.toRotationMatrix();
+  const int n = spec_.jaw_samples;
+  const int k = spec_.pad_columns;
+  const double phi = opening_ * spec_.max_opening_rad;
+  const double r = spec_.jaw_radius_m;
+  const Eigen::Vector3d half_width = rot.col(0) * (0.5 * spec_.pad_width_m);
+  for (int j = 0; j < 2; ++j) {
+    const double side = j == 0 ? 1.0 : -1.0;
+    Eigen::Vector3d a, b;
+    jawAxis(pose_, rot, side, phi, 0.0, r, spec_.jaw_length_m, a, b);
+    const int base = j * (1 + n * k);
+    ToolFeature& pad = features_[static_cast<std::size_t>(base)];
+    setJawFeature(pad, base, FeatureShape::kPad, j, a, b, r, a, side);
+    pad.half_width_m = half_width;
+    for (int i = 0; i < n; ++i) {
+      const double t = n == 1 ? 1.0 : static_cast<double>(i) / (n - 1);
+      for (int c = 0; c < k; ++c) {
+        const double x = k == 1 ? 0.0 : 2.0 * (static_cast<double>(c) / (k - 1) - 0.5);
+        const int id = base + 1 + i * k + c;
+        const Eigen::Vector3d centre = a + t * (b - a) + x * half_width;
+        ToolFeature& sample = features_[static_cast<std::size_t>(id)];
+        setJawFeature(sample, id, FeatureShape::kSphere, j, centre, centre, r, a, side);
+        sample.face_only = true;
+      }
     }
   }
 }

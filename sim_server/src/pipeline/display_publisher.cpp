@@ -236,16 +236,22 @@ bool DisplayLink::publishNow(const Simulation& sim, const StepReport* report) {
     h.gripper_opening = tool->gripperOpening();
     h.gripper_angle_rad = tool->gripperOpening() * tool->spec().max_opening_rad;
     int n = 0;
+    // a pad is drawn as three capsules along its length (both long edges and the middle); its
+    // sample spheres lie inside it and are not drawn
     for (const ToolFeature& feat : tool->features()) {
-      if (n >= shared::kMaxDisplayToolPrimitives) break;
-      shared::DisplayToolPrimitive& prim = h.tool_primitives[static_cast<std::size_t>(n++)];
-      for (int k = 0; k < 3; ++k) {
-        prim.a_m[k] = static_cast<float>(feat.a_m[k]);
-        prim.b_m[k] = static_cast<float>(feat.shape == FeatureShape::kSphere ? feat.a_m[k]
-                                                                             : feat.b_m[k]);
+      if (feat.face_only) continue;
+      const int copies = feat.shape == FeatureShape::kPad ? 3 : 1;
+      for (int c = 0; c < copies && n < shared::kMaxDisplayToolPrimitives; ++c) {
+        const Eigen::Vector3d shift = static_cast<double>(c - copies / 2) * feat.half_width_m;
+        shared::DisplayToolPrimitive& prim = h.tool_primitives[static_cast<std::size_t>(n++)];
+        for (int k = 0; k < 3; ++k) {
+          prim.a_m[k] = static_cast<float>(feat.a_m[k] + shift[k]);
+          prim.b_m[k] = static_cast<float>(
+              (feat.shape == FeatureShape::kSphere ? feat.a_m[k] : feat.b_m[k]) + shift[k]);
+        }
+        prim.radius_m = static_cast<float>(feat.radius_m);
+        prim.part = static_cast<std::uint32_t>(feat.part);
       }
-      prim.radius_m = static_cast<float>(feat.radius_m);
-      prim.part = static_cast<std::uint32_t>(feat.part);
     }
     h.tool_primitive_count = n;
     const Eigen::Matrix<double, 6, 1> w = sim.renderedWrench();

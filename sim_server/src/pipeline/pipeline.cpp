@@ -102,12 +102,15 @@ struct Simulation::Impl {
   void buildTissues();
   void solveContacts(StepReport& report);
   double queryContacts();
+  double min_excess_gap = 0.0;                    ///< of the last queryContacts
   double detectContacts(StepReport& report);
   /// Where the contacts assembleProblem uses were detected.
   enum class FoundAt { kFreeState, kStepStart, kCorrectedState };
   void assembleProblem(StepReport& report, FoundAt found_at);
   void solveAndCorrect(StepReport& report, bool restore_free);
   void blendWithPreviousPass();
+  int countDistinctNodes();
+  std::vector<std::int64_t> node_keys;            ///< scratch of countDistinctNodes
 };
 
 void Simulation::Impl::buildTissues() {
@@ -300,12 +303,24 @@ DeviceTarget Simulation::scriptedTarget(double t_s) const {
 bool Simulation::hasInstrument() const { return impl_->instrument != nullptr; }
 
 // Refits and queries every tissue at the current state; the smallest gap (+inf if none).
+// min_excess_gap: the smallest gap + c f_n, with f_n the normal force the contact (by id) had in
+// the last solve: the penetration beyond what the contact compliance c allows.
 double Simulation::Impl::queryContacts() {
   double min_gap = std::numeric_limits<double>::infinity();
+  min_excess_gap = min_gap;
+  const double c = spec.instrument.contact_compliance_mpn;
   for (TissueState& ts : tissues) {
     ts.collision->refit(ts.body->positions());
     ts.found = &ts.collision->detect(*instrument);
-    for (const Contact& c : *ts.found) min_gap = std::min(min_gap, c.gap_m);
+    for (const Contact& k : *ts.found) {
+      min_gap = std::min(min_gap, k.gap_m);
+      double allowed = 0.0;
+      if (c > 0.0) {
+        const auto it = previous_f.find(k.id);
+        if (it != previous_f.end()) allowed = c * it->second[0];
+      }
+      min_excess_gap = std::min(min_excess_gap, k.gap_m + allowed);
+    }
   }
   return min_gap;
 }
@@ -343,8 +358,11 @@ void Simulation::Impl::solveContacts(StepReport& report) {
     report.contact_passes = pass + 1;
     if (passes == 1) break;
     // the nonlinear gaps at the corrected state
-    double min_gap = detectContacts(report);
-    report.geometric_penetration_m = std::isfinite(min_gap) ? std::max(0.0, -min_gap) : 0.0;
+    const double geometric_gap = detectContacts(report);
+    report.geometric_penetration_m =
+        std::isfinite(geometric_gap) ? std::max(0.0, -geometric_gap) : 0.0;
+    // with a contact compliance a contact may penetrate by c f_n: the passes look at the rest
+    const double min_gap = min_excess_gap;
     if (!(min_gap < -spec.solver.penetration_tolerance_m) || pass + 1 >= passes) break;
     const double pass_gap = min_gap;
     if (pass > 0 && min_gap < previous_gap) {
@@ -515,11 +533,30 @@ void Simulation::Impl::assembleProblem(StepReport& report, FoundAt found_at) {
       }
     }
     p.J.noalias() = h_tool * tool_free->freeMotionSensitivity(h);
+    // contact compliance (collision.h): W + c I, penetration c f_n per contact
+    p.W.diagonal().array() += spec.instrument.contact_compliance_mpn;
   }
+  report.distinct_tissue_nodes = countDistinctNodes();
   if (mu > 0.0) counters.tangential_rows += rows - contacts;
   report.contacts = contacts;
   report.rows = rows;
   report.times.w_build_s += secondsSince(t0);
+}
+
+// Tissue nodes with a non-zero weight in some contact of the last assembled problem.
+int Simulation::Impl::countDistinctNodes() {
+  node_keys.clear();
+  for (std::size_t t = 0; t < tissues.size(); ++t) {
+    for (const Contact& k : *tissues[t].found) {
+      for (int j = 0; j < 3; ++j) {
+        if (k.nodes[j] >= 0 && k.weights[j] != 0.0) {
+          node_keys.push_back((static_cast<std::int64_t>(t) << 32) | k.nodes[j]);
+        }
+      }
+    }
+  }
+  std::sort(node_keys.begin(), node_keys.end());
+  return static_cast<int>(std::unique(node_keys.begin(), node_keys.end()) - node_keys.begin());
 }
 
 // Warm start by contact identity, NSGS, then the constrained motion from the free state:
@@ -554,6 +591,8 @@ void Simulation::Impl::solveAndCorrect(StepReport& report, bool restore_free) {
     previous_f.emplace(p.contact_id[c], fc);
   }
   report.times.solve_s += secondsSince(t0);
+  report.total_normal_force_n = 0.0;
+  for (int c = 0; c < contacts; ++c) report.total_normal_force_n += p.f[p.row_offset[c]];
 
   t0 = Clock::now();
   if (restore_free) {
@@ -574,6 +613,7 @@ void Simulation::Impl::solveAndCorrect(StepReport& report, bool restore_free) {
     }
     const shared::Vector6d wrench = h_tool.transpose() * p.f;
     last_wrench = wrench;
+    report.tool_wrench = wrench;
     instrument->applyCorrection(wrench);
     last_grip_torque = instrument->dynamicGrip() ? p.grip.dot(p.f) : 0.0;
     if (instrument->dynamicGrip()) instrument->applyGripCorrection(last_grip_torque);
@@ -666,6 +706,11 @@ long Simulation::stepIndex() const { return impl_->step; }
 int Simulation::tissueCount() const { return static_cast<int>(impl_->tissues.size()); }
 FemBody& Simulation::tissue(int i) { return *impl_->tissues.at(i).body; }
 const FemBody& Simulation::tissue(int i) const { return *impl_->tissues.at(i).body; }
+std::span<const Contact> Simulation::contacts(int i) const {
+  const auto& ts = impl_->tissues.at(static_cast<std::size_t>(i));
+  if (ts.found == nullptr) return {};
+  return *ts.found;
+}
 TissueCompliance* Simulation::compliance(int i) { return impl_->tissues.at(i).compliance.get(); }
 Instrument* Simulation::instrument() { return impl_->instrument.get(); }
 const ContactProblemData& Simulation::lastProblem() const { return impl_->problem; }

@@ -533,8 +533,8 @@ class SceneParser {
     const std::string p = "instrument";
     in->present = true;
     checkKeys(n, p, {"type", "mass", "inertia", "coupling", "friction", "alarm_distance",
-                     "contact_distance", "face_contacts", "probe", "grasper", "initial_pose",
-                     "trajectory", "workspace"});
+                     "contact_distance", "face_contacts", "contact_compliance", "probe",
+                     "grasper", "initial_pose", "trajectory", "workspace"});
     choice(n, p, "type", &in->kind,
            {{"probe", InstrumentKind::kProbe}, {"grasper", InstrumentKind::kGrasper}});
     number(n, p, "mass", &in->mass_kg, kPositive, kAtMost(1e3), Range{1e-4, 10.0});
@@ -545,6 +545,8 @@ class SceneParser {
     number(n, p, "contact_distance", &in->contact_distance_m, kNonNegative, kAtMost(1.0),
            kNonNegativeUpTo(0.01));
     boolean(n, p, "face_contacts", &in->face_contacts);
+    number(n, p, "contact_compliance", &in->contact_compliance_mpn, kNonNegative, kAtMost(1.0),
+           kNonNegativeUpTo(1e-2));
     YAML::Node s;
     if (section(n, p, "coupling", &s)) {
       const std::string q = join(p, "coupling");
@@ -566,7 +568,8 @@ class SceneParser {
     if (section(n, p, "grasper", &s)) {
       const std::string q = join(p, "grasper");
       checkKeys(s, q, {"jaw_length", "jaw_radius", "max_opening_deg", "samples", "width",
-                       "width_samples", "grip_stiffness", "grip_damping", "grip_inertia"});
+                       "width_samples", "pad_width", "pad_columns", "grip_stiffness", "grip_damping",
+                       "grip_inertia"});
       number(s, q, "jaw_length", &in->jaw_length_m, kPositive, kAtMost(1.0), Range{1e-4, 0.2});
       number(s, q, "jaw_radius", &in->jaw_radius_m, kPositive, kAtMost(0.5), Range{1e-5, 0.02});
       double deg = 0.0;
@@ -576,6 +579,8 @@ class SceneParser {
       integer(s, q, "samples", &in->jaw_samples, 1, 10000, 200);
       number(s, q, "width", &in->jaw_width_m, kNonNegative, kAtMost(1.0), kNonNegativeUpTo(0.05));
       integer(s, q, "width_samples", &in->jaw_rows, 1, 1000, 20);
+      number(s, q, "pad_width", &in->pad_width_m, kNonNegative, kAtMost(1.0), kNonNegativeUpTo(0.05));
+      integer(s, q, "pad_columns", &in->pad_columns, 1, 1000, 20);
       number(s, q, "grip_stiffness", &in->grip_k_nmprad, kNonNegative, kAtMost(1e6),
              kNonNegativeUpTo(1e3));
       number(s, q, "grip_damping", &in->grip_b_nmsprad, kNonNegative, kAtMost(1e4),

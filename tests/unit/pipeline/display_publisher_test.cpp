@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "../../../sim_server/src/pipeline/display_publisher.h"
+#include "../../support/liver_lobe.h"
 #include "tactus/shared/segment.h"
 #include "tactus/sim/fem.h"
 #include "tactus/sim/instrument.h"
@@ -26,6 +27,7 @@ const std::string kScene = std::string(TACTUS_SOURCE_DIR) + "/scenes/liver_grasp
 TEST(DisplayLink, FramesMatchTheSimulation) {
   SceneSpec spec = loadScene(kScene);
   spec.haptics.enabled = false;
+  test_support::useRoundKinematicJaws(spec);   // one drawn primitive per round-jaw feature
   for (auto& t : spec.tissues) t.compliance_cache_dir.clear();
   Simulation sim(spec);
   const std::string name = "tactus_test_" + std::to_string(::getpid()) + "_display_link";

@@ -7,6 +7,7 @@
 
 #include <cmath>
 
+#include "../../support/liver_lobe.h"
 #include "tactus/sim/fem.h"
 #include "tactus/sim/instrument.h"
 #include "tactus/sim/pipeline.h"
@@ -42,6 +43,7 @@ CloseResult closeOnTheLobe(double grip_k) {
   SceneSpec spec = loadScene(std::string(TACTUS_SOURCE_DIR) + "/scenes/liver_grasp.yaml");
   spec.haptics.enabled = false;
   for (auto& t : spec.tissues) t.compliance_cache_dir.clear();
+  test_support::useRoundKinematicJaws(spec);   // then the rows of samples below (not flat pads)
   spec.instrument.jaw_samples = 16;
   spec.instrument.jaw_rows = 5;
   spec.instrument.jaw_width_m = 0.006;

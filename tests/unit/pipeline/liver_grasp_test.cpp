@@ -1,4 +1,5 @@
-// The paper's scene (scenes/liver_grasp.yaml): the grasper closes on the right lobe's tip and
+// The paper's scene (scenes/liver_grasp.yaml) with its former round kinematic jaws (the flat
+// pads' grasp is pad_grasp_test's): the grasper closes on the right lobe's tip and
 // lifts it 2 cm. The hinged jaws form a wedge that squeezes the tissue out toward their tips
 // unless friction holds it: with mu = 0.8 the lobe stays in the jaws and rises with them; with
 // mu = 0.05 it slips out. Every step keeps the contact laws of the solved problem (gaps of the
@@ -35,6 +36,7 @@ struct GraspResult {
 GraspResult runGrasp(double mu) {
   SceneSpec spec = loadScene(kScene);
   spec.haptics.enabled = false;
+  test_support::useRoundKinematicJaws(spec);
   spec.instrument.friction_mu = mu;
   for (auto& t : spec.tissues) t.compliance_cache_dir.clear();
   EXPECT_EQ(spec.solver.penetration_tolerance_m, kTolerance_m);

@@ -43,6 +43,23 @@
 //        other side of a thin part, or the surface folded under it), the nearest candidate
 //        whose N agrees with that normal decides inside/outside and N0 instead.
 //     Tissue point s, tool point c - r n.
+// (c) pad (FeatureShape::kPad, a flat jaw pad: rectangle a + s (b - a) + x e, s in [0, 1],
+//     x in [-1, 1], swept by radius r) vs surface vertices, one contact per vertex and pad, of
+//     kind kVertexCapsule. Over the rectangle (s and x inside) the normal is the pad's face
+//     normal N = (b - a) x e / |..| on the vertex's side: n = -side N, gap = side (v - a).N - r
+//     - contact_distance, tool point = the vertex's projection on the mid-plane - r n. The side
+//     is the one of the vertex's contact with this jaw at the previous detect() (so a vertex
+//     squeezed past the mid-plane is pushed back, not through), else the side it lies on, and a
+//     new contact must face the pad (n . vertex_normal > 0). Beyond the rectangle's rim: the
+//     radial normal of the rounded edge, as for a capsule.
+//     Pad samples (spheres with face_only) are queried as in (b) but keep only interior and
+//     edge points, and drop a point that an earlier feature's triangle contact already uses
+//     (within 1 nm): a vertex belongs to the pad's own query, so no tissue point gets two
+//     contacts.
+// Contact compliance (instrument.contact_compliance, the pipeline adds it to W's diagonal, see
+// README.md): a contact carrying f penetrates by c f_n; W + c I is positive definite even
+// where the pads' rows are linearly dependent (a face point under a flat pad is an affine
+// combination of its triangle's vertices, which the pad also holds).
 // Every contact gets a stable id: (kind << 56) | (feature id << 32) | (vertex or triangle
 // index); it does not change while the same feature touches the same vertex/triangle, so warm
 // starts can be matched across steps. Contacts are returned sorted by id. When there are more

@@ -44,6 +44,18 @@
 //             Jaw pads (jaw_rows k > 1): each jaw is k such rows, row i's axis shifted along the
 //             tool x axis (the hinge axis) by jaw_width (i/(k-1) - 1/2); ids run jaw-major,
 //             then row: jaw j row i has capsule (j k + i)(n + 1) and samples after it.
+//  Flat pads (pad_width_m > 0; both scenes): each jaw is a rounded box, the rectangle of
+//             jaw_length x pad_width swept by a sphere of jaw_radius: jaw j's rectangle has its
+//             length along the jaw axis above (a_j .. b_j, jaw_rows ignored) and its width
+//             along the tool x axis (half-width vector e_j = (pad_width/2) x_tool), so the
+//             closed pads touch face to face along y = 0. Features of jaw j (base j (1 + n k),
+//             n = jaw_samples, k = pad_columns): the pad (kPad, queried against tissue
+//             vertices: one contact per vertex and jaw) at base, then n k sample spheres of
+//             jaw_radius centred on the rectangle's grid (length-major: sample i along the
+//             length at t = i/(n-1), column c across the width at x = c/(k-1) - 1/2, 0 when
+//             k = 1), queried against tissue triangles but kept only at interior and edge
+//             points not already used (face_only: a vertex is the pad feature's, so no tissue
+//             point gets two contacts from one jaw; collision.h (c)).
 //  Grip. By default the jaws are kinematic: the opening follows the gripper value given to
 //  freeMotion, whatever lies between them (a closing grasper squeezes tissue near the hinge
 //  without limit). With grip_k_nmprad > 0 the jaw half-angle phi = opening * max_opening_rad is
@@ -72,6 +84,9 @@ using shared::Vector6d;
 enum class FeatureShape : std::uint8_t {
   kSphere,    ///< centre a_m (== b_m): queried against tissue surface triangles
   kCapsule,   ///< segment a_m..b_m: queried against tissue surface vertices
+  /// rectangle {a_m + s (b_m - a_m) + x half_width_m : s in [0, 1], x in [-1, 1]} swept by
+  /// radius_m: queried against tissue surface vertices
+  kPad,
 };
 
 /// One collision primitive of the tool, in world coordinates at the current pose and opening.
@@ -87,6 +102,11 @@ struct ToolFeature {
   /// the probe tip: on a fine surface the triangle query's local minima leave the nodes between
   /// them free to sink into the sphere)
   bool query_vertices = false;
+  /// sphere: drop contacts whose closest tissue point is a vertex or a point already used (pad
+  /// samples; collision.h (c))
+  bool face_only = false;
+  /// pad: half of the rectangle's width, along the width (perpendicular to b_m - a_m)
+  Eigen::Vector3d half_width_m = Eigen::Vector3d::Zero();
   /// grasper: the jaw's hinge point (its axis start) and the sign s_j of its opening (+1 jaw 0,
   /// -1 jaw 1): a jaw-fixed point p moves by s_j x_tool x (p - hinge) per radian of phi.
   Eigen::Vector3d hinge_m = Eigen::Vector3d::Zero();
@@ -105,6 +125,12 @@ inline constexpr double kMaxTargetAngularSpeedRadps = 100.0;
 /// around `scene_bounds` (e.g. the tissues' rest positions; may be empty), the initial pose and
 /// every trajectory key, grown by kWorkspaceMarginM on every side.
 BoxSpec instrumentWorkspace(const InstrumentSpec& spec, const Eigen::AlignedBox3d& scene_bounds);
+
+/// The liver scenes' grasper and approach before the flat pads (issue 15), for the tests and the
+/// accuracy study calibrated on it: round kinematic jaws of radius 2 mm with 8 samples each,
+/// closing to 0.25, no contact compliance, and the trajectory keys at x = 0.100 m (the pads'
+/// grasp point) moved back to the former 0.107 m.
+void useFormerRoundJaws(SceneSpec& spec);
 
 /// PoseSpec (scene file) -> Pose.
 inline shared::Pose toPose(const PoseSpec& spec) {
@@ -188,6 +214,7 @@ class Instrument {
 
  private:
   void updateFeatures();
+  void updatePadFeatures();
 
   InstrumentSpec spec_;
   BoxSpec workspace_{Eigen::Vector3d::Constant(-kDefaultWorkspaceHalfM),

@@ -12,12 +12,14 @@
 #include <Eigen/Core>
 #include <cstdint>
 #include <memory>
+#include <span>
 #include <string>
 #include <vector>
 
 #include "tactus/shared/messages.h"
 #include "tactus/shared/nsgs.h"
 #include "tactus/shared/pose.h"
+#include "tactus/sim/collision.h"
 #include "tactus/sim/scene.h"
 
 namespace tactus::sim {
@@ -49,6 +51,12 @@ struct StepReport {
   /// max(-gap) by a fresh collision query at the corrected state, >= 0; measured only when
   /// solver.contact_iterations > 1 (else 0)
   double geometric_penetration_m = 0.0;
+  /// Tissue nodes with a non-zero weight in some contact (a vertex contact's node, a face
+  /// contact's triangle nodes), over all tissues, in the last assembled problem
+  int distinct_tissue_nodes = 0;
+  double total_normal_force_n = 0.0; ///< sum of the normal forces of the last solve [N]
+  /// Contact wrench on the tool of the last solve [force_n; torque_nm about the tool origin]
+  Eigen::Matrix<double, 6, 1> tool_wrench = Eigen::Matrix<double, 6, 1>::Zero();
   bool finite = true;                ///< every state value finite
   /// Tetrahedra inverted (det F <= 0) at the start of the step, over all tissues
   /// (FemStepStats::inverted_elements)
@@ -131,6 +139,9 @@ class Simulation {
   TissueCompliance* compliance(int i);
   Instrument* instrument();
   const ContactProblemData& lastProblem() const;
+  /// The contacts of tissue i found by the last collision query of the last step (empty
+  /// without an instrument or before the first step).
+  std::span<const Contact> contacts(int i) const;
   const PipelineCounters& counters() const;
 
   /// Smallest gap [m] between the instrument and the tissues at the current (corrected) state,

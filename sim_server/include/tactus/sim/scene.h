@@ -105,6 +105,16 @@ struct InstrumentSpec {
   /// axis (tool x), each row a capsule plus jaw_samples spheres. 1 row: a round jaw (default).
   int jaw_rows = 1;
   double jaw_width_m = 0.0;                     ///< centre-to-centre span of the rows
+  /// Flat jaw pads (grasper.pad_width > 0): each jaw is a rounded box, the rectangle of
+  /// jaw_length x pad_width_m swept by a sphere of jaw_radius (so 2 jaw_radius thick), with one
+  /// pad feature (tissue vertices against the rectangle) and jaw_samples x pad_columns sample
+  /// points on it (tissue triangles' interiors; see instrument.h). 0: round jaws (rows above).
+  double pad_width_m = 0.0;
+  int pad_columns = 3;                          ///< sample points across the pad's width
+  /// Contact compliance [m/N]: added to the normal and tangential diagonal of W (collision.h,
+  /// "Contact compliance"): the local compliance of the pad's serrations and of the tissue's
+  /// surface layer under one contact point. A contact carrying f_n penetrates by c f_n.
+  double contact_compliance_mpn = 0.0;
   /// Grip: 0 (default) = kinematic jaws (the opening follows the device's gripper value);
   /// > 0 = the jaw angle is a DOF pulled toward the device's value by this PD (see instrument.h).
   double grip_k_nmprad = 0.0;                   ///< grip stiffness [N m / rad]
@@ -128,6 +138,8 @@ struct SolverSpec {
   /// Contact passes per step: after the constrained motion, contacts are detected again at the
   /// corrected state and, while some gap is below -penetration_tolerance_m, the contact problem
   /// is linearised there and solved again from the free motion (1: the paper's single pass).
+  /// With a contact compliance c a contact's gap counts as gap + c f_n (f_n its normal force in
+  /// the pass just solved): the penetration the compliance allows is not a linearisation error.
   int contact_iterations = 1;
   double penetration_tolerance_m = 1e-4;        ///< geometric gap accepted by the passes [m]
   /// Where the first pass detects its contacts. kFreeState (default): at the free state, so the
