@@ -6,6 +6,7 @@
 #include "study.h"
 #include "tactus/shared/error.h"
 #include "tactus/shared/file_io.h"
+#include "tactus/sim/instrument.h"
 
 namespace tactus::study {
 
