@@ -209,6 +209,15 @@ double naturalMapError(const ContactProblemView& problem, const double* f,
 // of its checks repeat. Slow convergence and plateaus drift, so they never qualify.
 constexpr int kCyclePeriods = 4;
 constexpr double kCycleRelTol = 1e-6;
+// Oscillation rule (see NsgsSettings::stall_sweeps): a peak is a rise of the error to
+// kSwingRatio times the trough before it followed by a fall to 1 / kSwingRatio of the peak; it
+// counts when that trough lies within kTroughToBest of the best error (an oscillation about the
+// best level, not a transient excursion). kPeaksToRelax counted peaks within stall_sweeps
+// sweeps, while the best error has not fallen below stall_ratio times its value at the previous
+// such fall, lower sor at once.
+constexpr double kSwingRatio = 1.2;
+constexpr double kTroughToBest = 2.0;
+constexpr int kPeaksToRelax = 3;
 
 namespace {
 
@@ -276,6 +285,14 @@ NsgsResult solveWith(const ContactProblemView& p, const Storage& w, const NsgsSe
   int checks_done = 0;
   int window_start = 0;
   int window_repeats = 0;            // checks in the window whose error repeats a recent one
+  // oscillation watch (see kPeaksToRelax)
+  double progress_best = best_error;  // best error when it last fell below stall_ratio x this
+  bool rising = true;                 // looking for a peak (else for a trough)
+  double swing_high = 0.0;            // highest error since the last trough
+  double swing_low = best_error;      // lowest error since the last peak
+  double trough = best_error;         // the trough the current rise started from
+  int peak_sweep[kPeaksToRelax];      // sweeps of the last counted peaks (ring)
+  int peaks = 0;                      // counted peaks since progress_best was set
   result.sor = sor;
   double block[9];   // a contact's diagonal block (dense storage)
   for (int sweep = 1; sweep <= max_sweeps; ++sweep) {
@@ -333,6 +350,37 @@ NsgsResult solveWith(const ContactProblemView& p, const Storage& w, const NsgsSe
       repeats = repeats || std::abs(result.error - e) <= kCycleRelTol * result.error;
     }
     if (repeats) ++window_repeats;
+    if (best_error < settings.stall_ratio * progress_best) {
+      progress_best = best_error;
+      rising = true;
+      swing_high = swing_low = trough = result.error;
+      peaks = 0;
+    } else if (rising) {
+      swing_high = std::max(swing_high, result.error);
+      if (result.error * kSwingRatio < swing_high) {
+        if (trough <= kTroughToBest * best_error) peak_sweep[peaks++ % kPeaksToRelax] = sweep;
+        rising = false;
+        swing_low = result.error;
+      }
+    } else {
+      swing_low = std::min(swing_low, result.error);
+      if (result.error > kSwingRatio * swing_low) {
+        rising = true;
+        swing_high = result.error;
+        trough = swing_low;
+      }
+    }
+    // the oldest of the last kPeaksToRelax peaks is peak_sweep[peaks % kPeaksToRelax]
+    if (settings.stall_sweeps > 0 && peaks >= kPeaksToRelax &&
+        sweep - peak_sweep[peaks % kPeaksToRelax] <= settings.stall_sweeps &&
+        sor > settings.min_sor) {
+      sor = std::max(settings.min_sor, sor * settings.stall_sor_factor);
+      ++result.relaxations;
+      progress_best = best_error;
+      rising = true;
+      swing_high = swing_low = trough = result.error;
+      peaks = 0;
+    }
     recent[checks_done % kCyclePeriods] = result.error;
     ++checks_done;
     if (settings.stall_sweeps > 0 && sweep - window_start >= settings.stall_sweeps) {
