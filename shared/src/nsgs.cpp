@@ -204,20 +204,23 @@ double naturalMapError(const ContactProblemView& problem, const double* f,
   return naturalMapErrorWith(problem, DenseW(problem), f, delta_out);
 }
 
-// Stagnation rule (see NsgsSettings::stall_sweeps): a check "repeats" when its error equals one
-// of the last kCyclePeriods errors to kCycleRelTol; a window is a limit cycle when at least half
-// of its checks repeat. Slow convergence and plateaus drift, so they never qualify.
+// Limit-cycle rule (see NsgsSettings::stall_sweeps): a check "repeats" when its error equals the
+// error 2 to kCyclePeriods checks before it to kCycleRelTol (not the one just before: a flat
+// plateau is not a cycle); a window is a limit cycle when at least half of its checks repeat.
 constexpr int kCyclePeriods = 4;
 constexpr double kCycleRelTol = 1e-6;
 // Oscillation rule (see NsgsSettings::stall_sweeps): a peak is a rise of the error to
 // kSwingRatio times the trough before it followed by a fall to 1 / kSwingRatio of the peak; it
 // counts when that trough lies within kTroughToBest of the best error (an oscillation about the
-// best level, not a transient excursion). kPeaksToRelax counted peaks within stall_sweeps
-// sweeps, while the best error has not fallen below stall_ratio times its value at the previous
-// such fall, lower sor at once.
+// best level, not a transient excursion). kPeaksToRelax counted peaks within kPeakSpan x
+// stall_sweeps sweeps, while the best error has not fallen below stall_ratio times its value at
+// the previous such fall, lower sor at once. Chosen on plain Gauss-Seidel traces of the bench's
+// piles (tests/bench/nsgs_rule_bench.cpp --trace): 3 peaks in 50 sweeps, or troughs within 2x,
+// also fire on piles plain Gauss-Seidel solves faster than the relaxed one.
 constexpr double kSwingRatio = 1.2;
-constexpr double kTroughToBest = 2.0;
-constexpr int kPeaksToRelax = 3;
+constexpr double kTroughToBest = 1.5;
+constexpr int kPeaksToRelax = 5;
+constexpr int kPeakSpan = 2;
 
 namespace {
 
@@ -276,7 +279,7 @@ NsgsResult solveWith(const ContactProblemView& p, const Storage& w, const NsgsSe
     return fail(NsgsStatus::kNonFinite);
   }
 
-  // stagnation watch (see NsgsSettings::stall_sweeps)
+  // relaxation rule (see NsgsSettings::stall_sweeps and kPeaksToRelax)
   double best_error = std::numeric_limits<double>::infinity();
   double window_best = best_error;   // best error when the current window opened
   // errors of the last kCyclePeriods checks (ring, newest at recent[(checks_done - 1) % K])
@@ -285,7 +288,6 @@ NsgsResult solveWith(const ContactProblemView& p, const Storage& w, const NsgsSe
   int checks_done = 0;
   int window_start = 0;
   int window_repeats = 0;            // checks in the window whose error repeats a recent one
-  // oscillation watch (see kPeaksToRelax)
   double progress_best = best_error;  // best error when it last fell below stall_ratio x this
   bool rising = true;                 // looking for a peak (else for a trough)
   double swing_high = 0.0;            // highest error since the last trough
@@ -346,7 +348,8 @@ NsgsResult solveWith(const ContactProblemView& p, const Storage& w, const NsgsSe
     }
     best_error = std::min(best_error, result.error);
     bool repeats = false;
-    for (const double e : recent) {
+    for (int back = 2; back <= kCyclePeriods; ++back) {
+      const double e = recent[(checks_done - back + kCyclePeriods) % kCyclePeriods];
       repeats = repeats || std::abs(result.error - e) <= kCycleRelTol * result.error;
     }
     if (repeats) ++window_repeats;
@@ -372,7 +375,7 @@ NsgsResult solveWith(const ContactProblemView& p, const Storage& w, const NsgsSe
     }
     // the oldest of the last kPeaksToRelax peaks is peak_sweep[peaks % kPeaksToRelax]
     if (settings.stall_sweeps > 0 && peaks >= kPeaksToRelax &&
-        sweep - peak_sweep[peaks % kPeaksToRelax] <= settings.stall_sweeps &&
+        sweep - peak_sweep[peaks % kPeaksToRelax] <= kPeakSpan * settings.stall_sweeps &&
         sor > settings.min_sor) {
       sor = std::max(settings.min_sor, sor * settings.stall_sor_factor);
       ++result.relaxations;

@@ -1,6 +1,7 @@
 // NSGS relaxation rule against plain (sor 1) and fixed-relaxed (sor 0.7, 0.5) Gauss-Seidel on
 // the problem set of tests/support/nsgs_rule_set.h: sweeps to 1e-6 and 1e-9 (20000 at most).
 // Run: build/tests/bench/nsgs_rule_bench --table   (the README's table)
+//      build/tests/bench/nsgs_rule_bench --holdout (other seeds and sizes, not in the tests)
 //      build/tests/bench/nsgs_rule_bench --trace NAME SOR TOL  (error after every sweep, rule off)
 // The Google Benchmark part ("Small") only feeds the ctest smoke run.
 
@@ -39,8 +40,27 @@ NsgsSettings settings(double tol, double sor, bool rule) {
 
 int sweeps(const NsgsResult& r) { return r.status == NsgsStatus::kConverged ? r.sweeps : -1; }
 
-void table() {
-  const auto set = tactus::test::nsgsRuleSet(TACTUS_TEST_DATA_DIR);
+// Problems outside the tested set (other seeds and sizes), to check the rule is not fitted to it.
+std::vector<tactus::test::NamedProblem> holdout() {
+  using namespace tactus::test;
+  std::vector<NamedProblem> set;
+  for (unsigned seed = 6; seed <= 20; ++seed) {
+    set.push_back({"spheres20_mu2_s" + std::to_string(seed), spherePile(20, seed, 2.0)});
+  }
+  for (unsigned seed = 6; seed <= 10; ++seed) {
+    set.push_back({"spheres40_mu0.8_s" + std::to_string(seed), spherePile(40, seed, 0.8)});
+    set.push_back({"spheres60c6_mu1_s" + std::to_string(seed), spherePile(60, seed, 1.0, 6)});
+  }
+  for (unsigned seed = 4; seed <= 8; ++seed) {
+    set.push_back({"capsules6x4_mu2_s" + std::to_string(seed), capsulePile(6, 4, seed, 2.0)});
+    set.push_back({"patch4x6_mu2_s" + std::to_string(seed), redundantPatch(4, 6, seed, 2.0)});
+    set.push_back({"patch6x4_mu1_s" + std::to_string(seed), redundantPatch(6, 4, seed, 1.0)});
+  }
+  return set;
+}
+
+void table(bool hold_out) {
+  const auto set = hold_out ? holdout() : tactus::test::nsgsRuleSet(TACTUS_TEST_DATA_DIR);
   std::printf("%-44s %5s %6s %6s %6s %6s %6s  %s\n", "problem", "tol", "plain", "sor0.7",
               "sor0.5", "rule", "ratio", "relaxations/sor");
   int misses = 0;
@@ -68,7 +88,9 @@ void table() {
 }
 
 void trace(const char* want, double sor, double tol) {
-  for (const auto& [name, p] : tactus::test::nsgsRuleSet(TACTUS_TEST_DATA_DIR)) {
+  auto set = tactus::test::nsgsRuleSet(TACTUS_TEST_DATA_DIR);
+  for (auto& named : holdout()) set.push_back(std::move(named));
+  for (const auto& [name, p] : set) {
     if (name != want) continue;
     NsgsWorkspace ws(p.rows(), p.contacts());
     std::vector<double> f(p.rows(), 0.0);
@@ -92,8 +114,8 @@ BENCHMARK(BM_RuleSmall);
 }  // namespace
 
 int main(int argc, char** argv) {
-  if (argc >= 2 && std::strcmp(argv[1], "--table") == 0) {
-    table();
+  if (argc >= 2 && (std::strcmp(argv[1], "--table") == 0 || std::strcmp(argv[1], "--holdout") == 0)) {
+    table(std::strcmp(argv[1], "--holdout") == 0);
     return 0;
   }
   if (argc >= 5 && std::strcmp(argv[1], "--trace") == 0) {
