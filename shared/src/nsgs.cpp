@@ -205,7 +205,7 @@ double naturalMapError(const ContactProblemView& problem, const double* f,
 }
 
 // Limit-cycle rule (see NsgsSettings::stall_sweeps): a check "repeats" when its error equals the
-// error 2 to kCyclePeriods checks before it to kCycleRelTol (not the one just before: a flat
+// error 2 to kCyclePeriods checks before it to kCycleRelTol but not the one just before (a flat
 // plateau is not a cycle); a window is a limit cycle when at least half of its checks repeat.
 constexpr int kCyclePeriods = 4;
 constexpr double kCycleRelTol = 1e-6;
@@ -347,10 +347,12 @@ NsgsResult solveWith(const ContactProblemView& p, const Storage& w, const NsgsSe
       break;
     }
     best_error = std::min(best_error, result.error);
-    bool repeats = false;
-    for (int back = 2; back <= kCyclePeriods; ++back) {
+    bool repeats = false;   // at a lag of 2..kCyclePeriods checks but not at a lag of 1
+    for (int back = 1; back <= kCyclePeriods; ++back) {
       const double e = recent[(checks_done - back + kCyclePeriods) % kCyclePeriods];
-      repeats = repeats || std::abs(result.error - e) <= kCycleRelTol * result.error;
+      const bool same = std::abs(result.error - e) <= kCycleRelTol * result.error;
+      if (back == 1 && same) break;
+      repeats = repeats || same;
     }
     if (repeats) ++window_repeats;
     if (best_error < settings.stall_ratio * progress_best) {

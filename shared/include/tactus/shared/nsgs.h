@@ -87,9 +87,10 @@ struct NsgsSettings {
   ///   then a fall to 1/1.2 of the peak, that trough within 1.5x the best error) within
   ///   2 x `stall_sweeps` sweeps (the mu = 2 drag: at sweep 16; the pile: at sweep ~405); or
   /// - at the end of a window of `stall_sweeps` sweeps without that fall, at least half of the
-  ///   window's checks repeat one of the 4 errors before them (to 1e-6 relative: a cycle of
-  ///   period <= 4), or the sweep is past 3/4 of max_sweeps (the budget is then the nearer
-  ///   limit: the simulation's 500-sweep solves keep their budget-stop residual so).
+  ///   window's checks repeat the error 2, 3 or 4 checks before them but not the one just before
+  ///   (to 1e-6 relative: a cycle of period 2-4; a flat plateau is not one), or the sweep is past
+  ///   3/4 of max_sweeps (the budget is then the nearer limit: the simulation's 500-sweep solves
+  ///   on the mu = 2 drag keep their budget-stop residual low so).
   /// Slow convergence, plateaus and transient excursions keep sor: lowering it on any
   /// stagnation cost 4-8x more sweeps on rigid piles, or never reached 1e-9; with 3 peaks in
   /// 50 sweeps the rule also fired on piles that plain Gauss-Seidel solves 1.9x faster than
