@@ -114,8 +114,9 @@ BENCHMARK(BM_RuleSmall);
 }  // namespace
 
 int main(int argc, char** argv) {
-  if (argc >= 2 && (std::strcmp(argv[1], "--table") == 0 || std::strcmp(argv[1], "--holdout") == 0)) {
-    table(std::strcmp(argv[1], "--holdout") == 0);
+  const bool hold_out = argc >= 2 && std::strcmp(argv[1], "--holdout") == 0;
+  if (hold_out || (argc >= 2 && std::strcmp(argv[1], "--table") == 0)) {
+    table(hold_out);
     return 0;
   }
   if (argc >= 5 && std::strcmp(argv[1], "--trace") == 0) {

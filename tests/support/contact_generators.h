@@ -81,8 +81,10 @@ inline DenseProblem capsulePile(int layers, int per_layer, unsigned seed, double
     for (int a = (l - 1) * per_layer; a < l * per_layer; ++a) {
       for (int b = l * per_layer; b < (l + 1) * per_layer; ++b) {
         // crossing point: a's axis coordinate of b's line and vice versa
-        const Eigen::Vector3d pa = bodies[a].x + bodies[a].axis * bodies[a].axis.dot(bodies[b].x - bodies[a].x);
-        const Eigen::Vector3d pb = bodies[b].x + bodies[b].axis * bodies[b].axis.dot(bodies[a].x - bodies[b].x);
+        const Body& ba = bodies[a];
+        const Body& bb = bodies[b];
+        const Eigen::Vector3d pa = ba.x + ba.axis * ba.axis.dot(bb.x - ba.x);
+        const Eigen::Vector3d pb = bb.x + bb.axis * bb.axis.dot(ba.x - bb.x);
         touches.push_back({a, b, 0.5 * (pa + pb), (pb - pa).normalized()});
       }
     }

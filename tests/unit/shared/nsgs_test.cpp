@@ -912,7 +912,8 @@ TEST(NsgsStagnation, TheRuleIsNoSlowerThanTheBetterOfPlainAndRelaxed) {
       const int n_relaxed = sweepsToConverge(p.view(), relaxed);
       const int n_rule = sweepsToConverge(p.view(), rule);
       if (n_plain < 0 && n_relaxed < 0) continue;
-      const int best = n_plain < 0 ? n_relaxed : n_relaxed < 0 ? n_plain : std::min(n_plain, n_relaxed);
+      const int best =
+          n_plain < 0 ? n_relaxed : n_relaxed < 0 ? n_plain : std::min(n_plain, n_relaxed);
       EXPECT_GT(n_rule, 0) << "plain " << n_plain << " relaxed " << n_relaxed;
       EXPECT_LE(n_rule, 1.1 * best + 2) << "plain " << n_plain << " relaxed " << n_relaxed;
       if (n_plain < 0) ++only_relaxed;
