@@ -204,11 +204,23 @@ double naturalMapError(const ContactProblemView& problem, const double* f,
   return naturalMapErrorWith(problem, DenseW(problem), f, delta_out);
 }
 
-// Stagnation rule (see NsgsSettings::stall_sweeps): a check "repeats" when its error equals one
-// of the last kCyclePeriods errors to kCycleRelTol; a window is a limit cycle when at least half
-// of its checks repeat. Slow convergence and plateaus drift, so they never qualify.
+// Limit-cycle rule (see NsgsSettings::stall_sweeps): a check "repeats" when its error equals the
+// error 2 to kCyclePeriods checks before it to kCycleRelTol but not the one just before (a flat
+// plateau is not a cycle); a window is a limit cycle when at least half of its checks repeat.
 constexpr int kCyclePeriods = 4;
 constexpr double kCycleRelTol = 1e-6;
+// Oscillation rule (see NsgsSettings::stall_sweeps): a peak is a rise of the error to
+// kSwingRatio times the trough before it followed by a fall to 1 / kSwingRatio of the peak; it
+// counts when that trough lies within kTroughToBest of the best error (an oscillation about the
+// best level, not a transient excursion). kPeaksToRelax counted peaks within kPeakSpan x
+// stall_sweeps sweeps, while the best error has not fallen below stall_ratio times its value at
+// the previous such fall, lower sor at once. Chosen on plain Gauss-Seidel traces of the bench's
+// piles (tests/bench/nsgs_rule_bench.cpp --trace): 3 peaks in 50 sweeps, or troughs within 2x,
+// also fire on piles plain Gauss-Seidel solves faster than the relaxed one.
+constexpr double kSwingRatio = 1.2;
+constexpr double kTroughToBest = 1.5;
+constexpr int kPeaksToRelax = 5;
+constexpr int kPeakSpan = 2;
 
 namespace {
 
@@ -267,7 +279,7 @@ NsgsResult solveWith(const ContactProblemView& p, const Storage& w, const NsgsSe
     return fail(NsgsStatus::kNonFinite);
   }
 
-  // stagnation watch (see NsgsSettings::stall_sweeps)
+  // relaxation rule (see NsgsSettings::stall_sweeps and kPeaksToRelax)
   double best_error = std::numeric_limits<double>::infinity();
   double window_best = best_error;   // best error when the current window opened
   // errors of the last kCyclePeriods checks (ring, newest at recent[(checks_done - 1) % K])
@@ -276,6 +288,13 @@ NsgsResult solveWith(const ContactProblemView& p, const Storage& w, const NsgsSe
   int checks_done = 0;
   int window_start = 0;
   int window_repeats = 0;            // checks in the window whose error repeats a recent one
+  double progress_best = best_error;  // best error when it last fell below stall_ratio x this
+  bool rising = true;                 // looking for a peak (else for a trough)
+  double swing_high = 0.0;            // highest error since the last trough
+  double swing_low = best_error;      // lowest error since the last peak
+  double trough = best_error;         // the trough the current rise started from
+  int peak_sweep[kPeaksToRelax];      // sweeps of the last counted peaks (ring)
+  int peaks = 0;                      // counted peaks since progress_best was set
   result.sor = sor;
   double block[9];   // a contact's diagonal block (dense storage)
   for (int sweep = 1; sweep <= max_sweeps; ++sweep) {
@@ -328,11 +347,45 @@ NsgsResult solveWith(const ContactProblemView& p, const Storage& w, const NsgsSe
       break;
     }
     best_error = std::min(best_error, result.error);
-    bool repeats = false;
-    for (const double e : recent) {
-      repeats = repeats || std::abs(result.error - e) <= kCycleRelTol * result.error;
+    bool repeats = false;   // at a lag of 2..kCyclePeriods checks but not at a lag of 1
+    for (int back = 1; back <= kCyclePeriods; ++back) {
+      const double e = recent[(checks_done - back + kCyclePeriods) % kCyclePeriods];
+      const bool same = std::abs(result.error - e) <= kCycleRelTol * result.error;
+      if (back == 1 && same) break;
+      repeats = repeats || same;
     }
     if (repeats) ++window_repeats;
+    if (best_error < settings.stall_ratio * progress_best) {
+      progress_best = best_error;
+      rising = true;
+      swing_high = swing_low = trough = result.error;
+      peaks = 0;
+    } else if (rising) {
+      swing_high = std::max(swing_high, result.error);
+      if (result.error * kSwingRatio < swing_high) {
+        if (trough <= kTroughToBest * best_error) peak_sweep[peaks++ % kPeaksToRelax] = sweep;
+        rising = false;
+        swing_low = result.error;
+      }
+    } else {
+      swing_low = std::min(swing_low, result.error);
+      if (result.error > kSwingRatio * swing_low) {
+        rising = true;
+        swing_high = result.error;
+        trough = swing_low;
+      }
+    }
+    // the oldest of the last kPeaksToRelax peaks is peak_sweep[peaks % kPeaksToRelax]
+    if (settings.stall_sweeps > 0 && peaks >= kPeaksToRelax &&
+        sweep - peak_sweep[peaks % kPeaksToRelax] <= kPeakSpan * settings.stall_sweeps &&
+        sor > settings.min_sor) {
+      sor = std::max(settings.min_sor, sor * settings.stall_sor_factor);
+      ++result.relaxations;
+      progress_best = best_error;
+      rising = true;
+      swing_high = swing_low = trough = result.error;
+      peaks = 0;
+    }
     recent[checks_done % kCyclePeriods] = result.error;
     ++checks_done;
     if (settings.stall_sweeps > 0 && sweep - window_start >= settings.stall_sweeps) {

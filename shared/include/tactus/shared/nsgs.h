@@ -75,20 +75,32 @@ struct NsgsSettings {
   /// dense FEM-like W, 0.6 needs 46 sweeps against 73 at 1.0; on the rigid FCLIB stacks 1.3 is
   /// best (Box_Stacks 82 contacts: 15 against 22).
   double sor = 1.0;
-  /// Relaxation on a limit cycle. On redundant frictional contacts (a surface held by both vertex
-  /// and face contacts, mu = 2) plain Gauss-Seidel can settle into a limit cycle: measured on a
-  /// hard-case problem (65 contacts), the error repeats 3.1e-2 for 5000 sweeps at sor 1, while
-  /// sor 0.7 converges in 39. When `stall_sweeps` sweeps pass without the best error falling
-  /// below `stall_ratio` times the best error before them AND at least half of that window's
-  /// error checks repeat one of the 4 errors before them (to 1e-6 relative: a cycle of period
-  /// <= 4), sor is multiplied by `stall_sor_factor`, down to `min_sor` (a solution is a fixed
-  /// point for any sor, so this only changes the path). Slow convergence and long plateaus (rigid
-  /// sphere piles: 1000-12000 sweeps to 1e-9) drift, so they keep sor: an earlier rule without
-  /// the repeat test lowered sor there and cost 4-8x more sweeps or never converged. Past 3/4 of
-  /// max_sweeps any stalled window lowers sor (the budget is then the nearer limit: the
-  /// simulation's 500-sweep solves on the mu = 2 drag keep their budget-stop residual so). The
-  /// window counts sweeps of one call: the haptic loop's 40-sweep ticks never trigger it.
-  /// stall_sweeps = 0 disables it.
+  /// Relaxation on a cycling or oscillating error. On redundant frictional contacts (a surface
+  /// held by both vertex and face contacts, mu = 2) plain Gauss-Seidel can settle into a limit
+  /// cycle: measured on a hard-case problem (65 contacts), the error alternates 3.1e-2 / 4.1e-2
+  /// for 5000 sweeps at sor 1, while sor 0.7 converges in 39; some mu = 2 sphere piles oscillate
+  /// about a plateau (error 3e-4 .. 1.2e-3, period ~20 sweeps) and never converge at sor 1, where
+  /// sor 0.7 converges in 1195. sor is multiplied by `stall_sor_factor` (down to `min_sor`; a
+  /// solution is a fixed point for any sor, so this only changes the path) when, while the best
+  /// error has not fallen below `stall_ratio` times its value at the previous such fall:
+  /// - the error oscillates about its best level: 5 peaks (a rise to 1.2x the trough before it,
+  ///   then a fall to 1/1.2 of the peak, that trough within 1.5x the best error) within
+  ///   2 x `stall_sweeps` sweeps (the mu = 2 drag: at sweep 16; the pile: at sweep ~405); or
+  /// - at the end of a window of `stall_sweeps` sweeps without that fall, at least half of the
+  ///   window's checks repeat the error 2, 3 or 4 checks before them but not the one just before
+  ///   (to 1e-6 relative: a cycle of period 2-4; a flat plateau is not one), or the sweep is past
+  ///   3/4 of max_sweeps (the budget is then the nearer limit: the simulation's 500-sweep solves
+  ///   on the mu = 2 drag keep their budget-stop residual low so).
+  /// Slow convergence, plateaus and transient excursions keep sor: lowering it on any
+  /// stagnation cost 4-8x more sweeps on rigid piles, or never reached 1e-9; with 3 peaks in
+  /// 50 sweeps the rule also fired on piles that plain Gauss-Seidel solves 1.9x faster than
+  /// sor 0.7. Measured (tests/bench/nsgs_rule_bench.cpp, README "Solve"): on 48 problems
+  /// (FCLIB, the drag problem, sphere and capsule piles, redundant patches) at 1e-6 and 1e-9 the
+  /// rule converges wherever plain or sor 0.7 does, in at most the better one's sweeps; on 40
+  /// more (80 runs) it misses 3: plain converging after 3/4 of the budget (the late fallback
+  /// then stops it), and plain stalling flat at 1.7e-6 where sor 0.7 converges in 10140.
+  /// The windows count sweeps of one call: the haptic loop's 40-sweep ticks can only trigger
+  /// the oscillation test (on the drag problem's kind of cycle). stall_sweeps = 0 disables both.
   int stall_sweeps = 50;
   double stall_ratio = 0.9;
   double stall_sor_factor = 0.7;
