@@ -139,6 +139,8 @@ void Simulation::Impl::buildTissues() {
     solver.linear = spec.solver.linear;
     solver.cg_tolerance = spec.solver.cg_tolerance;
     solver.cg_max_iterations = spec.solver.cg_max_iterations;
+    solver.refactor_iterations = spec.solver.refactor_iterations;
+    solver.refactor_every_steps = spec.solver.refactor_every_steps;
     state.body = std::make_unique<FemBody>(state.mesh, material, fixed, gravity, solver);
     spdlog::info("tissue '{}': {} nodes, {} tets, {} fixed nodes", ts.name, state.mesh.nodeCount(),
                  state.mesh.tetCount(), fixed.size());
@@ -202,7 +204,11 @@ std::vector<std::string> Simulation::stages() const {
     std::string effects = ts.law == MaterialLaw::kCorotational ? "corotational" : "linear";
     effects += ts.damping ? ", Rayleigh damping" : ", no damping";
     effects += s.spec.gravity_mps2 ? ", gravity" : ", no gravity";
-    effects += s.spec.solver.linear == LinearSolverKind::kCholmod ? ", CHOLMOD" : ", PCG";
+    switch (s.spec.solver.linear) {
+      case LinearSolverKind::kCholmod: effects += ", CHOLMOD"; break;
+      case LinearSolverKind::kPcg: effects += ", PCG"; break;
+      case LinearSolverKind::kCholmodReuse: effects += ", PCG on a reused CHOLMOD factor"; break;
+    }
     out.push_back(fmt::format("free motion of tissue '{}' (implicit Euler; {})", ts.name, effects));
   }
   if (!s.instrument) {

@@ -10,7 +10,8 @@
 // R_e K0_e R_e^T. Linear: R_e = I (no rotation extraction at all).
 //
 // The system matrix keeps a fixed sparsity pattern; CHOLMOD's symbolic analysis runs once in the
-// constructor and every step refactorises numerically. Fixed nodes are eliminated (their rows and
+// constructor and every step refactorises numerically (LinearSolverKind::kCholmod), or a
+// recent factorisation preconditions a PCG (kCholmodReuse, see FemSolverOptions). Fixed nodes are eliminated (their rows and
 // columns are not in the system; their displacement stays zero).
 //
 // The contact compliance C = (M/h^2 + B/h + K)^-1 = h (M/h + B + hK)^-1 is available from the
@@ -48,11 +49,23 @@ enum class PcgPreconditioner {
                     ///< rotations; one CHOLMOD solve per iteration
 };
 
+/// Linear solve of the step, A dv = b with A = M/h + B + hK:
+///  * kCholmod: CHOLMOD factorises A every step and solves directly.
+///  * kPcg: PCG (cg_tolerance, cg_max_iterations) with `pcg_preconditioner`.
+///  * kCholmodReuse: PCG warm-started from the previous step's dv and preconditioned by the
+///    CHOLMOD factor of a recent A (the factor is that of an earlier step's A, or of the current
+///    one after solveCompliance refreshed it). The factor is refreshed synchronously (the
+///    current A is factorised and solved directly) when PCG does not reach cg_tolerance within
+///    refactor_iterations iterations, when the previous step needed more than half of them,
+///    and every refactor_every_steps steps when that is > 0. Every step's dv meets cg_tolerance
+///    (relative residual) or comes from a fresh factorisation. cg_max_iterations is not used.
 struct FemSolverOptions {
   LinearSolverKind linear = LinearSolverKind::kCholmod;
   double cg_tolerance = 1e-8;                   ///< relative residual ||A dv - b|| / ||b||
   int cg_max_iterations = 500;
   PcgPreconditioner pcg_preconditioner = PcgPreconditioner::kJacobi;
+  int refactor_iterations = 8;                  ///< kCholmodReuse: PCG iteration bound (>= 1)
+  int refactor_every_steps = 0;                 ///< kCholmodReuse: refresh schedule (0: none)
 };
 
 /// Per-stage wall times of the last step [s] and solver figures. freeMotion allocates nothing
@@ -66,6 +79,9 @@ struct FemStepStats {
   /// tolerance (its last finite iterate is applied; cg_residual says how far it got).
   bool ok = true;
   double cg_residual = 0.0;                     ///< final relative residual (CG only)
+  /// kCholmodReuse: the step factorised its current A (then cg_iterations counts the PCG
+  /// iterations of an attempt that did not converge within the bound, if any).
+  bool factor_refreshed = false;
   /// Tetrahedra inverted at the start of the step (det F <= 0 at the positions the step starts
   /// from). The corotational force pushes an inverted element back (see polarRotation); a count
   /// that stays up at equilibrium means the mesh or material cannot carry the load.
@@ -117,7 +133,8 @@ class FemBody {
 
   /// x = C r with C = (M/h^2 + B/h + K)^-1 from the last freeMotion's factorisation (h of that
   /// step). Fixed DOFs of x are zero. r and x are 3n.
-  /// With the PCG solver the current A is factorised by CHOLMOD on the first call after a step.
+  /// With the PCG solvers the current A is factorised by CHOLMOD on the first call after a step
+  /// when the step did not (kCholmodReuse then preconditions the next steps with that factor).
   void solveCompliance(const Eigen::VectorXd& r, Eigen::VectorXd& x) const;
   /// Same for the columns of r (3n x k) at once (one CHOLMOD call).
   void solveComplianceBatch(const Eigen::MatrixXd& r, Eigen::MatrixXd& x) const;
