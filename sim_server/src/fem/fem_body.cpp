@@ -218,7 +218,7 @@ void FemBody::Impl::ensureCurrentFactor() {
     throw NumericalError("FemBody(" + mesh.source +
                          "): current system matrix is not positive definite");
   chol_current = true;
-  reuse.noteFactorised();
+  if (a_is_step_matrix) reuse.noteFactorised();
 }
 
 bool FemBody::Impl::factorizeAndSolve(FemStepStats& stats) {
@@ -228,7 +228,6 @@ bool FemBody::Impl::factorizeAndSolve(FemStepStats& stats) {
   stats.factorisation_s = secondsSince(t1);
   chol_current = ok;
   if (!ok) return false;
-  reuse.noteFactorised();
   const auto t2 = Clock::now();
   chol.solve(rhs.data(), dv.data(), 1);
   stats.solve_s = secondsSince(t2);
@@ -363,6 +362,7 @@ FemStepStats FemBody::freeMotion(double h, const Eigen::VectorXd* external_force
                  m.mesh.source, stats.inverted_elements, m.mesh.tetCount());
   }
   m.chol_current = false;
+  m.a_is_step_matrix = true;
   m.compliance_scale = h;
   // p - F(q + h v, v) with F = f_int + B v
   m.rhs_full = -m.f_int;
@@ -402,6 +402,8 @@ FemStepStats FemBody::solveStatic(const Eigen::VectorXd* external_force_n, int m
     const auto t0 = Clock::now();
     m.evaluate(m.q, nullptr, 0.0, 0.0, &m.f_int, &m.a, 1.0, 0.0, false);
     m.chol_current = false;
+    m.a_is_step_matrix = false;
+    m.reuse.forget();  // chol will hold K, not a step's A
     m.compliance_scale = 1.0;
     m.rhs_full = -m.f_int;
     if (external_force_n) m.rhs_full += *external_force_n;

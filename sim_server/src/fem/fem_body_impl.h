@@ -56,6 +56,7 @@ struct FemBody::Impl {
   std::vector<int> diag_offset;  // per reduced DOF
   fem_detail::CholmodSolver chol;
   bool chol_current = false;     // chol holds the factor of the current `a`
+  bool a_is_step_matrix = false; // `a` is freeMotion's A (not solveStatic's K)
   fem_detail::ReusedFactorSolver reuse{{}};  // LinearSolverKind::kCholmodReuse (factor: chol)
   double compliance_scale = 0.0; // C = compliance_scale * A^-1 for the current `a`
   double last_h = 0.0;

@@ -142,7 +142,12 @@ class ReusedFactorSolver {
   ReuseSolveResult solve(CholmodSolver& factor, Sparse& a, const Eigen::VectorXd& b,
                          Eigen::VectorXd& x);
   /// The factor was computed from the current A outside solve() (it is 0 steps old).
-  void noteFactorised() { age_steps_ = 0; }
+  void noteFactorised() {
+    age_steps_ = 0;
+    last_iterations_ = 0;
+  }
+  /// The factor no longer holds a step's A (e.g. a static solve factorised K): refresh next time.
+  void forget() { age_steps_ = -1; }
   /// Steps since the factor was computed (-1: none yet).
   int ageSteps() const { return age_steps_; }
   long refreshes() const { return refreshes_; }
