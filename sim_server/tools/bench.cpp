@@ -78,6 +78,7 @@ struct BenchOptions {
   double jaw_width_mm = -1.0;          ///< >= 0: overrides instrument.grasper.width
   double grip_stiffness = -1.0;        ///< >= 0: overrides instrument.grasper.grip_stiffness
   int min_contacts = 0;                ///< > 0: a second table over the steps with this many
+  std::string linear;                  ///< non-empty: overrides solver.linear
 };
 
 int run(const BenchOptions& o) {
@@ -88,6 +89,9 @@ int run(const BenchOptions& o) {
   if (o.jaw_rows > 0) spec.instrument.jaw_rows = o.jaw_rows;
   if (o.jaw_width_mm >= 0.0) spec.instrument.jaw_width_m = 1e-3 * o.jaw_width_mm;
   if (o.grip_stiffness >= 0.0) spec.instrument.grip_k_nmprad = o.grip_stiffness;
+  if (o.linear == "cholmod") spec.solver.linear = sim::LinearSolverKind::kCholmod;
+  if (o.linear == "pcg") spec.solver.linear = sim::LinearSolverKind::kPcg;
+  if (o.linear == "cholmod_reuse") spec.solver.linear = sim::LinearSolverKind::kCholmodReuse;
   const double h = spec.time_step_s;
   const long steps = o.steps > 0 ? o.steps : static_cast<long>(std::llround(spec.duration_s / h));
   if (steps <= 0) throw Error(o.scene + ": no duration in the scene; pass --steps N");
@@ -121,7 +125,8 @@ int run(const BenchOptions& o) {
   std::vector<Series> busy = stages;   // the steps with at least o.min_contacts contacts
   std::vector<double> busy_contacts;
   std::vector<double> contacts, rows, sim_sweeps, tick_us, tick_cpu_us, tick_sweeps_v, tick_err, passes,
-      geometric_pen_mm;
+      geometric_pen_mm, fem_cg;
+  long fem_factorisations = 0;
   long tick_converged = 0;
   std::unique_ptr<shared::SnapshotFileWriter> recorder;
   if (!o.record_snapshots.empty()) {
@@ -147,6 +152,8 @@ int run(const BenchOptions& o) {
     const double publish_s = 1e-9 * static_cast<double>(shared::monotonicNs() - tp);
     if (recorder) recorder->append(sub.latest(), std::llround(sim.time() * 1e9));
     stages[0].v.push_back(r.times.free_motion_s);
+    fem_cg.push_back(r.fem_cg_iterations);
+    fem_factorisations += r.fem_factorisations;
     stages[1].v.push_back(r.times.collision_s);
     stages[2].v.push_back(r.times.w_build_s);
     stages[3].v.push_back(r.times.solve_s);
@@ -224,6 +231,9 @@ int run(const BenchOptions& o) {
   } else if (o.min_contacts > 0) {
     std::printf("no step had >= %d contacts\n", o.min_contacts);
   }
+  std::printf("free motion linear solve: %ld CHOLMOD factorisations in %ld steps; PCG iterations "
+              "per step median %.0f, p90 %.0f, max %.0f\n",
+              fem_factorisations, steps, pct(fem_cg, 0.5), pct(fem_cg, 0.9), pct(fem_cg, 1.0));
   std::printf(
       "steps in contact: %zu of %ld; over those: contacts median %.0f, max %.0f (rows "
       "median %.0f, max %.0f); sim NSGS sweeps median %.0f\n",
@@ -316,6 +326,8 @@ int main(int argc, char** argv) {
                  "Override the grasper's grip stiffness [N m/rad] (0: kinematic jaws)");
   app.add_option("--min-contacts", o.min_contacts,
                  "Also report the stages over the steps with at least this many contacts");
+  app.add_option("--linear", o.linear, "Override the scene's solver.linear")
+      ->check(CLI::IsMember({"cholmod", "pcg", "cholmod_reuse"}));
   app.add_option("--log-level", o.log_level, "spdlog level of the simulation library")
       ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error"}))
       ->capture_default_str();

@@ -631,6 +631,9 @@ StepReport Simulation::step() {
     const FemStepStats st = ts.body->freeMotion(h);
     if (!st.ok) report.finite = false;
     report.inverted_elements += st.inverted_elements;
+    report.fem_cg_iterations += st.cg_iterations;
+    if (st.factor_refreshed || s.spec.solver.linear == LinearSolverKind::kCholmod)
+      ++report.fem_factorisations;
   }
   if (s.instrument) {
     s.tool_begin = s.instrument->pose();
