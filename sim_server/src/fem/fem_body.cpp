@@ -218,7 +218,17 @@ void FemBody::Impl::ensureCurrentFactor() {
     throw NumericalError("FemBody(" + mesh.source +
                          "): current system matrix is not positive definite");
   chol_current = true;
-  if (a_is_step_matrix) reuse.noteFactorised();
+  if (a_is_step_matrix) {
+    reuse.noteFactorised();
+    keepFactorRotations();
+  }
+}
+
+void FemBody::Impl::keepFactorRotations() {
+  // node_rot holds this step's node rotations when kCholmodReuse computed them
+  if (options.linear != LinearSolverKind::kCholmodReuse || !corotational) return;
+  for (int i = 0; i < n; ++i)
+    if (dof_base[i] >= 0) factor_node_rot[dof_base[i] / 3] = node_rot[i];
 }
 
 bool FemBody::Impl::factorizeAndSolve(FemStepStats& stats) {
@@ -240,9 +250,22 @@ bool FemBody::Impl::solveStep(double h, FemStepStats& stats) {
       return factorizeAndSolve(stats) && dv.allFinite();
     case LinearSolverKind::kCholmodReuse: {
       dv = dv_prev;  // warm start
-      const fem_detail::ReuseSolveResult r = reuse.solve(chol, a, rhs, dv);
+      const auto t_warp = Clock::now();
+      if (corotational) {
+        averageRotations(rotation, node_acc, node_rot);
+        relative_rot.resize(n_free / 3);
+        if (factor_node_rot.size() != relative_rot.size())
+          factor_node_rot.assign(relative_rot.size(), Eigen::Matrix3d::Identity());
+        for (int i = 0; i < n; ++i)
+          if (dof_base[i] >= 0)
+            relative_rot[dof_base[i] / 3] = node_rot[i] * factor_node_rot[dof_base[i] / 3].transpose();
+      }
+      const double warp_s = secondsSince(t_warp);
+      const fem_detail::ReuseSolveResult r =
+          reuse.solve(chol, a, rhs, dv, corotational ? relative_rot.data() : nullptr);
+      if (r.refreshed) keepFactorRotations();
       stats.factorisation_s = r.factorisation_s;
-      stats.solve_s = r.solve_s;
+      stats.solve_s = warp_s + r.solve_s;
       stats.cg_iterations = r.cg_iterations;
       stats.cg_residual = r.residual;
       stats.factor_refreshed = r.refreshed;

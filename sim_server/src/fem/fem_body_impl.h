@@ -58,6 +58,9 @@ struct FemBody::Impl {
   bool chol_current = false;     // chol holds the factor of the current `a`
   bool a_is_step_matrix = false; // `a` is freeMotion's A (not solveStatic's K)
   fem_detail::ReusedFactorSolver reuse{{}};  // LinearSolverKind::kCholmodReuse (factor: chol)
+  // kCholmodReuse on a corotational body: node rotations of the factor's step (per free node, in
+  // DOF order) and this step's rotations relative to them (the preconditioner's warp)
+  std::vector<Eigen::Matrix3d> factor_node_rot, relative_rot;
   double compliance_scale = 0.0; // C = compliance_scale * A^-1 for the current `a`
   double last_h = 0.0;
 
@@ -127,6 +130,8 @@ struct FemBody::Impl {
   bool factorizeAndSolve(FemStepStats& stats);
   // dv from rhs by the configured strategy; false on failure (dv not finite or no factor).
   bool solveStep(double h, FemStepStats& stats);
+  // kCholmodReuse: the factor now holds this step's A; its node rotations are this step's.
+  void keepFactorRotations();
   bool pcg(double tol, int max_iter, FemStepStats& stats);
 };
 

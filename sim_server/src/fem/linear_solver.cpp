@@ -100,7 +100,8 @@ std::size_t CholmodSolver::factorNonzeros() const {
 // ---- factor reuse ----
 
 ReuseSolveResult ReusedFactorSolver::solve(CholmodSolver& factor, Sparse& a,
-                                           const Eigen::VectorXd& b, Eigen::VectorXd& x) {
+                                           const Eigen::VectorXd& b, Eigen::VectorXd& x,
+                                           const Eigen::Matrix3d* block_rotation) {
   ReuseSolveResult out;
   if (age_steps_ >= 0) ++age_steps_;
   bool refresh = age_steps_ < 0 || !factor.factorized() ||
@@ -110,8 +111,19 @@ ReuseSolveResult ReusedFactorSolver::solve(CholmodSolver& factor, Sparse& a,
     const auto t0 = Clock::now();
     const CgResult cg = conjugateGradient(
         a, b, x, policy_.tolerance, policy_.refactor_iterations, cg_,
-        [&factor](const Eigen::VectorXd& r, Eigen::VectorXd& z) {
-          factor.solve(r.data(), z.data(), 1);
+        [&](const Eigen::VectorXd& r, Eigen::VectorXd& z) {
+          if (!block_rotation) {
+            factor.solve(r.data(), z.data(), 1);
+            return;
+          }
+          // z = T A_f^-1 T^T r
+          const Eigen::Index blocks = r.size() / 3;
+          warp_.resize(r.size());
+          for (Eigen::Index k = 0; k < blocks; ++k)
+            warp_.segment<3>(3 * k).noalias() = block_rotation[k].transpose() * r.segment<3>(3 * k);
+          factor.solve(warp_.data(), warp_.data(), 1);
+          for (Eigen::Index k = 0; k < blocks; ++k)
+            z.segment<3>(3 * k).noalias() = block_rotation[k] * warp_.segment<3>(3 * k);
         });
     out.solve_s = secondsSince(t0);
     out.cg_iterations = cg.iterations;

@@ -139,8 +139,11 @@ class ReusedFactorSolver {
   using Sparse = CholmodSolver::Sparse;
   explicit ReusedFactorSolver(const FactorReusePolicy& policy) : policy_(policy) {}
   /// x holds the warm start (the previous step's solution) on entry, the solution on exit.
+  /// `block_rotation` (null: none) warps the preconditioner to T A_f^-1 T^T with T block
+  /// diagonal, one 3x3 rotation per 3 consecutive unknowns (size / 3 of them): the rotation of
+  /// each node since the factor's step, so that the factor follows the tissue's rotations.
   ReuseSolveResult solve(CholmodSolver& factor, Sparse& a, const Eigen::VectorXd& b,
-                         Eigen::VectorXd& x);
+                         Eigen::VectorXd& x, const Eigen::Matrix3d* block_rotation = nullptr);
   /// The factor was computed from the current A outside solve() (it is 0 steps old).
   void noteFactorised() {
     age_steps_ = 0;
@@ -155,6 +158,7 @@ class ReusedFactorSolver {
  private:
   FactorReusePolicy policy_;
   CgBuffers cg_;
+  Eigen::VectorXd warp_;
   int age_steps_ = -1;
   int last_iterations_ = 0;
   long refreshes_ = 0;
