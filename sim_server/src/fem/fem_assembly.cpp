@@ -1,6 +1,7 @@
 // The corotational element loop and the system matrix's pattern (see fem_body_impl.h).
 #include <algorithm>
 #include <array>
+#include <limits>
 
 #include "fem_body_impl.h"
 
@@ -67,7 +68,10 @@ void FemBody::Impl::buildPattern() {
   std::vector<std::array<int, 4>> sorted_nodes(ne);
   for (int e = 0; e < ne; ++e) {
     order[e] = e;
-    sorted_nodes[e] = mesh.tets[e];
+    for (int k = 0; k < 4; ++k) {
+      const int d = dof_base[mesh.tets[e][k]];
+      sorted_nodes[e][k] = d >= 0 ? d : std::numeric_limits<int>::max();
+    }
     std::sort(sorted_nodes[e].begin(), sorted_nodes[e].end());
   }
   std::stable_sort(order.begin(), order.end(),

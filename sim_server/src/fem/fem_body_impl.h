@@ -42,8 +42,9 @@ struct FemBody::Impl {
 
   // system matrix A (lower triangle, fixed pattern) and where each element writes
   Sparse a;
-  // The element loop's copy of the element data, in assembly order: sorted by lowest node, then
-  // second lowest, so that consecutive elements gather and scatter nearby memory.
+  // The element loop's copy of the element data, in assembly order: sorted by their nodes'
+  // lowest reduced DOF, then second lowest, ..., so that consecutive elements scatter into
+  // nearby memory.
   struct AssemblyElement {
     std::array<int, 4> node;
     int index;                      // in mesh.tets
@@ -70,7 +71,7 @@ struct FemBody::Impl {
   double rest_h = -1.0;
 
   // step buffers (reduced or full)
-  Eigen::VectorXd f_int, rhs_full, rhs, dv, dv_prev;
+  Eigen::VectorXd f_int, rhs_full, rhs, dv, dv_prev, dv_prev2;
   Eigen::VectorXd cg_t, jacobi_inv;
   fem_detail::CgBuffers cg;
   std::vector<Eigen::Matrix3d> node_rot, node_acc;  // warped preconditioner

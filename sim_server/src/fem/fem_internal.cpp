@@ -135,6 +135,57 @@ NumericThreads applyNumericThreadLimitImpl() {
 
 }  // namespace
 
+// ---- node order ----
+
+std::vector<int> bandwidthOrder(const TetMesh& mesh, const std::vector<bool>& skip) {
+  const int n = mesh.nodeCount();
+  // node adjacency (CSR) over the edges of the elements, both directions, without skipped nodes
+  std::vector<std::pair<int, int>> edges;
+  edges.reserve(mesh.tets.size() * 12);
+  for (const auto& t : mesh.tets)
+    for (int a = 0; a < 4; ++a)
+      for (int b = 0; b < 4; ++b) {
+        if (a == b || t[a] < 0 || t[a] >= n || t[b] < 0 || t[b] >= n) continue;
+        if (skip[t[a]] || skip[t[b]]) continue;
+        edges.emplace_back(t[a], t[b]);
+      }
+  std::sort(edges.begin(), edges.end());
+  edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
+  std::vector<int> start(n + 1, 0), adj(edges.size());
+  for (const auto& e : edges) ++start[e.first + 1];
+  for (int i = 0; i < n; ++i) start[i + 1] += start[i];
+  for (std::size_t k = 0; k < edges.size(); ++k) adj[k] = edges[k].second;
+  auto degree = [&](int i) { return start[i + 1] - start[i]; };
+  std::vector<int> by_degree;
+  for (int i = 0; i < n; ++i)
+    if (!skip[i]) by_degree.push_back(i);
+  std::stable_sort(by_degree.begin(), by_degree.end(),
+                   [&](int x, int y) { return degree(x) < degree(y); });
+  std::vector<int> order;
+  order.reserve(by_degree.size());
+  std::vector<char> seen(n, 0);
+  std::vector<int> next;
+  for (int root : by_degree) {
+    if (seen[root]) continue;
+    seen[root] = 1;
+    std::size_t head = order.size();
+    order.push_back(root);
+    while (head < order.size()) {
+      const int i = order[head++];
+      next.assign(adj.begin() + start[i], adj.begin() + start[i + 1]);
+      std::stable_sort(next.begin(), next.end(),
+                       [&](int x, int y) { return degree(x) < degree(y); });
+      for (int j : next)
+        if (!seen[j]) {
+          seen[j] = 1;
+          order.push_back(j);
+        }
+    }
+  }
+  std::reverse(order.begin(), order.end());
+  return order;
+}
+
 // ---- boundary ----
 
 std::vector<int> boundaryNodes(const TetMesh& mesh) {

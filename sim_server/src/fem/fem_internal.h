@@ -30,6 +30,12 @@ inline double secondsSince(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
 }
 
+/// The nodes not `skip`ped in reverse Cuthill-McKee order over the mesh's node adjacency (each
+/// connected part from a node of minimum degree): nodes of one element get nearby positions, so
+/// that element loops over data indexed in this order touch nearby memory. Node indices out of
+/// range are ignored.
+std::vector<int> bandwidthOrder(const TetMesh& mesh, const std::vector<bool>& skip);
+
 /// Sorted unique nodes on the boundary (faces that belong to exactly one tetrahedron).
 std::vector<int> boundaryNodes(const TetMesh& mesh);
 
