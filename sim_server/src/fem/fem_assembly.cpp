@@ -7,28 +7,6 @@
 
 namespace tactus::sim {
 
-namespace {
-
-// (a, b, i, j) of the kEntriesPerElement entries in buildPattern's order: blocks (a, b) with
-// a >= b, rows i, columns j (j <= i inside a diagonal block).
-struct Entry {
-  unsigned char a, b, i, j;
-};
-constexpr std::array<Entry, kEntriesPerElement> makeEntries() {
-  std::array<Entry, kEntriesPerElement> out{};
-  int k = 0;
-  for (int a = 0; a < 4; ++a)
-    for (int b = 0; b <= a; ++b)
-      for (int i = 0; i < 3; ++i)
-        for (int j = 0; j < (a == b ? i + 1 : 3); ++j)
-          out[k++] = {static_cast<unsigned char>(a), static_cast<unsigned char>(b),
-                      static_cast<unsigned char>(i), static_cast<unsigned char>(j)};
-  return out;
-}
-constexpr std::array<Entry, kEntriesPerElement> kEntries = makeEntries();
-
-}  // namespace
-
 void FemBody::Impl::buildPattern() {
   const int ne = mesh.tetCount();
   std::vector<Eigen::Triplet<double, int>> trip;
@@ -64,31 +42,47 @@ void FemBody::Impl::buildPattern() {
     const int* it = std::lower_bound(lo, hi, r);
     return static_cast<int>(it - inner);
   };
+  // assembly order: elements sorted by their nodes' reduced DOFs (lowest first, fixed last)
   std::vector<int> order(ne);
-  std::vector<std::array<int, 4>> sorted_nodes(ne);
+  std::vector<std::array<int, 4>> sorted_dofs(ne);
   for (int e = 0; e < ne; ++e) {
     order[e] = e;
     for (int k = 0; k < 4; ++k) {
       const int d = dof_base[mesh.tets[e][k]];
-      sorted_nodes[e][k] = d >= 0 ? d : std::numeric_limits<int>::max();
+      sorted_dofs[e][k] = d >= 0 ? d : std::numeric_limits<int>::max();
     }
-    std::sort(sorted_nodes[e].begin(), sorted_nodes[e].end());
+    std::sort(sorted_dofs[e].begin(), sorted_dofs[e].end());
   }
   std::stable_sort(order.begin(), order.end(),
-                   [&](int x, int y) { return sorted_nodes[x] < sorted_nodes[y]; });
+                   [&](int x, int y) { return sorted_dofs[x] < sorted_dofs[y]; });
   assembly_elems.resize(ne);
-  elem_offset.resize(static_cast<std::size_t>(ne) * kEntriesPerElement);
-  for (int k_elem = 0; k_elem < ne; ++k_elem) {
-    const int e = order[k_elem];
-    AssemblyElement& el = assembly_elems[k_elem];
-    el = {mesh.tets[e], e, false, grad[e], volume[e]};
-    int* off = elem_offset.data() + static_cast<std::size_t>(k_elem) * kEntriesPerElement;
-    int k = 0;
-    forEntry(e, [&](int r, int c) {
-      off[k] = r >= 0 ? offsetOf(r, c) : -1;
-      el.has_fixed = el.has_fixed || off[k] < 0;
-      ++k;
+  block_offset.resize(static_cast<std::size_t>(ne) * kBlockOffsetsPerElement);
+  for (int slot = 0; slot < ne; ++slot) {
+    const int e = order[slot];
+    AssemblyElement& el = assembly_elems[slot];
+    // local nodes by ascending reduced DOF (fixed nodes, DOF -1, first), gradients alike: then a
+    // block (a, b) with a > b lies below the diagonal as it is
+    std::array<int, 4> local = {0, 1, 2, 3};
+    std::stable_sort(local.begin(), local.end(), [&](int x, int y) {
+      return dof_base[mesh.tets[e][x]] < dof_base[mesh.tets[e][y]];
     });
+    el.index = e;
+    el.vol = volume[e];
+    el.has_fixed = false;
+    for (int k = 0; k < 4; ++k) {
+      el.node[k] = mesh.tets[e][local[k]];
+      el.g.col(k) = grad[e].col(local[k]);
+    }
+    int* off = block_offset.data() + static_cast<std::size_t>(slot) * kBlockOffsetsPerElement;
+    for (int a = 0, bk = 0; a < 4; ++a)
+      for (int b = 0; b <= a; ++b, ++bk) {
+        const int p = dof_base[el.node[a]], q = dof_base[el.node[b]];
+        for (int j = 0; j < 3; ++j) {
+          // column q + j: rows p..p+2 (diagonal block: p+j..p+2) are consecutive in it
+          off[3 * bk + j] = p < 0 || q < 0 ? -1 : offsetOf(a == b ? p + j : p, q + j);
+        }
+        el.has_fixed = el.has_fixed || p < 0 || q < 0;
+      }
   }
   diag_offset.resize(n_free);
   for (int d = 0; d < n_free; ++d) diag_offset[d] = offsetOf(d, d);
@@ -137,23 +131,31 @@ void FemBody::Impl::evaluate(const Eigen::VectorXd& q, const Eigen::VectorXd* v,
       for (int k = 0; k < 4; ++k) Eigen::Map<Eigen::Vector3d>(fd + 3 * t[k]) += fe.col(k);
     }
     if (target) {
-      // block (a, b) = c_k V (lambda r_a r_b^T + mu r_b r_a^T + mu (g_a . g_b) I), r_a = R g_a
+      // block (a, b) = c_k V (lambda r_a r_b^T + mu r_b r_a^T + mu (g_a . g_b) I), r_a = R g_a;
+      // column j of a block goes to 3 (diagonal block: 3 - j) consecutive values
       const Eigen::Matrix<double, 3, 4> rg = rotate ? Eigen::Matrix<double, 3, 4>(r * g) : g;
-      const Eigen::Matrix4d gg = (c_k * vol * mu) * (g.transpose() * g);
       const double cl = c_k * vol * lambda, cm = c_k * vol * mu;
-      double ke[kEntriesPerElement];
-#pragma GCC unroll 78
-      for (int k = 0; k < kEntriesPerElement; ++k) {
-        const Entry en = kEntries[k];
-        ke[k] = cl * rg(en.i, en.a) * rg(en.j, en.b) + cm * rg(en.i, en.b) * rg(en.j, en.a) +
-                (en.i == en.j ? gg(en.a, en.b) : 0.0);
-      }
-      const int* off = elem_offset.data() + static_cast<std::size_t>(slot) * kEntriesPerElement;
-      if (el.has_fixed) {
-        for (int k = 0; k < kEntriesPerElement; ++k)
-          if (off[k] >= 0) vals[off[k]] += ke[k];
-      } else {
-        for (int k = 0; k < kEntriesPerElement; ++k) vals[off[k]] += ke[k];
+      const int* off = block_offset.data() + static_cast<std::size_t>(slot) * kBlockOffsetsPerElement;
+#pragma GCC unroll 4
+      for (int a = 0; a < 4; ++a) {
+        const Eigen::Vector3d ra = rg.col(a);
+#pragma GCC unroll 4
+        for (int b = 0; b <= a; ++b) {
+          const int* o = off + 3 * (a * (a + 1) / 2 + b);
+          if (el.has_fixed && o[0] < 0) continue;
+          const double gg = cm * g.col(a).dot(g.col(b));
+          if (a == b) {
+            const double c = cl + cm;
+            for (int j = 0; j < 3; ++j)
+              for (int i = j; i < 3; ++i)
+                vals[o[j] + i - j] += c * ra[i] * ra[j] + (i == j ? gg : 0.0);
+          } else {
+            const Eigen::Vector3d rb = rg.col(b);
+            Eigen::Matrix3d blk = cl * ra * rb.transpose() + cm * rb * ra.transpose();
+            blk.diagonal().array() += gg;
+            for (int j = 0; j < 3; ++j) Eigen::Map<Eigen::Vector3d>(vals + o[j]) += blk.col(j);
+          }
+        }
       }
     }
   }

@@ -18,6 +18,8 @@ using Sparse = fem_detail::CholmodSolver::Sparse;
 // Entries of one element's lower-triangular contribution: blocks (a, b) with a >= b, and only
 // i >= j inside diagonal blocks: 4 * 6 + 6 * 9.
 inline constexpr int kEntriesPerElement = 78;
+// The element loop's offsets into A's values: per block (a, b), a >= b, one per column.
+inline constexpr int kBlockOffsetsPerElement = 30;
 
 struct FemBody::Impl {
   TetMesh mesh;
@@ -44,16 +46,20 @@ struct FemBody::Impl {
   Sparse a;
   // The element loop's copy of the element data, in assembly order: sorted by their nodes'
   // lowest reduced DOF, then second lowest, ..., so that consecutive elements scatter into
-  // nearby memory.
+  // nearby memory; the local nodes of each by ascending reduced DOF.
   struct AssemblyElement {
     std::array<int, 4> node;
     int index;                      // in mesh.tets
-    bool has_fixed;                 // some entry of elem_offset is -1
-    Eigen::Matrix<double, 3, 4> g;  // = grad[index]
+    bool has_fixed;                 // some block has a fixed node (its offsets are -1)
+    Eigen::Matrix<double, 3, 4> g;  // grad[index], columns in the order of `node`
     double vol;                     // = volume[index]
   };
   std::vector<AssemblyElement> assembly_elems;
-  std::vector<int> elem_offset;  // kEntriesPerElement per assembly element, -1 for fixed DOFs
+  // per assembly element and block (a, b), a >= b, in order (0,0), (1,0), (1,1), (2,0), ...:
+  // for each column j of the block, the position in A's values of its first entry (row p of
+  // column q + j, or row p + j on the diagonal, with p, q the DOFs of nodes a, b); -1: a node is
+  // fixed
+  std::vector<int> block_offset;
   std::vector<int> diag_offset;  // per reduced DOF
   fem_detail::CholmodSolver chol;
   bool chol_current = false;     // chol holds the factor of the current `a`
