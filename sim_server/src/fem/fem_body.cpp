@@ -573,6 +573,26 @@ double FemBody::gravityEnergy() const {
 
 // ---- free functions ----
 
+FemMaterial femMaterial(const TissueSpec& tissue) {
+  FemMaterial m;
+  m.law = tissue.law;
+  m.young_pa = tissue.young_pa;
+  m.poisson = tissue.poisson;
+  m.density_kgpm3 = tissue.density_kgpm3;
+  m.damping = tissue.damping;
+  return m;
+}
+
+FemSolverOptions femSolverOptions(const SolverSpec& solver) {
+  FemSolverOptions o;
+  o.linear = solver.linear;
+  o.cg_tolerance = solver.cg_tolerance;
+  o.cg_max_iterations = solver.cg_max_iterations;
+  o.refactor_iterations = solver.refactor_iterations;
+  o.refactor_every_steps = solver.refactor_every_steps;
+  return o;
+}
+
 void transformMesh(TetMesh& mesh, double scale, const Eigen::Vector3d& rotation_deg,
                    const Eigen::Vector3d& translation_m) {
   const double k = M_PI / 180.0;

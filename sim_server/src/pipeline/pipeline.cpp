@@ -129,19 +129,8 @@ void Simulation::Impl::buildTissues() {
     fixed.insert(fixed.end(), boxed.begin(), boxed.end());
     std::sort(fixed.begin(), fixed.end());
     fixed.erase(std::unique(fixed.begin(), fixed.end()), fixed.end());
-    FemMaterial material;
-    material.law = ts.law;
-    material.young_pa = ts.young_pa;
-    material.poisson = ts.poisson;
-    material.density_kgpm3 = ts.density_kgpm3;
-    material.damping = ts.damping;
-    FemSolverOptions solver;
-    solver.linear = spec.solver.linear;
-    solver.cg_tolerance = spec.solver.cg_tolerance;
-    solver.cg_max_iterations = spec.solver.cg_max_iterations;
-    solver.refactor_iterations = spec.solver.refactor_iterations;
-    solver.refactor_every_steps = spec.solver.refactor_every_steps;
-    state.body = std::make_unique<FemBody>(state.mesh, material, fixed, gravity, solver);
+    state.body = std::make_unique<FemBody>(state.mesh, femMaterial(ts), fixed, gravity,
+                                           femSolverOptions(spec.solver));
     spdlog::info("tissue '{}': {} nodes, {} tets, {} fixed nodes", ts.name, state.mesh.nodeCount(),
                  state.mesh.tetCount(), fixed.size());
     if (spec.instrument.present) {

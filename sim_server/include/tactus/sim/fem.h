@@ -76,9 +76,11 @@ struct FemSolverOptions {
 /// in our code after the first step (CHOLMOD allocates internally during factorisation).
 struct FemStepStats {
   double assembly_s = 0.0;
-  double factorisation_s = 0.0;                 ///< CHOLMOD numeric factorisation (0 for CG)
+  /// CHOLMOD numeric factorisation (PCG: the rest factor when it is refreshed; kCholmodReuse:
+  /// the steps that refresh)
+  double factorisation_s = 0.0;
   double solve_s = 0.0;
-  int cg_iterations = 0;                        ///< 0 for CHOLMOD
+  int cg_iterations = 0;                        ///< 0 for kCholmod
   /// false: the factorisation failed or dv was not finite (state kept), or CG stopped above its
   /// tolerance (its last finite iterate is applied; cg_residual says how far it got).
   bool ok = true;
@@ -117,8 +119,8 @@ class FemBody {
   const Eigen::VectorXd& lumpedMass() const;    ///< per DOF [kg]
 
   /// Implicit Euler free motion over `h` seconds with optional external force p (3n, may be null).
-  /// Updates positions/velocities to the free state. Leaves the factorisation of
-  /// A = M/h + B + hK at the linearisation point available for solveCompliance(). The
+  /// Updates positions/velocities to the free state. Leaves A = M/h + B + hK at the
+  /// linearisation point (and with kCholmod its factorisation) for solveCompliance(). The
   /// linearisation point is q + h v: element rotations, elastic force and tangent K are taken
   /// there, and the damping force is B v with the same K (eq. 7 with F(q + h v, v)).
   FemStepStats freeMotion(double h, const Eigen::VectorXd* external_force_n = nullptr);
@@ -230,6 +232,10 @@ NumericThreads limitNumericThreads();
 
 /// The current state, without changing it.
 NumericThreads queryNumericThreads();
+
+/// A scene tissue's material and the scene's linear solver settings as the FemBody takes them.
+FemMaterial femMaterial(const TissueSpec& tissue);
+FemSolverOptions femSolverOptions(const SolverSpec& solver);
 
 /// Applies a scene transform (scale, then XYZ Euler rotation in degrees, then translation).
 /// The rotation is extrinsic x, then y, then z: R = Rz(rz) Ry(ry) Rx(rx).
