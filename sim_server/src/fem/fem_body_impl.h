@@ -1,6 +1,6 @@
 #pragma once
-// FemBody's private state (fem_body.cpp: setup, steps and queries; fem_assembly.cpp: the
-// element loop and the system matrix pattern). Not installed.
+// FemBody's private state (fem_body.cpp: setup, steps and solves; fem_queries.cpp: queries of
+// the state; fem_assembly.cpp: the element loop and the system matrix pattern). Not installed.
 
 #include <Eigen/Core>
 #include <Eigen/SparseCore>

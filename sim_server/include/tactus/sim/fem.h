@@ -57,8 +57,9 @@ enum class PcgPreconditioner {
 ///    one after solveCompliance refreshed it). Corotational material: the preconditioner is
 ///    warped, T A_f^-1 T^T with T the per-node rotations since A_f's step (node rotations as in
 ///    nodeRotations(), from the step's element rotations), so the factor follows the tissue's
-///    rotations (measured on the liver scenes settling under gravity: 26 % of the steps
-///    factorise instead of 57 % unwarped, README "Soft tissue"). The factor is refreshed synchronously (the
+///    rotations (the liver scenes' tissue settling under gravity: 14-21 % of the steps
+///    factorise instead of 47-57 % unwarped, README "Soft tissue"). The warm start is
+///    extrapolated from the last two steps' dv. The factor is refreshed synchronously (the
 ///    current A is factorised and solved directly) when PCG does not reach cg_tolerance within
 ///    refactor_iterations iterations, when the previous step needed more than half of them,
 ///    and every refactor_every_steps steps when that is > 0. Every step's dv meets cg_tolerance
