@@ -80,6 +80,7 @@ struct BenchOptions {
   int min_contacts = 0;                ///< > 0: a second table over the steps with this many
   double contact_compliance = -1.0;    ///< >= 0: overrides instrument.contact_compliance [m/N]
   double pad_width_mm = -1.0;          ///< >= 0: overrides instrument.grasper.pad_width
+  std::string linear;                  ///< non-empty: overrides solver.linear
 };
 
 int run(const BenchOptions& o) {
@@ -92,6 +93,9 @@ int run(const BenchOptions& o) {
   if (o.grip_stiffness >= 0.0) spec.instrument.grip_k_nmprad = o.grip_stiffness;
   if (o.contact_compliance >= 0.0) spec.instrument.contact_compliance_mpn = o.contact_compliance;
   if (o.pad_width_mm >= 0.0) spec.instrument.pad_width_m = 1e-3 * o.pad_width_mm;
+  if (o.linear == "cholmod") spec.solver.linear = sim::LinearSolverKind::kCholmod;
+  if (o.linear == "pcg") spec.solver.linear = sim::LinearSolverKind::kPcg;
+  if (o.linear == "cholmod_reuse") spec.solver.linear = sim::LinearSolverKind::kCholmodReuse;
   const double h = spec.time_step_s;
   const long steps = o.steps > 0 ? o.steps : static_cast<long>(std::llround(spec.duration_s / h));
   if (steps <= 0) throw Error(o.scene + ": no duration in the scene; pass --steps N");
@@ -125,7 +129,8 @@ int run(const BenchOptions& o) {
   std::vector<Series> busy = stages;   // the steps with at least o.min_contacts contacts
   std::vector<double> busy_contacts;
   std::vector<double> contacts, rows, sim_sweeps, tick_us, tick_cpu_us, tick_sweeps_v, tick_err, passes,
-      geometric_pen_mm, distinct_nodes, total_fn;
+      geometric_pen_mm, distinct_nodes, total_fn, fem_cg;
+  long fem_factorisations = 0;
   long tick_converged = 0;
   long sim_converged = 0;
   int max_contacts_step = -1, max_contacts_nodes = 0;
@@ -156,6 +161,8 @@ int run(const BenchOptions& o) {
     const double publish_s = 1e-9 * static_cast<double>(shared::monotonicNs() - tp);
     if (recorder) recorder->append(sub.latest(), std::llround(sim.time() * 1e9));
     stages[0].v.push_back(r.times.free_motion_s);
+    fem_cg.push_back(r.fem_cg_iterations);
+    fem_factorisations += r.fem_factorisations;
     stages[1].v.push_back(r.times.collision_s);
     stages[2].v.push_back(r.times.w_build_s);
     stages[3].v.push_back(r.times.solve_s);
@@ -246,6 +253,9 @@ int run(const BenchOptions& o) {
   } else if (o.min_contacts > 0) {
     std::printf("no step had >= %d contacts\n", o.min_contacts);
   }
+  std::printf("free motion linear solve: %ld CHOLMOD factorisations in %ld steps; PCG iterations "
+              "per step median %.0f, p90 %.0f, max %.0f\n",
+              fem_factorisations, steps, pct(fem_cg, 0.5), pct(fem_cg, 0.9), pct(fem_cg, 1.0));
   std::printf(
       "steps in contact: %zu of %ld; over those: contacts median %.0f, max %.0f (rows "
       "median %.0f, max %.0f); sim NSGS sweeps median %.0f\n",
@@ -349,6 +359,8 @@ int main(int argc, char** argv) {
                  "Override the grasper's flat pad width [mm] (0: round jaws)");
   app.add_option("--min-contacts", o.min_contacts,
                  "Also report the stages over the steps with at least this many contacts");
+  app.add_option("--linear", o.linear, "Override the scene's solver.linear")
+      ->check(CLI::IsMember({"cholmod", "pcg", "cholmod_reuse"}));
   app.add_option("--log-level", o.log_level, "spdlog level of the simulation library")
       ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error"}))
       ->capture_default_str();

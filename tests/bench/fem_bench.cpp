@@ -1,6 +1,8 @@
-// FEM free motion (one implicit Euler step) on the livers, CHOLMOD vs PCG, with the per-stage
-// breakdown as counters; warped-compliance precompute and W build for 450 rows.
-//   build-*/tests/bench/fem_bench --benchmark_filter=Liver2_
+// FEM free motion (one implicit Euler step) on the livers for every linear strategy (CHOLMOD,
+// PCG with each preconditioner, PCG on a reused CHOLMOD factor), with the per-stage breakdown as
+// counters (assembly_ms and assembly_ns_per_tet, factor_ms, solve_ms, cg_iters, refresh_frac: the
+// fraction of steps that factorised); warped-compliance precompute and W build for 450 rows.
+//   build/tests/bench/fem_bench --benchmark_filter=FemStep_Liver
 // OpenBLAS 0.3.21 does not recognise this VM's CPU and falls back to SSE3 kernels: export
 // OPENBLAS_CORETYPE=SkylakeX (or Haswell) for the large factorisations.
 #include <benchmark/benchmark.h>
@@ -14,6 +16,7 @@
 #include "tactus/sim/compliance.h"
 #include "tactus/sim/fem.h"
 #include "tactus/sim/mesh_gen.h"
+#include "tactus/sim/scene.h"
 
 namespace tactus::sim {
 namespace {
@@ -48,7 +51,7 @@ std::vector<int> lowestX(const TetMesh& mesh, int count) {
 }
 
 std::unique_ptr<FemBody> makeBody(const TetMesh& mesh, LinearSolverKind solver,
-                                  PcgPreconditioner pre, int fixed) {
+                                  PcgPreconditioner pre, int fixed, double cg_tolerance = 1e-6) {
   FemMaterial mat;
   mat.law = MaterialLaw::kCorotational;
   mat.young_pa = 3000.0;
@@ -58,17 +61,20 @@ std::unique_ptr<FemBody> makeBody(const TetMesh& mesh, LinearSolverKind solver,
   FemSolverOptions opt;
   opt.linear = solver;
   opt.pcg_preconditioner = pre;
-  opt.cg_tolerance = 1e-6;
+  opt.cg_tolerance = cg_tolerance;
   opt.cg_max_iterations = 1000;
   static const Eigen::Vector3d gravity(0, 0, -9.81);
   return std::make_unique<FemBody>(mesh, mat, lowestX(mesh, fixed), &gravity, opt);
 }
 
+// The reuse strategy runs at the scenes' default tolerance (1e-8); the fixed-preconditioner PCG
+// rows keep their historical 1e-6.
 void runStep(benchmark::State& state, const TetMesh& mesh, LinearSolverKind solver,
              PcgPreconditioner pre = PcgPreconditioner::kJacobi) {
-  auto body = makeBody(mesh, solver, pre, std::max(4, mesh.nodeCount() / 30));
+  const double tol = solver == LinearSolverKind::kCholmodReuse ? 1e-8 : 1e-6;
+  auto body = makeBody(mesh, solver, pre, std::max(4, mesh.nodeCount() / 30), tol);
   for (int s = 0; s < 5; ++s) body->freeMotion(kH);  // sagging, rotated state
-  double assembly = 0, factor = 0, solve = 0, iters = 0;
+  double assembly = 0, factor = 0, solve = 0, iters = 0, refreshes = 0;
   for (auto _ : state) {
     const FemStepStats st = body->freeMotion(kH);
     if (!st.ok) state.SkipWithError("step failed");
@@ -76,15 +82,18 @@ void runStep(benchmark::State& state, const TetMesh& mesh, LinearSolverKind solv
     factor += st.factorisation_s;
     solve += st.solve_s;
     iters += st.cg_iterations;
+    refreshes += st.factor_refreshed ? 1.0 : 0.0;
   }
   const double n = static_cast<double>(state.iterations());
   state.counters["assembly_ms"] = 1e3 * assembly / n;
+  state.counters["assembly_ns_per_tet"] = 1e9 * assembly / n / mesh.tetCount();
   state.counters["factor_ms"] = 1e3 * factor / n;
   state.counters["solve_ms"] = 1e3 * solve / n;
   state.counters["cg_iters"] = iters / n;
+  if (solver == LinearSolverKind::kCholmodReuse) state.counters["refresh_frac"] = refreshes / n;
   state.counters["dofs"] = body->freeDofCount();
   state.counters["tets"] = mesh.tetCount();
-  if (solver == LinearSolverKind::kCholmod)
+  if (solver != LinearSolverKind::kPcg)
     state.counters["factor_nnz"] = static_cast<double>(body->factorNonzeros());
 }
 
@@ -115,6 +124,16 @@ void BM_FemStep_Liver23k_PcgRestChol(benchmark::State& s) {
   runStep(s, loadLiver("liver_23k.msh"), LinearSolverKind::kPcg,
           PcgPreconditioner::kRestCholesky);
 }
+void BM_FemStep_Small_CholmodReuse(benchmark::State& state) {
+  static const TetMesh mesh = makeBoxTetMesh(6, 3, 3, Eigen::Vector3d(0.12, 0.06, 0.06));
+  runStep(state, mesh, LinearSolverKind::kCholmodReuse);
+}
+void BM_FemStep_Liver2_CholmodReuse(benchmark::State& s) {
+  runStep(s, loadLiver("liver2.msh"), LinearSolverKind::kCholmodReuse);
+}
+void BM_FemStep_Liver23k_CholmodReuse(benchmark::State& s) {
+  runStep(s, loadLiver("liver_23k.msh"), LinearSolverKind::kCholmodReuse);
+}
 void BM_FemStep_Liver2_PcgWarpedChol(benchmark::State& s) {
   runStep(s, loadLiver("liver2.msh"), LinearSolverKind::kPcg, PcgPreconditioner::kWarpedCholesky);
 }
@@ -122,16 +141,72 @@ void BM_FemStep_Liver23k_PcgWarpedChol(benchmark::State& s) {
   runStep(s, loadLiver("liver_23k.msh"), LinearSolverKind::kPcg,
           PcgPreconditioner::kWarpedCholesky);
 }
+// The scene's own tissue (material, damping, fixed box, gravity, h) settling from rest under
+// gravity: the first second of the liver_grasp scenes, 100 steps from the rest shape (each
+// repetition starts again from rest). The stages are averaged over the 100 steps.
+void runScene(benchmark::State& state, const char* scene, LinearSolverKind solver) {
+  const SceneSpec spec = loadScene(std::filesystem::path(TACTUS_SOURCE_DIR) / "scenes" / scene);
+  const TissueSpec& ts = spec.tissues.at(0);
+  TetMesh mesh = loadTetMesh(ts.mesh_path);
+  transformMesh(mesh, ts.scale, ts.rotation_deg, ts.translation_m);
+  const FemMaterial mat = femMaterial(ts);
+  FemSolverOptions opt = femSolverOptions(spec.solver);
+  opt.linear = solver;
+  const Eigen::Vector3d gravity = spec.gravity_mps2.value_or(Eigen::Vector3d::Zero());
+  const double h = spec.time_step_s;
+  constexpr int kSteps = 100;
+  double assembly = 0, factor = 0, solve = 0, iters = 0, refreshes = 0, steps = 0;
+  for (auto _ : state) {
+    FemBody body(mesh, mat, nodesInBoxes(mesh, ts.fixed_boxes), &gravity, opt);
+    for (int s = 0; s < kSteps; ++s) {
+      const FemStepStats st = body.freeMotion(h);
+      if (!st.ok) state.SkipWithError("step failed");
+      assembly += st.assembly_s;
+      factor += st.factorisation_s;
+      solve += st.solve_s;
+      iters += st.cg_iterations;
+      refreshes += st.factor_refreshed ? 1.0 : 0.0;
+      steps += 1.0;
+    }
+  }
+  state.counters["step_ms"] = 1e3 * (assembly + factor + solve) / steps;
+  state.counters["assembly_ms"] = 1e3 * assembly / steps;
+  state.counters["assembly_ns_per_tet"] = 1e9 * assembly / steps / mesh.tetCount();
+  state.counters["factor_ms"] = 1e3 * factor / steps;
+  state.counters["solve_ms"] = 1e3 * solve / steps;
+  state.counters["cg_iters"] = iters / steps;
+  if (solver == LinearSolverKind::kCholmodReuse) state.counters["refresh_frac"] = refreshes / steps;
+}
+void BM_Settle_Liver2_Cholmod(benchmark::State& s) {
+  runScene(s, "liver_grasp.yaml", LinearSolverKind::kCholmod);
+}
+void BM_Settle_Liver2_CholmodReuse(benchmark::State& s) {
+  runScene(s, "liver_grasp.yaml", LinearSolverKind::kCholmodReuse);
+}
+void BM_Settle_Liver23k_Cholmod(benchmark::State& s) {
+  runScene(s, "liver_grasp_23k.yaml", LinearSolverKind::kCholmod);
+}
+void BM_Settle_Liver23k_CholmodReuse(benchmark::State& s) {
+  runScene(s, "liver_grasp_23k.yaml", LinearSolverKind::kCholmodReuse);
+}
+BENCHMARK(BM_Settle_Liver2_Cholmod)->Unit(benchmark::kMillisecond)->Iterations(3);
+BENCHMARK(BM_Settle_Liver2_CholmodReuse)->Unit(benchmark::kMillisecond)->Iterations(3);
+BENCHMARK(BM_Settle_Liver23k_Cholmod)->Unit(benchmark::kMillisecond)->Iterations(1);
+BENCHMARK(BM_Settle_Liver23k_CholmodReuse)->Unit(benchmark::kMillisecond)->Iterations(1);
+
 BENCHMARK(BM_FemStep_Small)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_FemStep_Small_Pcg)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_FemStep_Small_CholmodReuse)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_FemStep_Liver2_Cholmod)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_FemStep_Liver2_PcgJacobi)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_FemStep_Liver2_PcgRestChol)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_FemStep_Liver2_PcgWarpedChol)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_FemStep_Liver2_CholmodReuse)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_FemStep_Liver23k_Cholmod)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_FemStep_Liver23k_PcgJacobi)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_FemStep_Liver23k_PcgRestChol)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_FemStep_Liver23k_PcgWarpedChol)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_FemStep_Liver23k_CholmodReuse)->Unit(benchmark::kMillisecond);
 
 // 150 contacts x (n, t1, t2) on random surface triangles around one area (a grasp).
 std::vector<TissueRow> rows450(const FemBody& body) {

@@ -7,25 +7,16 @@
 
 #include <spdlog/spdlog.h>
 
-#include "fem_internal.h"
+#include "fem_body_impl.h"
 #include "tactus/shared/error.h"
 #include "tactus/sim/fem.h"
 
 namespace tactus::sim {
 
-using fem_detail::CholmodSolver;
-using Sparse = CholmodSolver::Sparse;
+using fem_detail::secondsSince;
+using Clock = fem_detail::Clock;
 
 namespace {
-
-using Clock = std::chrono::steady_clock;
-double secondsSince(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
-
-// Entries of one element's lower-triangular contribution: blocks (a, b) with a >= b, and only
-// i >= j inside diagonal blocks: 4 * 6 + 6 * 9.
-constexpr int kEntriesPerElement = 78;
 
 // An edge shorter than this fraction of its element's longest edge ties its two nodes into one
 // rotation group (see FemBody::nodeRotations).
@@ -41,94 +32,6 @@ int findRoot(std::vector<int>& parent, int i) {
 
 }  // namespace
 
-struct FemBody::Impl {
-  TetMesh mesh;
-  FemMaterial material;
-  FemSolverOptions options;
-  bool corotational = true;
-  bool has_gravity = false;
-  Eigen::Vector3d gravity = Eigen::Vector3d::Zero();
-  double lambda = 0.0, mu = 0.0;
-
-  int n = 0;
-  std::vector<bool> fixed;
-  std::vector<int> dof_base;  // first reduced DOF of each node, -1 when fixed
-  int n_free = 0;             // reduced DOFs
-
-  Eigen::VectorXd rest, q, v, mass;
-
-  // per element: shape function gradients (columns g_0..g_3) and rest volume
-  std::vector<Eigen::Matrix<double, 3, 4>> grad;
-  std::vector<double> volume;
-  std::vector<Eigen::Matrix3d> rotation;
-
-  // system matrix A (lower triangle, fixed pattern) and where each element writes
-  Sparse a;
-  std::vector<int> elem_offset;  // kEntriesPerElement per element, -1 for fixed DOFs
-  std::vector<int> diag_offset;  // per reduced DOF
-  CholmodSolver chol;
-  bool chol_current = false;     // chol holds the factor of the current `a`
-  double compliance_scale = 0.0; // C = compliance_scale * A^-1 for the current `a`
-  double last_h = 0.0;
-
-  // rest-shape factorisation
-  Sparse a_rest;
-  CholmodSolver chol_rest;
-  double rest_h = -1.0;
-
-  // step buffers (reduced or full)
-  Eigen::VectorXd f_int, kv, rhs_full, rhs, dv, dv_prev, x_lin;
-  Eigen::VectorXd cg_r, cg_z, cg_p, cg_ap, cg_t, jacobi_inv;
-  std::vector<Eigen::Matrix3d> node_rot, node_acc;  // warped preconditioner
-
-  // rotation groups: nodes tied by short edges share one node rotation
-  std::vector<int> rot_group;   // node -> group index (empty: every node on its own)
-  int rot_group_count = 0;
-  std::vector<Eigen::Matrix3d> group_acc;
-
-  std::vector<int> surface;
-  bool surface_ready = false;
-  std::uint64_t hash = 0;
-  Counters counters;
-  bool inversion_warned = false;   // "inverted elements" is logged once per body
-
-  void init(const TetMesh& m, const FemMaterial& mat, const std::vector<int>& fixed_nodes,
-            const Eigen::Vector3d* g, const FemSolverOptions& opt);
-  void buildPattern();
-  // Element loop at positions x: internal force (+K u sense) into f_out (3n, if non-null),
-  // cK * K + cM * M into `target` (if non-null), K v into kv_out (if v_in non-null).
-  // use_rest_frame: R = I without rotation extraction (rest tangent).
-  void evaluate(const Eigen::VectorXd& x, Eigen::VectorXd* f_out, Sparse* target, double c_k,
-                double c_m, const Eigen::VectorXd* v_in, Eigen::VectorXd* kv_out,
-                bool use_rest_frame);
-  Eigen::Matrix3d elementF(int e, const Eigen::VectorXd& x) const {
-    const auto& t = mesh.tets[e];
-    Eigen::Matrix<double, 3, 4> xe;
-    for (int k = 0; k < 4; ++k) xe.col(k) = x.segment<3>(3 * t[k]);
-    return xe * grad[e].transpose();
-  }
-  Eigen::Matrix3d sigma(const Eigen::Matrix3d& eps) const {
-    return lambda * eps.trace() * Eigen::Matrix3d::Identity() + 2.0 * mu * eps;
-  }
-  void reduce(const Eigen::VectorXd& full, double* out) const {
-    for (int i = 0; i < n; ++i)
-      if (dof_base[i] >= 0)
-        for (int c = 0; c < 3; ++c) out[dof_base[i] + c] = full[3 * i + c];
-  }
-  void expand(const double* red, double scale, double* out) const {
-    for (int i = 0; i < n; ++i)
-      for (int c = 0; c < 3; ++c)
-        out[3 * i + c] = dof_base[i] >= 0 ? scale * red[dof_base[i] + c] : 0.0;
-  }
-  void buildRotationGroups();
-  // Node rotations from element rotations: volume-weighted sum over the adjacent elements,
-  // summed over the node's rotation group, polar factor. Nodes with no weight get identity.
-  void averageRotations(const std::vector<Eigen::Matrix3d>& element_rot,
-                        std::vector<Eigen::Matrix3d>& acc, std::vector<Eigen::Matrix3d>& out);
-  void ensureRestFactor(double h);
-  void ensureCurrentFactor();
-  bool pcg(double tol, int max_iter, FemStepStats& stats);
-};
 
 void FemBody::Impl::init(const TetMesh& m, const FemMaterial& mat,
                          const std::vector<int>& fixed_nodes, const Eigen::Vector3d* g,
@@ -136,6 +39,8 @@ void FemBody::Impl::init(const TetMesh& m, const FemMaterial& mat,
   mesh = m;
   material = mat;
   options = opt;
+  reuse = fem_detail::ReusedFactorSolver(
+      {opt.cg_tolerance, opt.refactor_iterations, opt.refactor_every_steps});
   corotational = mat.law == MaterialLaw::kCorotational;
   n = mesh.nodeCount();
   const std::string where = "FemBody(" + (mesh.source.empty() ? "mesh" : mesh.source) + "): ";
@@ -160,12 +65,13 @@ void FemBody::Impl::init(const TetMesh& m, const FemMaterial& mat,
                   std::to_string(n) + ")");
     fixed[i] = true;
   }
+  // reduced DOFs in reverse Cuthill-McKee order of the free nodes: the element loop's scatter
+  // into A and the products with A touch nearby memory (CHOLMOD orders the factor itself)
   dof_base.assign(n, -1);
-  for (int i = 0; i < n; ++i)
-    if (!fixed[i]) {
-      dof_base[i] = n_free;
-      n_free += 3;
-    }
+  for (int i : fem_detail::bandwidthOrder(mesh, fixed)) {
+    dof_base[i] = n_free;
+    n_free += 3;
+  }
   if (n_free == 0) throw Error(where + "every node is fixed");
 
   rest.resize(3 * n);
@@ -206,12 +112,11 @@ void FemBody::Impl::init(const TetMesh& m, const FemMaterial& mat,
   buildPattern();
   buildRotationGroups();
   f_int.resize(3 * n);
-  kv.resize(3 * n);
   rhs_full.resize(3 * n);
-  x_lin.resize(3 * n);
   rhs.resize(n_free);
   dv = Eigen::VectorXd::Zero(n_free);
   dv_prev = Eigen::VectorXd::Zero(n_free);
+  dv_prev2 = Eigen::VectorXd::Zero(n_free);
 
   // hash of what the rest compliance depends on (h excluded)
   using fem_detail::fnv1a;
@@ -291,125 +196,11 @@ void FemBody::Impl::averageRotations(const std::vector<Eigen::Matrix3d>& element
                                         : Eigen::Matrix3d::Identity();
 }
 
-void FemBody::Impl::buildPattern() {
-  const int ne = mesh.tetCount();
-  std::vector<Eigen::Triplet<double, int>> trip;
-  trip.reserve(static_cast<std::size_t>(ne) * kEntriesPerElement + n_free);
-  for (int d = 0; d < n_free; ++d) trip.emplace_back(d, d, 0.0);
-  auto forEntry = [&](int e, auto&& fn) {
-    const auto& t = mesh.tets[e];
-    for (int a = 0; a < 4; ++a)
-      for (int b = 0; b <= a; ++b)
-        for (int i = 0; i < 3; ++i)
-          for (int j = 0; j < (a == b ? i + 1 : 3); ++j) {
-            const int ra = dof_base[t[a]], cb = dof_base[t[b]];
-            if (ra < 0 || cb < 0) {
-              fn(-1, -1);
-            } else {
-              const int r = ra + i, c = cb + j;
-              fn(std::max(r, c), std::min(r, c));
-            }
-          }
-  };
-  for (int e = 0; e < ne; ++e)
-    forEntry(e, [&](int r, int c) {
-      if (r >= 0) trip.emplace_back(r, c, 0.0);
-    });
-  a.resize(n_free, n_free);
-  a.setFromTriplets(trip.begin(), trip.end());
-  a.makeCompressed();
-  const int* outer = a.outerIndexPtr();
-  const int* inner = a.innerIndexPtr();
-  auto offsetOf = [&](int r, int c) {
-    const int* lo = inner + outer[c];
-    const int* hi = inner + outer[c + 1];
-    const int* it = std::lower_bound(lo, hi, r);
-    return static_cast<int>(it - inner);
-  };
-  elem_offset.resize(static_cast<std::size_t>(ne) * kEntriesPerElement);
-  for (int e = 0; e < ne; ++e) {
-    int k = 0;
-    forEntry(e, [&](int r, int c) {
-      elem_offset[static_cast<std::size_t>(e) * kEntriesPerElement + k++] =
-          r >= 0 ? offsetOf(r, c) : -1;
-    });
-  }
-  diag_offset.resize(n_free);
-  for (int d = 0; d < n_free; ++d) diag_offset[d] = offsetOf(d, d);
-  a_rest = a;
-}
-
-void FemBody::Impl::evaluate(const Eigen::VectorXd& x, Eigen::VectorXd* f_out, Sparse* target,
-                             double c_k, double c_m, const Eigen::VectorXd* v_in,
-                             Eigen::VectorXd* kv_out, bool use_rest_frame) {
-  if (f_out) f_out->setZero(3 * n);
-  if (kv_out) kv_out->setZero(3 * n);
-  double* vals = target ? target->valuePtr() : nullptr;
-  if (target) std::fill(vals, vals + target->nonZeros(), 0.0);
-  const bool rotate = corotational && !use_rest_frame;
-  const int ne = mesh.tetCount();
-  for (int e = 0; e < ne; ++e) {
-    const auto& t = mesh.tets[e];
-    const auto& g = grad[e];
-    const double vol = volume[e];
-    Eigen::Matrix3d r = Eigen::Matrix3d::Identity();
-    if (rotate) {
-      r = fem_detail::polarRotation(elementF(e, x));
-      rotation[e] = r;
-    }
-    // rotated gradients r_a = R g_a
-    const Eigen::Matrix<double, 3, 4> rg = rotate ? Eigen::Matrix<double, 3, 4>(r * g) : g;
-    if (f_out) {
-      // internal force R V sigma(sym(R^T F) - I) g_a
-      const Eigen::Matrix3d fl = rotate ? Eigen::Matrix3d(r.transpose() * elementF(e, x))
-                                        : elementF(e, x);
-      const Eigen::Matrix3d eps =
-          0.5 * (fl + fl.transpose()) - Eigen::Matrix3d::Identity();
-      const Eigen::Matrix3d s = vol * sigma(eps);
-      const Eigen::Matrix<double, 3, 4> fe = rotate ? Eigen::Matrix<double, 3, 4>(r * s * g)
-                                                    : Eigen::Matrix<double, 3, 4>(s * g);
-      for (int k = 0; k < 4; ++k) f_out->segment<3>(3 * t[k]) += fe.col(k);
-    }
-    if (v_in && kv_out) {
-      // K v = R V sigma(sym(R^T grad v)) g_a
-      Eigen::Matrix<double, 3, 4> ve;
-      for (int k = 0; k < 4; ++k) ve.col(k) = v_in->segment<3>(3 * t[k]);
-      Eigen::Matrix3d gv = ve * g.transpose();
-      if (rotate) gv = r.transpose() * gv;
-      const Eigen::Matrix3d s = vol * sigma(0.5 * (gv + gv.transpose()));
-      const Eigen::Matrix<double, 3, 4> fe = rotate ? Eigen::Matrix<double, 3, 4>(r * s * g)
-                                                    : Eigen::Matrix<double, 3, 4>(s * g);
-      for (int k = 0; k < 4; ++k) kv_out->segment<3>(3 * t[k]) += fe.col(k);
-    }
-    if (target) {
-      // block (a, b) = c_k V (lambda r_a r_b^T + mu r_b r_a^T + mu (g_a . g_b) I)
-      const int* off = elem_offset.data() + static_cast<std::size_t>(e) * kEntriesPerElement;
-      const double cl = c_k * vol * lambda, cm = c_k * vol * mu;
-      int k = 0;
-      for (int ia = 0; ia < 4; ++ia)
-        for (int ib = 0; ib <= ia; ++ib) {
-          const Eigen::Vector3d ra = rg.col(ia), rb = rg.col(ib);
-          const double gg = cm * g.col(ia).dot(g.col(ib));
-          for (int i = 0; i < 3; ++i)
-            for (int j = 0; j < (ia == ib ? i + 1 : 3); ++j, ++k) {
-              if (off[k] < 0) continue;
-              vals[off[k]] += cl * ra[i] * rb[j] + cm * rb[i] * ra[j] + (i == j ? gg : 0.0);
-            }
-        }
-    }
-  }
-  if (rotate) counters.rotation_extractions += ne;
-  if (target && c_m != 0.0)
-    for (int i = 0; i < n; ++i)
-      if (dof_base[i] >= 0)
-        for (int c = 0; c < 3; ++c) vals[diag_offset[dof_base[i] + c]] += c_m * mass[3 * i + c];
-}
-
 void FemBody::Impl::ensureRestFactor(double h) {
   if (rest_h == h && chol_rest.factorized()) return;
   const double alpha = material.damping ? material.damping->mass_alpha_per_s : 0.0;
   const double beta = material.damping ? material.damping->stiffness_beta_s : 0.0;
-  evaluate(rest, nullptr, &a_rest, h + beta, 1.0 / h + alpha, nullptr, nullptr, true);
+  evaluate(rest, nullptr, 0.0, 0.0, nullptr, &a_rest, h + beta, 1.0 / h + alpha, true);
   if (!chol_rest.analyzed()) chol_rest.analyze(a_rest);
   ++counters.factorisations;
   if (!chol_rest.factorize(a_rest))
@@ -429,10 +220,77 @@ void FemBody::Impl::ensureCurrentFactor() {
     throw NumericalError("FemBody(" + mesh.source +
                          "): current system matrix is not positive definite");
   chol_current = true;
+  if (a_is_step_matrix) {
+    reuse.noteFactorised();
+    keepFactorRotations();
+  }
+}
+
+void FemBody::Impl::keepFactorRotations() {
+  // node_rot holds this step's node rotations when kCholmodReuse computed them
+  if (options.linear != LinearSolverKind::kCholmodReuse || !corotational) return;
+  for (int i = 0; i < n; ++i)
+    if (dof_base[i] >= 0) factor_node_rot[dof_base[i] / 3] = node_rot[i];
+}
+
+bool FemBody::Impl::factorizeAndSolve(FemStepStats& stats) {
+  const auto t1 = Clock::now();
+  ++counters.factorisations;
+  const bool ok = chol.factorize(a);
+  stats.factorisation_s = secondsSince(t1);
+  chol_current = ok;
+  if (!ok) return false;
+  const auto t2 = Clock::now();
+  chol.solve(rhs.data(), dv.data(), 1);
+  stats.solve_s = secondsSince(t2);
+  return true;
+}
+
+bool FemBody::Impl::solveStep(double h, FemStepStats& stats) {
+  switch (options.linear) {
+    case LinearSolverKind::kCholmod:
+      return factorizeAndSolve(stats) && dv.allFinite();
+    case LinearSolverKind::kCholmodReuse: {
+      dv = 2.0 * dv_prev - dv_prev2;  // warm start
+      const auto t_warp = Clock::now();
+      if (corotational) {
+        averageRotations(rotation, node_acc, node_rot);
+        relative_rot.resize(n_free / 3);
+        if (factor_node_rot.size() != relative_rot.size())
+          factor_node_rot.assign(relative_rot.size(), Eigen::Matrix3d::Identity());
+        for (int i = 0; i < n; ++i)
+          if (dof_base[i] >= 0)
+            relative_rot[dof_base[i] / 3] = node_rot[i] * factor_node_rot[dof_base[i] / 3].transpose();
+      }
+      const double warp_s = secondsSince(t_warp);
+      const fem_detail::ReuseSolveResult r =
+          reuse.solve(chol, a, rhs, dv, corotational ? relative_rot.data() : nullptr);
+      if (r.refreshed) keepFactorRotations();
+      stats.factorisation_s = r.factorisation_s;
+      stats.solve_s = warp_s + r.solve_s;
+      stats.cg_iterations = r.cg_iterations;
+      stats.cg_residual = r.residual;
+      stats.factor_refreshed = r.refreshed;
+      if (r.refreshed) ++counters.factorisations;
+      chol_current = r.refreshed;
+      return r.ok;
+    }
+    case LinearSolverKind::kPcg: {
+      const auto t1 = Clock::now();
+      if (options.pcg_preconditioner != PcgPreconditioner::kJacobi) ensureRestFactor(h);
+      stats.factorisation_s = secondsSince(t1);
+      const auto t2 = Clock::now();
+      const bool ok = pcg(options.cg_tolerance, options.cg_max_iterations, stats);
+      stats.solve_s = secondsSince(t2);
+      if (!ok && !dv.allFinite()) return false;
+      stats.ok = ok;
+      return dv.allFinite();
+    }
+  }
+  return false;
 }
 
 bool FemBody::Impl::pcg(double tol, int max_iter, FemStepStats& stats) {
-  const auto sa = a.selfadjointView<Eigen::Lower>();
   const bool warped = options.pcg_preconditioner == PcgPreconditioner::kWarpedCholesky;
   const bool use_rest =
       options.pcg_preconditioner == PcgPreconditioner::kRestCholesky || warped;
@@ -465,44 +323,11 @@ bool FemBody::Impl::pcg(double tol, int max_iter, FemStepStats& stats) {
       z = jacobi_inv.cwiseProduct(r);
     }
   };
-  const double b_norm = rhs.norm();
-  stats.cg_iterations = 0;
-  if (b_norm == 0.0) {
-    dv.setZero();
-    stats.cg_residual = 0.0;
-    return true;
-  }
   dv = dv_prev;  // warm start
-  cg_r = rhs;
-  cg_r.noalias() -= sa * dv;
-  double res = cg_r.norm() / b_norm;
-  if (!(res < 1e300)) {
-    dv.setZero();
-    cg_r = rhs;
-    res = 1.0;
-  }
-  precond(cg_r, cg_z);
-  cg_p = cg_z;
-  double rz = cg_r.dot(cg_z);
-  int it = 0;
-  while (res > tol && it < max_iter) {
-    cg_ap.noalias() = sa * cg_p;
-    const double pap = cg_p.dot(cg_ap);
-    if (!(pap > 0.0)) break;
-    const double step = rz / pap;
-    dv.noalias() += step * cg_p;
-    cg_r.noalias() -= step * cg_ap;
-    ++it;
-    res = cg_r.norm() / b_norm;
-    if (res <= tol) break;
-    precond(cg_r, cg_z);
-    const double rz_new = cg_r.dot(cg_z);
-    cg_p = cg_z + (rz_new / rz) * cg_p;
-    rz = rz_new;
-  }
-  stats.cg_iterations = it;
-  stats.cg_residual = res;
-  return res <= tol && dv.allFinite();
+  const fem_detail::CgResult r = fem_detail::conjugateGradient(a, rhs, dv, tol, max_iter, cg, precond);
+  stats.cg_iterations = r.iterations;
+  stats.cg_residual = r.residual;
+  return r.converged;
 }
 
 // ---- FemBody ----
@@ -513,7 +338,7 @@ FemBody::FemBody(const TetMesh& mesh, const FemMaterial& material,
     : impl_(std::make_unique<Impl>()) {
   impl_->init(mesh, material, fixed_nodes, gravity_mps2, options);
   // symbolic analysis once, on the fixed pattern
-  if (options.linear == LinearSolverKind::kCholmod) impl_->chol.analyze(impl_->a);
+  if (options.linear != LinearSolverKind::kPcg) impl_->chol.analyze(impl_->a);
 }
 
 FemBody::~FemBody() = default;
@@ -551,7 +376,9 @@ FemStepStats FemBody::freeMotion(double h, const Eigen::VectorXd* external_force
   const bool damped = m.material.damping.has_value();
   const double alpha = damped ? m.material.damping->mass_alpha_per_s : 0.0;
   const double beta = damped ? m.material.damping->stiffness_beta_s : 0.0;
-  stats.inverted_elements = invertedElementCount();
+  // linearise at q + h v: internal force, tangent, and K v for the damping force
+  m.evaluate(m.q, &m.v, h, beta, &m.f_int, &m.a, h + beta, 1.0 / h + alpha, false,
+             &stats.inverted_elements);
   if (stats.inverted_elements > 0 && !m.inversion_warned) {
     m.inversion_warned = true;
     spdlog::warn("{}: {} of {} tetrahedra inverted (det F <= 0); the corotational force pushes "
@@ -559,12 +386,8 @@ FemStepStats FemBody::freeMotion(double h, const Eigen::VectorXd* external_force
                  "volume_ratio), the mesh or the material cannot carry the load. Logged once.",
                  m.mesh.source, stats.inverted_elements, m.mesh.tetCount());
   }
-
-  // linearise at q + h v: internal force, tangent, and K v for the damping force
-  m.x_lin = m.q + h * m.v;
-  m.evaluate(m.x_lin, &m.f_int, &m.a, h + beta, 1.0 / h + alpha, damped ? &m.v : nullptr,
-             damped ? &m.kv : nullptr, false);
   m.chol_current = false;
+  m.a_is_step_matrix = true;
   m.compliance_scale = h;
   // p - F(q + h v, v) with F = f_int + B v
   m.rhs_full = -m.f_int;
@@ -572,42 +395,17 @@ FemStepStats FemBody::freeMotion(double h, const Eigen::VectorXd* external_force
   if (m.has_gravity)
     for (int i = 0; i < m.n; ++i) m.rhs_full.segment<3>(3 * i) += m.mass[3 * i] * m.gravity;
   if (damped) {
-    m.rhs_full -= alpha * m.mass.cwiseProduct(m.v) + beta * m.kv;
+    m.rhs_full -= alpha * m.mass.cwiseProduct(m.v);  // beta K v is in f_int
     ++m.counters.damping_evaluations;
   }
   m.reduce(m.rhs_full, m.rhs.data());
   stats.assembly_s = secondsSince(t0);
 
-  if (m.options.linear == LinearSolverKind::kCholmod) {
-    const auto t1 = Clock::now();
-    ++m.counters.factorisations;
-    if (!m.chol.factorize(m.a)) {
-      stats.ok = false;
-      stats.factorisation_s = secondsSince(t1);
-      return stats;
-    }
-    m.chol_current = true;
-    stats.factorisation_s = secondsSince(t1);
-    const auto t2 = Clock::now();
-    m.chol.solve(m.rhs.data(), m.dv.data(), 1);
-    stats.solve_s = secondsSince(t2);
-  } else {
-    const auto t1 = Clock::now();
-    if (m.options.pcg_preconditioner != PcgPreconditioner::kJacobi) m.ensureRestFactor(h);
-    stats.factorisation_s = secondsSince(t1);
-    const auto t2 = Clock::now();
-    const bool ok = m.pcg(m.options.cg_tolerance, m.options.cg_max_iterations, stats);
-    stats.solve_s = secondsSince(t2);
-    if (!ok && !m.dv.allFinite()) {
-      stats.ok = false;
-      return stats;
-    }
-    stats.ok = ok;
-  }
-  if (!m.dv.allFinite()) {
+  if (!m.solveStep(h, stats)) {
     stats.ok = false;
     return stats;
   }
+  m.dv_prev2 = m.dv_prev;
   m.dv_prev = m.dv;
   // v_free = v + dv, q_free = q + h v_free (free DOFs only)
   for (int i = 0; i < m.n; ++i) {
@@ -628,8 +426,10 @@ FemStepStats FemBody::solveStatic(const Eigen::VectorXd* external_force_n, int m
   if (!m.chol.analyzed()) m.chol.analyze(m.a);
   for (int it = 0; it < max_iterations; ++it) {
     const auto t0 = Clock::now();
-    m.evaluate(m.q, &m.f_int, &m.a, 1.0, 0.0, nullptr, nullptr, false);
+    m.evaluate(m.q, nullptr, 0.0, 0.0, &m.f_int, &m.a, 1.0, 0.0, false);
     m.chol_current = false;
+    m.a_is_step_matrix = false;
+    m.reuse.forget();  // chol will hold K, not a step's A
     m.compliance_scale = 1.0;
     m.rhs_full = -m.f_int;
     if (external_force_n) m.rhs_full += *external_force_n;
@@ -638,17 +438,10 @@ FemStepStats FemBody::solveStatic(const Eigen::VectorXd* external_force_n, int m
     m.reduce(m.rhs_full, m.rhs.data());
     stats.assembly_s = secondsSince(t0);
     if (m.rhs.norm() <= tol_n) break;
-    const auto t1 = Clock::now();
-    ++m.counters.factorisations;
-    if (!m.chol.factorize(m.a)) {
+    if (!m.factorizeAndSolve(stats)) {
       stats.ok = false;
       return stats;
     }
-    m.chol_current = true;
-    stats.factorisation_s = secondsSince(t1);
-    const auto t2 = Clock::now();
-    m.chol.solve(m.rhs.data(), m.dv.data(), 1);
-    stats.solve_s = secondsSince(t2);
     for (int i = 0; i < m.n; ++i)
       if (m.dof_base[i] >= 0) m.q.segment<3>(3 * i) += m.dv.segment<3>(m.dof_base[i]);
     if (!m.corotational) break;  // linear: one Newton step is exact
@@ -657,7 +450,7 @@ FemStepStats FemBody::solveStatic(const Eigen::VectorXd* external_force_n, int m
 }
 
 void FemBody::elasticForce(const Eigen::VectorXd& q, Eigen::VectorXd& force_out) {
-  impl_->evaluate(q, &force_out, nullptr, 0.0, 0.0, nullptr, nullptr, false);
+  impl_->evaluate(q, nullptr, 0.0, 0.0, &force_out, nullptr, 0.0, 0.0, false);
   force_out = -force_out;
 }
 
@@ -703,82 +496,27 @@ void FemBody::solveRestComplianceBatch(double h, const Eigen::MatrixXd& r, Eigen
   for (int c = 0; c < k; ++c) m.expand(rr.col(c).data(), h, x.col(c).data());
 }
 
-void FemBody::nodeRotations(std::vector<Eigen::Matrix3d>& out) const {
-  Impl& m = *impl_;
-  out.assign(m.n, Eigen::Matrix3d::Identity());
-  if (!m.corotational) return;
-  std::vector<Eigen::Matrix3d> element_rot(m.mesh.tetCount()), acc;
-  for (int e = 0; e < m.mesh.tetCount(); ++e)
-    element_rot[e] = fem_detail::polarRotation(m.elementF(e, m.q));
-  m.counters.rotation_extractions += m.mesh.tetCount();
-  m.averageRotations(element_rot, acc, out);
-}
-
-void FemBody::stresses(std::vector<Eigen::Matrix3d>& out) const {
-  const Impl& m = *impl_;
-  out.resize(m.mesh.tetCount());
-  for (int e = 0; e < m.mesh.tetCount(); ++e) {
-    const Eigen::Matrix3d f = m.elementF(e, m.q);
-    const Eigen::Matrix3d r =
-        m.corotational ? fem_detail::polarRotation(f) : Eigen::Matrix3d::Identity();
-    const Eigen::Matrix3d fl = r.transpose() * f;
-    const Eigen::Matrix3d s =
-        m.sigma(0.5 * (fl + fl.transpose()) - Eigen::Matrix3d::Identity());
-    out[e] = r * s * r.transpose();
-  }
-}
-
-void FemBody::volumeRatios(Eigen::VectorXd& out) const {
-  const Impl& m = *impl_;
-  out.resize(m.mesh.tetCount());
-  for (int e = 0; e < m.mesh.tetCount(); ++e) out[e] = m.elementF(e, m.q).determinant();
-}
-
-int FemBody::invertedElementCount() const {
-  const Impl& m = *impl_;
-  int count = 0;
-  for (int e = 0; e < m.mesh.tetCount(); ++e) {
-    if (!(m.elementF(e, m.q).determinant() > 0.0)) ++count;
-  }
-  return count;
-}
-
-void FemBody::vonMises(Eigen::VectorXd& out) const {
-  std::vector<Eigen::Matrix3d> s;
-  stresses(s);
-  out.resize(static_cast<Eigen::Index>(s.size()));
-  for (std::size_t e = 0; e < s.size(); ++e) {
-    const Eigen::Matrix3d dev = s[e] - s[e].trace() / 3.0 * Eigen::Matrix3d::Identity();
-    out[static_cast<Eigen::Index>(e)] = std::sqrt(1.5 * dev.squaredNorm());
-  }
-}
-
-double FemBody::kineticEnergy() const {
-  return 0.5 * impl_->v.dot(impl_->mass.cwiseProduct(impl_->v));
-}
-
-double FemBody::elasticEnergy() const {
-  const Impl& m = *impl_;
-  double energy = 0.0;
-  for (int e = 0; e < m.mesh.tetCount(); ++e) {
-    const Eigen::Matrix3d f = m.elementF(e, m.q);
-    const Eigen::Matrix3d fl =
-        m.corotational ? Eigen::Matrix3d(fem_detail::polarRotation(f).transpose() * f) : f;
-    const Eigen::Matrix3d eps = 0.5 * (fl + fl.transpose()) - Eigen::Matrix3d::Identity();
-    energy += m.volume[e] * (m.mu * eps.squaredNorm() + 0.5 * m.lambda * eps.trace() * eps.trace());
-  }
-  return energy;
-}
-
-double FemBody::gravityEnergy() const {
-  const Impl& m = *impl_;
-  if (!m.has_gravity) return 0.0;
-  double energy = 0.0;
-  for (int i = 0; i < m.n; ++i) energy -= m.mass[3 * i] * m.gravity.dot(m.q.segment<3>(3 * i));
-  return energy;
-}
-
 // ---- free functions ----
+
+FemMaterial femMaterial(const TissueSpec& tissue) {
+  FemMaterial m;
+  m.law = tissue.law;
+  m.young_pa = tissue.young_pa;
+  m.poisson = tissue.poisson;
+  m.density_kgpm3 = tissue.density_kgpm3;
+  m.damping = tissue.damping;
+  return m;
+}
+
+FemSolverOptions femSolverOptions(const SolverSpec& solver) {
+  FemSolverOptions o;
+  o.linear = solver.linear;
+  o.cg_tolerance = solver.cg_tolerance;
+  o.cg_max_iterations = solver.cg_max_iterations;
+  o.refactor_iterations = solver.refactor_iterations;
+  o.refactor_every_steps = solver.refactor_every_steps;
+  return o;
+}
 
 void transformMesh(TetMesh& mesh, double scale, const Eigen::Vector3d& rotation_deg,
                    const Eigen::Vector3d& translation_m) {

@@ -135,87 +135,55 @@ NumericThreads applyNumericThreadLimitImpl() {
 
 }  // namespace
 
-CholmodSolver::CholmodSolver() {
-  limitNumericThreads();
-  cholmod_start(&common_);
-  common_.print = 0;
-  common_.error_handler = nullptr;
-}
+// ---- node order ----
 
-CholmodSolver::~CholmodSolver() {
-  if (factor_) cholmod_free_factor(&factor_, &common_);
-  if (x_) cholmod_free_dense(&x_, &common_);
-  if (y_) cholmod_free_dense(&y_, &common_);
-  if (e_) cholmod_free_dense(&e_, &common_);
-  cholmod_finish(&common_);
-}
-
-cholmod_sparse CholmodSolver::view(Sparse& lower) const {
-  cholmod_sparse s{};
-  s.nrow = static_cast<std::size_t>(lower.rows());
-  s.ncol = static_cast<std::size_t>(lower.cols());
-  s.nzmax = static_cast<std::size_t>(lower.nonZeros());
-  s.p = lower.outerIndexPtr();
-  s.i = lower.innerIndexPtr();
-  s.nz = nullptr;
-  s.x = lower.valuePtr();
-  s.z = nullptr;
-  s.stype = -1;  // lower triangle holds the symmetric matrix
-  s.itype = CHOLMOD_INT;
-  s.xtype = CHOLMOD_REAL;
-  s.dtype = CHOLMOD_DOUBLE;
-  s.sorted = 1;
-  s.packed = 1;
-  return s;
-}
-
-void CholmodSolver::analyze(Sparse& lower) {
-  if (!lower.isCompressed()) lower.makeCompressed();
-  if (factor_) cholmod_free_factor(&factor_, &common_);
-  cholmod_sparse a = view(lower);
-  factor_ = cholmod_analyze(&a, &common_);
-  factorized_ = false;
-  if (!factor_ || common_.status < CHOLMOD_OK) {
-    throw NumericalError("CHOLMOD symbolic analysis failed (status " +
-                         std::to_string(common_.status) + ") for a system of " +
-                         std::to_string(lower.rows()) + " unknowns");
+std::vector<int> bandwidthOrder(const TetMesh& mesh, const std::vector<bool>& skip) {
+  const int n = mesh.nodeCount();
+  // node adjacency (CSR) over the edges of the elements, both directions, without skipped nodes
+  std::vector<std::pair<int, int>> edges;
+  edges.reserve(mesh.tets.size() * 12);
+  for (const auto& t : mesh.tets)
+    for (int a = 0; a < 4; ++a)
+      for (int b = 0; b < 4; ++b) {
+        if (a == b || t[a] < 0 || t[a] >= n || t[b] < 0 || t[b] >= n) continue;
+        if (skip[t[a]] || skip[t[b]]) continue;
+        edges.emplace_back(t[a], t[b]);
+      }
+  std::sort(edges.begin(), edges.end());
+  edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
+  std::vector<int> start(n + 1, 0), adj(edges.size());
+  for (const auto& e : edges) ++start[e.first + 1];
+  for (int i = 0; i < n; ++i) start[i + 1] += start[i];
+  for (std::size_t k = 0; k < edges.size(); ++k) adj[k] = edges[k].second;
+  auto degree = [&](int i) { return start[i + 1] - start[i]; };
+  std::vector<int> by_degree;
+  for (int i = 0; i < n; ++i)
+    if (!skip[i]) by_degree.push_back(i);
+  std::stable_sort(by_degree.begin(), by_degree.end(),
+                   [&](int x, int y) { return degree(x) < degree(y); });
+  std::vector<int> order;
+  order.reserve(by_degree.size());
+  std::vector<char> seen(n, 0);
+  std::vector<int> next;
+  for (int root : by_degree) {
+    if (seen[root]) continue;
+    seen[root] = 1;
+    std::size_t head = order.size();
+    order.push_back(root);
+    while (head < order.size()) {
+      const int i = order[head++];
+      next.assign(adj.begin() + start[i], adj.begin() + start[i + 1]);
+      std::stable_sort(next.begin(), next.end(),
+                       [&](int x, int y) { return degree(x) < degree(y); });
+      for (int j : next)
+        if (!seen[j]) {
+          seen[j] = 1;
+          order.push_back(j);
+        }
+    }
   }
-  spdlog::debug("CHOLMOD analysis: n {} nnz(A) {} nnz(L) {:.0f} flops {:.3g} ordering {} {}", lower.rows(),
-                lower.nonZeros(), common_.lnz, common_.fl,
-                common_.method[common_.selected].ordering,
-                factor_->is_super ? "supernodal" : "simplicial");
-}
-
-bool CholmodSolver::factorize(Sparse& lower) {
-  cholmod_sparse a = view(lower);
-  const int ok = cholmod_factorize(&a, factor_, &common_);
-  factorized_ = ok && common_.status == CHOLMOD_OK && factor_->minor == factor_->n;
-  return factorized_;
-}
-
-void CholmodSolver::solve(const double* b, double* x, int ncols) {
-  const auto n = factor_->n;
-  cholmod_dense bd{};
-  bd.nrow = n;
-  bd.ncol = static_cast<std::size_t>(ncols);
-  bd.nzmax = n * bd.ncol;
-  bd.d = n;
-  bd.x = const_cast<double*>(b);
-  bd.z = nullptr;
-  bd.xtype = CHOLMOD_REAL;
-  bd.dtype = CHOLMOD_DOUBLE;
-  cholmod_solve2(CHOLMOD_A, factor_, &bd, nullptr, &x_, nullptr, &y_, &e_, &common_);
-  if (!x_) throw NumericalError("CHOLMOD solve failed (out of memory?)");
-  std::memcpy(x, x_->x, sizeof(double) * n * bd.ncol);
-}
-
-std::size_t CholmodSolver::factorNonzeros() const {
-  if (!factor_) return 0;
-  if (factor_->is_super) {
-    // supernodal: count the stored values
-    return factor_->xsize;
-  }
-  return factor_->nzmax;
+  std::reverse(order.begin(), order.end());
+  return order;
 }
 
 // ---- boundary ----

@@ -1,14 +1,14 @@
 #pragma once
-// Private helpers of the fem module (not installed): polar decomposition, a thin CHOLMOD wrapper
-// with a fixed pattern and reusable workspaces, boundary nodes, and a 64-bit FNV-1a hash.
-
-#include <cholmod.h>
+// Private helpers of the fem module (not installed): polar decomposition, boundary nodes and a
+// 64-bit FNV-1a hash; the linear solvers are in linear_solver.h.
 
 #include <Eigen/Core>
 #include <Eigen/SparseCore>
+#include <chrono>
 #include <cstdint>
 #include <vector>
 
+#include "linear_solver.h"
 #include "tactus/sim/mesh.h"
 
 namespace tactus::sim::fem_detail {
@@ -25,37 +25,16 @@ namespace tactus::sim::fem_detail {
 /// large enough load can still hold an element inverted at equilibrium: FemStepStats counts them.
 Eigen::Matrix3d polarRotation(const Eigen::Matrix3d& F);
 
-/// Sparse symmetric positive-definite factorisation through the CHOLMOD C API. The matrix is the
-/// lower triangle of a compressed column-major Eigen matrix whose pattern never changes:
-/// analyze() once, factorize() per step, solve() with workspaces kept between calls.
-class CholmodSolver {
- public:
-  using Sparse = Eigen::SparseMatrix<double, Eigen::ColMajor, int>;
-  CholmodSolver();
-  ~CholmodSolver();
-  CholmodSolver(const CholmodSolver&) = delete;
-  CholmodSolver& operator=(const CholmodSolver&) = delete;
+using Clock = std::chrono::steady_clock;
+inline double secondsSince(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
 
-  /// Symbolic analysis (fill-reducing ordering). Throws NumericalError on failure.
-  void analyze(Sparse& lower);
-  /// Numeric factorisation; false when the matrix is not positive definite.
-  bool factorize(Sparse& lower);
-  bool analyzed() const { return factor_ != nullptr; }
-  bool factorized() const { return factorized_; }
-  /// x = A^-1 b for `ncols` column-major right-hand sides of length n (x may alias b).
-  void solve(const double* b, double* x, int ncols);
-  /// Nonzeros of the factor (for the log/benchmarks).
-  std::size_t factorNonzeros() const;
-
- private:
-  cholmod_sparse view(Sparse& lower) const;
-  cholmod_common common_;
-  cholmod_factor* factor_ = nullptr;
-  cholmod_dense* x_ = nullptr;
-  cholmod_dense* y_ = nullptr;
-  cholmod_dense* e_ = nullptr;
-  bool factorized_ = false;
-};
+/// The nodes not `skip`ped in reverse Cuthill-McKee order over the mesh's node adjacency (each
+/// connected part from a node of minimum degree): nodes of one element get nearby positions, so
+/// that element loops over data indexed in this order touch nearby memory. Node indices out of
+/// range are ignored.
+std::vector<int> bandwidthOrder(const TetMesh& mesh, const std::vector<bool>& skip);
 
 /// Sorted unique nodes on the boundary (faces that belong to exactly one tetrahedron).
 std::vector<int> boundaryNodes(const TetMesh& mesh);

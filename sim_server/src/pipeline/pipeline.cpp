@@ -132,17 +132,8 @@ void Simulation::Impl::buildTissues() {
     fixed.insert(fixed.end(), boxed.begin(), boxed.end());
     std::sort(fixed.begin(), fixed.end());
     fixed.erase(std::unique(fixed.begin(), fixed.end()), fixed.end());
-    FemMaterial material;
-    material.law = ts.law;
-    material.young_pa = ts.young_pa;
-    material.poisson = ts.poisson;
-    material.density_kgpm3 = ts.density_kgpm3;
-    material.damping = ts.damping;
-    FemSolverOptions solver;
-    solver.linear = spec.solver.linear;
-    solver.cg_tolerance = spec.solver.cg_tolerance;
-    solver.cg_max_iterations = spec.solver.cg_max_iterations;
-    state.body = std::make_unique<FemBody>(state.mesh, material, fixed, gravity, solver);
+    state.body = std::make_unique<FemBody>(state.mesh, femMaterial(ts), fixed, gravity,
+                                           femSolverOptions(spec.solver));
     spdlog::info("tissue '{}': {} nodes, {} tets, {} fixed nodes", ts.name, state.mesh.nodeCount(),
                  state.mesh.tetCount(), fixed.size());
     if (spec.instrument.present) {
@@ -205,7 +196,11 @@ std::vector<std::string> Simulation::stages() const {
     std::string effects = ts.law == MaterialLaw::kCorotational ? "corotational" : "linear";
     effects += ts.damping ? ", Rayleigh damping" : ", no damping";
     effects += s.spec.gravity_mps2 ? ", gravity" : ", no gravity";
-    effects += s.spec.solver.linear == LinearSolverKind::kCholmod ? ", CHOLMOD" : ", PCG";
+    switch (s.spec.solver.linear) {
+      case LinearSolverKind::kCholmod: effects += ", CHOLMOD"; break;
+      case LinearSolverKind::kPcg: effects += ", PCG"; break;
+      case LinearSolverKind::kCholmodReuse: effects += ", PCG on a reused CHOLMOD factor"; break;
+    }
     out.push_back(fmt::format("free motion of tissue '{}' (implicit Euler; {})", ts.name, effects));
   }
   if (!s.instrument) {
@@ -665,6 +660,9 @@ StepReport Simulation::step() {
     const FemStepStats st = ts.body->freeMotion(h);
     if (!st.ok) report.finite = false;
     report.inverted_elements += st.inverted_elements;
+    report.fem_cg_iterations += st.cg_iterations;
+    if (st.factor_refreshed || s.spec.solver.linear == LinearSolverKind::kCholmod)
+      ++report.fem_factorisations;
   }
   if (s.instrument) {
     s.tool_begin = s.instrument->pose();

@@ -193,6 +193,27 @@ TEST(Scene, ContactDetectionAndFaceContacts) {
             "'later')");
 }
 
+TEST(Scene, LinearSolverStrategies) {
+  const SceneSpec def = parseScene(kHead, "s.yaml", kScenes);
+  EXPECT_EQ(def.solver.linear, LinearSolverKind::kCholmod);
+  EXPECT_EQ(def.solver.refactor_iterations, 8);
+  EXPECT_EQ(def.solver.refactor_every_steps, 0);
+  const SceneSpec s = parseScene(
+      kHead + "solver: {linear: cholmod_reuse, refactor_iterations: 12, refactor_every_steps: 50}\n",
+      "s.yaml", kScenes);
+  EXPECT_EQ(s.solver.linear, LinearSolverKind::kCholmodReuse);
+  EXPECT_EQ(s.solver.refactor_iterations, 12);
+  EXPECT_EQ(s.solver.refactor_every_steps, 50);
+  EXPECT_EQ(sceneError(kHead + "solver: {linear: lu}\n"),
+            "s.yaml:4:18: solver.linear: must be one of cholmod, pcg, cholmod_reuse (got 'lu')");
+  EXPECT_EQ(sceneError(kHead + "solver: {refactor_iterations: 0}\n"),
+            "s.yaml:4:31: solver.refactor_iterations: must be >= 1 (got 0)");
+  EXPECT_EQ(sceneError(kHead + "solver: {refactor_every_steps: -1}\n"),
+            "s.yaml:4:32: solver.refactor_every_steps: must be >= 0 (got -1)");
+  EXPECT_EQ(sceneError(kHead + "solver: {refactor_iterations: 20000}\n"),
+            "s.yaml:4:31: solver.refactor_iterations: must be in [1, 10000] (got 20000)");
+}
+
 TEST(Scene, EulerAnglesApplyXThenYThenZ) {
   const SceneSpec s = parseScene(kHead +
                                      "instrument:\n"

@@ -10,7 +10,8 @@
 // R_e K0_e R_e^T. Linear: R_e = I (no rotation extraction at all).
 //
 // The system matrix keeps a fixed sparsity pattern; CHOLMOD's symbolic analysis runs once in the
-// constructor and every step refactorises numerically. Fixed nodes are eliminated (their rows and
+// constructor and every step refactorises numerically (LinearSolverKind::kCholmod), or a
+// recent factorisation preconditions a PCG (kCholmodReuse, see FemSolverOptions). Fixed nodes are eliminated (their rows and
 // columns are not in the system; their displacement stays zero).
 //
 // The contact compliance C = (M/h^2 + B/h + K)^-1 = h (M/h + B + hK)^-1 is available from the
@@ -48,24 +49,46 @@ enum class PcgPreconditioner {
                     ///< rotations; one CHOLMOD solve per iteration
 };
 
+/// Linear solve of the step, A dv = b with A = M/h + B + hK:
+///  * kCholmod: CHOLMOD factorises A every step and solves directly.
+///  * kPcg: PCG (cg_tolerance, cg_max_iterations) with `pcg_preconditioner`.
+///  * kCholmodReuse: PCG warm-started from the previous step's dv and preconditioned by the
+///    CHOLMOD factor of a recent A (the factor is that of an earlier step's A_f, or of the current
+///    one after solveCompliance refreshed it). Corotational material: the preconditioner is
+///    warped, T A_f^-1 T^T with T the per-node rotations since A_f's step (node rotations as in
+///    nodeRotations(), from the step's element rotations), so the factor follows the tissue's
+///    rotations (the liver scenes' tissue settling under gravity: 14-21 % of the steps
+///    factorise instead of 47-57 % unwarped, README "Soft tissue"). The warm start is
+///    extrapolated from the last two steps' dv. The factor is refreshed synchronously (the
+///    current A is factorised and solved directly) when PCG does not reach cg_tolerance within
+///    refactor_iterations iterations, when the previous step needed more than half of them,
+///    and every refactor_every_steps steps when that is > 0. Every step's dv meets cg_tolerance
+///    (relative residual) or comes from a fresh factorisation. cg_max_iterations is not used.
 struct FemSolverOptions {
   LinearSolverKind linear = LinearSolverKind::kCholmod;
   double cg_tolerance = 1e-8;                   ///< relative residual ||A dv - b|| / ||b||
   int cg_max_iterations = 500;
   PcgPreconditioner pcg_preconditioner = PcgPreconditioner::kJacobi;
+  int refactor_iterations = 8;                  ///< kCholmodReuse: PCG iteration bound (>= 1)
+  int refactor_every_steps = 0;                 ///< kCholmodReuse: refresh schedule (0: none)
 };
 
 /// Per-stage wall times of the last step [s] and solver figures. freeMotion allocates nothing
 /// in our code after the first step (CHOLMOD allocates internally during factorisation).
 struct FemStepStats {
   double assembly_s = 0.0;
-  double factorisation_s = 0.0;                 ///< CHOLMOD numeric factorisation (0 for CG)
+  /// CHOLMOD numeric factorisation (PCG: the rest factor when it is refreshed; kCholmodReuse:
+  /// the steps that refresh)
+  double factorisation_s = 0.0;
   double solve_s = 0.0;
-  int cg_iterations = 0;                        ///< 0 for CHOLMOD
+  int cg_iterations = 0;                        ///< 0 for kCholmod
   /// false: the factorisation failed or dv was not finite (state kept), or CG stopped above its
   /// tolerance (its last finite iterate is applied; cg_residual says how far it got).
   bool ok = true;
   double cg_residual = 0.0;                     ///< final relative residual (CG only)
+  /// kCholmodReuse: the step factorised its current A (then cg_iterations counts the PCG
+  /// iterations of an attempt that did not converge within the bound, if any).
+  bool factor_refreshed = false;
   /// Tetrahedra inverted at the start of the step (det F <= 0 at the positions the step starts
   /// from). The corotational force pushes an inverted element back (see polarRotation); a count
   /// that stays up at equilibrium means the mesh or material cannot carry the load.
@@ -97,8 +120,8 @@ class FemBody {
   const Eigen::VectorXd& lumpedMass() const;    ///< per DOF [kg]
 
   /// Implicit Euler free motion over `h` seconds with optional external force p (3n, may be null).
-  /// Updates positions/velocities to the free state. Leaves the factorisation of
-  /// A = M/h + B + hK at the linearisation point available for solveCompliance(). The
+  /// Updates positions/velocities to the free state. Leaves A = M/h + B + hK at the
+  /// linearisation point (and with kCholmod its factorisation) for solveCompliance(). The
   /// linearisation point is q + h v: element rotations, elastic force and tangent K are taken
   /// there, and the damping force is B v with the same K (eq. 7 with F(q + h v, v)).
   FemStepStats freeMotion(double h, const Eigen::VectorXd* external_force_n = nullptr);
@@ -117,7 +140,8 @@ class FemBody {
 
   /// x = C r with C = (M/h^2 + B/h + K)^-1 from the last freeMotion's factorisation (h of that
   /// step). Fixed DOFs of x are zero. r and x are 3n.
-  /// With the PCG solver the current A is factorised by CHOLMOD on the first call after a step.
+  /// With the PCG solvers the current A is factorised by CHOLMOD on the first call after a step
+  /// when the step did not (kCholmodReuse then preconditions the next steps with that factor).
   void solveCompliance(const Eigen::VectorXd& r, Eigen::VectorXd& x) const;
   /// Same for the columns of r (3n x k) at once (one CHOLMOD call).
   void solveComplianceBatch(const Eigen::MatrixXd& r, Eigen::MatrixXd& x) const;
@@ -209,6 +233,10 @@ NumericThreads limitNumericThreads();
 
 /// The current state, without changing it.
 NumericThreads queryNumericThreads();
+
+/// A scene tissue's material and the scene's linear solver settings as the FemBody takes them.
+FemMaterial femMaterial(const TissueSpec& tissue);
+FemSolverOptions femSolverOptions(const SolverSpec& solver);
 
 /// Applies a scene transform (scale, then XYZ Euler rotation in degrees, then translation).
 /// The rotation is extrinsic x, then y, then z: R = Rz(rz) Ry(ry) Rx(rx).

@@ -61,6 +61,10 @@ struct StepReport {
   /// Tetrahedra inverted (det F <= 0) at the start of the step, over all tissues
   /// (FemStepStats::inverted_elements)
   int inverted_elements = 0;
+  /// The free motions' linear solves, over all tissues: CHOLMOD factorisations of the step's
+  /// system matrix and PCG iterations (FemStepStats)
+  int fem_factorisations = 0;
+  int fem_cg_iterations = 0;
   StageTimes times;
 };
 

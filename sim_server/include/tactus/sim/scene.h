@@ -17,7 +17,13 @@ namespace tactus::sim {
 
 enum class MaterialLaw { kLinear, kCorotational };
 enum class ComplianceKind { kExact, kWarped, kRest, kUncoupled };
-enum class LinearSolverKind { kCholmod, kPcg };
+/// How the implicit Euler step solves its linear system (FemSolverOptions, scenes/README.md).
+enum class LinearSolverKind {
+  kCholmod,        ///< CHOLMOD factorises A every step (exact)
+  kPcg,            ///< PCG with a fixed preconditioner (FemSolverOptions::pcg_preconditioner)
+  kCholmodReuse,   ///< PCG preconditioned by the CHOLMOD factor of a recent A, refreshed when
+                   ///< PCG needs more than refactor_iterations (or on a schedule)
+};
 enum class InstrumentKind { kProbe, kGrasper };
 /// Where the first contact pass of a step detects its contacts (SolverSpec::contact_detection).
 enum class ContactDetection {
@@ -131,6 +137,8 @@ struct SolverSpec {
   LinearSolverKind linear = LinearSolverKind::kCholmod;
   double cg_tolerance = 1e-8;
   int cg_max_iterations = 500;
+  int refactor_iterations = 8;                  ///< kCholmodReuse: PCG iteration bound
+  int refactor_every_steps = 0;                 ///< kCholmodReuse: refresh schedule (0: none)
   double nsgs_tolerance = 1e-6;
   int nsgs_max_sweeps = 500;
   double nsgs_sor = 1.0;                        ///< over-relaxation factor in (0, 2)

@@ -1,0 +1,145 @@
+#pragma once
+// FemBody's private state (fem_body.cpp: setup, steps and solves; fem_queries.cpp: queries of
+// the state; fem_assembly.cpp: the element loop and the system matrix pattern). Not installed.
+
+#include <Eigen/Core>
+#include <Eigen/SparseCore>
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include "fem_internal.h"
+#include "tactus/sim/fem.h"
+
+namespace tactus::sim {
+
+using Sparse = fem_detail::CholmodSolver::Sparse;
+
+// Entries of one element's lower-triangular contribution: blocks (a, b) with a >= b, and only
+// i >= j inside diagonal blocks: 4 * 6 + 6 * 9.
+inline constexpr int kEntriesPerElement = 78;
+// The element loop's offsets into A's values: per block (a, b), a >= b, one per column.
+inline constexpr int kBlockOffsetsPerElement = 30;
+
+struct FemBody::Impl {
+  TetMesh mesh;
+  FemMaterial material;
+  FemSolverOptions options;
+  bool corotational = true;
+  bool has_gravity = false;
+  Eigen::Vector3d gravity = Eigen::Vector3d::Zero();
+  double lambda = 0.0, mu = 0.0;
+
+  int n = 0;
+  std::vector<bool> fixed;
+  std::vector<int> dof_base;  // first reduced DOF of each node, -1 when fixed
+  int n_free = 0;             // reduced DOFs
+
+  Eigen::VectorXd rest, q, v, mass;
+
+  // per element: shape function gradients (columns g_0..g_3) and rest volume
+  std::vector<Eigen::Matrix<double, 3, 4>> grad;
+  std::vector<double> volume;
+  std::vector<Eigen::Matrix3d> rotation;
+
+  // system matrix A (lower triangle, fixed pattern) and where each element writes
+  Sparse a;
+  // The element loop's copy of the element data, in assembly order: sorted by their nodes'
+  // lowest reduced DOF, then second lowest, ..., so that consecutive elements scatter into
+  // nearby memory; the local nodes of each by ascending reduced DOF.
+  struct AssemblyElement {
+    std::array<int, 4> node;
+    int index;                      // in mesh.tets
+    bool has_fixed;                 // some block has a fixed node (its offsets are -1)
+    Eigen::Matrix<double, 3, 4> g;  // grad[index], columns in the order of `node`
+    double vol;                     // = volume[index]
+  };
+  std::vector<AssemblyElement> assembly_elems;
+  // per assembly element and block (a, b), a >= b, in order (0,0), (1,0), (1,1), (2,0), ...:
+  // for each column j of the block, the position in A's values of its first entry (row p of
+  // column q + j, or row p + j on the diagonal, with p, q the DOFs of nodes a, b); -1: a node is
+  // fixed
+  std::vector<int> block_offset;
+  std::vector<int> diag_offset;  // per reduced DOF
+  fem_detail::CholmodSolver chol;
+  bool chol_current = false;     // chol holds the factor of the current `a`
+  bool a_is_step_matrix = false; // `a` is freeMotion's A (not solveStatic's K)
+  fem_detail::ReusedFactorSolver reuse{{}};  // LinearSolverKind::kCholmodReuse (factor: chol)
+  // kCholmodReuse on a corotational body: node rotations of the factor's step (per free node, in
+  // DOF order) and this step's rotations relative to them (the preconditioner's warp)
+  std::vector<Eigen::Matrix3d> factor_node_rot, relative_rot;
+  double compliance_scale = 0.0; // C = compliance_scale * A^-1 for the current `a`
+  double last_h = 0.0;
+
+  // rest-shape factorisation
+  Sparse a_rest;
+  fem_detail::CholmodSolver chol_rest;
+  double rest_h = -1.0;
+
+  // step buffers (reduced or full)
+  Eigen::VectorXd f_int, rhs_full, rhs, dv, dv_prev, dv_prev2;
+  Eigen::VectorXd cg_t, jacobi_inv;
+  fem_detail::CgBuffers cg;
+  std::vector<Eigen::Matrix3d> node_rot, node_acc;  // warped preconditioner
+
+  // rotation groups: nodes tied by short edges share one node rotation
+  std::vector<int> rot_group;   // node -> group index (empty: every node on its own)
+  int rot_group_count = 0;
+  std::vector<Eigen::Matrix3d> group_acc;
+
+  std::vector<int> surface;
+  bool surface_ready = false;
+  std::uint64_t hash = 0;
+  Counters counters;
+  bool inversion_warned = false;   // "inverted elements" is logged once per body
+
+  void init(const TetMesh& m, const FemMaterial& mat, const std::vector<int>& fixed_nodes,
+            const Eigen::Vector3d* g, const FemSolverOptions& opt);
+  void buildPattern();
+  // Element loop (fem_assembly.cpp) at positions x = q + h v (x = q when v is null):
+  //  * f_out (3n, if non-null): internal force (+K u sense) f_el(x) + beta K(x) v, the elastic
+  //    force plus the stiffness-proportional damping force (beta = 0 or v null: elastic only);
+  //  * target (if non-null): c_k K(x) + c_m M into its fixed pattern;
+  //  * inverted_at_q (if non-null): elements with det F <= 0 at q (not x).
+  // Element rotations are taken at x and kept in `rotation`; use_rest_frame: R = I without
+  // rotation extraction (rest tangent).
+  void evaluate(const Eigen::VectorXd& q, const Eigen::VectorXd* v, double h, double beta,
+                Eigen::VectorXd* f_out, Sparse* target, double c_k, double c_m,
+                bool use_rest_frame, int* inverted_at_q = nullptr);
+  Eigen::Matrix3d elementF(int e, const Eigen::VectorXd& x) const {
+    const auto& t = mesh.tets[e];
+    Eigen::Matrix<double, 3, 4> xe;
+    for (int k = 0; k < 4; ++k) xe.col(k) = x.segment<3>(3 * t[k]);
+    return xe * grad[e].transpose();
+  }
+  Eigen::Matrix3d sigma(const Eigen::Matrix3d& eps) const {
+    return lambda * eps.trace() * Eigen::Matrix3d::Identity() + 2.0 * mu * eps;
+  }
+  void reduce(const Eigen::VectorXd& full, double* out) const {
+    for (int i = 0; i < n; ++i)
+      if (dof_base[i] >= 0)
+        for (int c = 0; c < 3; ++c) out[dof_base[i] + c] = full[3 * i + c];
+  }
+  void expand(const double* red, double scale, double* out) const {
+    for (int i = 0; i < n; ++i)
+      for (int c = 0; c < 3; ++c)
+        out[3 * i + c] = dof_base[i] >= 0 ? scale * red[dof_base[i] + c] : 0.0;
+  }
+  void buildRotationGroups();
+  // Node rotations from element rotations: volume-weighted sum over the adjacent elements,
+  // summed over the node's rotation group, polar factor. Nodes with no weight get identity.
+  void averageRotations(const std::vector<Eigen::Matrix3d>& element_rot,
+                        std::vector<Eigen::Matrix3d>& acc, std::vector<Eigen::Matrix3d>& out);
+  void ensureRestFactor(double h);
+  void ensureCurrentFactor();
+  // dv = A^-1 rhs by a fresh CHOLMOD factorisation of `a` (timed into stats); false when A is not
+  // positive definite.
+  bool factorizeAndSolve(FemStepStats& stats);
+  // dv from rhs by the configured strategy; false on failure (dv not finite or no factor).
+  bool solveStep(double h, FemStepStats& stats);
+  // kCholmodReuse: the factor now holds this step's A; its node rotations are this step's.
+  void keepFactorRotations();
+  bool pcg(double tol, int max_iter, FemStepStats& stats);
+};
+
+}  // namespace tactus::sim

@@ -1,0 +1,83 @@
+// FemBody's queries of the current state: node rotations, stresses, volume ratios, energies.
+#include <cmath>
+
+#include "fem_body_impl.h"
+
+namespace tactus::sim {
+
+void FemBody::nodeRotations(std::vector<Eigen::Matrix3d>& out) const {
+  Impl& m = *impl_;
+  out.assign(m.n, Eigen::Matrix3d::Identity());
+  if (!m.corotational) return;
+  std::vector<Eigen::Matrix3d> element_rot(m.mesh.tetCount()), acc;
+  for (int e = 0; e < m.mesh.tetCount(); ++e)
+    element_rot[e] = fem_detail::polarRotation(m.elementF(e, m.q));
+  m.counters.rotation_extractions += m.mesh.tetCount();
+  m.averageRotations(element_rot, acc, out);
+}
+
+void FemBody::stresses(std::vector<Eigen::Matrix3d>& out) const {
+  const Impl& m = *impl_;
+  out.resize(m.mesh.tetCount());
+  for (int e = 0; e < m.mesh.tetCount(); ++e) {
+    const Eigen::Matrix3d f = m.elementF(e, m.q);
+    const Eigen::Matrix3d r =
+        m.corotational ? fem_detail::polarRotation(f) : Eigen::Matrix3d::Identity();
+    const Eigen::Matrix3d fl = r.transpose() * f;
+    const Eigen::Matrix3d s =
+        m.sigma(0.5 * (fl + fl.transpose()) - Eigen::Matrix3d::Identity());
+    out[e] = r * s * r.transpose();
+  }
+}
+
+void FemBody::volumeRatios(Eigen::VectorXd& out) const {
+  const Impl& m = *impl_;
+  out.resize(m.mesh.tetCount());
+  for (int e = 0; e < m.mesh.tetCount(); ++e) out[e] = m.elementF(e, m.q).determinant();
+}
+
+int FemBody::invertedElementCount() const {
+  const Impl& m = *impl_;
+  int count = 0;
+  for (int e = 0; e < m.mesh.tetCount(); ++e) {
+    if (!(m.elementF(e, m.q).determinant() > 0.0)) ++count;
+  }
+  return count;
+}
+
+void FemBody::vonMises(Eigen::VectorXd& out) const {
+  std::vector<Eigen::Matrix3d> s;
+  stresses(s);
+  out.resize(static_cast<Eigen::Index>(s.size()));
+  for (std::size_t e = 0; e < s.size(); ++e) {
+    const Eigen::Matrix3d dev = s[e] - s[e].trace() / 3.0 * Eigen::Matrix3d::Identity();
+    out[static_cast<Eigen::Index>(e)] = std::sqrt(1.5 * dev.squaredNorm());
+  }
+}
+
+double FemBody::kineticEnergy() const {
+  return 0.5 * impl_->v.dot(impl_->mass.cwiseProduct(impl_->v));
+}
+
+double FemBody::elasticEnergy() const {
+  const Impl& m = *impl_;
+  double energy = 0.0;
+  for (int e = 0; e < m.mesh.tetCount(); ++e) {
+    const Eigen::Matrix3d f = m.elementF(e, m.q);
+    const Eigen::Matrix3d fl =
+        m.corotational ? Eigen::Matrix3d(fem_detail::polarRotation(f).transpose() * f) : f;
+    const Eigen::Matrix3d eps = 0.5 * (fl + fl.transpose()) - Eigen::Matrix3d::Identity();
+    energy += m.volume[e] * (m.mu * eps.squaredNorm() + 0.5 * m.lambda * eps.trace() * eps.trace());
+  }
+  return energy;
+}
+
+double FemBody::gravityEnergy() const {
+  const Impl& m = *impl_;
+  if (!m.has_gravity) return 0.0;
+  double energy = 0.0;
+  for (int i = 0; i < m.n; ++i) energy -= m.mass[3 * i] * m.gravity.dot(m.q.segment<3>(3 * i));
+  return energy;
+}
+
+}  // namespace tactus::sim

@@ -1,0 +1,167 @@
+#pragma once
+// Private linear solvers of the fem module (not installed): the CHOLMOD wrapper, a preconditioned
+// conjugate gradient over the lower triangle of a symmetric matrix, and the factor-reuse
+// strategy (LinearSolverKind::kCholmodReuse; fem.h, docs/design.md "Solvers").
+
+#include <cholmod.h>
+
+#include <Eigen/Core>
+#include <Eigen/SparseCore>
+#include <cstddef>
+
+namespace tactus::sim::fem_detail {
+
+/// Sparse symmetric positive-definite factorisation through the CHOLMOD C API. The matrix is the
+/// lower triangle of a compressed column-major Eigen matrix whose pattern never changes:
+/// analyze() once, factorize() per step, solve() with workspaces kept between calls.
+class CholmodSolver {
+ public:
+  using Sparse = Eigen::SparseMatrix<double, Eigen::ColMajor, int>;
+  CholmodSolver();
+  ~CholmodSolver();
+  CholmodSolver(const CholmodSolver&) = delete;
+  CholmodSolver& operator=(const CholmodSolver&) = delete;
+
+  /// Symbolic analysis (fill-reducing ordering). Throws NumericalError on failure.
+  void analyze(Sparse& lower);
+  /// Numeric factorisation; false when the matrix is not positive definite.
+  bool factorize(Sparse& lower);
+  bool analyzed() const { return factor_ != nullptr; }
+  bool factorized() const { return factorized_; }
+  /// x = A^-1 b for `ncols` column-major right-hand sides of length n (x may alias b).
+  void solve(const double* b, double* x, int ncols);
+  /// Nonzeros of the factor (for the log/benchmarks).
+  std::size_t factorNonzeros() const;
+
+ private:
+  cholmod_sparse view(Sparse& lower) const;
+  cholmod_common common_;
+  cholmod_factor* factor_ = nullptr;
+  cholmod_dense* x_ = nullptr;
+  cholmod_dense* y_ = nullptr;
+  cholmod_dense* e_ = nullptr;
+  bool factorized_ = false;
+};
+
+/// Work vectors of conjugateGradient, kept between calls (no allocation once sized).
+struct CgBuffers {
+  Eigen::VectorXd r, z, p, ap;
+};
+
+struct CgResult {
+  int iterations = 0;
+  double residual = 0.0;  ///< final ||b - A x|| / ||b||
+  bool converged = false; ///< residual <= tolerance and x finite
+};
+
+/// Preconditioned conjugate gradient on A x = b, A symmetric positive definite given by its lower
+/// triangle. x holds the warm start on entry (a non-finite start residual restarts from 0) and
+/// the last iterate on exit. `precond(r, z)` sets z = P^-1 r. Stops when ||b - A x|| / ||b|| <=
+/// tolerance or after max_iterations; b = 0 gives x = 0.
+template <class Precond>
+CgResult conjugateGradient(const CholmodSolver::Sparse& lower, const Eigen::VectorXd& b,
+                           Eigen::VectorXd& x, double tolerance, int max_iterations,
+                           CgBuffers& w, Precond&& precond) {
+  CgResult out;
+  const auto a = lower.selfadjointView<Eigen::Lower>();
+  const double b_norm = b.norm();
+  if (b_norm == 0.0) {
+    x.setZero(b.size());
+    out.converged = true;
+    return out;
+  }
+  w.r = b;
+  w.r.noalias() -= a * x;
+  double res = w.r.norm() / b_norm;
+  if (!(res < 1e300)) {
+    x.setZero(b.size());
+    w.r = b;
+    res = 1.0;
+  }
+  int it = 0;
+  if (res > tolerance) {
+    w.z.resize(b.size());
+    precond(w.r, w.z);
+    w.p = w.z;
+    double rz = w.r.dot(w.z);
+    while (it < max_iterations) {
+      w.ap.noalias() = a * w.p;
+      const double pap = w.p.dot(w.ap);
+      if (!(pap > 0.0)) break;
+      const double step = rz / pap;
+      x.noalias() += step * w.p;
+      w.r.noalias() -= step * w.ap;
+      ++it;
+      res = w.r.norm() / b_norm;
+      if (res <= tolerance) break;
+      precond(w.r, w.z);
+      const double rz_new = w.r.dot(w.z);
+      w.p = w.z + (rz_new / rz) * w.p;
+      rz = rz_new;
+    }
+  }
+  out.iterations = it;
+  out.residual = res;
+  out.converged = res <= tolerance && x.allFinite();
+  return out;
+}
+
+/// When the factor-reuse strategy refreshes its factorisation.
+struct FactorReusePolicy {
+  double tolerance = 1e-8;        ///< PCG relative residual
+  int refactor_iterations = 8;    ///< PCG iteration bound (see ReusedFactorSolver)
+  int refactor_every_steps = 0;   ///< also refresh when the factor is this many steps old (0: never)
+};
+
+/// Figures of one ReusedFactorSolver::solve.
+struct ReuseSolveResult {
+  bool ok = false;               ///< false: the factorisation failed or x is not finite
+  bool refreshed = false;        ///< the current A was factorised in this solve
+  int cg_iterations = 0;         ///< PCG iterations (those of a failed attempt included)
+  double residual = 0.0;         ///< final relative residual (0 after a direct solve)
+  double factorisation_s = 0.0;
+  double solve_s = 0.0;
+};
+
+/// A dv = b with the CHOLMOD factorisation of a recent system matrix A_f as the preconditioner of
+/// a warm-started PCG. The factor is refreshed (CHOLMOD factorises the current A and solves
+/// directly, synchronously) when
+///  * there is none yet, or it is `refactor_every_steps` steps old (when that is > 0);
+///  * the previous step's PCG needed more than refactor_iterations / 2 iterations (the matrix is
+///    drifting away from A_f: refresh before the bound is hit);
+///  * PCG does not reach the tolerance within refactor_iterations iterations (the step then pays
+///    those iterations plus a factorisation and a direct solve; its result is exact).
+/// So every solve meets the tolerance: a direct solve with a fresh factor, or a PCG that
+/// converged. The factor is the caller's (shared with the exact compliance path): whoever
+/// refactorises it at the current A calls noteFactorised().
+class ReusedFactorSolver {
+ public:
+  using Sparse = CholmodSolver::Sparse;
+  explicit ReusedFactorSolver(const FactorReusePolicy& policy) : policy_(policy) {}
+  /// x holds the warm start (the previous step's solution) on entry, the solution on exit.
+  /// `block_rotation` (null: none) warps the preconditioner to T A_f^-1 T^T with T block
+  /// diagonal, one 3x3 rotation per 3 consecutive unknowns (size / 3 of them): the rotation of
+  /// each node since the factor's step, so that the factor follows the tissue's rotations.
+  ReuseSolveResult solve(CholmodSolver& factor, Sparse& a, const Eigen::VectorXd& b,
+                         Eigen::VectorXd& x, const Eigen::Matrix3d* block_rotation = nullptr);
+  /// The factor was computed from the current A outside solve() (it is 0 steps old).
+  void noteFactorised() {
+    age_steps_ = 0;
+    last_iterations_ = 0;
+  }
+  /// The factor no longer holds a step's A (e.g. a static solve factorised K): refresh next time.
+  void forget() { age_steps_ = -1; }
+  /// Steps since the factor was computed (-1: none yet).
+  int ageSteps() const { return age_steps_; }
+  long refreshes() const { return refreshes_; }
+
+ private:
+  FactorReusePolicy policy_;
+  CgBuffers cg_;
+  Eigen::VectorXd warp_;
+  int age_steps_ = -1;
+  int last_iterations_ = 0;
+  long refreshes_ = 0;
+};
+
+}  // namespace tactus::sim::fem_detail
