@@ -152,7 +152,7 @@ const char* eventName(std::uint32_t code) noexcept {
   }
 }
 
-HapticLink::HapticLink(shared::Segment&& s)
+AttachedSegment::AttachedSegment(shared::Segment&& s)
     : segment(std::move(s)),
       snapshots(segment.snapshotSubscriber()),
       samples(segment.deviceWriter()),
@@ -192,18 +192,18 @@ void HapticLoop::initLimits() {
   }
 }
 
-void HapticLoop::offerLink(HapticLink* link) noexcept {
+void HapticLoop::offerLink(AttachedSegment* link) noexcept {
   // seq_cst: with the tick's hazard store and re-read (adoptOfferedLink), a withdrawn link is
   // either seen as still in use by linkInUse() or never used by the tick
   offered_.store(link, std::memory_order_seq_cst);
 }
 
-HapticLink* HapticLoop::linkInUse() const noexcept {
+AttachedSegment* HapticLoop::linkInUse() const noexcept {
   return in_use_.load(std::memory_order_seq_cst);
 }
 
 void HapticLoop::adoptOfferedLink() noexcept {
-  HapticLink* offered = offered_.load(std::memory_order_seq_cst);
+  AttachedSegment* offered = offered_.load(std::memory_order_seq_cst);
   if (offered == link_) return;
   if (adoption_hook_ != nullptr) adoption_hook_(adoption_context_);
   // hazard pointer: announce the link before touching it, then check it is still offered; if
@@ -236,7 +236,7 @@ void HapticLoop::pushRateLimited(NoisyEvent which, std::uint32_t code, std::int6
   pushEvent(code, a, b);
 }
 
-void HapticLoop::solveLocalModel(HapticLink& link, const shared::SnapshotView& snap,
+void HapticLoop::solveLocalModel(AttachedSegment& link, const shared::SnapshotView& snap,
                                  const shared::Pose& device_pose, TickOutput& out) noexcept {
   shared::NsgsWorkspace& workspace = link.workspace;
   std::vector<double>& delta_free = link.delta_free;

@@ -27,7 +27,7 @@ const shared::Segment* Supervisor::segment() const {
   return link_ ? &link_->segment : nullptr;
 }
 
-void Supervisor::retire(std::unique_ptr<HapticLink> old) {
+void Supervisor::retire(std::unique_ptr<AttachedSegment> old) {
   loop_.offerLink(nullptr);
   retired_ = std::move(old);
 }
@@ -85,7 +85,7 @@ void Supervisor::poll() {
                        std::to_string(other) + ": stop it first (scripts/stop.sh) or start this "
                        "one with another --segment");
   }
-  link_ = std::make_unique<HapticLink>(std::move(*r.segment));
+  link_ = std::make_unique<AttachedSegment>(std::move(*r.segment));
   creator_alive_ = true;
   spdlog::info("attached to segment '{}' (generation {}, up to {} contacts / {} rows)", name_,
                link_->segment.generation(), link_->segment.capacity().max_contacts,

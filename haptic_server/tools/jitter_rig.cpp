@@ -71,7 +71,7 @@ LoopRig::LoopRig(const std::string& segment_name, const shared::SegmentCapacity&
   settings_.engage_threshold_n = 1e9;
   settings_.watchdog_ms = options.watchdog_ms;
   loop_ = std::make_unique<HapticLoop>(*device_, settings_);
-  link_ = std::make_unique<HapticLink>(
+  link_ = std::make_unique<AttachedSegment>(
       shared::Segment::open(segment_.name(), shared::Access::kReadWrite));
   core_ = options.core >= 0 ? options.core : shared::availableCpuCount() - 1;
 }

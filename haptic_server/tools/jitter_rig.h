@@ -96,7 +96,7 @@ class LoopRig {
   HapticSettings settings_;
   std::unique_ptr<CircleDevice> device_;
   std::unique_ptr<HapticLoop> loop_;
-  std::unique_ptr<HapticLink> link_;
+  std::unique_ptr<AttachedSegment> link_;
   int core_ = -1;
   std::string rt_summary_;
   std::thread haptic_thread_, publisher_thread_;

@@ -54,7 +54,7 @@ struct Series {
   std::vector<double> v;
 };
 
-// Writes the step's problem into the slot and publishes it, as sim_server's HapticLink does.
+// Writes the step's problem into the slot and publishes it, as sim_server's SegmentHost does.
 void publishProblem(const sim::Simulation& sim, shared::SnapshotPublisher& pub, std::uint64_t seq,
                     double max_opening_rad) {
   shared::SnapshotWriter slot = pub.slot();

@@ -48,7 +48,7 @@ class Rig {
     settings_.tolerance = spec_.haptics.nsgs_tolerance;
     settings_.solve_budget_ns = 0;   // simulated time: bound the solve by sweeps only
     loop_.emplace(device_, settings_);
-    link_ = std::make_unique<haptic::HapticLink>(shared::Segment::open(name_));
+    link_ = std::make_unique<haptic::AttachedSegment>(shared::Segment::open(name_));
     loop_->offerLink(link_.get());
     target_ = sim_.scriptedTarget(0.0);
     ticks_per_step_ = static_cast<int>(std::lround(spec_.time_step_s * 1e9 / kTickNs));
@@ -149,7 +149,7 @@ class Rig {
   ScriptedDevice device_;
   haptic::HapticSettings settings_;
   std::optional<haptic::HapticLoop> loop_;
-  std::unique_ptr<haptic::HapticLink> link_;
+  std::unique_ptr<haptic::AttachedSegment> link_;
   sim::DeviceTarget target_;
   StepWatch watch_;
   int ticks_per_step_ = 10;

@@ -126,7 +126,7 @@ TEST(HapticLoopProperty, EveryCommandIsFiniteAndWithinTheClampWhateverTheSetting
   shared::Segment::remove(name);
   shared::Segment sim = shared::Segment::create(name, shared::SegmentCapacity::forContacts(4, true));
   shared::SnapshotPublisher publisher = sim.snapshotPublisher();
-  auto link = std::make_unique<haptic::HapticLink>(shared::Segment::open(name));
+  auto link = std::make_unique<haptic::AttachedSegment>(shared::Segment::open(name));
   Nasty r(2024);
   std::uint64_t seq = 0;
   std::int64_t t = 1'000'000'000;
@@ -237,7 +237,7 @@ TEST(HapticLoopProperty, WithValidSettingsTheGuardNeverIntervenes) {
   shared::Segment::remove(name);
   shared::Segment sim = shared::Segment::create(name, shared::SegmentCapacity::forContacts(2, false));
   shared::SnapshotPublisher publisher = sim.snapshotPublisher();
-  auto link = std::make_unique<haptic::HapticLink>(shared::Segment::open(name));
+  auto link = std::make_unique<haptic::AttachedSegment>(shared::Segment::open(name));
   test::ScriptedDevice device;
   HapticSettings s;
   s.max_force_n = 3.0;

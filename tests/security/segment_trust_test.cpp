@@ -26,7 +26,7 @@
 #include <thread>
 #include <vector>
 
-#include "../../sim_server/src/pipeline/haptic_link.h"
+#include "../../sim_server/src/pipeline/segment_host.h"
 #include "tactus/shared/error.h"
 #include "tactus/shared/segment.h"
 #include "tactus/sim/instrument.h"
@@ -402,7 +402,7 @@ TEST(DeviceSanity, AbsurdPoseIsRejectedAndTheGodObjectRecovers) {
   // the default workspace: the cube and the initial pose, grown by the margin
   EXPECT_LT(workspace.max_m.x(), 1.0);
   EXPECT_GT(workspace.max_m.x(), 0.5);
-  tactus::sim::HapticLink link(g.name, spec, workspace);
+  tactus::sim::SegmentHost link(g.name, spec, workspace);
   Segment haptic = Segment::open(g.name);
   auto writer = haptic.deviceWriter();
 

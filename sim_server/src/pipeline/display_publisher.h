@@ -12,7 +12,7 @@
 // (FemBody::vonMises, which re-extracts R, costs ~10x more). It never waits for a viewer and does not know whether one is
 // attached.
 //
-// Use (runner.cpp), after the HapticLink has created the segment:
+// Use (runner.cpp), after the SegmentHost has created the segment:
 //   auto display = link ? std::make_unique<DisplayLink>(options.segment, sim) : nullptr;
 //   ... each step, after link->publish(sim):  if (display) display->publish(sim, report);
 
@@ -35,7 +35,7 @@ struct DisplayOptions {
 
 class DisplayLink {
  public:
-  /// Attaches to the segment `segment_name` (created by the HapticLink of this process) and
+  /// Attaches to the segment `segment_name` (created by the SegmentHost of this process) and
   /// writes the topology. When the segment has no display part or the surface does not fit its
   /// capacity, logs a warning saying so and publishes nothing (enabled() is false). Throws
   /// tactus::SegmentError when the segment cannot be opened.

@@ -11,7 +11,7 @@
 #include <vector>
 
 #include "display_publisher.h"
-#include "haptic_link.h"
+#include "segment_host.h"
 #include "tactus/sim/instrument.h"
 #include "tactus/shared/clock.h"
 #include "tactus/shared/error.h"
@@ -191,9 +191,9 @@ int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
   spdlog::info("scene {}: stages:", spec.source.string());
   for (const auto& s : sim.stages()) spdlog::info("  - {}", s);
 
-  std::unique_ptr<HapticLink> link;
+  std::unique_ptr<SegmentHost> link;
   if (spec.haptics.enabled && sim.hasInstrument()) {
-    link = std::make_unique<HapticLink>(options.segment, spec, sim.instrument()->workspace());
+    link = std::make_unique<SegmentHost>(options.segment, spec, sim.instrument()->workspace());
   }
   auto display = link ? std::make_unique<DisplayLink>(options.segment, sim) : nullptr;
 

@@ -34,7 +34,7 @@ class HapticLoopTest : public ::testing::Test {
     settings_.slew_n_per_s = 1e6;
     settings_.fade_ms = 10.0;
     loop_.emplace(device_, settings_);
-    link_ = std::make_unique<HapticLink>(shared::Segment::open(name_));
+    link_ = std::make_unique<AttachedSegment>(shared::Segment::open(name_));
     loop_->offerLink(link_.get());
   }
   void TearDown() override {
@@ -119,7 +119,7 @@ class HapticLoopTest : public ::testing::Test {
   ScriptedDevice device_;
   HapticSettings settings_;
   std::optional<HapticLoop> loop_;
-  std::unique_ptr<HapticLink> link_;
+  std::unique_ptr<AttachedSegment> link_;
   std::uint64_t seq_ = 0;
   std::int64_t t_ = shared::monotonicNs();
 };
@@ -345,10 +345,10 @@ TEST_F(HapticLoopTest, AWithdrawnLinkIsNeverUsedEvenIfTheTickStalledWhileAdoptin
   shared::Segment sim_b =
       shared::Segment::create(other, shared::SegmentCapacity::forContacts(4, true));
   auto samples_b = sim_b.deviceReader();
-  auto link_b = std::make_unique<HapticLink>(shared::Segment::open(other));
+  auto link_b = std::make_unique<AttachedSegment>(shared::Segment::open(other));
   struct Supervisor {
     HapticLoop* loop;
-    HapticLink* link;
+    AttachedSegment* link;
     bool would_free = false;
   } supervisor{&*loop_, link_b.get()};
   loop_->setAdoptionHookForTest(
@@ -468,7 +468,7 @@ class LargeProblemRig {
     settings_.solve_budget_ns = 1'000'000'000;   // sweeps bound the solve, not the clock
     settings_.max_sweeps = 20;
     loop_.emplace(device_, settings_);
-    link_ = std::make_unique<HapticLink>(shared::Segment::open(name_));
+    link_ = std::make_unique<AttachedSegment>(shared::Segment::open(name_));
     loop_->offerLink(link_.get());
   }
   ~LargeProblemRig() {
@@ -514,7 +514,7 @@ class LargeProblemRig {
   }
 
   ScriptedDevice& device() { return device_; }
-  HapticLink& link() { return *link_; }
+  AttachedSegment& link() { return *link_; }
 
  private:
   std::string name_;
@@ -524,7 +524,7 @@ class LargeProblemRig {
   ScriptedDevice device_;
   HapticSettings settings_;
   std::optional<HapticLoop> loop_;
-  std::unique_ptr<HapticLink> link_;
+  std::unique_ptr<AttachedSegment> link_;
   std::uint64_t seq_ = 0;
   std::int64_t t_ = shared::monotonicNs();
 };

@@ -121,7 +121,7 @@ const char* eventName(std::uint32_t code) noexcept;
 
 /// What the tick uses of an attached segment, with the solver memory sized for the segment's
 /// capacity (built and destroyed by the non-real-time supervisor).
-struct HapticLink {
+struct AttachedSegment {
   shared::Segment segment;
   shared::SnapshotSubscriber snapshots;
   shared::TripleWriter<shared::DeviceSample> samples;
@@ -138,7 +138,7 @@ struct HapticLink {
   shared::DelassusBlocks blocks;
   std::uint64_t blocks_seq = 0;         ///< snapshot whose W `blocks` was chosen for (0: none)
   bool use_blocks = false;              ///< blocks_seq's W is solved on `blocks`
-  explicit HapticLink(shared::Segment&& s);
+  explicit AttachedSegment(shared::Segment&& s);
 };
 
 /// Output of one tick (for tests and tools).
@@ -178,8 +178,8 @@ class HapticLoop {
   /// So once the supervisor has withdrawn a link (offerLink of another one), a later
   /// linkInUse() != old proves that the tick does not hold it and never will again: only then
   /// may the old link be destroyed. Withdrawn links must never be offered again.
-  void offerLink(HapticLink* link) noexcept;
-  HapticLink* linkInUse() const noexcept;
+  void offerLink(AttachedSegment* link) noexcept;
+  AttachedSegment* linkInUse() const noexcept;
 
   /// The force and torque clamps in use (settings and device combined, see the constructor).
   double forceLimitN() const noexcept { return force_limit_n_; }
@@ -197,7 +197,7 @@ class HapticLoop {
   const HapticSettings& settings() const noexcept { return settings_; }
 
  private:
-  void solveLocalModel(HapticLink& link, const shared::SnapshotView& snap,
+  void solveLocalModel(AttachedSegment& link, const shared::SnapshotView& snap,
                        const shared::Pose& device_pose, TickOutput& out) noexcept;
   void pushEvent(std::uint32_t code, double a = 0.0, double b = 0.0) noexcept;
   /// Episode events that can recur every few ticks (no data, clamped, not converged, overrun):
@@ -228,9 +228,9 @@ class HapticLoop {
   HapticSettings settings_;
   HapticCounters counters_;
   shared::EventRing events_;
-  std::atomic<HapticLink*> offered_{nullptr};
-  std::atomic<HapticLink*> in_use_{nullptr};
-  HapticLink* link_ = nullptr;
+  std::atomic<AttachedSegment*> offered_{nullptr};
+  std::atomic<AttachedSegment*> in_use_{nullptr};
+  AttachedSegment* link_ = nullptr;
   void (*adoption_hook_)(void*) = nullptr;
   void* adoption_context_ = nullptr;
   double force_limit_n_ = 0.0;     ///< min(settings, device), what the chain and guard clamp to

@@ -27,12 +27,12 @@ class Supervisor {
   const shared::Segment* segment() const;
 
  private:
-  void retire(std::unique_ptr<HapticLink> old);
+  void retire(std::unique_ptr<AttachedSegment> old);
 
   HapticLoop& loop_;
   std::string name_;
-  std::unique_ptr<HapticLink> link_;
-  std::unique_ptr<HapticLink> retired_;     ///< detached, waiting for the loop's ack
+  std::unique_ptr<AttachedSegment> link_;
+  std::unique_ptr<AttachedSegment> retired_;     ///< detached, waiting for the loop's ack
   std::string last_open_message_;
   bool creator_alive_ = true;
 };

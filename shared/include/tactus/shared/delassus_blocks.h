@@ -21,7 +21,7 @@
 //
 // Where the conversion happens: the simulation builds W dense (H C H^T) and the shared segment
 // carries it dense; the haptic loop converts once per adopted snapshot into its preallocated
-// DelassusBlocks (haptic_loop.h, HapticLink) - one scan of W, about the entry pass the first
+// DelassusBlocks (haptic_loop.h, AttachedSegment) - one scan of W, about the entry pass the first
 // solve on a new snapshot makes anyway - so the segment format is unchanged.
 //
 // Real-time: reserve() allocates; assign() and chooseStorage() never allocate, lock or throw.

@@ -175,7 +175,7 @@ bool deviceSampleFresh(const shared::DeviceSample& s, std::int64_t now_ns,
 /// Fills `target` from a sample (pose, twist, gripper opening = gripper_rad / max_opening_rad
 /// clamped to [0, 1]; max_opening_rad <= 0 counts as 1 rad); false, leaving `target` unchanged,
 /// when the pose is not finite or the orientation is zero. The quaternion is normalised without
-/// overflow and the twist bounded (haptic_link.h); jumps and the workspace are the link's.
+/// overflow and the twist bounded (segment_host.h); jumps and the workspace are the link's.
 bool deviceTargetFromSample(const shared::DeviceSample& s, double max_opening_rad,
                             DeviceTarget& target);
 

@@ -38,12 +38,14 @@ inline constexpr double kJumpAllowanceM = 0.02;
 /// Period of the displacement check [ns].
 inline constexpr std::int64_t kDisplacementCheckNs = 200'000'000;
 
-class HapticLink {
+/// The simulation's end of the shared segment: it creates and owns the segment, publishes the
+/// contact snapshots and reads the device samples (see the header comment).
+class SegmentHost {
  public:
   /// Creates the segment `name` (replacing a stale one). Device positions are bounded to
   /// `workspace` (the instrument's, see instrumentWorkspace). Throws tactus::SegmentError.
-  HapticLink(const std::string& name, const SceneSpec& spec, const BoxSpec& workspace);
-  ~HapticLink();
+  SegmentHost(const std::string& name, const SceneSpec& spec, const BoxSpec& workspace);
+  ~SegmentHost();
 
   /// Replaces `target` by the newest device sample when one arrived within the watchdog period
   /// (bounded as described above; a rejected jump holds the last accepted target); otherwise

@@ -1,5 +1,5 @@
 // Segment publishing for the haptic process.
-#include "haptic_link.h"
+#include "segment_host.h"
 
 #include <spdlog/spdlog.h>
 
@@ -21,7 +21,7 @@ Eigen::Vector3d boundedNorm(Eigen::Vector3d v, double max_norm) {
 
 }  // namespace
 
-HapticLink::HapticLink(const std::string& name, const SceneSpec& spec, const BoxSpec& workspace)
+SegmentHost::SegmentHost(const std::string& name, const SceneSpec& spec, const BoxSpec& workspace)
     : segment_(shared::Segment::create(
           name, shared::SegmentCapacity::forContacts(spec.solver.max_contacts,
                                                      spec.instrument.friction_mu > 0.0))),
@@ -38,7 +38,7 @@ HapticLink::HapticLink(const std::string& name, const SceneSpec& spec, const Box
                segment_.capacity().max_contacts, segment_.capacity().max_rows);
 }
 
-HapticLink::~HapticLink() {
+SegmentHost::~SegmentHost() {
   // tell the haptic side to fade out now rather than after its watchdog
   if (publisher_.attached()) {
     auto slot = publisher_.slot();
@@ -79,7 +79,7 @@ bool deviceTargetFromSample(const shared::DeviceSample& s, double max_opening_ra
   return true;
 }
 
-bool HapticLink::deviceTarget(DeviceTarget& target) {
+bool SegmentHost::deviceTarget(DeviceTarget& target) {
   const shared::DeviceSample& s = device_.latest();
   const std::int64_t now = shared::monotonicNs();
   const bool fresh = deviceSampleFresh(s, now, watchdog_ns_);
@@ -140,7 +140,7 @@ bool HapticLink::deviceTarget(DeviceTarget& target) {
   return true;
 }
 
-std::string HapticLink::displacedReason(std::int64_t now_ns) {
+std::string SegmentHost::displacedReason(std::int64_t now_ns) {
   if (now_ns < next_displacement_check_ns_) return {};
   next_displacement_check_ns_ = now_ns + kDisplacementCheckNs;
   if (segment_.stillCurrent()) return {};
@@ -218,7 +218,7 @@ bool writeSnapshot(const Simulation& sim, double max_opening_rad, std::uint64_t 
   return fits;
 }
 
-void HapticLink::publish(const Simulation& sim) {
+void SegmentHost::publish(const Simulation& sim) {
   auto slot = publisher_.slot();
   if (!writeSnapshot(sim, max_opening_rad_, ++published_, shared::monotonicNs(), device_seq_,
                      slot)) {
@@ -228,7 +228,7 @@ void HapticLink::publish(const Simulation& sim) {
   segment_.beat(shared::Side::kSim);
 }
 
-void HapticLink::logStatus() {
+void SegmentHost::logStatus() {
   const std::int64_t beat = segment_.heartbeatNs(shared::Side::kHaptic);
   if (beat == 0) {
     spdlog::info("published {} snapshots; no haptic process attached yet", published_);
