@@ -8,13 +8,12 @@
 #include <spdlog/spdlog.h>
 
 #include "fem_body_impl.h"
+#include "tactus/shared/clock.h"
 #include "tactus/shared/error.h"
 #include "tactus/sim/fem.h"
 
 namespace tactus::sim {
 
-using fem_detail::secondsSince;
-using Clock = fem_detail::Clock;
 
 namespace {
 
@@ -234,15 +233,15 @@ void FemBody::Impl::keepFactorRotations() {
 }
 
 bool FemBody::Impl::factorizeAndSolve(FemStepStats& stats) {
-  const auto t1 = Clock::now();
+  const std::int64_t t1 = shared::monotonicNs();
   ++counters.factorisations;
   const bool ok = chol.factorize(a);
-  stats.factorisation_s = secondsSince(t1);
+  stats.factorisation_s = shared::secondsSinceNs(t1);
   chol_current = ok;
   if (!ok) return false;
-  const auto t2 = Clock::now();
+  const std::int64_t t2 = shared::monotonicNs();
   chol.solve(rhs.data(), dv.data(), 1);
-  stats.solve_s = secondsSince(t2);
+  stats.solve_s = shared::secondsSinceNs(t2);
   return true;
 }
 
@@ -252,7 +251,7 @@ bool FemBody::Impl::solveStep(double h, FemStepStats& stats) {
       return factorizeAndSolve(stats) && dv.allFinite();
     case LinearSolverKind::kCholmodReuse: {
       dv = 2.0 * dv_prev - dv_prev2;  // warm start
-      const auto t_warp = Clock::now();
+      const std::int64_t t_warp = shared::monotonicNs();
       if (corotational) {
         averageRotations(rotation, node_acc, node_rot);
         relative_rot.resize(n_free / 3);
@@ -262,7 +261,7 @@ bool FemBody::Impl::solveStep(double h, FemStepStats& stats) {
           if (dof_base[i] >= 0)
             relative_rot[dof_base[i] / 3] = node_rot[i] * factor_node_rot[dof_base[i] / 3].transpose();
       }
-      const double warp_s = secondsSince(t_warp);
+      const double warp_s = shared::secondsSinceNs(t_warp);
       const fem_detail::ReuseSolveResult r =
           reuse.solve(chol, a, rhs, dv, corotational ? relative_rot.data() : nullptr);
       if (r.refreshed) keepFactorRotations();
@@ -276,12 +275,12 @@ bool FemBody::Impl::solveStep(double h, FemStepStats& stats) {
       return r.ok;
     }
     case LinearSolverKind::kPcg: {
-      const auto t1 = Clock::now();
+      const std::int64_t t1 = shared::monotonicNs();
       if (options.pcg_preconditioner != PcgPreconditioner::kJacobi) ensureRestFactor(h);
-      stats.factorisation_s = secondsSince(t1);
-      const auto t2 = Clock::now();
+      stats.factorisation_s = shared::secondsSinceNs(t1);
+      const std::int64_t t2 = shared::monotonicNs();
       const bool ok = pcg(options.cg_tolerance, options.cg_max_iterations, stats);
-      stats.solve_s = secondsSince(t2);
+      stats.solve_s = shared::secondsSinceNs(t2);
       if (!ok && !dv.allFinite()) return false;
       stats.ok = ok;
       return dv.allFinite();
@@ -372,7 +371,7 @@ FemStepStats FemBody::freeMotion(double h, const Eigen::VectorXd* external_force
   Impl& m = *impl_;
   FemStepStats stats;
   if (!(h > 0.0)) throw Error("FemBody::freeMotion: time step must be > 0");
-  const auto t0 = Clock::now();
+  const std::int64_t t0 = shared::monotonicNs();
   const bool damped = m.material.damping.has_value();
   const double alpha = damped ? m.material.damping->mass_alpha_per_s : 0.0;
   const double beta = damped ? m.material.damping->stiffness_beta_s : 0.0;
@@ -399,7 +398,7 @@ FemStepStats FemBody::freeMotion(double h, const Eigen::VectorXd* external_force
     ++m.counters.damping_evaluations;
   }
   m.reduce(m.rhs_full, m.rhs.data());
-  stats.assembly_s = secondsSince(t0);
+  stats.assembly_s = shared::secondsSinceNs(t0);
 
   if (!m.solveStep(h, stats)) {
     stats.ok = false;
@@ -425,7 +424,7 @@ FemStepStats FemBody::solveStatic(const Eigen::VectorXd* external_force_n, int m
   m.v.setZero();
   if (!m.chol.analyzed()) m.chol.analyze(m.a);
   for (int it = 0; it < max_iterations; ++it) {
-    const auto t0 = Clock::now();
+    const std::int64_t t0 = shared::monotonicNs();
     m.evaluate(m.q, nullptr, 0.0, 0.0, &m.f_int, &m.a, 1.0, 0.0, false);
     m.chol_current = false;
     m.a_is_step_matrix = false;
@@ -436,7 +435,7 @@ FemStepStats FemBody::solveStatic(const Eigen::VectorXd* external_force_n, int m
     if (m.has_gravity)
       for (int i = 0; i < m.n; ++i) m.rhs_full.segment<3>(3 * i) += m.mass[3 * i] * m.gravity;
     m.reduce(m.rhs_full, m.rhs.data());
-    stats.assembly_s = secondsSince(t0);
+    stats.assembly_s = shared::secondsSinceNs(t0);
     if (m.rhs.norm() <= tol_n) break;
     if (!m.factorizeAndSolve(stats)) {
       stats.ok = false;

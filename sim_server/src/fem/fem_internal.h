@@ -25,11 +25,6 @@ namespace tactus::sim::fem_detail {
 /// large enough load can still hold an element inverted at equilibrium: FemStepStats counts them.
 Eigen::Matrix3d polarRotation(const Eigen::Matrix3d& F);
 
-using Clock = std::chrono::steady_clock;
-inline double secondsSince(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
-
 /// The nodes not `skip`ped in reverse Cuthill-McKee order over the mesh's node adjacency (each
 /// connected part from a node of minimum degree): nodes of one element get nearby positions, so
 /// that element loops over data indexed in this order touch nearby memory. Node indices out of

@@ -1,4 +1,5 @@
 // The simulation step built from a scene: only the stages the scene calls for exist.
+#include "tactus/shared/clock.h"
 #include "tactus/sim/pipeline.h"
 
 #include <fmt/format.h>
@@ -19,11 +20,6 @@
 
 namespace tactus::sim {
 namespace {
-
-using Clock = std::chrono::steady_clock;
-double secondsSince(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
 
 const char* toString(ComplianceKind k) {
   switch (k) {
@@ -321,10 +317,10 @@ double Simulation::Impl::queryContacts() {
 }
 
 double Simulation::Impl::detectContacts(StepReport& report) {
-  const auto t0 = Clock::now();
+  const std::int64_t t0 = shared::monotonicNs();
   const double min_gap = queryContacts();
   counters.collision_queries += static_cast<long>(tissues.size());
-  report.times.collision_s += secondsSince(t0);
+  report.times.collision_s += shared::secondsSinceNs(t0);
   return min_gap;
 }
 
@@ -405,7 +401,7 @@ void Simulation::Impl::assembleProblem(StepReport& report, FoundAt found_at) {
   const Instrument& detected = at_start ? *tool_start : *instrument;   // where found
   const shared::Pose& tool_pose = detected.pose();
   const shared::Pose& free_pose = tool_free->pose();
-  auto t0 = Clock::now();
+  std::int64_t t0 = shared::monotonicNs();
   int rows = 0;
   int contacts = 0;
   all_contacts.clear();
@@ -468,10 +464,10 @@ void Simulation::Impl::assembleProblem(StepReport& report, FoundAt found_at) {
     contacts += static_cast<int>(found.size());
     all_contacts.insert(all_contacts.end(), found.begin(), found.end());
   }
-  report.times.collision_s += secondsSince(t0);
+  report.times.collision_s += shared::secondsSinceNs(t0);
 
   // assemble the problem: W = sum_tissue H C H^T + H_tool C6 H_tool^T
-  t0 = Clock::now();
+  t0 = shared::monotonicNs();
   ContactProblemData& p = problem;
   p.contacts = contacts;
   p.rows = rows;
@@ -535,7 +531,7 @@ void Simulation::Impl::assembleProblem(StepReport& report, FoundAt found_at) {
   if (mu > 0.0) counters.tangential_rows += rows - contacts;
   report.contacts = contacts;
   report.rows = rows;
-  report.times.w_build_s += secondsSince(t0);
+  report.times.w_build_s += shared::secondsSinceNs(t0);
 }
 
 // Tissue nodes with a non-zero weight in some contact of the last assembled problem.
@@ -561,7 +557,7 @@ void Simulation::Impl::solveAndCorrect(StepReport& report, bool restore_free) {
   ContactProblemData& p = problem;
   const int rows = p.rows;
   const int contacts = p.contacts;
-  auto t0 = Clock::now();
+  std::int64_t t0 = shared::monotonicNs();
   p.f.setZero(rows);
   for (int c = 0; c < contacts; ++c) {
     auto it = previous_f.find(p.contact_id[c]);
@@ -585,11 +581,11 @@ void Simulation::Impl::solveAndCorrect(StepReport& report, bool restore_free) {
     for (int k = 0; k < nr; ++k) fc[k] = p.f[r0 + k];
     previous_f.emplace(p.contact_id[c], fc);
   }
-  report.times.solve_s += secondsSince(t0);
+  report.times.solve_s += shared::secondsSinceNs(t0);
   report.total_normal_force_n = 0.0;
   for (int c = 0; c < contacts; ++c) report.total_normal_force_n += p.f[p.row_offset[c]];
 
-  t0 = Clock::now();
+  t0 = shared::monotonicNs();
   if (restore_free) {
     for (TissueState& ts : tissues) {
       ts.body->positions() = ts.q_free;
@@ -633,13 +629,13 @@ void Simulation::Impl::solveAndCorrect(StepReport& report, bool restore_free) {
     last_wrench.setZero();
     last_grip_torque = 0.0;
   }
-  report.times.correction_s += secondsSince(t0);
+  report.times.correction_s += shared::secondsSinceNs(t0);
 }
 
 StepReport Simulation::step() {
   Impl& s = *impl_;
   StepReport report;
-  const auto t_step = Clock::now();
+  const std::int64_t t_step = shared::monotonicNs();
   const double h = s.spec.time_step_s;
 
   // kStepStart: contacts at the start-of-step state (carried to the free state when assembled,
@@ -654,7 +650,7 @@ StepReport Simulation::step() {
   }
 
   // free motion of every object (no contact forces)
-  auto t0 = Clock::now();
+  std::int64_t t0 = shared::monotonicNs();
   for (TissueState& ts : s.tissues) {
     if (s.instrument) ts.q_begin = ts.body->positions();
     const FemStepStats st = ts.body->freeMotion(h);
@@ -670,12 +666,12 @@ StepReport Simulation::step() {
     s.problem.device_pose = s.target.pose;
     s.problem.device_gripper = s.target.gripper_opening;
   }
-  report.times.free_motion_s = secondsSince(t0);
+  report.times.free_motion_s = shared::secondsSinceNs(t0);
 
   if (s.instrument) {
-    t0 = Clock::now();
+    t0 = shared::monotonicNs();
     for (TissueState& ts : s.tissues) ts.compliance->update(*ts.body);
-    report.times.w_build_s = secondsSince(t0);
+    report.times.w_build_s = shared::secondsSinceNs(t0);
     s.solveContacts(report);
     s.problem.tool_pose = s.instrument->pose();
   }
@@ -695,7 +691,7 @@ StepReport Simulation::step() {
     report.finite = report.finite && s.instrument->pose().pos_m.allFinite() &&
                     s.instrument->twist().allFinite();
   }
-  report.times.total_s = secondsSince(t_step);
+  report.times.total_s = shared::secondsSinceNs(t_step);
   return report;
 }
 
