@@ -2,6 +2,9 @@
 
 #include "fem_internal.h"
 
+#include <pthread.h>
+#include <signal.h>
+
 #include <cstring>
 #include <string>
 
@@ -14,6 +17,36 @@
 namespace tactus::sim::fem_detail {
 
 // ---- CHOLMOD ----
+
+namespace {
+
+// METIS, which cholmod_analyze calls for its orderings, replaces the SIGTERM handler while it
+// runs (GKlib's gk_sigtrap) and swallows a SIGTERM that arrives then: a stop request sent during
+// the analysis of a large mesh was lost (FilesTest.SigtermDuringC0PrecomputationExitsWithAMessage
+// failed so). The stop signals are blocked in this thread around the analysis; one that arrives
+// stays pending and reaches the process's own handler when they are unblocked.
+class StopSignalsBlocked {
+ public:
+  StopSignalsBlocked() {
+    sigset_t stop;
+    sigemptyset(&stop);
+    sigaddset(&stop, SIGINT);
+    sigaddset(&stop, SIGTERM);
+    sigaddset(&stop, SIGHUP);
+    blocked_ = pthread_sigmask(SIG_BLOCK, &stop, &previous_) == 0;
+  }
+  ~StopSignalsBlocked() {
+    if (blocked_) pthread_sigmask(SIG_SETMASK, &previous_, nullptr);
+  }
+  StopSignalsBlocked(const StopSignalsBlocked&) = delete;
+  StopSignalsBlocked& operator=(const StopSignalsBlocked&) = delete;
+
+ private:
+  sigset_t previous_{};
+  bool blocked_ = false;
+};
+
+}  // namespace
 
 CholmodSolver::CholmodSolver() {
   limitNumericThreads();
@@ -57,7 +90,10 @@ void CholmodSolver::analyze(Sparse& lower) {
   if (!lower.isCompressed()) lower.makeCompressed();
   if (factor_) cholmod_free_factor(&factor_, &common_);
   cholmod_sparse a = view(lower);
-  factor_ = cholmod_analyze(&a, &common_);
+  {
+    const StopSignalsBlocked stop_signals_pending;
+    factor_ = cholmod_analyze(&a, &common_);
+  }
   factorized_ = false;
   if (!factor_ || common_.status < CHOLMOD_OK) {
     throw NumericalError("CHOLMOD symbolic analysis failed (status " +
