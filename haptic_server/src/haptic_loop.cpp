@@ -1,4 +1,6 @@
 // The haptic tick: device -> local model -> NSGS -> safety chain -> device, allocation-free.
+// This file: settings, construction, links, events and the tick's phases; the local model is in
+// local_model.cpp, the safety chain in safety_chain.cpp.
 #include "tactus/haptic/haptic_loop.h"
 
 #include <spdlog/spdlog.h>
@@ -10,52 +12,16 @@
 #include <sstream>
 #include <string>
 
+#include "haptic_loop_internal.h"
 #include "tactus/shared/clock.h"
 #include "tactus/shared/error.h"
 
 namespace tactus::haptic {
-namespace {
 
-bool finite(const std::array<double, 3>& a) noexcept {
-  return std::isfinite(a[0]) && std::isfinite(a[1]) && std::isfinite(a[2]);
-}
-
-}  // namespace
-
-double wrenchNorm(const std::array<double, 3>& v) noexcept {
-  if (!finite(v)) return std::abs(v[0]) + std::abs(v[1]) + std::abs(v[2]);  // NaN or +inf
-  const double s = std::max({std::abs(v[0]), std::abs(v[1]), std::abs(v[2])});
-  if (s == 0.0) return 0.0;
-  const double a = v[0] / s, b = v[1] / s, c = v[2] / s;
-  return s * std::sqrt(a * a + b * b + c * c);
-}
+using detail::finite;
+using detail::sanitizeLimit;
 
 namespace {
-
-// Scales `v` so that wrenchNorm(v) <= limit (a limit below kMinLimit, or NaN, zeroes v), with
-// a relative margin of 1e-12 so that any rounding of the norm stays within the limit; a result
-// that still is not within it (non-finite input) becomes zero. Returns true when it changed v.
-bool clampNorm(std::array<double, 3>& v, double limit) noexcept {
-  const double n = wrenchNorm(v);
-  if (n <= limit) return false;
-  if (!(limit >= HapticSettingsLimits::kMinLimit)) {
-    v = {};
-    return true;
-  }
-  const double k = (limit / n) * (1.0 - 1e-12);
-  for (double& x : v) x *= k;
-  if (!(wrenchNorm(v) <= limit)) v = {};
-  return true;
-}
-
-// Limits the change from `previous` to `v` to a vector of norm <= max_step.
-void slewLimit(std::array<double, 3>& v, const std::array<double, 3>& previous,
-               double max_step) noexcept {
-  std::array<double, 3> d{v[0] - previous[0], v[1] - previous[1], v[2] - previous[2]};
-  if (clampNorm(d, max_step)) {
-    for (int i = 0; i < 3; ++i) v[i] = previous[i] + d[i];
-  }
-}
 
 // now - t_ns, saturated instead of overflowing (time stamps from shared memory or a device)
 std::int64_t ageNs(std::int64_t now, std::int64_t t_ns) noexcept {
@@ -65,12 +31,6 @@ std::int64_t ageNs(std::int64_t now, std::int64_t t_ns) noexcept {
                     : std::numeric_limits<std::int64_t>::min();
   }
   return age;
-}
-
-// A usable clamp: finite and >= kMinLimit, at most `ceiling`; anything else is 0 (no output).
-double sanitizeLimit(double limit, double ceiling) noexcept {
-  if (!std::isfinite(limit) || !(limit >= HapticSettingsLimits::kMinLimit)) return 0.0;
-  return std::min(limit, ceiling);
 }
 
 std::string show(double v) {
@@ -89,37 +49,7 @@ void checkSetting(const char* name, double v, double lo, bool lo_open, double hi
               "]" + (unit[0] != '\0' ? " " : "") + unit);
 }
 
-shared::Pose toPose(const shared::PoseSample& s) noexcept {
-  shared::Pose p;
-  p.pos_m = Eigen::Vector3d(s.pos_m[0], s.pos_m[1], s.pos_m[2]);
-  p.rot = Eigen::Quaterniond(s.quat_wxyz[0], s.quat_wxyz[1], s.quat_wxyz[2], s.quat_wxyz[3]);
-  const double n = p.rot.norm();
-  if (n > 1e-12 && std::isfinite(n)) {
-    p.rot.coeffs() /= n;
-  } else {
-    p.rot = Eigen::Quaterniond::Identity();
-  }
-  return p;
-}
-
 }  // namespace
-
-bool guardWrench(std::array<double, 3>& force_n, std::array<double, 3>& torque_nm,
-                 double max_force_n, double max_torque_nm) noexcept {
-  bool changed = false;
-  if (!finite(force_n)) {
-    force_n = {};
-    changed = true;
-  }
-  if (!finite(torque_nm)) {
-    torque_nm = {};
-    changed = true;
-  }
-  changed |= clampNorm(force_n, sanitizeLimit(max_force_n, HapticSettingsLimits::kMaxForceN));
-  changed |= clampNorm(torque_nm,
-                       sanitizeLimit(max_torque_nm, HapticSettingsLimits::kMaxTorqueNm));
-  return changed;
-}
 
 void HapticSettings::validate() const {
   using L = HapticSettingsLimits;
@@ -234,169 +164,6 @@ void HapticLoop::pushRateLimited(NoisyEvent which, std::uint32_t code, std::int6
   noisy_pushed_[i] = true;
   noisy_event_ns_[i] = now_ns;
   pushEvent(code, a, b);
-}
-
-void HapticLoop::solveLocalModel(AttachedSegment& link, const shared::SnapshotView& snap,
-                                 const shared::Pose& device_pose, TickOutput& out) noexcept {
-  shared::NsgsWorkspace& workspace = link.workspace;
-  std::vector<double>& delta_free = link.delta_free;
-  std::vector<double>& f = link.f;
-  const auto& hdr = snap.header();
-  const int m = hdr.rows;
-  const int nc = hdr.contacts;
-  out.contacts = nc;
-  if (m <= 0 || nc <= 0) return;
-  if (m > workspace.maxRows() || nc > workspace.maxContacts()) {
-    pushEvent(kEventSnapshotTooLarge, m);
-    return;
-  }
-  // delta_free(t) = delta_free* + J (x_h [-] x_h*)
-  const shared::Pose x_star = toPose(hdr.device_pose);
-  const shared::Vector6d dx = shared::poseDifference(device_pose, x_star);
-  const double* df = snap.deltaFree();
-  const double* J = snap.J();
-  const bool move = (hdr.flags & shared::kSnapshotHasJacobian) != 0;
-  for (int r = 0; r < m; ++r) {
-    double d = df[r];
-    if (move) {
-      const double* jr = J + 6 * r;
-      for (int k = 0; k < 6; ++k) d += jr[k] * dx[k];
-    }
-    delta_free[r] = d;
-  }
-  shared::NsgsSettings ns;
-  ns.tolerance = settings_.tolerance;
-  ns.max_sweeps = settings_.max_sweeps;
-  ns.time_budget_ns = settings_.solve_budget_ns;
-  // the row-update sweep needs an exactly symmetric W: only when the snapshot says so
-  ns.coupling = (hdr.flags & shared::kSnapshotSymmetricW) != 0
-                    ? shared::NsgsCoupling::kSymmetricRowUpdate
-                    : shared::NsgsCoupling::kColumnUpdate;
-  // same snapshot as the last solve: W and f are unchanged, so W f + delta_free only shifts by
-  // the change of delta_free (saves a pass over W)
-  if (link.delta_seq == hdr.seq) {
-    double* delta = workspace.delta.data();
-    for (int r = 0; r < m; ++r) delta[r] += delta_free[r] - link.last_delta_free[r];
-    ns.delta_is_current = true;
-  }
-  // W's storage, chosen once per snapshot: dense (one tissue) or blocks (several bodies)
-  shared::ContactProblemView problem = snap.problem(delta_free.data());
-  if (link.blocks_seq != hdr.seq) {
-    link.use_blocks = shared::chooseStorage(problem, link.blocks).blocks != nullptr;
-    link.blocks_seq = hdr.seq;
-  }
-  if (link.use_blocks) problem.blocks = &link.blocks;
-  const shared::NsgsResult res = shared::solveNsgs(problem, ns, workspace, f.data());
-  link.delta_seq = res.status == shared::NsgsStatus::kEmpty ? 0 : hdr.seq;
-  std::copy_n(delta_free.begin(), m, link.last_delta_free.begin());
-  out.sweeps = res.sweeps;
-  out.residual = res.error;
-  out.solve_ns = res.elapsed_ns;
-  // kEmpty: the view is inconsistent (row offsets, sizes): its offsets must not be used
-  if (res.status == shared::NsgsStatus::kEmpty) return;
-  if (res.status == shared::NsgsStatus::kNonFinite) {   // NSGS has zeroed f
-    counters_.non_finite_input.fetch_add(1, std::memory_order_relaxed);
-    return;
-  }
-  // kIllPosed: W itself is unusable (a contact with a zero, negative or denormal diagonal). The
-  // simulation never publishes such a W from a real scene, so the snapshot is corrupt: render no
-  // force from it (the safety chain ramps the command down) and report it once per snapshot.
-  if (res.status == shared::NsgsStatus::kIllPosed) {
-    counters_.ill_posed_solves.fetch_add(1, std::memory_order_relaxed);
-    out.flags |= shared::kStatsSolverNotConverged;
-    if (link.ill_posed_seq != hdr.seq) {
-      link.ill_posed_seq = hdr.seq;
-      pushEvent(kEventIllPosedSnapshot, static_cast<double>(res.ill_posed_contacts),
-                static_cast<double>(hdr.seq));
-    }
-    return;
-  }
-  const bool not_converged = res.status != shared::NsgsStatus::kConverged;
-  if (not_converged) {
-    out.flags |= shared::kStatsSolverNotConverged;
-    counters_.solver_not_converged.fetch_add(1, std::memory_order_relaxed);
-    if (!not_converged_) {
-      pushRateLimited(kNoisyNotConverged, shared::kEventSolverNotConverged, last_tick_ns_,
-                      res.sweeps, res.error);
-    }
-  }
-  not_converged_ = not_converged;
-  // wrench on the instrument from the contact forces (frame rows n, t1, t2)
-  const std::int32_t* ro = snap.rowOffset();
-  const double* pt = snap.contactPoint();
-  const double* nn = snap.contactNormal();
-  const double* tt = snap.contactTangent();
-  const Eigen::Vector3d origin = toPose(hdr.tool_pose).pos_m + dx.head<3>();
-  Eigen::Vector3d force = Eigen::Vector3d::Zero();
-  Eigen::Vector3d torque = Eigen::Vector3d::Zero();
-  for (int c = 0; c < nc; ++c) {
-    const int r0 = ro[c];
-    const int rows = ro[c + 1] - r0;
-    Eigen::Vector3d fc = f[r0] * Eigen::Vector3d(nn[3 * c], nn[3 * c + 1], nn[3 * c + 2]);
-    if (rows == 3) {
-      fc += f[r0 + 1] * Eigen::Vector3d(tt[6 * c], tt[6 * c + 1], tt[6 * c + 2]);
-      fc += f[r0 + 2] * Eigen::Vector3d(tt[6 * c + 3], tt[6 * c + 4], tt[6 * c + 5]);
-    }
-    force += fc;
-    torque += (Eigen::Vector3d(pt[3 * c], pt[3 * c + 1], pt[3 * c + 2]) - origin).cross(fc);
-  }
-  for (int i = 0; i < 3; ++i) {
-    out.force_n[i] = force[i];
-    out.torque_nm[i] = torque[i];
-  }
-}
-
-void HapticLoop::applySafetyChain(double dt, TickOutput& out, std::array<double, 3>& force,
-                                  std::array<double, 3>& torque) noexcept {
-  // scale, engage gate, fade, clamp, slew
-  for (int i = 0; i < 3; ++i) {
-    force[i] = settings_.force_scale * out.force_n[i];
-    torque[i] = settings_.render_torque ? settings_.force_scale * out.torque_nm[i] : 0.0;
-  }
-  if (!finite(force) || !finite(torque)) {
-    force = {};
-    torque = {};
-  }
-  out.unlimited_force_norm_n = wrenchNorm(force);
-  const bool usable = !out.stale && have_pose_ && !device_fault_;
-  if (!engaged_ && usable && out.unlimited_force_norm_n < settings_.engage_threshold_n) {
-    engaged_ = true;
-    pushEvent(kEventEngaged, out.unlimited_force_norm_n);
-  }
-  const double target_gain = (usable && engaged_) ? 1.0 : 0.0;
-  const double ramp = settings_.fade_ms > 0.0 ? dt / (1e-3 * settings_.fade_ms) : 1.0;
-  gain_ = target_gain > gain_ ? std::min(target_gain, gain_ + ramp)
-                              : std::max(target_gain, gain_ - ramp);
-  if (!(gain_ >= 0.0 && gain_ <= 1.0)) gain_ = 0.0;   // NaN ramp (unchecked settings)
-  for (int i = 0; i < 3; ++i) {
-    force[i] *= gain_;
-    torque[i] *= gain_;
-  }
-  const double requested_n = wrenchNorm(force);
-  const bool clamped = clampNorm(force, force_limit_n_);
-  if (clamped) {
-    out.flags |= shared::kStatsForceClamped;
-    counters_.clamped.fetch_add(1, std::memory_order_relaxed);
-    if (!clamped_) {
-      pushRateLimited(kNoisyClamped, shared::kEventForceClamped, last_tick_ns_, requested_n,
-                      wrenchNorm(force));
-    }
-  }
-  clamped_ = clamped;
-  clampNorm(torque, torque_limit_nm_);
-  slewLimit(force, last_force_n_, settings_.slew_n_per_s * dt);
-  // the slew limiter never lets a faded command exceed the clamp
-  clampNorm(force, force_limit_n_);
-
-  // last stage, whatever the settings: finite and within the clamps
-  if (guardWrench(force, torque, force_limit_n_, torque_limit_nm_)) {
-    counters_.guard_interventions.fetch_add(1, std::memory_order_relaxed);
-  }
-  out.force_n = force;
-  out.torque_nm = torque;
-  out.gain = gain_;
-  last_force_n_ = force;
-  last_torque_nm_ = torque;
 }
 
 device::IoStatus HapticLoop::readDevice(std::int64_t now, TickOutput& out) noexcept {

@@ -196,6 +196,9 @@ class HapticLoop {
   shared::EventRing& events() noexcept { return events_; }
   const HapticSettings& settings() const noexcept { return settings_; }
 
+  /// Tests run the tick's phases one at a time (tests/unit/haptic/haptic_phases_test.cpp).
+  friend struct HapticLoopPhases;
+
  private:
   void solveLocalModel(AttachedSegment& link, const shared::SnapshotView& snap,
                        const shared::Pose& device_pose, TickOutput& out) noexcept;

@@ -1,0 +1,320 @@
+// The haptic tick's phases one at a time (HapticLoop::tick calls them in this order): adopt the
+// offered link, read the device, publish the sample, take the snapshot (and solve the local
+// model), the safety chain, write the device, record the stats. Each is checked on its own
+// against a real shared segment; haptic_loop_test.cpp checks them together through tick().
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "../../support/scripted_device.h"
+#include "tactus/haptic/haptic_loop.h"
+#include "tactus/shared/clock.h"
+
+namespace tactus::haptic {
+
+// The tick's private phases, for these tests (a friend of HapticLoop).
+struct HapticLoopPhases {
+  static void adoptOfferedLink(HapticLoop& l) { l.adoptOfferedLink(); }
+  static device::IoStatus readDevice(HapticLoop& l, std::int64_t now, TickOutput& out) {
+    return l.readDevice(now, out);
+  }
+  static void publishSample(HapticLoop& l, std::int64_t now, device::IoStatus io) {
+    l.publishSample(now, io);
+  }
+  static void takeSnapshot(HapticLoop& l, std::int64_t now, TickOutput& out) {
+    l.takeSnapshot(now, out);
+  }
+  static void solveLocalModel(HapticLoop& l, AttachedSegment& link,
+                              const shared::SnapshotView& snap, const shared::Pose& device_pose,
+                              TickOutput& out) {
+    l.solveLocalModel(link, snap, device_pose, out);
+  }
+  static void applySafetyChain(HapticLoop& l, double dt, TickOutput& out,
+                               std::array<double, 3>& force, std::array<double, 3>& torque) {
+    l.applySafetyChain(dt, out, force, torque);
+  }
+  static void writeDevice(HapticLoop& l, const std::array<double, 3>& force,
+                          const std::array<double, 3>& torque) {
+    l.writeDevice(force, torque);
+  }
+  static void recordStats(HapticLoop& l, std::int64_t scheduled_ns, std::int64_t woken_ns,
+                          const TickOutput& out, const std::array<double, 3>& force) {
+    l.recordStats(scheduled_ns, woken_ns, out, force);
+  }
+};
+
+namespace {
+
+using P = HapticLoopPhases;
+using test::ScriptedDevice;
+
+// A device whose writes fail.
+class RefusingDevice : public ScriptedDevice {
+ public:
+  device::IoStatus write(const device::DeviceCommand&) noexcept override {
+    return device::IoStatus::kFault;
+  }
+};
+
+class HapticPhasesTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    name_ = "tactus_phases_test_" + std::to_string(::getpid());
+    shared::Segment::remove(name_);
+    sim_.emplace(shared::Segment::create(name_, shared::SegmentCapacity::forContacts(50, true)));
+    publisher_ = sim_->snapshotPublisher();
+    settings_.max_force_n = 5.0;
+    settings_.slew_n_per_s = 1e6;
+    settings_.fade_ms = 10.0;
+    loop_.emplace(device_, settings_);
+    link_ = std::make_unique<AttachedSegment>(shared::Segment::open(name_));
+    loop_->offerLink(link_.get());
+  }
+  void TearDown() override {
+    loop_->offerLink(nullptr);
+    P::adoptOfferedLink(*loop_);
+    link_.reset();
+    sim_.reset();
+    shared::Segment::remove(name_);
+  }
+
+  // One frictionless contact along +z: W = w, delta_free = gap + J dx, J = [0 0 1 0 0 0].
+  void publish(double gap_m, double w_m_per_n, std::int64_t t_ns) {
+    auto slot = publisher_.slot();
+    auto& h = slot.header();
+    ASSERT_TRUE(slot.setSize(1, 1));
+    h.seq = ++seq_;
+    h.t_ns = t_ns;
+    h.flags = shared::kSnapshotValid | shared::kSnapshotHasJacobian;
+    h.device_pose.pos_m = {0.0, 0.0, 0.0};
+    h.tool_pose.pos_m = {0.0, 0.0, 0.0};
+    slot.rowOffset()[0] = 0;
+    slot.rowOffset()[1] = 1;
+    slot.contactId()[0] = 7;
+    slot.mu()[0] = 0.0;
+    slot.W()[0] = w_m_per_n;
+    slot.deltaFree()[0] = gap_m;
+    slot.f()[0] = 0.0;
+    for (int k = 0; k < 6; ++k) slot.J()[k] = k == 2 ? 1.0 : 0.0;
+    for (int k = 0; k < 3; ++k) {
+      slot.contactPoint()[k] = 0.0;
+      slot.contactNormal()[k] = k == 2 ? 1.0 : 0.0;
+    }
+    publisher_.publish();
+  }
+
+  // Adopts the link and reads one valid device sample at the origin (the loop has a pose).
+  void readValidPose() {
+    P::adoptOfferedLink(*loop_);
+    device_.state.pos_m = {0.0, 0.0, 0.0};
+    device_.state.t_ns = now_;
+    TickOutput out;
+    ASSERT_EQ(P::readDevice(*loop_, now_, out), device::IoStatus::kOk);
+  }
+
+  std::string name_;
+  std::optional<shared::Segment> sim_;
+  shared::SnapshotPublisher publisher_;
+  ScriptedDevice device_;
+  HapticSettings settings_;
+  std::optional<HapticLoop> loop_;
+  std::unique_ptr<AttachedSegment> link_;
+  std::uint64_t seq_ = 0;
+  std::int64_t now_ = shared::monotonicNs();
+};
+
+TEST_F(HapticPhasesTest, AdoptTakesTheOfferedLinkAndANullOfferDetaches) {
+  EXPECT_EQ(loop_->linkInUse(), nullptr) << "an offer is taken only by the tick";
+  P::adoptOfferedLink(*loop_);
+  EXPECT_EQ(loop_->linkInUse(), link_.get());
+  loop_->offerLink(nullptr);
+  EXPECT_EQ(loop_->linkInUse(), link_.get()) << "the old link stays in use until the next tick";
+  P::adoptOfferedLink(*loop_);
+  EXPECT_EQ(loop_->linkInUse(), nullptr);
+}
+
+TEST_F(HapticPhasesTest, ReadDeviceSortsFreshStaleNonFiniteAndMissingSamples) {
+  TickOutput out;
+  device_.state.pos_m = {0.01, 0.02, 0.03};
+  device_.state.t_ns = now_;
+  EXPECT_EQ(P::readDevice(*loop_, now_, out), device::IoStatus::kOk);
+  EXPECT_EQ(out.flags, 0u);
+
+  // a sample stamped a second ago while the watchdog is 50 ms: the device stopped updating
+  out = {};
+  device_.state.t_ns = now_ - 1'000'000'000;
+  EXPECT_EQ(P::readDevice(*loop_, now_, out), device::IoStatus::kFault);
+  EXPECT_NE(out.flags & shared::kStatsDeviceFault, 0u);
+  EXPECT_EQ(loop_->counters().stale_device_samples.load(), 1u);
+  EXPECT_EQ(loop_->counters().device_faults.load(), 1u);
+
+  // a fresh sample with a NaN coordinate is read but not trusted
+  out = {};
+  device_.state.t_ns = now_;
+  device_.state.pos_m = {std::nan(""), 0.0, 0.0};
+  EXPECT_EQ(P::readDevice(*loop_, now_, out), device::IoStatus::kOk);
+  EXPECT_NE(out.flags & shared::kStatsDeviceFault, 0u);
+  EXPECT_EQ(loop_->counters().non_finite_input.load(), 1u);
+
+  out = {};
+  device_.no_data = true;
+  EXPECT_EQ(P::readDevice(*loop_, now_, out), device::IoStatus::kNoData);
+  EXPECT_NE(out.flags & shared::kStatsDeviceNoData, 0u);
+  EXPECT_EQ(loop_->counters().device_no_data.load(), 1u);
+}
+
+TEST_F(HapticPhasesTest, PublishSampleGivesTheSimulationThePoseHeldAndTheDeviceStatus) {
+  auto samples = sim_->deviceReader();
+  P::adoptOfferedLink(*loop_);
+  TickOutput out;
+  device_.state.pos_m = {0.01, 0.02, 0.03};
+  device_.state.t_ns = now_;
+  device_.state.gripper_rad = 0.25;
+  device::IoStatus io = P::readDevice(*loop_, now_, out);
+  P::publishSample(*loop_, now_, io);
+  shared::DeviceSample s = samples.latest();
+  EXPECT_EQ(s.seq, 1u);
+  EXPECT_EQ(s.t_ns, now_);
+  EXPECT_DOUBLE_EQ(s.pos_m[0], 0.01);
+  EXPECT_DOUBLE_EQ(s.pos_m[2], 0.03);
+  EXPECT_DOUBLE_EQ(s.gripper_rad, 0.25);
+  EXPECT_NE(s.status & shared::kDeviceOk, 0u);
+  EXPECT_EQ(s.status & shared::kDeviceFault, 0u);
+
+  // a non-finite sample: the last good pose is held and the fault is flagged
+  device_.state.pos_m = {std::nan(""), 1.0, 1.0};
+  io = P::readDevice(*loop_, now_ + 1'000'000, out);
+  P::publishSample(*loop_, now_ + 1'000'000, io);
+  s = samples.latest();
+  EXPECT_EQ(s.seq, 2u);
+  EXPECT_DOUBLE_EQ(s.pos_m[0], 0.01);
+  EXPECT_DOUBLE_EQ(s.pos_m[1], 0.02);
+  EXPECT_NE(s.status & shared::kDeviceFault, 0u);
+}
+
+TEST_F(HapticPhasesTest, TakeSnapshotFlagsAMissingOrOldSnapshotAndSolvesAFreshOne) {
+  readValidPose();
+  TickOutput out;
+  P::takeSnapshot(*loop_, now_, out);
+  EXPECT_TRUE(out.stale);
+  EXPECT_NE(out.flags & shared::kStatsNoSnapshot, 0u);
+
+  publish(-0.002, 1e-3, now_ - 1'000'000'000);   // a second old: beyond the 50 ms watchdog
+  out = {};
+  P::takeSnapshot(*loop_, now_, out);
+  EXPECT_TRUE(out.stale);
+  EXPECT_NE(out.flags & shared::kStatsSnapshotStale, 0u);
+  EXPECT_EQ(out.snapshot_seq, 1u) << "an old snapshot is adopted (warm start), not solved";
+  EXPECT_EQ(out.contacts, 0);
+
+  publish(-0.002, 1e-3, now_);                    // 2 mm penetration, W = 1 mm/N: 2 N
+  out = {};
+  P::takeSnapshot(*loop_, now_, out);
+  EXPECT_FALSE(out.stale);
+  EXPECT_EQ(out.snapshot_seq, 2u);
+  EXPECT_EQ(out.contacts, 1);
+  EXPECT_NEAR(out.force_n[2], 2.0, 1e-9);
+  EXPECT_EQ(loop_->counters().snapshots_taken.load(), 2u);
+}
+
+TEST_F(HapticPhasesTest, LocalModelMovesDeltaFreeWithTheDevice) {
+  publish(-0.002, 1e-3, now_);
+  bool fresh = false;
+  const shared::SnapshotView snap = link_->snapshots.latest(&fresh);
+  ASSERT_EQ(snap.header().seq, 1u);
+  for (const double dz : {-0.001, 0.0, 0.0015, 0.003}) {
+    shared::Pose device_pose;
+    device_pose.pos_m = Eigen::Vector3d(0.0, 0.0, dz);
+    TickOutput out;
+    P::solveLocalModel(*loop_, *link_, snap, device_pose, out);
+    // delta_free = -2 mm + dz; the contact pushes with f = max(0, -delta_free / w)
+    EXPECT_NEAR(out.force_n[2], std::max(0.0, (0.002 - dz) / 1e-3), 1e-9) << "dz " << dz;
+    EXPECT_EQ(out.contacts, 1);
+  }
+}
+
+TEST_F(HapticPhasesTest, SafetyChainEngagesFadesInClampsAndZeroesNonFiniteWrenches) {
+  readValidPose();
+  std::array<double, 3> force{}, torque{};
+  TickOutput out;
+  // one tick's chain on the local model's wrench `command` (the chain overwrites out.force_n)
+  auto chain = [&](const std::array<double, 3>& command, bool stale = false) {
+    out = {};
+    out.stale = stale;
+    out.force_n = command;
+    P::applySafetyChain(*loop_, 1e-3, out, force, torque);
+  };
+  chain({0.0, 0.0, 2.0});                   // above the 0.5 N engage threshold: held at zero
+  EXPECT_DOUBLE_EQ(out.gain, 0.0);
+  EXPECT_DOUBLE_EQ(force[2], 0.0);
+  chain({0.0, 0.0, 0.4});                   // below it: engages and fades in (10 ms ramp)
+  EXPECT_NEAR(out.gain, 0.1, 1e-12);
+  EXPECT_NEAR(force[2], 0.1 * 0.4, 1e-12);
+  for (int i = 0; i < 20; ++i) chain({0.0, 0.0, 0.4});
+  EXPECT_DOUBLE_EQ(out.gain, 1.0);
+  EXPECT_NEAR(force[2], 0.4, 1e-12);
+
+  chain({0.0, 30.0, 40.0});                 // 50 N against the 5 N clamp
+  EXPECT_NEAR(std::hypot(force[1], force[2]), 5.0, 1e-9);
+  EXPECT_LE(std::hypot(force[1], force[2]), 5.0);
+  EXPECT_NE(out.flags & shared::kStatsForceClamped, 0u);
+  EXPECT_NEAR(force[2] / force[1], 40.0 / 30.0, 1e-9) << "the clamp keeps the direction";
+
+  chain({std::nan(""), 0.0, 1.0});
+  for (const double component : force) EXPECT_EQ(component, 0.0) << "a NaN command is zero";
+
+  for (int i = 0; i < 20; ++i) chain({0.0, 0.0, 0.4}, /*stale=*/true);   // no fresh snapshot
+  EXPECT_DOUBLE_EQ(out.gain, 0.0);
+  EXPECT_DOUBLE_EQ(force[2], 0.0);
+}
+
+TEST_F(HapticPhasesTest, WriteDeviceSendsTheCommandAndCountsRefusedWrites) {
+  P::writeDevice(*loop_, {1.0, 2.0, 3.0}, {0.1, 0.2, 0.3});
+  EXPECT_DOUBLE_EQ(device_.last.force_n[1], 2.0);
+  EXPECT_DOUBLE_EQ(device_.last.torque_nm[2], 0.3);
+  EXPECT_EQ(loop_->counters().write_faults.load(), 0u);
+
+  RefusingDevice refusing;
+  HapticLoop other(refusing, settings_);
+  P::writeDevice(other, {1.0, 2.0, 3.0}, {0.0, 0.0, 0.0});
+  EXPECT_EQ(other.counters().write_faults.load(), 1u);
+}
+
+TEST_F(HapticPhasesTest, RecordStatsWritesOneRecordBeatsAndFlagsAnOverrun) {
+  auto stats = sim_->statsReader(shared::StatsRingReader::Start::kOldest);
+  P::adoptOfferedLink(*loop_);
+  TickOutput out;
+  out.contacts = 3;
+  out.sweeps = 7;
+  out.flags = shared::kStatsForceClamped;
+  // scheduled in the future: cannot have overrun
+  const std::int64_t scheduled = shared::monotonicNs() + 1'000'000'000;
+  P::recordStats(*loop_, scheduled, scheduled, out, {3.0, 4.0, 0.0});
+  std::vector<shared::StatsRecord> recs(8);
+  ASSERT_EQ(stats.poll(recs.data(), recs.size()), 1u);
+  EXPECT_EQ(recs[0].contacts, 3);
+  EXPECT_EQ(recs[0].sweeps, 7);
+  EXPECT_DOUBLE_EQ(recs[0].force_norm_n, 5.0);
+  EXPECT_EQ(recs[0].scheduled_ns, scheduled);
+  EXPECT_NE(recs[0].flags & shared::kStatsForceClamped, 0u);
+  EXPECT_EQ(recs[0].flags & shared::kStatsOverrun, 0u);
+  EXPECT_EQ(sim_->heartbeatNs(shared::Side::kHaptic), scheduled);
+  EXPECT_EQ(loop_->counters().overruns.load(), 0u);
+
+  // scheduled ten periods ago: the work ended more than a period late
+  const std::int64_t late = shared::monotonicNs() - 10 * settings_.period_ns;
+  P::recordStats(*loop_, late, late, out, {0.0, 0.0, 0.0});
+  ASSERT_EQ(stats.poll(recs.data(), recs.size()), 1u);
+  EXPECT_NE(recs[0].flags & shared::kStatsOverrun, 0u);
+  EXPECT_EQ(loop_->counters().overruns.load(), 1u);
+}
+
+}  // namespace
+}  // namespace tactus::haptic
