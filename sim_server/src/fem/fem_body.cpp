@@ -1,3 +1,5 @@
+// FemBody: setup (element data, lumped mass, rotation groups), the free-motion and static steps
+// and the public API; the linear solves are in fem_solve.cpp, the element loop in fem_assembly.cpp.
 #include <Eigen/Geometry>
 #include <Eigen/LU>
 #include <algorithm>
@@ -195,140 +197,6 @@ void FemBody::Impl::averageRotations(const std::vector<Eigen::Matrix3d>& element
                                         : Eigen::Matrix3d::Identity();
 }
 
-void FemBody::Impl::ensureRestFactor(double h) {
-  if (rest_h == h && chol_rest.factorized()) return;
-  const double alpha = material.damping ? material.damping->mass_alpha_per_s : 0.0;
-  const double beta = material.damping ? material.damping->stiffness_beta_s : 0.0;
-  evaluate(rest, nullptr, 0.0, 0.0, nullptr, &a_rest, h + beta, 1.0 / h + alpha, true);
-  if (!chol_rest.analyzed()) chol_rest.analyze(a_rest);
-  ++counters.factorisations;
-  if (!chol_rest.factorize(a_rest))
-    throw NumericalError("FemBody(" + mesh.source +
-                         "): rest-shape system matrix is not positive definite; check the "
-                         "material parameters and the time step");
-  rest_h = h;
-}
-
-void FemBody::Impl::ensureCurrentFactor() {
-  if (chol_current) return;
-  if (compliance_scale == 0.0)
-    throw Error("FemBody::solveCompliance: no system matrix yet; call freeMotion() first");
-  if (!chol.analyzed()) chol.analyze(a);
-  ++counters.factorisations;
-  if (!chol.factorize(a))
-    throw NumericalError("FemBody(" + mesh.source +
-                         "): current system matrix is not positive definite");
-  chol_current = true;
-  if (a_is_step_matrix) {
-    reuse.noteFactorised();
-    keepFactorRotations();
-  }
-}
-
-void FemBody::Impl::keepFactorRotations() {
-  // node_rot holds this step's node rotations when kCholmodReuse computed them
-  if (options.linear != LinearSolverKind::kCholmodReuse || !corotational) return;
-  for (int i = 0; i < n; ++i)
-    if (dof_base[i] >= 0) factor_node_rot[dof_base[i] / 3] = node_rot[i];
-}
-
-bool FemBody::Impl::factorizeAndSolve(FemStepStats& stats) {
-  const std::int64_t t1 = shared::monotonicNs();
-  ++counters.factorisations;
-  const bool ok = chol.factorize(a);
-  stats.factorisation_s = shared::secondsSinceNs(t1);
-  chol_current = ok;
-  if (!ok) return false;
-  const std::int64_t t2 = shared::monotonicNs();
-  chol.solve(rhs.data(), dv.data(), 1);
-  stats.solve_s = shared::secondsSinceNs(t2);
-  return true;
-}
-
-bool FemBody::Impl::solveStep(double h, FemStepStats& stats) {
-  switch (options.linear) {
-    case LinearSolverKind::kCholmod:
-      return factorizeAndSolve(stats) && dv.allFinite();
-    case LinearSolverKind::kCholmodReuse: {
-      dv = 2.0 * dv_prev - dv_prev2;  // warm start
-      const std::int64_t t_warp = shared::monotonicNs();
-      if (corotational) {
-        averageRotations(rotation, node_acc, node_rot);
-        relative_rot.resize(n_free / 3);
-        if (factor_node_rot.size() != relative_rot.size())
-          factor_node_rot.assign(relative_rot.size(), Eigen::Matrix3d::Identity());
-        for (int i = 0; i < n; ++i)
-          if (dof_base[i] >= 0)
-            relative_rot[dof_base[i] / 3] = node_rot[i] * factor_node_rot[dof_base[i] / 3].transpose();
-      }
-      const double warp_s = shared::secondsSinceNs(t_warp);
-      const fem_detail::ReuseSolveResult r =
-          reuse.solve(chol, a, rhs, dv, corotational ? relative_rot.data() : nullptr);
-      if (r.refreshed) keepFactorRotations();
-      stats.factorisation_s = r.factorisation_s;
-      stats.solve_s = warp_s + r.solve_s;
-      stats.cg_iterations = r.cg_iterations;
-      stats.cg_residual = r.residual;
-      stats.factor_refreshed = r.refreshed;
-      if (r.refreshed) ++counters.factorisations;
-      chol_current = r.refreshed;
-      return r.ok;
-    }
-    case LinearSolverKind::kPcg: {
-      const std::int64_t t1 = shared::monotonicNs();
-      if (options.pcg_preconditioner != PcgPreconditioner::kJacobi) ensureRestFactor(h);
-      stats.factorisation_s = shared::secondsSinceNs(t1);
-      const std::int64_t t2 = shared::monotonicNs();
-      const bool ok = pcg(options.cg_tolerance, options.cg_max_iterations, stats);
-      stats.solve_s = shared::secondsSinceNs(t2);
-      if (!ok && !dv.allFinite()) return false;
-      stats.ok = ok;
-      return dv.allFinite();
-    }
-  }
-  return false;
-}
-
-bool FemBody::Impl::pcg(double tol, int max_iter, FemStepStats& stats) {
-  const bool warped = options.pcg_preconditioner == PcgPreconditioner::kWarpedCholesky;
-  const bool use_rest =
-      options.pcg_preconditioner == PcgPreconditioner::kRestCholesky || warped;
-  if (warped && corotational) {
-    // per-node rotations from this step's element rotations (volume-weighted, re-orthonormalised)
-    averageRotations(rotation, node_acc, node_rot);
-  }
-  const bool rotate = warped && corotational;
-  if (!use_rest) {
-    jacobi_inv.resize(n_free);
-    const double* vals = a.valuePtr();
-    for (int d = 0; d < n_free; ++d) jacobi_inv[d] = 1.0 / vals[diag_offset[d]];
-  }
-  auto precond = [&](const Eigen::VectorXd& r, Eigen::VectorXd& z) {
-    if (use_rest) {
-      z.resize(n_free);
-      if (rotate) {
-        // z = R A0^-1 R^T r
-        cg_t.resize(n_free);
-        for (int i = 0; i < n; ++i)
-          if (dof_base[i] >= 0)
-            cg_t.segment<3>(dof_base[i]) = node_rot[i].transpose() * r.segment<3>(dof_base[i]);
-        chol_rest.solve(cg_t.data(), cg_t.data(), 1);
-        for (int i = 0; i < n; ++i)
-          if (dof_base[i] >= 0) z.segment<3>(dof_base[i]) = node_rot[i] * cg_t.segment<3>(dof_base[i]);
-      } else {
-        chol_rest.solve(r.data(), z.data(), 1);
-      }
-    } else {
-      z = jacobi_inv.cwiseProduct(r);
-    }
-  };
-  dv = dv_prev;  // warm start
-  const fem_detail::CgResult r = fem_detail::conjugateGradient(a, rhs, dv, tol, max_iter, cg, precond);
-  stats.cg_iterations = r.iterations;
-  stats.cg_residual = r.residual;
-  return r.converged;
-}
-
 // ---- FemBody ----
 
 FemBody::FemBody(const TetMesh& mesh, const FemMaterial& material,
@@ -493,52 +361,6 @@ void FemBody::solveRestComplianceBatch(double h, const Eigen::MatrixXd& r, Eigen
   m.chol_rest.solve(rr.data(), rr.data(), k);
   x.resize(3 * m.n, k);
   for (int c = 0; c < k; ++c) m.expand(rr.col(c).data(), h, x.col(c).data());
-}
-
-// ---- free functions ----
-
-FemMaterial femMaterial(const TissueSpec& tissue) {
-  FemMaterial m;
-  m.law = tissue.law;
-  m.young_pa = tissue.young_pa;
-  m.poisson = tissue.poisson;
-  m.density_kgpm3 = tissue.density_kgpm3;
-  m.damping = tissue.damping;
-  return m;
-}
-
-FemSolverOptions femSolverOptions(const SolverSpec& solver) {
-  FemSolverOptions o;
-  o.linear = solver.linear;
-  o.cg_tolerance = solver.cg_tolerance;
-  o.cg_max_iterations = solver.cg_max_iterations;
-  o.refactor_iterations = solver.refactor_iterations;
-  o.refactor_every_steps = solver.refactor_every_steps;
-  return o;
-}
-
-void transformMesh(TetMesh& mesh, double scale, const Eigen::Vector3d& rotation_deg,
-                   const Eigen::Vector3d& translation_m) {
-  const double k = M_PI / 180.0;
-  const Eigen::Matrix3d r =
-      (Eigen::AngleAxisd(rotation_deg.z() * k, Eigen::Vector3d::UnitZ()) *
-       Eigen::AngleAxisd(rotation_deg.y() * k, Eigen::Vector3d::UnitY()) *
-       Eigen::AngleAxisd(rotation_deg.x() * k, Eigen::Vector3d::UnitX()))
-          .toRotationMatrix();
-  mesh.nodes = ((r * (scale * mesh.nodes)).colwise() + translation_m).eval();
-}
-
-std::vector<int> nodesInBoxes(const TetMesh& mesh, const std::vector<BoxSpec>& boxes) {
-  std::vector<int> out;
-  for (int i = 0; i < mesh.nodeCount(); ++i) {
-    const Eigen::Vector3d p = mesh.nodes.col(i);
-    for (const auto& b : boxes)
-      if ((p.array() >= b.min_m.array()).all() && (p.array() <= b.max_m.array()).all()) {
-        out.push_back(i);
-        break;
-      }
-  }
-  return out;
 }
 
 }  // namespace tactus::sim

@@ -1,6 +1,7 @@
 #pragma once
-// FemBody's private state (fem_body.cpp: setup, steps and solves; fem_queries.cpp: queries of
-// the state; fem_assembly.cpp: the element loop and the system matrix pattern). Not installed.
+// FemBody's private state (fem_body.cpp: setup and steps; fem_solve.cpp: the linear solves;
+// fem_queries.cpp: queries of the state; fem_assembly.cpp: the element loop and the system
+// matrix pattern; fem_scene.cpp: a scene's tissue to the FEM's inputs). Not installed.
 
 #include <Eigen/Core>
 #include <Eigen/SparseCore>

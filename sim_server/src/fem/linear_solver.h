@@ -1,7 +1,7 @@
 #pragma once
 // Private linear solvers of the fem module (not installed): the CHOLMOD wrapper, a preconditioned
 // conjugate gradient over the lower triangle of a symmetric matrix, and the factor-reuse
-// strategy (LinearSolverKind::kCholmodReuse; fem.h, docs/design.md "Solvers").
+// strategy (LinearSolverKind::kCholmodReuse; fem.h, docs/design.md, "Free motion", Solvers).
 
 #include <cholmod.h>
 
