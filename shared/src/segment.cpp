@@ -1,3 +1,6 @@
+// The shared-memory segment: create, open (with the ownership and trust checks of
+// segment_ownership.cpp), the typed endpoints, heartbeats and the shutdown handshake; where each
+// part lies is in segment_layout.cpp.
 #include "tactus/shared/segment.h"
 
 #include <errno.h>
@@ -26,33 +29,6 @@ namespace bip = boost::interprocess;
 using namespace segment_detail;
 
 // ---------------------------------------------------------------------------------------------
-
-SegmentLayout SegmentLayout::forCapacity(SegmentCapacity capacity) noexcept {
-  SegmentLayout l;
-  l.snapshot = SnapshotLayout::forCapacity(capacity.max_rows, capacity.max_contacts);
-  std::size_t at = roundUpToCacheLine(sizeof(SegmentHeader));
-  l.snapshot_offset = at;
-  l.snapshot_bytes = tripleBufferBytes(l.snapshot.total_bytes);
-  at = roundUpToCacheLine(at + l.snapshot_bytes);
-  l.device_offset = at;
-  l.device_bytes = tripleBufferBytes(sizeof(DeviceSample));
-  at = roundUpToCacheLine(at + l.device_bytes);
-  l.stats_offset = at;
-  l.stats_bytes = seqRingBytes<StatsRecord>(kStatsRingCapacity);
-  at = roundUpToCacheLine(at + l.stats_bytes);
-  const DisplayCapacity dc = capacity.display();
-  if (dc.enabled() && dc.max_contacts >= 0) {
-    l.display = DisplayLayout::forCapacity(dc);
-    l.display_offset = at;
-    l.display_bytes = tripleBufferBytes(l.display.frame_bytes);
-    at = roundUpToCacheLine(at + l.display_bytes);
-    l.topology_offset = at;
-    l.topology_bytes = l.display.topology_bytes;
-    at = roundUpToCacheLine(at + l.topology_bytes);
-  }
-  l.total_bytes = at;
-  return l;
-}
 
 struct Segment::Impl {
   std::string name;
