@@ -63,8 +63,7 @@ ReplayRig::ReplayRig(std::vector<shared::RecordedSnapshot> snapshots, const Repl
                        g_replay_counter++),
            capacityFor(snapshots_),
            std::make_unique<CircleDevice>(devicePoses(snapshots_), "jitter replay device"),
-           RigLoopOptions{options.rate_hz, options.core, options.priority, options.max_sweeps,
-                          options.solve_budget_fraction, watchdogMs(snapshots_)}) {
+           RigLoopOptions{options, watchdogMs(snapshots_)}) {
   pass_ns_ = snapshots_.back().t_ns - snapshots_.front().t_ns + firstStepNs(snapshots_);
   publish(0);
 }

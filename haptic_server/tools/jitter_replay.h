@@ -22,13 +22,8 @@
 
 namespace tactus::haptic::jitter {
 
-struct ReplayOptions {
+struct ReplayOptions : LoopRunOptions {
   bool loop = false;                   ///< start over after the last snapshot
-  double rate_hz = 1000.0;             ///< haptic loop rate
-  int core = -1;                       ///< -1: the last CPU
-  int priority = 80;                   ///< SCHED_FIFO priority (0: none)
-  int max_sweeps = 50;                 ///< NSGS sweeps per tick
-  double solve_budget_fraction = 0.4;  ///< NSGS time budget as a fraction of the period
 };
 
 /// The replay set-up: private segment sized for the largest recorded problem, publisher thread

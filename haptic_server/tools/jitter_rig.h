@@ -49,13 +49,17 @@ class CircleDevice : public device::Device {
   std::atomic<std::uint64_t> writes_{0};
 };
 
-/// The loop's settings in an in-process mode.
-struct RigLoopOptions {
+/// How an in-process mode runs the haptic loop (the synthetic and replay modes' options).
+struct LoopRunOptions {
   double rate_hz = 1000.0;             ///< haptic loop rate
   int core = -1;                       ///< -1: the last CPU
   int priority = 80;                   ///< SCHED_FIFO priority (0: none)
   int max_sweeps = 50;                 ///< NSGS sweeps per tick
   double solve_budget_fraction = 0.4;  ///< NSGS time budget as a fraction of the period
+};
+
+/// The loop's settings in an in-process mode.
+struct RigLoopOptions : LoopRunOptions {
   double watchdog_ms = 50.0;           ///< snapshot age at which the force fades
 };
 

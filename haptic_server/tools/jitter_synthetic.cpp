@@ -198,9 +198,7 @@ SyntheticRig::SyntheticRig(const SyntheticOptions& options)
            shared::SegmentCapacity{problem_.rows, problem_.contacts},
            std::make_unique<CircleDevice>(std::vector<shared::PoseSample>{problem_.device_pose},
                                           "jitter scripted device"),
-           RigLoopOptions{options.rate_hz, options.core, options.priority, options.max_sweeps,
-                          options.solve_budget_fraction,
-                          std::max(50.0, 3e3 / options.sim_rate_hz)}) {
+           RigLoopOptions{options, std::max(50.0, 3e3 / options.sim_rate_hz)}) {
   publish(0.0);
 }
 

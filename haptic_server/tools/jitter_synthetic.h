@@ -67,15 +67,10 @@ SyntheticProblem makeSyntheticProblem(const SyntheticProblemOptions& options);
 void writeSnapshot(const SyntheticProblem& problem, shared::SnapshotWriter slot, std::uint64_t seq,
                    double t_s, double drift_m);
 
-struct SyntheticOptions {
+struct SyntheticOptions : LoopRunOptions {
   SyntheticProblemOptions problem;
   double sim_rate_hz = 100.0;          ///< snapshot publication rate
   double drift_m = 2e-5;               ///< amplitude of the gap drift between publications
-  double rate_hz = 1000.0;             ///< haptic loop rate
-  int core = -1;                       ///< -1: the last CPU
-  int priority = 80;                   ///< SCHED_FIFO priority (0: none)
-  int max_sweeps = 50;                 ///< NSGS sweeps per tick
-  double solve_budget_fraction = 0.4;  ///< NSGS time budget as a fraction of the period
 };
 
 /// The synthetic set-up: private segment, snapshot publisher thread, haptic loop thread

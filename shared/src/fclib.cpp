@@ -86,15 +86,8 @@ std::string stemOf(const std::filesystem::path& path) {
 }  // namespace
 
 ContactProblemView FclibProblem::view() const {
-  ContactProblemView v;
-  v.contacts = contacts;
-  v.rows = rows();
-  v.row_offset = row_offset.data();
-  v.W = W.data();
-  v.ld = rows();
-  v.delta_free = q.data();
-  v.mu = mu.data();
-  return v;
+  return denseProblemView(contacts, rows(), row_offset.data(), W.data(), rows(), q.data(),
+                          mu.data());
 }
 
 FclibProblem assembleFclibProblem(const std::string& source, std::string name,

@@ -15,6 +15,7 @@
 #include "tactus/shared/error.h"
 #include "tactus/shared/fclib.h"
 #include "tactus/shared/nsgs.h"
+#include "tactus/shared/tool_main.h"
 #ifdef TACTUS_HAVE_HDF5
 #include "fclib_hdf5.h"
 #endif
@@ -106,11 +107,4 @@ int run(int argc, char** argv) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
-  try {
-    return run(argc, argv);
-  } catch (const std::exception& e) {
-    spdlog::error("{}", e.what());
-    return 1;
-  }
-}
+int main(int argc, char** argv) { return tactus::shared::runToolMain(run, argc, argv); }

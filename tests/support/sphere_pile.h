@@ -3,7 +3,7 @@
 //
 // spherePile: rigid multi-body problems, W = H M^-1 H^T. A contact couples only with the contacts
 // of its two bodies, so W is block-sparse: 3 x 3 per layer (cols = 3) gives the small slowly
-// converging piles of nsgs_test; cols = 6 and 40-100 spheres give 240-600 contacts at 4-10 %
+// converging piles of nsgs_stagnation_test; cols = 6 and 40-100 spheres give 240-600 contacts at 4-10 %
 // non-zero blocks, the size and sparsity of FCLIB's larger multi-body problems.
 
 #include <Eigen/Dense>
@@ -23,15 +23,8 @@ struct DenseProblem {
   int rows() const { return row_offset.back(); }
   int contacts() const { return static_cast<int>(row_offset.size()) - 1; }
   shared::ContactProblemView view() const {
-    shared::ContactProblemView v;
-    v.contacts = contacts();
-    v.rows = rows();
-    v.row_offset = row_offset.data();
-    v.W = W.data();
-    v.ld = rows();
-    v.delta_free = q.data();
-    v.mu = mu.data();
-    return v;
+    return shared::denseProblemView(contacts(), rows(), row_offset.data(), W.data(), rows(),
+                                    q.data(), mu.data());
   }
 };
 

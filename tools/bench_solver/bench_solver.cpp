@@ -23,6 +23,7 @@
 #include "tactus/shared/fclib.h"
 #include "tactus/shared/nsgs.h"
 #include "tactus/shared/snapshot_file.h"
+#include "tactus/shared/tool_main.h"
 #ifdef TACTUS_HAVE_HDF5
 #include "fclib_hdf5.h"
 #include "sphere_pile.h"
@@ -484,11 +485,4 @@ int run(int argc, char** argv) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
-  try {
-    return run(argc, argv);
-  } catch (const std::exception& e) {
-    spdlog::error("{}", e.what());
-    return 1;
-  }
-}
+int main(int argc, char** argv) { return tactus::shared::runToolMain(run, argc, argv); }

@@ -20,6 +20,18 @@ void appendDouble(std::string* out, double v) {
   out->append(buf, ptr);
 }
 
+// One cell scalar per line, as an ascii Float64 DataArray named `name`.
+void appendScalarArray(std::string* out, const char* name, const Eigen::VectorXd& values) {
+  *out += "<DataArray type=\"Float64\" Name=\"";
+  *out += name;
+  *out += "\" format=\"ascii\">\n";
+  for (Eigen::Index c = 0; c < values.size(); ++c) {
+    appendDouble(out, values(c));
+    *out += '\n';
+  }
+  *out += "</DataArray>\n";
+}
+
 // The series' own files: replaced on a re-run into the same folder, always through a checked,
 // fsync'ed temporary file (a full disk is an error, never a silently truncated file).
 void writeFile(const std::filesystem::path& path, const std::string& text) {
@@ -106,22 +118,11 @@ void writeVtu(const std::filesystem::path& path, const TetMesh& mesh,
   const bool with_ratio = volume_ratio.size() == m && m > 0;
   if (with_vm || with_ratio) {
     s += with_vm ? "<CellData Scalars=\"von_mises\">\n" : "<CellData Scalars=\"volume_ratio\">\n";
-    if (with_vm) {
-      s += "<DataArray type=\"Float64\" Name=\"von_mises\" format=\"ascii\">\n";
-      for (Eigen::Index c = 0; c < m; ++c) {
-        appendDouble(&s, von_mises(c));
-        s += '\n';
-      }
-      s += "</DataArray>\n";
-    }
+    if (with_vm) appendScalarArray(&s, "von_mises", von_mises);
     if (with_ratio) {
       // det F: current / rest signed volume; inverted: 1 where det F <= 0
-      s += "<DataArray type=\"Float64\" Name=\"volume_ratio\" format=\"ascii\">\n";
-      for (Eigen::Index c = 0; c < m; ++c) {
-        appendDouble(&s, volume_ratio(c));
-        s += '\n';
-      }
-      s += "</DataArray>\n<DataArray type=\"UInt8\" Name=\"inverted\" format=\"ascii\">\n";
+      appendScalarArray(&s, "volume_ratio", volume_ratio);
+      s += "<DataArray type=\"UInt8\" Name=\"inverted\" format=\"ascii\">\n";
       for (Eigen::Index c = 0; c < m; ++c) s += volume_ratio(c) > 0.0 ? "0\n" : "1\n";
       s += "</DataArray>\n";
     }

@@ -136,15 +136,9 @@ class SnapshotView {
   /// The contact problem delta = W f + delta_free, pointing into the slot. Pass another
   /// delta_free (e.g. moved with the device) to solve the same problem from a local copy.
   ContactProblemView problem(const double* delta_free_override = nullptr) const noexcept {
-    ContactProblemView p;
-    p.contacts = contacts();
-    p.rows = rows();
-    p.row_offset = rowOffset();
-    p.W = W();
-    p.ld = ld();
-    p.delta_free = delta_free_override != nullptr ? delta_free_override : deltaFree();
-    p.mu = mu();
-    return p;
+    return denseProblemView(contacts(), rows(), rowOffset(), W(), ld(),
+                            delta_free_override != nullptr ? delta_free_override : deltaFree(),
+                            mu());
   }
 
  private:

@@ -52,6 +52,22 @@ struct ContactProblemView {
   const DelassusBlocks* blocks = nullptr;
 };
 
+/// The view of a problem stored densely (W row-major with leading dimension ld), for the types
+/// that own one (FclibProblem, the snapshot slots, test problems).
+inline ContactProblemView denseProblemView(int contacts, int rows, const int* row_offset,
+                                           const double* W, int ld, const double* delta_free,
+                                           const double* mu) noexcept {
+  ContactProblemView v;
+  v.contacts = contacts;
+  v.rows = rows;
+  v.row_offset = row_offset;
+  v.W = W;
+  v.ld = ld;
+  v.delta_free = delta_free;
+  v.mu = mu;
+  return v;
+}
+
 /// How the solver keeps the coupling between contacts (all give the same iterates up to
 /// rounding, when W is symmetric for kSymmetricRowUpdate).
 /// - kColumnUpdate (default, any W): keeps delta = W f + q current by adding W(:, rows_i) df_i
