@@ -1,6 +1,6 @@
 #pragma once
 // The problem set the NSGS relaxation rule is measured and tested on (tests/bench/
-// nsgs_rule_bench.cpp prints the table, nsgs_test asserts the criterion): the FCLIB problems, the
+// nsgs_rule_bench.cpp prints the table, nsgs_stagnation_test asserts the criterion): the FCLIB problems, the
 // cycling mu = 2 drag problem, and generated sphere piles, capsule piles and redundant tissue
 // patches.
 
@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "contact_generators.h"
+#include "fclib_set.h"
 #include "sphere_pile.h"
 #include "tactus/shared/fclib.h"
 
@@ -34,16 +35,10 @@ inline DenseProblem fromFclib(const shared::FclibProblem& f) {
 /// `data_dir` is tests/data.
 inline std::vector<NamedProblem> nsgsRuleSet(const std::filesystem::path& data_dir) {
   std::vector<NamedProblem> set;
-  std::vector<std::filesystem::path> files;
-  for (const auto& e : std::filesystem::directory_iterator(data_dir / "fclib" / "problems")) {
-    files.push_back(e.path());
-  }
-  std::sort(files.begin(), files.end());
+  std::vector<std::filesystem::path> files = fclibProblemFiles(data_dir);
   files.push_back(data_dir / "nsgs" / "drag_mu2_cycle.fc3d.txt");
   for (const auto& path : files) {
-    std::string n = path.filename().string();
-    n = n.substr(0, n.size() - std::string(".fc3d.txt").size());
-    set.push_back({n, fromFclib(shared::readFclibText(path))});
+    set.push_back({fclibStem(path), fromFclib(shared::readFclibText(path))});
   }
   for (unsigned seed = 1; seed <= 5; ++seed) {
     set.push_back({"spheres20_mu2_s" + std::to_string(seed), spherePile(20, seed, 2.0)});

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "../../support/alloc_counter.h"
+#include "../../support/haptic_segment_test.h"
 #include "../../support/scripted_device.h"
 #include "tactus/haptic/haptic_loop.h"
 #include "tactus/haptic/supervisor.h"
@@ -21,55 +22,8 @@ namespace {
 
 using test::ScriptedDevice;
 
-// One frictionless contact below the tool along +z: W = w, delta_free = gap + J dx with
-// J = [0 0 1 0 0 0] (moving the device up opens the gap).
-class HapticLoopTest : public ::testing::Test {
+class HapticLoopTest : public test::HapticSegmentTest {
  protected:
-  void SetUp() override {
-    name_ = "tactus_haptic_test_" + std::to_string(::getpid());
-    shared::Segment::remove(name_);
-    sim_.emplace(shared::Segment::create(name_, shared::SegmentCapacity::forContacts(50, true)));
-    publisher_ = sim_->snapshotPublisher();
-    settings_.max_force_n = 5.0;
-    settings_.slew_n_per_s = 1e6;
-    settings_.fade_ms = 10.0;
-    loop_.emplace(device_, settings_);
-    link_ = std::make_unique<AttachedSegment>(shared::Segment::open(name_));
-    loop_->offerLink(link_.get());
-  }
-  void TearDown() override {
-    loop_->offerLink(nullptr);
-    tickFor(1);
-    link_.reset();
-    sim_.reset();
-    shared::Segment::remove(name_);
-  }
-
-  // Publishes the one-contact problem with gap_m at device height z_star.
-  void publish(double gap_m, double w_m_per_n, double z_star, std::int64_t t_ns = 0) {
-    auto slot = publisher_.slot();
-    auto& h = slot.header();
-    ASSERT_TRUE(slot.setSize(1, 1));
-    h.seq = ++seq_;
-    h.t_ns = t_ns != 0 ? t_ns : t_;
-    h.flags = shared::kSnapshotValid | shared::kSnapshotHasJacobian;
-    h.device_pose.pos_m = {0.0, 0.0, z_star};
-    h.tool_pose.pos_m = {0.0, 0.0, z_star};
-    slot.rowOffset()[0] = 0;
-    slot.rowOffset()[1] = 1;
-    slot.contactId()[0] = 7;
-    slot.mu()[0] = 0.0;
-    slot.W()[0] = w_m_per_n;
-    slot.deltaFree()[0] = gap_m;
-    slot.f()[0] = std::max(0.0, -gap_m / w_m_per_n);
-    for (int k = 0; k < 6; ++k) slot.J()[k] = k == 2 ? 1.0 : 0.0;
-    for (int k = 0; k < 3; ++k) {
-      slot.contactPoint()[k] = 0.0;
-      slot.contactNormal()[k] = k == 2 ? 1.0 : 0.0;
-    }
-    publisher_.publish();
-  }
-
   // Publishes a general frictionless-or-frictional problem (normals per contact, tangents x/y),
   // with zero J (the device does not move delta_free) and the given flags.
   void publishProblem(const std::vector<int>& row_offset, const std::vector<double>& W,
@@ -113,15 +67,6 @@ class HapticLoopTest : public ::testing::Test {
     }
     return out;
   }
-  std::string name_;
-  std::optional<shared::Segment> sim_;
-  shared::SnapshotPublisher publisher_;
-  ScriptedDevice device_;
-  HapticSettings settings_;
-  std::optional<HapticLoop> loop_;
-  std::unique_ptr<AttachedSegment> link_;
-  std::uint64_t seq_ = 0;
-  std::int64_t t_ = shared::monotonicNs();
 };
 
 TEST_F(HapticLoopTest, ForceRisesWithPenetrationThroughTheLocalModel) {

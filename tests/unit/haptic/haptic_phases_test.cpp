@@ -3,16 +3,13 @@
 // model), the safety chain, write the device, record the stats. Each is checked on its own
 // against a real shared segment; haptic_loop_test.cpp checks them together through tick().
 #include <gtest/gtest.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <array>
 #include <cmath>
-#include <memory>
-#include <optional>
-#include <string>
 #include <vector>
 
+#include "../../support/haptic_segment_test.h"
 #include "../../support/scripted_device.h"
 #include "tactus/haptic/haptic_loop.h"
 #include "tactus/shared/clock.h"
@@ -63,71 +60,16 @@ class RefusingDevice : public ScriptedDevice {
   }
 };
 
-class HapticPhasesTest : public ::testing::Test {
+class HapticPhasesTest : public test::HapticSegmentTest {
  protected:
-  void SetUp() override {
-    name_ = "tactus_phases_test_" + std::to_string(::getpid());
-    shared::Segment::remove(name_);
-    sim_.emplace(shared::Segment::create(name_, shared::SegmentCapacity::forContacts(50, true)));
-    publisher_ = sim_->snapshotPublisher();
-    settings_.max_force_n = 5.0;
-    settings_.slew_n_per_s = 1e6;
-    settings_.fade_ms = 10.0;
-    loop_.emplace(device_, settings_);
-    link_ = std::make_unique<AttachedSegment>(shared::Segment::open(name_));
-    loop_->offerLink(link_.get());
-  }
-  void TearDown() override {
-    loop_->offerLink(nullptr);
-    P::adoptOfferedLink(*loop_);
-    link_.reset();
-    sim_.reset();
-    shared::Segment::remove(name_);
-  }
-
-  // One frictionless contact along +z: W = w, delta_free = gap + J dx, J = [0 0 1 0 0 0].
-  void publish(double gap_m, double w_m_per_n, std::int64_t t_ns) {
-    auto slot = publisher_.slot();
-    auto& h = slot.header();
-    ASSERT_TRUE(slot.setSize(1, 1));
-    h.seq = ++seq_;
-    h.t_ns = t_ns;
-    h.flags = shared::kSnapshotValid | shared::kSnapshotHasJacobian;
-    h.device_pose.pos_m = {0.0, 0.0, 0.0};
-    h.tool_pose.pos_m = {0.0, 0.0, 0.0};
-    slot.rowOffset()[0] = 0;
-    slot.rowOffset()[1] = 1;
-    slot.contactId()[0] = 7;
-    slot.mu()[0] = 0.0;
-    slot.W()[0] = w_m_per_n;
-    slot.deltaFree()[0] = gap_m;
-    slot.f()[0] = 0.0;
-    for (int k = 0; k < 6; ++k) slot.J()[k] = k == 2 ? 1.0 : 0.0;
-    for (int k = 0; k < 3; ++k) {
-      slot.contactPoint()[k] = 0.0;
-      slot.contactNormal()[k] = k == 2 ? 1.0 : 0.0;
-    }
-    publisher_.publish();
-  }
-
   // Adopts the link and reads one valid device sample at the origin (the loop has a pose).
   void readValidPose() {
     P::adoptOfferedLink(*loop_);
     device_.state.pos_m = {0.0, 0.0, 0.0};
-    device_.state.t_ns = now_;
+    device_.state.t_ns = t_;
     TickOutput out;
-    ASSERT_EQ(P::readDevice(*loop_, now_, out), device::IoStatus::kOk);
+    ASSERT_EQ(P::readDevice(*loop_, t_, out), device::IoStatus::kOk);
   }
-
-  std::string name_;
-  std::optional<shared::Segment> sim_;
-  shared::SnapshotPublisher publisher_;
-  ScriptedDevice device_;
-  HapticSettings settings_;
-  std::optional<HapticLoop> loop_;
-  std::unique_ptr<AttachedSegment> link_;
-  std::uint64_t seq_ = 0;
-  std::int64_t now_ = shared::monotonicNs();
 };
 
 TEST_F(HapticPhasesTest, AdoptTakesTheOfferedLinkAndANullOfferDetaches) {
@@ -143,29 +85,29 @@ TEST_F(HapticPhasesTest, AdoptTakesTheOfferedLinkAndANullOfferDetaches) {
 TEST_F(HapticPhasesTest, ReadDeviceSortsFreshStaleNonFiniteAndMissingSamples) {
   TickOutput out;
   device_.state.pos_m = {0.01, 0.02, 0.03};
-  device_.state.t_ns = now_;
-  EXPECT_EQ(P::readDevice(*loop_, now_, out), device::IoStatus::kOk);
+  device_.state.t_ns = t_;
+  EXPECT_EQ(P::readDevice(*loop_, t_, out), device::IoStatus::kOk);
   EXPECT_EQ(out.flags, 0u);
 
   // a sample stamped a second ago while the watchdog is 50 ms: the device stopped updating
   out = {};
-  device_.state.t_ns = now_ - 1'000'000'000;
-  EXPECT_EQ(P::readDevice(*loop_, now_, out), device::IoStatus::kFault);
+  device_.state.t_ns = t_ - 1'000'000'000;
+  EXPECT_EQ(P::readDevice(*loop_, t_, out), device::IoStatus::kFault);
   EXPECT_NE(out.flags & shared::kStatsDeviceFault, 0u);
   EXPECT_EQ(loop_->counters().stale_device_samples.load(), 1u);
   EXPECT_EQ(loop_->counters().device_faults.load(), 1u);
 
   // a fresh sample with a NaN coordinate is read but not trusted
   out = {};
-  device_.state.t_ns = now_;
+  device_.state.t_ns = t_;
   device_.state.pos_m = {std::nan(""), 0.0, 0.0};
-  EXPECT_EQ(P::readDevice(*loop_, now_, out), device::IoStatus::kOk);
+  EXPECT_EQ(P::readDevice(*loop_, t_, out), device::IoStatus::kOk);
   EXPECT_NE(out.flags & shared::kStatsDeviceFault, 0u);
   EXPECT_EQ(loop_->counters().non_finite_input.load(), 1u);
 
   out = {};
   device_.no_data = true;
-  EXPECT_EQ(P::readDevice(*loop_, now_, out), device::IoStatus::kNoData);
+  EXPECT_EQ(P::readDevice(*loop_, t_, out), device::IoStatus::kNoData);
   EXPECT_NE(out.flags & shared::kStatsDeviceNoData, 0u);
   EXPECT_EQ(loop_->counters().device_no_data.load(), 1u);
 }
@@ -175,13 +117,13 @@ TEST_F(HapticPhasesTest, PublishSampleGivesTheSimulationThePoseHeldAndTheDeviceS
   P::adoptOfferedLink(*loop_);
   TickOutput out;
   device_.state.pos_m = {0.01, 0.02, 0.03};
-  device_.state.t_ns = now_;
+  device_.state.t_ns = t_;
   device_.state.gripper_rad = 0.25;
-  device::IoStatus io = P::readDevice(*loop_, now_, out);
-  P::publishSample(*loop_, now_, io);
+  device::IoStatus io = P::readDevice(*loop_, t_, out);
+  P::publishSample(*loop_, t_, io);
   shared::DeviceSample s = samples.latest();
   EXPECT_EQ(s.seq, 1u);
-  EXPECT_EQ(s.t_ns, now_);
+  EXPECT_EQ(s.t_ns, t_);
   EXPECT_DOUBLE_EQ(s.pos_m[0], 0.01);
   EXPECT_DOUBLE_EQ(s.pos_m[2], 0.03);
   EXPECT_DOUBLE_EQ(s.gripper_rad, 0.25);
@@ -190,8 +132,8 @@ TEST_F(HapticPhasesTest, PublishSampleGivesTheSimulationThePoseHeldAndTheDeviceS
 
   // a non-finite sample: the last good pose is held and the fault is flagged
   device_.state.pos_m = {std::nan(""), 1.0, 1.0};
-  io = P::readDevice(*loop_, now_ + 1'000'000, out);
-  P::publishSample(*loop_, now_ + 1'000'000, io);
+  io = P::readDevice(*loop_, t_ + 1'000'000, out);
+  P::publishSample(*loop_, t_ + 1'000'000, io);
   s = samples.latest();
   EXPECT_EQ(s.seq, 2u);
   EXPECT_DOUBLE_EQ(s.pos_m[0], 0.01);
@@ -202,21 +144,21 @@ TEST_F(HapticPhasesTest, PublishSampleGivesTheSimulationThePoseHeldAndTheDeviceS
 TEST_F(HapticPhasesTest, TakeSnapshotFlagsAMissingOrOldSnapshotAndSolvesAFreshOne) {
   readValidPose();
   TickOutput out;
-  P::takeSnapshot(*loop_, now_, out);
+  P::takeSnapshot(*loop_, t_, out);
   EXPECT_TRUE(out.stale);
   EXPECT_NE(out.flags & shared::kStatsNoSnapshot, 0u);
 
-  publish(-0.002, 1e-3, now_ - 1'000'000'000);   // a second old: beyond the 50 ms watchdog
+  publish(-0.002, 1e-3, 0.0, t_ - 1'000'000'000);   // a second old: beyond the 50 ms watchdog
   out = {};
-  P::takeSnapshot(*loop_, now_, out);
+  P::takeSnapshot(*loop_, t_, out);
   EXPECT_TRUE(out.stale);
   EXPECT_NE(out.flags & shared::kStatsSnapshotStale, 0u);
   EXPECT_EQ(out.snapshot_seq, 1u) << "an old snapshot is adopted (warm start), not solved";
   EXPECT_EQ(out.contacts, 0);
 
-  publish(-0.002, 1e-3, now_);                    // 2 mm penetration, W = 1 mm/N: 2 N
+  publish(-0.002, 1e-3, 0.0, t_);                    // 2 mm penetration, W = 1 mm/N: 2 N
   out = {};
-  P::takeSnapshot(*loop_, now_, out);
+  P::takeSnapshot(*loop_, t_, out);
   EXPECT_FALSE(out.stale);
   EXPECT_EQ(out.snapshot_seq, 2u);
   EXPECT_EQ(out.contacts, 1);
@@ -225,7 +167,7 @@ TEST_F(HapticPhasesTest, TakeSnapshotFlagsAMissingOrOldSnapshotAndSolvesAFreshOn
 }
 
 TEST_F(HapticPhasesTest, LocalModelMovesDeltaFreeWithTheDevice) {
-  publish(-0.002, 1e-3, now_);
+  publish(-0.002, 1e-3, 0.0, t_);
   bool fresh = false;
   const shared::SnapshotView snap = link_->snapshots.latest(&fresh);
   ASSERT_EQ(snap.header().seq, 1u);
