@@ -1,6 +1,6 @@
 #pragma once
 // Private to segment.cpp and segment_ownership.cpp: who owns a segment object and whether it can
-// be trusted (docs/design.md, "The segment": ownership lock, owner and mode checks, stale or live
+// be trusted (docs/design.md section 3, "Ownership and trust": ownership lock, owner and mode checks, stale or live
 // creators).
 
 #include <sys/types.h>
