@@ -133,14 +133,8 @@ SyntheticProblem makeSyntheticProblem(const SyntheticProblemOptions& o) {
   p.tool_pose = p.device_pose;
 
   // the simulation's solution: cold NSGS to 1e-8
-  shared::ContactProblemView view;
-  view.contacts = nc;
-  view.rows = m;
-  view.row_offset = p.row_offset.data();
-  view.W = p.W.data();
-  view.ld = m;
-  view.delta_free = p.delta_free.data();
-  view.mu = p.mu.data();
+  const shared::ContactProblemView view = shared::denseProblemView(
+      nc, m, p.row_offset.data(), p.W.data(), m, p.delta_free.data(), p.mu.data());
   shared::NsgsWorkspace ws(m, nc);
   shared::NsgsSettings ns;
   ns.tolerance = 1e-8;

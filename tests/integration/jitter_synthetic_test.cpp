@@ -44,14 +44,8 @@ TEST(JitterSyntheticProblem, SymmetricSolvedAndMixedGaps) {
     EXPECT_EQ(Eigen::LLT<Eigen::MatrixXd>(W).info(), Eigen::Success);
   }
   // f is a solution of the published problem (natural-map error at the solver's tolerance)
-  shared::ContactProblemView v;
-  v.contacts = p.contacts;
-  v.rows = m;
-  v.row_offset = p.row_offset.data();
-  v.W = p.W.data();
-  v.ld = m;
-  v.delta_free = p.delta_free.data();
-  v.mu = p.mu.data();
+  const shared::ContactProblemView v = shared::denseProblemView(
+      p.contacts, m, p.row_offset.data(), p.W.data(), m, p.delta_free.data(), p.mu.data());
   EXPECT_LE(shared::naturalMapError(v, p.f.data()), 1e-8);
   double fn_sum = 0.0;
   for (int c = 0; c < p.contacts; ++c) fn_sum += p.f[3 * c];

@@ -539,14 +539,8 @@ TEST(HapticLoopLarge, ASeveralBodiesTickSolvesOnTheBlocksWithoutAllocating) {
     for (int j = 0; j < m; ++j) W[static_cast<std::size_t>(i) * m + j] = bodiesCoupling(i, j);
     q[i] = i % 3 == 0 ? -2e-4 : 1e-5 * ((i % 5) - 2);
   }
-  shared::ContactProblemView v;
-  v.contacts = LargeProblemRig::kContacts;
-  v.rows = m;
-  v.row_offset = ro.data();
-  v.W = W.data();
-  v.ld = m;
-  v.delta_free = q.data();
-  v.mu = mu.data();
+  const shared::ContactProblemView v = shared::denseProblemView(
+      LargeProblemRig::kContacts, m, ro.data(), W.data(), m, q.data(), mu.data());
   shared::NsgsWorkspace ws(m, v.contacts);
   std::vector<double> f(m, 0.0);
   shared::NsgsSettings s;
