@@ -1,6 +1,6 @@
 // Collision between the tissue surface and the tool's features (collision.h): construction,
 // refit, detect (dispatch per feature shape, the contact cap) and the contact rows. The surface
-// upkeep and the narrow phases are in collision_{surface,primitives,vertex,sphere}.cpp.
+// upkeep and the narrow phases are in collision_{surface,vertex,sphere}.cpp.
 #include "tactus/sim/collision.h"
 
 #include <algorithm>

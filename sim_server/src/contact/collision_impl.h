@@ -1,13 +1,16 @@
 #pragma once
-// Private to collision: the helpers and Collision::Impl shared by the collision source files.
+// Private to collision: the geometric primitives (closest points on a triangle and a segment, the
+// grown-box slab test) and Collision::Impl, shared by the collision source files. The primitives
+// and the normals are inline: the narrow phases call them per candidate.
 //   collision.cpp             construction, refit, detect (the cap), contact records and rows
-//   collision_surface.cpp     broad phase upkeep: adjacency, boxes, normals on demand
-//   collision_primitives.cpp  closest points (triangle, segment) and the grown-box slab test
+//   collision_surface.cpp     broad phase upkeep: adjacency, node -> triangle lists, boxes
 //   collision_vertex.cpp      narrow phase: tissue vertices against capsules and pads
 //   collision_sphere.cpp      narrow phase: spheres against the surface triangles
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <vector>
 
@@ -32,15 +35,67 @@ struct ClosestPoint {
 
 // Closest point of p on triangle (a, b, c) by Voronoi regions (Ericson, Real-Time Collision
 // Detection 5.1.5); vertex/edge regions carry exact zero weights.
-ClosestPoint closestOnTriangle(const Eigen::Vector3d& p, const Eigen::Vector3d& a,
-                               const Eigen::Vector3d& b, const Eigen::Vector3d& c);
+inline ClosestPoint closestOnTriangle(const Eigen::Vector3d& p, const Eigen::Vector3d& a,
+                                      const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
+  const Eigen::Vector3d ab = b - a, ac = c - a, ap = p - a;
+  const double d1 = ab.dot(ap), d2 = ac.dot(ap);
+  if (d1 <= 0.0 && d2 <= 0.0) return {a, {1, 0, 0}, kVertex0};
+  const Eigen::Vector3d bp = p - b;
+  const double d3 = ab.dot(bp), d4 = ac.dot(bp);
+  if (d3 >= 0.0 && d4 <= d3) return {b, {0, 1, 0}, kVertex0 + 1};
+  const double vc = d1 * d4 - d3 * d2;
+  if (vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0) {
+    const double v = d1 / (d1 - d3);
+    return {a + v * ab, {1.0 - v, v, 0.0}, kEdge0};
+  }
+  const Eigen::Vector3d cp = p - c;
+  const double d5 = ab.dot(cp), d6 = ac.dot(cp);
+  if (d6 >= 0.0 && d5 <= d6) return {c, {0, 0, 1}, kVertex0 + 2};
+  const double vb = d5 * d2 - d1 * d6;
+  if (vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0) {
+    const double w = d2 / (d2 - d6);
+    return {a + w * ac, {1.0 - w, 0.0, w}, kEdge0 + 2};
+  }
+  const double va = d3 * d6 - d5 * d4;
+  if (va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0) {
+    const double w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+    return {b + w * (c - b), {0.0, 1.0 - w, w}, kEdge0 + 1};
+  }
+  const double sum = va + vb + vc;
+  if (!(sum > 0.0)) return {a, {1, 0, 0}, kVertex0};   // degenerate triangle
+  const double v = vb / sum, w = vc / sum;
+  return {a + v * ab + w * ac, {1.0 - v - w, v, w}, kFace};
+}
+
 // Parameter in [0, 1] of the closest point of p on segment a..b.
-double closestOnSegment(const Eigen::Vector3d& p, const Eigen::Vector3d& a,
-                        const Eigen::Vector3d& b);
+inline double closestOnSegment(const Eigen::Vector3d& p, const Eigen::Vector3d& a,
+                               const Eigen::Vector3d& b) {
+  const Eigen::Vector3d ab = b - a;
+  const double len2 = ab.squaredNorm();
+  if (len2 <= 0.0) return 0.0;
+  return std::clamp((p - a).dot(ab) / len2, 0.0, 1.0);
+}
+
 // Segment a..b against a box grown by `radius` on every side (slab test): conservative for the
 // capsule of that radius.
-bool segmentHitsGrownBox(const Eigen::Vector3d& a, const Eigen::Vector3d& b, double radius,
-                         const Box& box);
+inline bool segmentHitsGrownBox(const Eigen::Vector3d& a, const Eigen::Vector3d& b,
+                                double radius, const Box& box) {
+  double t0 = 0.0, t1 = 1.0;
+  const Eigen::Vector3d d = b - a;
+  for (int i = 0; i < 3; ++i) {
+    const double lo = box.min()[i] - radius, hi = box.max()[i] + radius;
+    if (std::abs(d[i]) < 1e-300) {
+      if (a[i] < lo || a[i] > hi) return false;
+      continue;
+    }
+    double ta = (lo - a[i]) / d[i], tb = (hi - a[i]) / d[i];
+    if (ta > tb) std::swap(ta, tb);
+    t0 = std::max(t0, ta);
+    t1 = std::min(t1, tb);
+    if (t0 > t1) return false;
+  }
+  return true;
+}
 
 }  // namespace tactus::sim::collision_detail
 
@@ -99,10 +154,51 @@ struct Collision::Impl {
   void buildVertexTriangles();
   // Boxes of the current positions; normals become stale (new epoch).
   void updateGeometry();
-  Eigen::Vector3d triNormal(int t);
+
+  // --- normals on demand (inline: the narrow phases call them per candidate) ---
+  Eigen::Vector3d triNormal(int t) {
+    if (tri_normal_epoch[t] != epoch) {
+      const auto& tri = surface.triangles[t];
+      const Eigen::Vector3d p0 = pos(tri[0]);
+      const Eigen::Vector3d nrm = (pos(tri[1]) - p0).cross(pos(tri[2]) - p0);
+      const double len = nrm.norm();
+      tri_normal.col(t) = len > 0.0 ? Eigen::Vector3d(nrm / len) : Eigen::Vector3d::Zero();
+      tri_normal_epoch[t] = epoch;
+    }
+    return tri_normal.col(t);
+  }
+
   // Angle-weighted pseudo-normal of a surface node (unit; zero if degenerate).
-  Eigen::Vector3d vertexNormal(int node);
-  Eigen::Vector3d pseudoNormal(const Candidate& cand);
+  Eigen::Vector3d vertexNormal(int node) {
+    if (vertex_normal_epoch[node] != epoch) {
+      Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+      const Eigen::Vector3d p = pos(node);
+      for (int i = vt_offset[node]; i < vt_offset[node + 1]; ++i) {
+        const int t = vt_tri[i];
+        const auto& tri = surface.triangles[t];
+        const int k = tri[0] == node ? 0 : (tri[1] == node ? 1 : 2);
+        const Eigen::Vector3d e1 = pos(tri[(k + 1) % 3]) - p, e2 = pos(tri[(k + 2) % 3]) - p;
+        const double angle = std::atan2(e1.cross(e2).norm(), e1.dot(e2));
+        sum += angle * triNormal(t);
+      }
+      const double len = sum.norm();
+      vertex_normal.col(node) = len > 0.0 ? Eigen::Vector3d(sum / len) : Eigen::Vector3d::Zero();
+      vertex_normal_epoch[node] = epoch;
+    }
+    return vertex_normal.col(node);
+  }
+
+  Eigen::Vector3d pseudoNormal(const Candidate& cand) {
+    const int region = cand.cp.region;
+    if (region == collision_detail::kFace) return triNormal(cand.tri);
+    if (region < collision_detail::kEdge0) {
+      return vertexNormal(surface.triangles[cand.tri][region - collision_detail::kVertex0]);
+    }
+    const int nb = tri_neighbor[cand.tri][region - collision_detail::kEdge0];
+    Eigen::Vector3d n = triNormal(cand.tri);
+    if (nb >= 0) n += triNormal(nb);
+    return n;
+  }
 
   // --- collision.cpp ---
   void emit(ContactKind kind, const ToolFeature& f, int element, const std::array<int, 3>& nodes,

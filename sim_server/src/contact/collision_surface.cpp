@@ -1,5 +1,6 @@
 // Collision, the tissue surface's upkeep for the broad phase: triangle adjacency, node -> triangle
-// lists, the boxes the AABB trees refit, and the normals computed on demand once per refit.
+// lists and the boxes the AABB trees refit (the normals, computed on demand once per refit, are
+// inline in collision_impl.h: the narrow phases call them per candidate).
 
 #include <algorithm>
 #include <cmath>
@@ -70,48 +71,6 @@ void Collision::Impl::updateGeometry() {
     const Eigen::Vector3d p = pos(surface.nodes[i]);
     vertex_boxes[i] = Box(p, p);
   }
-}
-
-Eigen::Vector3d Collision::Impl::triNormal(int t) {
-  if (tri_normal_epoch[t] != epoch) {
-    const auto& tri = surface.triangles[t];
-    const Eigen::Vector3d p0 = pos(tri[0]);
-    const Eigen::Vector3d nrm = (pos(tri[1]) - p0).cross(pos(tri[2]) - p0);
-    const double len = nrm.norm();
-    tri_normal.col(t) = len > 0.0 ? Eigen::Vector3d(nrm / len) : Eigen::Vector3d::Zero();
-    tri_normal_epoch[t] = epoch;
-  }
-  return tri_normal.col(t);
-}
-
-// Angle-weighted pseudo-normal of a surface node (unit; zero if degenerate).
-Eigen::Vector3d Collision::Impl::vertexNormal(int node) {
-  if (vertex_normal_epoch[node] != epoch) {
-    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-    const Eigen::Vector3d p = pos(node);
-    for (int i = vt_offset[node]; i < vt_offset[node + 1]; ++i) {
-      const int t = vt_tri[i];
-      const auto& tri = surface.triangles[t];
-      const int k = tri[0] == node ? 0 : (tri[1] == node ? 1 : 2);
-      const Eigen::Vector3d e1 = pos(tri[(k + 1) % 3]) - p, e2 = pos(tri[(k + 2) % 3]) - p;
-      const double angle = std::atan2(e1.cross(e2).norm(), e1.dot(e2));
-      sum += angle * triNormal(t);
-    }
-    const double len = sum.norm();
-    vertex_normal.col(node) = len > 0.0 ? Eigen::Vector3d(sum / len) : Eigen::Vector3d::Zero();
-    vertex_normal_epoch[node] = epoch;
-  }
-  return vertex_normal.col(node);
-}
-
-Eigen::Vector3d Collision::Impl::pseudoNormal(const Candidate& cand) {
-  const int region = cand.cp.region;
-  if (region == kFace) return triNormal(cand.tri);
-  if (region < kEdge0) return vertexNormal(surface.triangles[cand.tri][region - kVertex0]);
-  const int nb = tri_neighbor[cand.tri][region - kEdge0];
-  Eigen::Vector3d n = triNormal(cand.tri);
-  if (nb >= 0) n += triNormal(nb);
-  return n;
 }
 
 }  // namespace tactus::sim
