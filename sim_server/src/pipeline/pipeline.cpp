@@ -96,14 +96,20 @@ struct Simulation::Impl {
   Eigen::Matrix<double, Eigen::Dynamic, 6, Eigen::RowMajor> b_tool;   ///< H_tool L, C6 = L L^T
 
   void buildTissues();
-  void solveContacts(StepReport& report);
   double queryContacts();
   double min_excess_gap = 0.0;                    ///< of the last queryContacts
-  double detectContacts(StepReport& report);
-  /// Where the contacts assembleProblem uses were detected.
+  /// Where the contacts buildW uses were detected.
   enum class FoundAt { kFreeState, kStepStart, kCorrectedState };
-  void assembleProblem(StepReport& report, FoundAt found_at);
-  void solveAndCorrect(StepReport& report, bool restore_free);
+  // The stages of one step (paper 3.1), in order; each adds its wall time to its StageTimes field.
+  void freeMotion(StepReport& report);
+  double detectCollisions(StepReport& report);
+  void updateCompliance(StepReport& report);
+  void buildW(StepReport& report, FoundAt found_at);
+  void solveContacts(StepReport& report);
+  void constrainedMotion(StepReport& report, bool restore_free);
+  // Contact passes (solver.contact_iterations): whether to run another, and its set-up.
+  void keepFreeState();
+  bool nextContactPass(StepReport& report, int pass, double& previous_gap);
   void blendWithPreviousPass();
   int countDistinctNodes();
   std::vector<std::int64_t> node_keys;            ///< scratch of countDistinctNodes
@@ -316,17 +322,16 @@ double Simulation::Impl::queryContacts() {
   return min_gap;
 }
 
-double Simulation::Impl::detectContacts(StepReport& report) {
+double Simulation::Impl::detectCollisions(StepReport& report) {
   const std::int64_t t0 = shared::monotonicNs();
   const double min_gap = queryContacts();
   counters.collision_queries += static_cast<long>(tissues.size());
-  report.times.collision_s += shared::secondsSinceNs(t0);
+  report.times.detect_collisions_s += shared::secondsSinceNs(t0);
   return min_gap;
 }
 
-void Simulation::Impl::solveContacts(StepReport& report) {
-  const int passes = std::max(1, spec.solver.contact_iterations);
-  // the free state, which every pass corrects
+// The free state, which every contact pass corrects.
+void Simulation::Impl::keepFreeState() {
   for (TissueState& ts : tissues) {
     ts.q_free = ts.body->positions();
     ts.v_free = ts.body->velocities();
@@ -336,39 +341,37 @@ void Simulation::Impl::solveContacts(StepReport& report) {
   } else {
     *tool_free = *instrument;
   }
-  // kStepStart: step() detected the contacts before the free motion; their gaps are carried to
-  // the free state like those of a later pass
-  const bool detected_at_start = spec.solver.contact_detection == ContactDetection::kStepStart;
-  if (!detected_at_start) detectContacts(report);
-  double previous_gap = std::numeric_limits<double>::infinity();
-  for (int pass = 0;; ++pass) {
-    assembleProblem(report, pass > 0            ? FoundAt::kCorrectedState
-                            : detected_at_start ? FoundAt::kStepStart
-                                                : FoundAt::kFreeState);
-    solveAndCorrect(report, pass > 0);
-    report.contact_passes = pass + 1;
-    if (passes == 1) break;
-    // the nonlinear gaps at the corrected state
-    const double geometric_gap = detectContacts(report);
-    report.geometric_penetration_m =
-        std::isfinite(geometric_gap) ? std::max(0.0, -geometric_gap) : 0.0;
-    // with a contact compliance a contact may penetrate by c f_n: the passes look at the rest
-    const double min_gap = min_excess_gap;
-    if (!(min_gap < -spec.solver.penetration_tolerance_m) || pass + 1 >= passes) break;
-    const double pass_gap = min_gap;
-    if (pass > 0 && min_gap < previous_gap) {
-      // worse than the previous pass: the linearisations alternate (the contact set flips
-      // between two states). Linearise the next pass at the mean of the two corrections. (A step
-      // never ends on such a mean: the last pass's state is its own solution, so the published
-      // forces are those that moved it.)
-      blendWithPreviousPass();
-      detectContacts(report);
-    }
-    previous_gap = pass_gap;
-    for (TissueState& ts : tissues) ts.dq_previous = ts.body->positions() - ts.q_free;
-    previous_wrench = last_wrench;
-    previous_grip_torque = last_grip_torque;
+}
+
+// After a pass: detects the contacts at the corrected state and says whether another pass runs
+// (some gap below -penetration_tolerance, beyond what the contact compliance allows, and passes
+// left). A pass that ended worse than the one before sends the next to the mean of the two.
+bool Simulation::Impl::nextContactPass(StepReport& report, int pass, double& previous_gap) {
+  const int passes = std::max(1, spec.solver.contact_iterations);
+  if (passes == 1) return false;
+  // the nonlinear gaps at the corrected state
+  const double geometric_gap = detectCollisions(report);
+  report.geometric_penetration_m =
+      std::isfinite(geometric_gap) ? std::max(0.0, -geometric_gap) : 0.0;
+  // with a contact compliance a contact may penetrate by c f_n: the passes look at the rest
+  const double min_gap = min_excess_gap;
+  if (!(min_gap < -spec.solver.penetration_tolerance_m) || pass + 1 >= passes) return false;
+  const double pass_gap = min_gap;
+  if (pass > 0 && min_gap < previous_gap) {
+    // worse than the previous pass: the linearisations alternate (the contact set flips
+    // between two states). Linearise the next pass at the mean of the two corrections. (A step
+    // never ends on such a mean: the last pass's state is its own solution, so the published
+    // forces are those that moved it.)
+    const std::int64_t t0 = shared::monotonicNs();
+    blendWithPreviousPass();
+    report.times.constrained_motion_s += shared::secondsSinceNs(t0);
+    detectCollisions(report);
   }
+  previous_gap = pass_gap;
+  for (TissueState& ts : tissues) ts.dq_previous = ts.body->positions() - ts.q_free;
+  previous_wrench = last_wrench;
+  previous_grip_torque = last_grip_torque;
+  return true;
 }
 
 // State = free state + the mean of this pass's and the previous pass's corrections (tissue dq,
@@ -393,7 +396,7 @@ void Simulation::Impl::blendWithPreviousPass() {
 // there; otherwise (kCorrectedState: at the current state, kStepStart: at the start of the step)
 // their gaps are carried to the free state along the rows (gap - H (x_detected - x_free)).
 // Friction rows: the relative tangential displacement of the tool point over the free motion.
-void Simulation::Impl::assembleProblem(StepReport& report, FoundAt found_at) {
+void Simulation::Impl::buildW(StepReport& report, FoundAt found_at) {
   const double h = spec.time_step_s;
   const double mu = spec.instrument.friction_mu;
   const bool relinearise = found_at != FoundAt::kFreeState;
@@ -401,7 +404,7 @@ void Simulation::Impl::assembleProblem(StepReport& report, FoundAt found_at) {
   const Instrument& detected = at_start ? *tool_start : *instrument;   // where found
   const shared::Pose& tool_pose = detected.pose();
   const shared::Pose& free_pose = tool_free->pose();
-  std::int64_t t0 = shared::monotonicNs();
+  const std::int64_t t0 = shared::monotonicNs();
   int rows = 0;
   int contacts = 0;
   all_contacts.clear();
@@ -464,10 +467,8 @@ void Simulation::Impl::assembleProblem(StepReport& report, FoundAt found_at) {
     contacts += static_cast<int>(found.size());
     all_contacts.insert(all_contacts.end(), found.begin(), found.end());
   }
-  report.times.collision_s += shared::secondsSinceNs(t0);
 
   // assemble the problem: W = sum_tissue H C H^T + H_tool C6 H_tool^T
-  t0 = shared::monotonicNs();
   ContactProblemData& p = problem;
   p.contacts = contacts;
   p.rows = rows;
@@ -531,7 +532,7 @@ void Simulation::Impl::assembleProblem(StepReport& report, FoundAt found_at) {
   if (mu > 0.0) counters.tangential_rows += rows - contacts;
   report.contacts = contacts;
   report.rows = rows;
-  report.times.w_build_s += shared::secondsSinceNs(t0);
+  report.times.build_w_s += shared::secondsSinceNs(t0);
 }
 
 // Tissue nodes with a non-zero weight in some contact of the last assembled problem.
@@ -550,14 +551,13 @@ int Simulation::Impl::countDistinctNodes() {
   return static_cast<int>(std::unique(node_keys.begin(), node_keys.end()) - node_keys.begin());
 }
 
-// Warm start by contact identity, NSGS, then the constrained motion from the free state:
-// tissue dq = C H^T f (per model), tool dx = C6 H_tool^T f.
-void Simulation::Impl::solveAndCorrect(StepReport& report, bool restore_free) {
-  const double h = spec.time_step_s;
+// Warm start by contact identity, then NSGS; the forces are kept by contact id for the next
+// solve's warm start.
+void Simulation::Impl::solveContacts(StepReport& report) {
   ContactProblemData& p = problem;
   const int rows = p.rows;
   const int contacts = p.contacts;
-  std::int64_t t0 = shared::monotonicNs();
+  const std::int64_t t0 = shared::monotonicNs();
   p.f.setZero(rows);
   for (int c = 0; c < contacts; ++c) {
     auto it = previous_f.find(p.contact_id[c]);
@@ -581,11 +581,19 @@ void Simulation::Impl::solveAndCorrect(StepReport& report, bool restore_free) {
     for (int k = 0; k < nr; ++k) fc[k] = p.f[r0 + k];
     previous_f.emplace(p.contact_id[c], fc);
   }
-  report.times.solve_s += shared::secondsSinceNs(t0);
   report.total_normal_force_n = 0.0;
   for (int c = 0; c < contacts; ++c) report.total_normal_force_n += p.f[p.row_offset[c]];
+  report.times.solve_contacts_s += shared::secondsSinceNs(t0);
+}
 
-  t0 = shared::monotonicNs();
+// The constrained motion from the free state (restored first on a later pass): tissue
+// dq = C H^T f (per model), tool dx = C6 H_tool^T f; then the linearised gaps it leaves.
+void Simulation::Impl::constrainedMotion(StepReport& report, bool restore_free) {
+  const double h = spec.time_step_s;
+  const ContactProblemData& p = problem;
+  const int rows = p.rows;
+  const int contacts = p.contacts;
+  const std::int64_t t0 = shared::monotonicNs();
   if (restore_free) {
     for (TissueState& ts : tissues) {
       ts.body->positions() = ts.q_free;
@@ -629,19 +637,53 @@ void Simulation::Impl::solveAndCorrect(StepReport& report, bool restore_free) {
     last_wrench.setZero();
     last_grip_torque = 0.0;
   }
-  report.times.correction_s += shared::secondsSinceNs(t0);
+  report.times.constrained_motion_s += shared::secondsSinceNs(t0);
 }
 
+// Free motion of every object (no contact forces): implicit Euler of each tissue, the god object
+// toward the device target.
+void Simulation::Impl::freeMotion(StepReport& report) {
+  const double h = spec.time_step_s;
+  const std::int64_t t0 = shared::monotonicNs();
+  for (TissueState& ts : tissues) {
+    if (instrument) ts.q_begin = ts.body->positions();
+    const FemStepStats st = ts.body->freeMotion(h);
+    if (!st.ok) report.finite = false;
+    report.inverted_elements += st.inverted_elements;
+    report.fem_cg_iterations += st.cg_iterations;
+    if (st.factor_refreshed || spec.solver.linear == LinearSolverKind::kCholmod)
+      ++report.fem_factorisations;
+  }
+  if (instrument) {
+    tool_begin = instrument->pose();
+    instrument->freeMotion(h, target.pose, target.twist, target.gripper_opening);
+    problem.device_pose = target.pose;
+    problem.device_gripper = target.gripper_opening;
+  }
+  report.times.free_motion_s += shared::secondsSinceNs(t0);
+}
+
+// The compliance at the free state: C ~ R C0 R^T (warped, eq. 12), the current tangent's (exact),
+// C0 (rest, uncoupled: nothing to do).
+void Simulation::Impl::updateCompliance(StepReport& report) {
+  const std::int64_t t0 = shared::monotonicNs();
+  for (TissueState& ts : tissues) ts.compliance->update(*ts.body);
+  report.times.update_compliance_s += shared::secondsSinceNs(t0);
+}
+
+// One step, the paper's stages in order (docs/design.md section 2).
 StepReport Simulation::step() {
   Impl& s = *impl_;
   StepReport report;
   const std::int64_t t_step = shared::monotonicNs();
   const double h = s.spec.time_step_s;
+  const bool detect_at_start =
+      s.spec.solver.contact_detection == ContactDetection::kStepStart;
 
-  // kStepStart: contacts at the start-of-step state (carried to the free state when assembled,
-  // from q_begin and tool_start)
-  if (s.instrument && s.spec.solver.contact_detection == ContactDetection::kStepStart) {
-    s.detectContacts(report);
+  // kStepStart: contacts at the start-of-step state (carried to the free state by buildW, from
+  // q_begin and tool_start)
+  if (s.instrument && detect_at_start) {
+    s.detectCollisions(report);
     if (!s.tool_start) {
       s.tool_start = std::make_unique<Instrument>(*s.instrument);
     } else {
@@ -649,30 +691,22 @@ StepReport Simulation::step() {
     }
   }
 
-  // free motion of every object (no contact forces)
-  std::int64_t t0 = shared::monotonicNs();
-  for (TissueState& ts : s.tissues) {
-    if (s.instrument) ts.q_begin = ts.body->positions();
-    const FemStepStats st = ts.body->freeMotion(h);
-    if (!st.ok) report.finite = false;
-    report.inverted_elements += st.inverted_elements;
-    report.fem_cg_iterations += st.cg_iterations;
-    if (st.factor_refreshed || s.spec.solver.linear == LinearSolverKind::kCholmod)
-      ++report.fem_factorisations;
-  }
-  if (s.instrument) {
-    s.tool_begin = s.instrument->pose();
-    s.instrument->freeMotion(h, s.target.pose, s.target.twist, s.target.gripper_opening);
-    s.problem.device_pose = s.target.pose;
-    s.problem.device_gripper = s.target.gripper_opening;
-  }
-  report.times.free_motion_s = shared::secondsSinceNs(t0);
+  s.freeMotion(report);
 
   if (s.instrument) {
-    t0 = shared::monotonicNs();
-    for (TissueState& ts : s.tissues) ts.compliance->update(*ts.body);
-    report.times.w_build_s = shared::secondsSinceNs(t0);
-    s.solveContacts(report);
+    s.updateCompliance(report);
+    s.keepFreeState();
+    if (!detect_at_start) s.detectCollisions(report);
+    double previous_gap = std::numeric_limits<double>::infinity();
+    for (int pass = 0;; ++pass) {
+      s.buildW(report, pass > 0          ? Impl::FoundAt::kCorrectedState
+                       : detect_at_start ? Impl::FoundAt::kStepStart
+                                         : Impl::FoundAt::kFreeState);
+      s.solveContacts(report);
+      s.constrainedMotion(report, pass > 0);
+      report.contact_passes = pass + 1;
+      if (!s.nextContactPass(report, pass, previous_gap)) break;
+    }
     s.problem.tool_pose = s.instrument->pose();
   }
 
