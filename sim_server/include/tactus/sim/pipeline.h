@@ -40,7 +40,9 @@ struct StageTimes {
   double build_w_s = 0.0;              ///< buildW: contact rows H, delta_free, W = H C H^T
   double solve_contacts_s = 0.0;       ///< solveContacts: warm start and NSGS
   double constrained_motion_s = 0.0;   ///< constrainedMotion: dq = C H^T f, tool dx = C6 H^T f
-  double output_s = 0.0;               ///< not measured by step() (VTK output is separate)
+  /// VTK output: not part of step() (writeOutputIfDue); 0 unless the caller fills it, which
+  /// sim_server's runner does not yet do (its "output" row reads 0)
+  double output_s = 0.0;
   double total_s = 0.0;                ///< the whole step() call
 };
 
