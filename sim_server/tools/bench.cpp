@@ -1,6 +1,7 @@
 // tactus-bench: end-to-end benchmark of a scene, headless. Runs N steps (default: the scene's
 // duration / time step) following the scene's scripted instrument, and reports per-stage medians
-// (free motion, collision, W build, solve, correction, publish), contacts, sweeps, and the haptic
+// (free_motion, detect_collisions, update_compliance, build_w, solve_contacts, constrained_motion:
+// the functions of Simulation::step(); then publish), contacts, sweeps, and the haptic
 // tick's solve for the same snapshots: each step's problem, published into a private segment's
 // snapshot slot exactly as sim_server does, is re-solved from the slot as the haptic loop would
 // (delta_free moved by J times a small device displacement, warm-started NSGS from the
@@ -123,9 +124,11 @@ int run(const BenchOptions& o) {
   const double d_m = 1e-3 * o.displacement_mm / std::sqrt(3.0);
   dx << d_m, -d_m, -d_m, 0.0, 0.0, 0.0;
 
-  std::vector<Series> stages = {{"free motion", {}}, {"collision", {}},  {"W build", {}},
-                                {"solve", {}},       {"correction", {}}, {"publish", {}},
-                                {"total step", {}}};
+  // total: the step and the publish
+  std::vector<Series> stages = {{"free_motion", {}},       {"detect_collisions", {}},
+                                {"update_compliance", {}}, {"build_w", {}},
+                                {"solve_contacts", {}},    {"constrained_motion", {}},
+                                {"publish", {}},           {"total", {}}};
   std::vector<Series> busy = stages;   // the steps with at least o.min_contacts contacts
   std::vector<double> busy_contacts;
   std::vector<double> contacts, rows, sim_sweeps, tick_us, tick_cpu_us, tick_sweeps_v, tick_err, passes,
@@ -163,12 +166,13 @@ int run(const BenchOptions& o) {
     stages[0].v.push_back(r.times.free_motion_s);
     fem_cg.push_back(r.fem_cg_iterations);
     fem_factorisations += r.fem_factorisations;
-    stages[1].v.push_back(r.times.collision_s);
-    stages[2].v.push_back(r.times.w_build_s);
-    stages[3].v.push_back(r.times.solve_s);
-    stages[4].v.push_back(r.times.correction_s);
-    stages[5].v.push_back(publish_s);
-    stages[6].v.push_back(r.times.total_s + publish_s);
+    stages[1].v.push_back(r.times.detect_collisions_s);
+    stages[2].v.push_back(r.times.update_compliance_s);
+    stages[3].v.push_back(r.times.build_w_s);
+    stages[4].v.push_back(r.times.solve_contacts_s);
+    stages[5].v.push_back(r.times.constrained_motion_s);
+    stages[6].v.push_back(publish_s);
+    stages[7].v.push_back(r.times.total_s + publish_s);
     if (o.min_contacts > 0 && r.contacts >= o.min_contacts) {
       for (std::size_t i = 0; i < stages.size(); ++i) busy[i].v.push_back(stages[i].v.back());
       busy_contacts.push_back(r.contacts);
@@ -195,7 +199,7 @@ int run(const BenchOptions& o) {
       }
     }
     if (trace != nullptr && r.contacts <= 0) {
-      std::fprintf(trace, "%ld,%.4f,0,0,0,%.4f,0,0\n", k, sim.time(), 1e3 * stages[6].v.back());
+      std::fprintf(trace, "%ld,%.4f,0,0,0,%.4f,0,0\n", k, sim.time(), 1e3 * stages[7].v.back());
     }
 
     // the haptic side's tick on this snapshot, read back from the slot
@@ -222,7 +226,7 @@ int run(const BenchOptions& o) {
     if (res.status == shared::NsgsStatus::kConverged) ++tick_converged;
     if (trace != nullptr) {
       std::fprintf(trace, "%ld,%.4f,%d,%d,%d,%.4f,%.3f,%d\n", k, sim.time(), r.contacts, r.rows,
-                   r.nsgs.sweeps, 1e3 * stages[6].v.back(),
+                   r.nsgs.sweeps, 1e3 * stages[7].v.back(),
                    1e-3 * static_cast<double>(res.elapsed_ns), res.sweeps);
     }
   }
@@ -237,9 +241,9 @@ int run(const BenchOptions& o) {
   // table
   std::printf("%s: %ld steps of %.1f ms (%.1f s simulated) in %.1f s wall; set-up %.1f s\n",
               o.scene.c_str(), steps, 1e3 * h, static_cast<double>(steps) * h, wall_s, build_s);
-  std::printf("%-14s %10s %10s %10s %10s\n", "stage [ms]", "median", "p90", "p99", "max");
+  std::printf("%-19s %10s %10s %10s %10s\n", "stage [ms]", "median", "p90", "p99", "max");
   for (const auto& s : stages) {
-    std::printf("%-14s %10.3f %10.3f %10.3f %10.3f\n", s.name.c_str(), 1e3 * pct(s.v, 0.5),
+    std::printf("%-19s %10.3f %10.3f %10.3f %10.3f\n", s.name.c_str(), 1e3 * pct(s.v, 0.5),
                 1e3 * pct(s.v, 0.9), 1e3 * pct(s.v, 0.99), 1e3 * pct(s.v, 1.0));
   }
   if (o.min_contacts > 0 && !busy_contacts.empty()) {
@@ -247,7 +251,7 @@ int run(const BenchOptions& o) {
                 busy_contacts.size(), o.min_contacts, pct(busy_contacts, 0.5),
                 pct(busy_contacts, 1.0));
     for (const auto& s : busy) {
-      std::printf("  %-12s %10.3f %10.3f %10.3f %10.3f\n", s.name.c_str(), 1e3 * pct(s.v, 0.5),
+      std::printf("  %-19s %10.3f %10.3f %10.3f %10.3f\n", s.name.c_str(), 1e3 * pct(s.v, 0.5),
                   1e3 * pct(s.v, 0.9), 1e3 * pct(s.v, 0.99), 1e3 * pct(s.v, 1.0));
     }
   } else if (o.min_contacts > 0) {

@@ -65,10 +65,11 @@ std::string jsonEscape(const std::string& s) {
 
 void RunStatistics::add(const StepReport& r) {
   free_motion_.push_back(r.times.free_motion_s);
-  collision_.push_back(r.times.collision_s);
-  w_build_.push_back(r.times.w_build_s);
-  solve_.push_back(r.times.solve_s);
-  correction_.push_back(r.times.correction_s);
+  detect_collisions_.push_back(r.times.detect_collisions_s);
+  update_compliance_.push_back(r.times.update_compliance_s);
+  build_w_.push_back(r.times.build_w_s);
+  solve_contacts_.push_back(r.times.solve_contacts_s);
+  constrained_motion_.push_back(r.times.constrained_motion_s);
   output_.push_back(r.times.output_s);
   total_.push_back(r.times.total_s);
   contacts_.push_back(r.contacts);
@@ -79,10 +80,14 @@ void RunStatistics::add(const StepReport& r) {
 }
 
 std::vector<StageSummary> RunStatistics::stages() const {
-  return {summarise("free motion", free_motion_), summarise("collision", collision_),
-          summarise("W build", w_build_),         summarise("solve", solve_),
-          summarise("correction", correction_),   summarise("output", output_),
-          summarise("total step", total_)};
+  return {summarise("free_motion", free_motion_),
+          summarise("detect_collisions", detect_collisions_),
+          summarise("update_compliance", update_compliance_),
+          summarise("build_w", build_w_),
+          summarise("solve_contacts", solve_contacts_),
+          summarise("constrained_motion", constrained_motion_),
+          summarise("output", output_),
+          summarise("total", total_)};
 }
 
 double RunStatistics::medianContacts() const { return percentile(contacts_, 0.5); }
@@ -92,10 +97,10 @@ int RunStatistics::maxContacts() const {
 }
 
 std::string RunStatistics::table() const {
-  std::string out = fmt::format("{:<12} {:>10} {:>10} {:>10} {:>10}   ({} steps)\n", "stage [ms]",
+  std::string out = fmt::format("{:<19} {:>10} {:>10} {:>10} {:>10}   ({} steps)\n", "stage [ms]",
                                 "median", "p90", "p99", "max", steps());
   for (const auto& s : stages()) {
-    out += fmt::format("{:<12} {:>10.3f} {:>10.3f} {:>10.3f} {:>10.3f}\n", s.name,
+    out += fmt::format("{:<19} {:>10.3f} {:>10.3f} {:>10.3f} {:>10.3f}\n", s.name,
                        1e3 * s.median_s, 1e3 * s.p90_s, 1e3 * s.p99_s, 1e3 * s.max_s);
   }
   out += fmt::format("contacts: median {:.0f}, max {}; NSGS sweeps median {:.0f}; max penetration "

@@ -1,8 +1,10 @@
 #pragma once
-// The simulation pipeline built from a scene (paper 3.1; docs/design.md section 2):
+// The simulation pipeline built from a scene (paper 3.1; docs/design.md section 2). One step is
+// the paper's stages, each a named function timed under its own name (StageTimes):
 //
-//   free motion (tissues, instrument) -> collision -> contact rows, W = H C H^T -> NSGS
-//   -> constrained motion -> [publish snapshot] -> [VTK output]
+//   freeMotion (tissues, instrument) -> detectCollisions -> updateCompliance (C ~ R C0 R^T)
+//   -> buildW (rows H, W = H C H^T) -> solveContacts (NSGS) -> constrainedMotion
+//   -> [publish snapshot] -> [VTK output]
 //
 // Only the stages a scene calls for are constructed: no collision, W or solve without an
 // instrument; no tangential rows when friction is zero; no rotation extraction for linear
@@ -28,15 +30,20 @@ class FemBody;
 class TissueCompliance;
 class Instrument;
 
-/// Wall time per stage of the last step [s].
+/// Wall time per stage of the last step [s], named after the functions of `Simulation::step()`
+/// (docs/design.md section 2). With contact passes (solver.contact_iterations) every pass adds to
+/// the stages it runs.
 struct StageTimes {
-  double free_motion_s = 0.0;
-  double collision_s = 0.0;
-  double w_build_s = 0.0;
-  double solve_s = 0.0;
-  double correction_s = 0.0;
+  double free_motion_s = 0.0;          ///< freeMotion: tissues and god object, no contact force
+  double detect_collisions_s = 0.0;    ///< detectCollisions: BVH refit and proximity queries
+  double update_compliance_s = 0.0;    ///< updateCompliance: C ~ R C0 R^T (or the exact C)
+  double build_w_s = 0.0;              ///< buildW: contact rows H, delta_free, W = H C H^T
+  double solve_contacts_s = 0.0;       ///< solveContacts: warm start and NSGS
+  double constrained_motion_s = 0.0;   ///< constrainedMotion: dq = C H^T f, tool dx = C6 H^T f
+  /// VTK output: not part of step() (writeOutputIfDue); 0 unless the caller fills it, which
+  /// sim_server's runner does not yet do (its "output" row reads 0)
   double output_s = 0.0;
-  double total_s = 0.0;
+  double total_s = 0.0;                ///< the whole step() call
 };
 
 /// What one step did.

@@ -67,7 +67,8 @@ class RunStatistics {
   std::string json(const std::string& scene) const;
 
  private:
-  std::vector<double> free_motion_, collision_, w_build_, solve_, correction_, output_, total_;
+  std::vector<double> free_motion_, detect_collisions_, update_compliance_, build_w_,
+      solve_contacts_, constrained_motion_, output_, total_;
   std::vector<double> contacts_, sweeps_;
   double max_penetration_m_ = 0.0;
   int max_inverted_ = 0;

@@ -1,0 +1,29 @@
+#pragma once
+// The VTK output of a run (scene key output): one .vtu per tissue every output.every_n_steps
+// steps (positions, displacement, von Mises stress, volume ratio) and the series.pvd that lists
+// them by time. Outside the physics: it only reads the state.
+
+#include <string>
+#include <vector>
+
+#include "simulation_model.h"
+#include "simulation_state.h"
+
+namespace tactus::sim {
+
+class OutputWriter {
+ public:
+  /// Writes the frame of the current state when output is enabled and the step is due; returns
+  /// whether it wrote one.
+  bool writeIfDue(const SimulationModel& model, const SimulationState& state);
+  /// Rewrites the series file at the end of the run and logs where it is.
+  void finish(const SimulationModel& model) const;
+  long frames() const { return frame_; }
+
+ private:
+  std::vector<std::string> files_;   ///< every .vtu written, relative to the output directory
+  std::vector<double> times_s_;      ///< simulated time of each
+  long frame_ = 0;
+};
+
+}  // namespace tactus::sim

@@ -1,0 +1,125 @@
+// A Simulation built from a scene: the model, the physics objects at the initial state, the
+// step's scratch, and the list of the stages the scene runs.
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include "simulation_impl.h"
+
+namespace tactus::sim {
+namespace {
+
+const char* toString(ComplianceKind k) {
+  switch (k) {
+    case ComplianceKind::kExact: return "exact";
+    case ComplianceKind::kWarped: return "warped";
+    case ComplianceKind::kRest: return "rest";
+    case ComplianceKind::kUncoupled: return "uncoupled";
+  }
+  return "?";
+}
+
+TissueState buildTissueState(const SimulationModel& model, const TissueSpec& ts,
+                             const TissueModel& tissue) {
+  const SceneSpec& spec = model.spec;
+  const Eigen::Vector3d* gravity = spec.gravity_mps2 ? &*spec.gravity_mps2 : nullptr;
+  TissueState state;
+  state.body = std::make_unique<FemBody>(tissue.mesh, femMaterial(ts), tissue.fixed_nodes, gravity,
+                                         femSolverOptions(spec.solver));
+  spdlog::info("tissue '{}': {} nodes, {} tets, {} fixed nodes", ts.name, tissue.mesh.nodeCount(),
+               tissue.mesh.tetCount(), tissue.fixed_nodes.size());
+  if (!model.has_instrument) return state;
+  ComplianceOptions copt;
+  copt.h_s = model.h_s;
+  copt.cache_dir = ts.compliance_cache_dir;
+  copt.cache_name = ts.name;
+  copt.exact_correction = ts.exact_correction;
+  copt.c0_single_precision = ts.c0_single_precision;
+  state.compliance = makeCompliance(ts.compliance, *state.body, copt);
+  spdlog::info("tissue '{}': {} compliance, {:.1f} MiB", ts.name, toString(ts.compliance),
+               static_cast<double>(state.compliance->memoryBytes()) / (1024.0 * 1024.0));
+  CollisionOptions col;
+  col.alarm_distance_m = spec.instrument.alarm_distance_m;
+  col.contact_distance_m = spec.instrument.contact_distance_m;
+  col.max_contacts = spec.solver.max_contacts;
+  col.sphere_vs_triangle = spec.instrument.face_contacts;
+  state.collision = std::make_unique<Collision>(tissue.surface, state.body->positions(), col);
+  return state;
+}
+
+}  // namespace
+
+SimulationState buildState(const SimulationModel& model) {
+  SimulationState state;
+  for (std::size_t t = 0; t < model.tissues.size(); ++t) {
+    state.tissues.push_back(buildTissueState(model, model.spec.tissues[t], model.tissues[t]));
+  }
+  if (model.has_instrument) {
+    state.instrument = std::make_unique<Instrument>(model.spec.instrument);
+    state.instrument->setWorkspace(model.instrument_workspace);
+    state.target = scriptedTarget(model.spec.instrument, 0.0);
+    state.instrument->reset(state.target.pose, state.target.gripper_opening);
+  }
+  return state;
+}
+
+StepScratch buildScratch(const SimulationModel& model) {
+  StepScratch scratch;
+  scratch.tissues.resize(model.tissues.size());
+  if (model.has_instrument) scratch.workspace.reserve(model.max_rows, model.spec.solver.max_contacts);
+  scratch.problem.row_offset.assign(1, 0);
+  return scratch;
+}
+
+Simulation::Simulation(const SceneSpec& spec) : impl_(std::make_unique<Impl>()) {
+  impl_->model = buildModel(spec);
+  impl_->state = buildState(impl_->model);
+  impl_->scratch = buildScratch(impl_->model);
+}
+
+Simulation::~Simulation() = default;
+
+std::vector<std::string> Simulation::stages() const {
+  const SceneSpec& spec = impl_->model.spec;
+  std::vector<std::string> out;
+  for (const auto& ts : spec.tissues) {
+    std::string effects = ts.law == MaterialLaw::kCorotational ? "corotational" : "linear";
+    effects += ts.damping ? ", Rayleigh damping" : ", no damping";
+    effects += spec.gravity_mps2 ? ", gravity" : ", no gravity";
+    switch (spec.solver.linear) {
+      case LinearSolverKind::kCholmod: effects += ", CHOLMOD"; break;
+      case LinearSolverKind::kPcg: effects += ", PCG"; break;
+      case LinearSolverKind::kCholmodReuse: effects += ", PCG on a reused CHOLMOD factor"; break;
+    }
+    out.push_back(fmt::format("free motion of tissue '{}' (implicit Euler; {})", ts.name, effects));
+  }
+  if (!impl_->model.has_instrument) {
+    out.push_back("no instrument: no collision, no contact problem");
+  } else {
+    const auto& in = spec.instrument;
+    out.push_back(fmt::format("free motion of the {} god object (PD coupling k = {} N/m)",
+                              in.kind == InstrumentKind::kGrasper ? "grasper" : "probe",
+                              in.coupling_k_npm));
+    out.push_back(fmt::format(
+        "collision detection (BVH refit, alarm {} mm, at most {} contacts, {}, at the {})",
+        1e3 * in.alarm_distance_m, spec.solver.max_contacts,
+        in.face_contacts ? "vertex and face contacts" : "vertex contacts only",
+        spec.solver.contact_detection == ContactDetection::kStepStart ? "start of the step"
+                                                                      : "free state"));
+    for (const auto& ts : spec.tissues) {
+      out.push_back(fmt::format("W = H C H^T with {} compliance of '{}'", toString(ts.compliance),
+                                ts.name));
+    }
+    out.push_back(in.friction_mu > 0.0
+                      ? fmt::format("NSGS with Coulomb friction mu = {} (3 rows per contact)",
+                                    in.friction_mu)
+                      : std::string("NSGS frictionless (1 row per contact)"));
+    out.push_back("constrained motion (tissue and instrument)");
+  }
+  if (spec.output.enabled) {
+    out.push_back(fmt::format("VTK output every {} steps into {}", spec.output.every_n_steps,
+                              spec.output.directory.string()));
+  }
+  return out;
+}
+
+}  // namespace tactus::sim

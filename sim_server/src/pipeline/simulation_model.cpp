@@ -1,0 +1,61 @@
+// The model of a scene: meshes placed, fixed nodes collected, solver settings derived.
+#include "simulation_model.h"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+
+#include "tactus/shared/error.h"
+#include "tactus/sim/fem.h"
+#include "tactus/sim/instrument.h"
+
+namespace tactus::sim {
+namespace {
+
+TissueModel buildTissueModel(const SceneSpec& spec, const TissueSpec& ts) {
+  TissueModel tissue;
+  tissue.name = ts.name;
+  MeshReport mesh_report;
+  tissue.mesh = loadTetMesh(ts.mesh_path, &mesh_report);
+  transformMesh(tissue.mesh, ts.scale, ts.rotation_deg, ts.translation_m);
+  std::vector<int> fixed = ts.fixed_nodes;
+  for (int n : fixed) {
+    if (n < 0 || n >= tissue.mesh.nodeCount()) {
+      throw SceneError(fmt::format("{}: tissue '{}': fixed node {} is not in the mesh ({} nodes)",
+                                   spec.source.string(), ts.name, n, tissue.mesh.nodeCount()));
+    }
+  }
+  const std::vector<int> boxed = nodesInBoxes(tissue.mesh, ts.fixed_boxes);
+  fixed.insert(fixed.end(), boxed.begin(), boxed.end());
+  std::sort(fixed.begin(), fixed.end());
+  fixed.erase(std::unique(fixed.begin(), fixed.end()), fixed.end());
+  tissue.fixed_nodes = std::move(fixed);
+  if (spec.instrument.present) tissue.surface = extractSurface(tissue.mesh);
+  return tissue;
+}
+
+}  // namespace
+
+SimulationModel buildModel(const SceneSpec& spec) {
+  if (!(spec.time_step_s > 0.0)) throw SceneError("time_step must be > 0");
+  SimulationModel model;
+  model.spec = spec;
+  model.h_s = spec.time_step_s;
+  for (const TissueSpec& ts : spec.tissues) model.tissues.push_back(buildTissueModel(spec, ts));
+  model.has_instrument = spec.instrument.present;
+  if (!model.has_instrument) return model;
+  // the device target stays within a box around the scene at rest (instrument.h "Workspace")
+  Eigen::AlignedBox3d bounds;
+  for (const TissueModel& tissue : model.tissues) {
+    for (Eigen::Index i = 0; i < tissue.mesh.nodes.cols(); ++i) bounds.extend(tissue.mesh.nodes.col(i));
+  }
+  model.instrument_workspace = instrumentWorkspace(spec.instrument, bounds);
+  model.max_rows = (spec.instrument.friction_mu > 0.0 ? 3 : 1) * spec.solver.max_contacts;
+  model.nsgs.tolerance = spec.solver.nsgs_tolerance;
+  model.nsgs.max_sweeps = spec.solver.nsgs_max_sweeps;
+  model.nsgs.sor = spec.solver.nsgs_sor;
+  model.nsgs.coupling = shared::NsgsCoupling::kSymmetricRowUpdate;   // buildW keeps W symmetric
+  return model;
+}
+
+}  // namespace tactus::sim

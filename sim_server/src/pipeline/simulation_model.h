@@ -1,0 +1,49 @@
+#pragma once
+// The simulation's model, in the manner of MuJoCo's mjModel (docs/design.md, "Model, state,
+// scratch"): what the scene defines, built once by the Simulation constructor and never changed by
+// a step. The stages take it as `const SimulationModel&`.
+//
+//   SimulationModel  (this file)        what the scene defines: spec, meshes, fixed nodes, solver
+//                                       settings, the instrument's workspace
+//   SimulationState  (simulation_state.h)  what a step changes and the next step starts from
+//   StepScratch      (step_scratch.h)   what a step rebuilds and reuses: rows, W, free state
+//   OutputWriter, PipelineCounters      output and statistics, outside the physics
+//
+// The physics objects keep their own parameters beside their state: FemBody its rest shape,
+// material and K0, TissueCompliance its C0 (warped, rest, uncoupled), Instrument its spec. They
+// live in SimulationState because a step changes them; what they hold of the model is built
+// from this one and not changed by a step either.
+
+#include <Eigen/Geometry>
+#include <string>
+#include <vector>
+
+#include "tactus/shared/nsgs.h"
+#include "tactus/sim/mesh.h"
+#include "tactus/sim/scene.h"
+
+namespace tactus::sim {
+
+/// One deformable object as the scene defines it.
+struct TissueModel {
+  std::string name;
+  TetMesh mesh;                    ///< rest mesh, scaled, rotated and placed as the scene says
+  SurfaceMesh surface;             ///< its boundary (only with an instrument)
+  std::vector<int> fixed_nodes;    ///< Dirichlet nodes: the listed ones and those in the boxes
+};
+
+struct SimulationModel {
+  SceneSpec spec;
+  double h_s = 0.0;                      ///< time step
+  std::vector<TissueModel> tissues;
+  bool has_instrument = false;
+  int max_rows = 0;                      ///< rows of the largest contact problem
+  shared::NsgsSettings nsgs;             ///< the simulation's NSGS settings
+  BoxSpec instrument_workspace;          ///< where the device target may go (instrument.h)
+};
+
+/// Loads and places the meshes, collects the fixed nodes and derives the solver settings.
+/// Throws SceneError / MeshError with the scene's file in the message.
+SimulationModel buildModel(const SceneSpec& spec);
+
+}  // namespace tactus::sim

@@ -1,0 +1,45 @@
+#pragma once
+// The simulation's state, in the manner of MuJoCo's mjData (simulation_model.h has the overview):
+// everything a step changes and the next step starts from. A run continues from what is here;
+// StepScratch is rebuilt by the next step before it is read.
+
+#include <Eigen/Core>
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <unordered_map>
+#include <vector>
+
+#include "tactus/sim/collision.h"
+#include "tactus/sim/compliance.h"
+#include "tactus/sim/fem.h"
+#include "tactus/sim/instrument.h"
+#include "tactus/sim/pipeline.h"
+
+namespace tactus::sim {
+
+/// One tissue's physics objects.
+struct TissueState {
+  /// Positions q, velocities v and the FEM's factorisation (its rest data and K0 inside it).
+  std::unique_ptr<FemBody> body;
+  /// C0 and the rotations of the last updateCompliance (only with an instrument).
+  std::unique_ptr<TissueCompliance> compliance;
+  /// The surface's AABB trees, refit at every detection, and the contacts they found; the
+  /// feature-side memory of the pad and sphere queries carries to the next step (collision.h).
+  std::unique_ptr<Collision> collision;
+  const std::vector<Contact>* found = nullptr;   ///< contacts of the last detection
+};
+
+struct SimulationState {
+  double t_s = 0.0;                         ///< simulated time
+  long step = 0;                            ///< steps taken
+  std::vector<TissueState> tissues;         ///< as SimulationModel::tissues
+  /// The god object: pose, twist, jaw opening (its parameters inside); null without instrument.
+  std::unique_ptr<Instrument> instrument;
+  DeviceTarget target;                      ///< the device target the next step follows
+  bool target_rejected = false;             ///< the last setDeviceTarget was non-finite
+  /// The last solve's force per contact id (n, t1, t2): the next solve's warm start.
+  std::unordered_map<std::uint64_t, std::array<double, 3>> warm_start_f;
+};
+
+}  // namespace tactus::sim

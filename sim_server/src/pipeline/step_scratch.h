@@ -1,0 +1,57 @@
+#pragma once
+// What one step rebuilds and reuses (simulation_model.h has the overview): the free state the
+// contact passes correct, the contact rows, the assembled problem and the solver's workspace.
+// Every step overwrites these before it reads them; they are kept between steps only so their
+// memory is reused, and so the last step's problem can be published (Simulation::lastProblem).
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include "tactus/shared/nsgs.h"
+#include "tactus/shared/pose.h"
+#include "tactus/sim/collision.h"
+#include "tactus/sim/instrument.h"
+#include "tactus/sim/pipeline.h"
+
+namespace tactus::sim {
+
+/// One tissue's part of the step.
+struct TissueScratch {
+  Eigen::VectorXd q_begin;               ///< positions at the start of the step
+  Eigen::VectorXd q_free, v_free;        ///< after the free motion
+  ContactRows rows;                      ///< this pass's rows on this tissue
+  std::vector<double> grip;              ///< per row: d gap / d phi (dynamic grip)
+  int row_begin = 0;                     ///< first global row
+  int contact_begin = 0;                 ///< first global contact
+  Eigen::VectorXd dq;                    ///< this pass's correction
+  Eigen::VectorXd dq_previous;           ///< the previous contact pass's correction
+};
+
+using ToolRows = Eigen::Matrix<double, Eigen::Dynamic, 6, Eigen::RowMajor>;
+
+struct StepScratch {
+  std::vector<TissueScratch> tissues;    ///< as SimulationModel::tissues
+  /// The assembled contact problem of the last pass (W, delta_free, f, J, ...); after the step,
+  /// the one the haptic process re-solves.
+  ContactProblemData problem;
+  shared::NsgsWorkspace workspace;
+  std::vector<Contact> all_contacts;     ///< every tissue's contacts in row order
+  ToolRows h_tool;                       ///< H_tool, rows x 6
+  ToolRows b_tool;                       ///< H_tool L, C6 = L L^T
+  std::vector<std::int64_t> node_keys;   ///< countDistinctNodes
+  shared::Pose tool_begin;               ///< god object pose at the start of the step
+  std::unique_ptr<Instrument> tool_free; ///< god object after its free motion
+  /// god object at the start of the step (contact_detection: step_start; contacts found there)
+  std::unique_ptr<Instrument> tool_start;
+  /// This pass's and the previous pass's tool wrench and grip torque (the blend of two passes)
+  Eigen::Matrix<double, 6, 1> wrench = Eigen::Matrix<double, 6, 1>::Zero();
+  Eigen::Matrix<double, 6, 1> previous_wrench = Eigen::Matrix<double, 6, 1>::Zero();
+  double grip_torque = 0.0;              ///< g^T f of the last correction (dynamic grip)
+  double previous_grip_torque = 0.0;
+  /// Smallest gap + c f_n of the last detection (penetration beyond the contact compliance)
+  double min_excess_gap = 0.0;
+};
+
+}  // namespace tactus::sim

@@ -1,0 +1,240 @@
+// The stages of one step but buildW (build_w.cpp): free motion, collision detection, compliance
+// update, NSGS, constrained motion and the contact passes' control.
+#include "step_stages.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "tactus/shared/clock.h"
+
+namespace tactus::sim {
+
+void freeMotion(const SimulationModel& model, SimulationState& state, StepScratch& scratch,
+                StepReport& report) {
+  const double h = model.h_s;
+  const std::int64_t t0 = shared::monotonicNs();
+  for (std::size_t t = 0; t < state.tissues.size(); ++t) {
+    FemBody& body = *state.tissues[t].body;
+    if (state.instrument) scratch.tissues[t].q_begin = body.positions();
+    const FemStepStats st = body.freeMotion(h);
+    if (!st.ok) report.finite = false;
+    report.inverted_elements += st.inverted_elements;
+    report.fem_cg_iterations += st.cg_iterations;
+    if (st.factor_refreshed || model.spec.solver.linear == LinearSolverKind::kCholmod)
+      ++report.fem_factorisations;
+  }
+  if (state.instrument) {
+    const DeviceTarget& target = state.target;
+    scratch.tool_begin = state.instrument->pose();
+    state.instrument->freeMotion(h, target.pose, target.twist, target.gripper_opening);
+    scratch.problem.device_pose = target.pose;
+    scratch.problem.device_gripper = target.gripper_opening;
+  }
+  report.times.free_motion_s += shared::secondsSinceNs(t0);
+}
+
+// min_excess_gap: the smallest gap + c f_n, with f_n the normal force the contact (by id) had in
+// the last solve: the penetration beyond what the contact compliance c allows.
+double queryContacts(const SimulationModel& model, SimulationState& state, StepScratch& scratch) {
+  double min_gap = std::numeric_limits<double>::infinity();
+  scratch.min_excess_gap = min_gap;
+  const double c = model.spec.instrument.contact_compliance_mpn;
+  for (TissueState& ts : state.tissues) {
+    ts.collision->refit(ts.body->positions());
+    ts.found = &ts.collision->detect(*state.instrument);
+    for (const Contact& k : *ts.found) {
+      min_gap = std::min(min_gap, k.gap_m);
+      double allowed = 0.0;
+      if (c > 0.0) {
+        const auto it = state.warm_start_f.find(k.id);
+        if (it != state.warm_start_f.end()) allowed = c * it->second[0];
+      }
+      scratch.min_excess_gap = std::min(scratch.min_excess_gap, k.gap_m + allowed);
+    }
+  }
+  return min_gap;
+}
+
+double detectCollisions(const SimulationModel& model, SimulationState& state, StepScratch& scratch,
+                        StepReport& report, PipelineCounters& counters) {
+  const std::int64_t t0 = shared::monotonicNs();
+  const double min_gap = queryContacts(model, state, scratch);
+  counters.collision_queries += static_cast<long>(state.tissues.size());
+  report.times.detect_collisions_s += shared::secondsSinceNs(t0);
+  return min_gap;
+}
+
+void updateCompliance(SimulationState& state, StepReport& report) {
+  const std::int64_t t0 = shared::monotonicNs();
+  for (TissueState& ts : state.tissues) ts.compliance->update(*ts.body);
+  report.times.update_compliance_s += shared::secondsSinceNs(t0);
+}
+
+void keepFreeState(SimulationState& state, StepScratch& scratch) {
+  for (std::size_t t = 0; t < state.tissues.size(); ++t) {
+    scratch.tissues[t].q_free = state.tissues[t].body->positions();
+    scratch.tissues[t].v_free = state.tissues[t].body->velocities();
+  }
+  if (!scratch.tool_free) {
+    scratch.tool_free = std::make_unique<Instrument>(*state.instrument);
+  } else {
+    *scratch.tool_free = *state.instrument;
+  }
+}
+
+void solveContacts(const SimulationModel& model, SimulationState& state, StepScratch& scratch,
+                   StepReport& report, PipelineCounters& counters) {
+  ContactProblemData& p = scratch.problem;
+  const int rows = p.rows;
+  const int contacts = p.contacts;
+  const std::int64_t t0 = shared::monotonicNs();
+  p.f.setZero(rows);
+  for (int c = 0; c < contacts; ++c) {
+    auto it = state.warm_start_f.find(p.contact_id[c]);
+    if (it == state.warm_start_f.end()) continue;
+    const int r0 = p.row_offset[c];
+    const int nr = p.row_offset[c + 1] - r0;
+    for (int k = 0; k < nr; ++k) p.f[r0 + k] = it->second[k];
+  }
+  if (rows > 0) {
+    // zeroes f on NaN
+    report.nsgs = shared::solveNsgs(p.view(), model.nsgs, scratch.workspace, p.f.data());
+    ++counters.solves;
+  } else {
+    report.nsgs = shared::NsgsResult{};
+  }
+  p.solve = report.nsgs;
+  state.warm_start_f.clear();
+  for (int c = 0; c < contacts; ++c) {
+    const int r0 = p.row_offset[c];
+    const int nr = p.row_offset[c + 1] - r0;
+    std::array<double, 3> fc{0.0, 0.0, 0.0};
+    for (int k = 0; k < nr; ++k) fc[k] = p.f[r0 + k];
+    state.warm_start_f.emplace(p.contact_id[c], fc);
+  }
+  report.total_normal_force_n = 0.0;
+  for (int c = 0; c < contacts; ++c) report.total_normal_force_n += p.f[p.row_offset[c]];
+  report.times.solve_contacts_s += shared::secondsSinceNs(t0);
+}
+
+namespace {
+
+void restoreFreeState(SimulationState& state, const StepScratch& scratch) {
+  for (std::size_t t = 0; t < state.tissues.size(); ++t) {
+    state.tissues[t].body->positions() = scratch.tissues[t].q_free;
+    state.tissues[t].body->velocities() = scratch.tissues[t].v_free;
+  }
+  *state.instrument = *scratch.tool_free;
+}
+
+}  // namespace
+
+void constrainedMotion(const SimulationModel& model, SimulationState& state, StepScratch& scratch,
+                       StepReport& report, bool restore_free) {
+  const double h = model.h_s;
+  const ContactProblemData& p = scratch.problem;
+  const int rows = p.rows;
+  const int contacts = p.contacts;
+  const std::int64_t t0 = shared::monotonicNs();
+  if (restore_free) restoreFreeState(state, scratch);
+  report.max_penetration_m = 0.0;
+  report.complementarity = 0.0;
+  Instrument& tool = *state.instrument;
+  if (rows > 0) {
+    for (std::size_t t = 0; t < state.tissues.size(); ++t) {
+      TissueState& ts = state.tissues[t];
+      TissueScratch& tx = scratch.tissues[t];
+      if (tx.rows.rows() == 0) continue;
+      ts.compliance->correction(*ts.body, tx.rows.tissue, p.f.data() + tx.row_begin, tx.dq);
+      ts.body->positions() += tx.dq;
+      ts.body->velocities() += tx.dq / h;
+    }
+    const shared::Vector6d wrench = scratch.h_tool.transpose() * p.f;
+    scratch.wrench = wrench;
+    report.tool_wrench = wrench;
+    tool.applyCorrection(wrench);
+    scratch.grip_torque = tool.dynamicGrip() ? p.grip.dot(p.f) : 0.0;
+    if (tool.dynamicGrip()) tool.applyGripCorrection(scratch.grip_torque);
+    // linearised gaps after the correction: delta = W f + delta_free, left by NSGS on exit
+    // (not when it refused the problem as larger than its workspace: then computed here)
+    Eigen::VectorXd unsolved_delta;
+    const double* delta = scratch.workspace.delta.data();
+    if (report.nsgs.status == shared::NsgsStatus::kEmpty) {
+      unsolved_delta = p.W * p.f + p.delta_free;
+      delta = unsolved_delta.data();
+    }
+    double pen = 0.0;
+    double comp = 0.0;
+    for (int c = 0; c < contacts; ++c) {
+      const int r0 = p.row_offset[c];
+      pen = std::max(pen, -delta[r0]);
+      comp = std::max(comp, std::abs(delta[r0] * p.f[r0]));
+    }
+    report.max_penetration_m = pen;
+    report.complementarity = comp;
+  } else {
+    scratch.wrench.setZero();
+    scratch.grip_torque = 0.0;
+  }
+  report.times.constrained_motion_s += shared::secondsSinceNs(t0);
+}
+
+namespace {
+
+// State = free state + the mean of this pass's and the previous pass's corrections (tissue dq,
+// tool wrench, grip torque; each correction is linear in its force, so this is the correction of
+// the mean force).
+void blendWithPreviousPass(const SimulationModel& model, SimulationState& state,
+                           StepScratch& scratch) {
+  const double h = model.h_s;
+  for (std::size_t t = 0; t < state.tissues.size(); ++t) {
+    FemBody& body = *state.tissues[t].body;
+    const TissueScratch& tx = scratch.tissues[t];
+    const Eigen::VectorXd dq = 0.5 * (body.positions() - tx.q_free + tx.dq_previous);
+    body.positions() = tx.q_free + dq;
+    body.velocities() = tx.v_free + dq / h;
+  }
+  scratch.wrench = 0.5 * (scratch.wrench + scratch.previous_wrench);
+  scratch.grip_torque = 0.5 * (scratch.grip_torque + scratch.previous_grip_torque);
+  Instrument& tool = *state.instrument;
+  tool = *scratch.tool_free;
+  tool.applyCorrection(scratch.wrench);
+  if (tool.dynamicGrip()) tool.applyGripCorrection(scratch.grip_torque);
+}
+
+}  // namespace
+
+bool nextContactPass(const SimulationModel& model, SimulationState& state, StepScratch& scratch,
+                     StepReport& report, PipelineCounters& counters, int pass,
+                     double& previous_gap) {
+  const SolverSpec& solver = model.spec.solver;
+  const int passes = std::max(1, solver.contact_iterations);
+  if (passes == 1) return false;
+  // the nonlinear gaps at the corrected state
+  const double geometric_gap = detectCollisions(model, state, scratch, report, counters);
+  report.geometric_penetration_m =
+      std::isfinite(geometric_gap) ? std::max(0.0, -geometric_gap) : 0.0;
+  // with a contact compliance a contact may penetrate by c f_n: the passes look at the rest
+  const double min_gap = scratch.min_excess_gap;
+  if (!(min_gap < -solver.penetration_tolerance_m) || pass + 1 >= passes) return false;
+  if (pass > 0 && min_gap < previous_gap) {
+    // worse than the previous pass: the linearisations alternate (the contact set flips
+    // between two states). Linearise the next pass at the mean of the two corrections. (A step
+    // never ends on such a mean: the last pass's state is its own solution, so the published
+    // forces are those that moved it.)
+    const std::int64_t t0 = shared::monotonicNs();
+    blendWithPreviousPass(model, state, scratch);
+    report.times.constrained_motion_s += shared::secondsSinceNs(t0);
+    detectCollisions(model, state, scratch, report, counters);
+  }
+  previous_gap = min_gap;
+  for (std::size_t t = 0; t < state.tissues.size(); ++t) {
+    scratch.tissues[t].dq_previous = state.tissues[t].body->positions() - scratch.tissues[t].q_free;
+  }
+  scratch.previous_wrench = scratch.wrench;
+  scratch.previous_grip_torque = scratch.grip_torque;
+  return true;
+}
+
+}  // namespace tactus::sim

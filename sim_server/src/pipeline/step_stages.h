@@ -1,0 +1,65 @@
+#pragma once
+// The stages of one simulation step (paper 3.1; docs/design.md section 2), each a function named
+// after the paper's stage and timed under its own StageTimes field. Simulation::step()
+// (pipeline.cpp) calls them in this order:
+//
+//   freeMotion -> detectCollisions -> updateCompliance -> buildW -> solveContacts
+//   -> constrainedMotion [-> nextContactPass: detectCollisions, back to buildW]
+//
+// Each reads the model, changes the state, reuses the scratch and records into the report (times,
+// figures) and the run's counters.
+
+#include "simulation_model.h"
+#include "simulation_state.h"
+#include "step_scratch.h"
+#include "tactus/sim/pipeline.h"
+
+namespace tactus::sim {
+
+/// Implicit Euler of every tissue and the god object toward the device target, without contact
+/// forces; keeps the start-of-step positions and pose (for the friction rows).
+void freeMotion(const SimulationModel& model, SimulationState& state, StepScratch& scratch,
+                StepReport& report);
+
+/// Refits every tissue's trees at its current positions and finds the contacts with the
+/// instrument. Returns the smallest gap (+inf if none); sets scratch.min_excess_gap.
+double detectCollisions(const SimulationModel& model, SimulationState& state, StepScratch& scratch,
+                        StepReport& report, PipelineCounters& counters);
+
+/// detectCollisions without its timing and counter (Simulation::geometricMinGap).
+double queryContacts(const SimulationModel& model, SimulationState& state, StepScratch& scratch);
+
+/// The compliance at the free state: C ~ R C0 R^T (warped, eq. 12), the current tangent's
+/// (exact); rest and uncoupled keep C0.
+void updateCompliance(SimulationState& state, StepReport& report);
+
+/// Copies the free state (positions, velocities, god object), which every contact pass corrects.
+void keepFreeState(SimulationState& state, StepScratch& scratch);
+
+/// Where the contacts buildW uses were detected.
+enum class FoundAt { kFreeState, kStepStart, kCorrectedState };
+
+/// The contact problem of the contacts last detected: rows H (n, t1, t2 per contact), delta_free
+/// (carried to the free state when found elsewhere), W = sum_tissue H C H^T + H_tool C6 H_tool^T
+/// (+ c_g g g^T with a dynamic grip, + c I with a contact compliance) and J (build_w.cpp).
+void buildW(const SimulationModel& model, SimulationState& state, StepScratch& scratch,
+            StepReport& report, PipelineCounters& counters, FoundAt found_at);
+
+/// NSGS on the assembled problem, warm-started by contact id; keeps the forces for the next
+/// solve's warm start.
+void solveContacts(const SimulationModel& model, SimulationState& state, StepScratch& scratch,
+                   StepReport& report, PipelineCounters& counters);
+
+/// Tissue dq = C H^T f (per model), tool dx = C6 H_tool^T f, from the free state (restored first
+/// when `restore_free`, a later pass); the largest penetration and complementarity it leaves.
+void constrainedMotion(const SimulationModel& model, SimulationState& state, StepScratch& scratch,
+                       StepReport& report, bool restore_free);
+
+/// After pass `pass`: detects the contacts at the corrected state and says whether another pass
+/// runs (solver.contact_iterations; a gap beyond -penetration_tolerance). A pass that ended
+/// worse than the one before sends the next to the mean of the two corrections.
+bool nextContactPass(const SimulationModel& model, SimulationState& state, StepScratch& scratch,
+                     StepReport& report, PipelineCounters& counters, int pass,
+                     double& previous_gap);
+
+}  // namespace tactus::sim
