@@ -2,6 +2,7 @@
 #include "tactus/shared/workspace_mapping.h"
 
 #include <cmath>
+#include <iomanip>
 #include <sstream>
 
 #include "tactus/shared/error.h"
@@ -34,7 +35,7 @@ std::string WorkspaceMappingParams::problem() const {
   }
   if (!(std::abs(std::sqrt(n2) - 1.0) <= L::kUnitTolerance)) {
     os << "workspace rotation must be a unit quaternion (w, x, y, z): its norm is "
-       << std::sqrt(n2) << " (tolerance " << L::kUnitTolerance << ")";
+       << std::sqrt(n2) << std::setprecision(3) << " (tolerance " << L::kUnitTolerance << ")";
     return os.str();
   }
   if (clutch_button < -1 || clutch_button > L::kMaxButton) {
