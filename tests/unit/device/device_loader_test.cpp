@@ -30,7 +30,8 @@ std::string loadError(const std::string& name, const DeviceConfig& config = {}) 
 }
 
 TEST(DeviceLoader, BuiltinsByName) {
-  EXPECT_EQ(builtinDeviceNames(), (std::vector<std::string>{"null", "replay", "simulated"}));
+  EXPECT_EQ(builtinDeviceNames(),
+            (std::vector<std::string>{"bridge", "null", "replay", "simulated"}));
   auto sim = loadDevice("");  // the default
   EXPECT_EQ(sim->info().model, "tactus simulated hand");
   EXPECT_NE(dynamic_cast<SimulatedDevice*>(sim.get()), nullptr);

@@ -10,6 +10,7 @@
 #include <string>
 
 #include "../../support/alloc_counter.h"
+#include "../../support/one_contact_rig.h"
 #include "../../support/scripted_device.h"
 #include "tactus/haptic/haptic_loop.h"
 #include "tactus/haptic/workspace_mapping.h"
@@ -81,55 +82,20 @@ TEST(WorkspaceMapping, MapsThePoseAndBringsTheWrenchBackExactly) {
   EXPECT_NEAR(torque[0], 0.0, 1e-15);
 }
 
-// One frictionless contact below the instrument along scene +z, W = w, J = [0 0 1 0 0 0].
+// The real loop with one contact along scene +z (tests/support/one_contact_rig.h).
 class MappedLoopTest : public ::testing::Test {
  protected:
   void start(const WorkspaceMappingParams& params) {
-    name_ = "tactus_mapping_test_" + std::to_string(::getpid());
-    shared::Segment::remove(name_);
-    sim_.emplace(shared::Segment::create(name_, shared::SegmentCapacity::forContacts(8, true)));
-    publisher_ = sim_->snapshotPublisher();
-    samples_.emplace(sim_->deviceReader());
     settings_.max_force_n = 5.0;
     settings_.slew_n_per_s = 1e6;
     settings_.fade_ms = 1.0;
-    loop_.emplace(device_, settings_);
+    rig_.reset();
+    rig_ = std::make_unique<test::OneContactRig>(device_, settings_, "mapping_test");
+    loop_ = &rig_->loop();
     loop_->workspaceMapping().configure(params);
-    link_ = std::make_unique<AttachedSegment>(shared::Segment::open(name_));
-    loop_->offerLink(link_.get());
   }
-  void TearDown() override {
-    if (!loop_) return;
-    loop_->offerLink(nullptr);
-    tick(1);
-    link_.reset();
-    samples_.reset();
-    sim_.reset();
-    shared::Segment::remove(name_);
-  }
-  // the contact problem with gap_m when the instrument is at scene height z_star
   void publish(double gap_m, double w_m_per_n, double z_star) {
-    auto slot = publisher_.slot();
-    ASSERT_TRUE(slot.setSize(1, 1));
-    auto& h = slot.header();
-    h.seq = ++seq_;
-    h.t_ns = t_;
-    h.flags = shared::kSnapshotValid | shared::kSnapshotHasJacobian;
-    h.device_pose.pos_m = {0.0, 0.0, z_star};
-    h.tool_pose.pos_m = {0.0, 0.0, z_star};
-    slot.rowOffset()[0] = 0;
-    slot.rowOffset()[1] = 1;
-    slot.contactId()[0] = 1;
-    slot.mu()[0] = 0.0;
-    slot.W()[0] = w_m_per_n;
-    slot.deltaFree()[0] = gap_m;
-    slot.f()[0] = 0.0;
-    for (int k = 0; k < 6; ++k) slot.J()[k] = k == 2 ? 1.0 : 0.0;
-    for (int k = 0; k < 3; ++k) {
-      slot.contactPoint()[k] = 0.0;
-      slot.contactNormal()[k] = k == 2 ? 1.0 : 0.0;
-    }
-    publisher_.publish();
+    rig_->publish(gap_m, w_m_per_n, z_star, t_);
   }
   TickOutput tick(int n) {
     TickOutput out;
@@ -139,18 +105,12 @@ class MappedLoopTest : public ::testing::Test {
     }
     return out;
   }
-  // the scene pose the simulation received with the last sample
-  shared::DeviceSample sample() { return samples_->latest(); }
+  shared::DeviceSample sample() { return rig_->sample(); }
 
-  std::string name_;
-  std::optional<shared::Segment> sim_;
-  shared::SnapshotPublisher publisher_;
-  std::optional<shared::TripleReader<shared::DeviceSample>> samples_;
   test::ScriptedDevice device_;
   HapticSettings settings_;
-  std::optional<HapticLoop> loop_;
-  std::unique_ptr<AttachedSegment> link_;
-  std::uint64_t seq_ = 0;
+  std::unique_ptr<test::OneContactRig> rig_;
+  HapticLoop* loop_ = nullptr;
   std::int64_t t_ = shared::monotonicNs();
 };
 
@@ -160,7 +120,6 @@ class MappedLoopTest : public ::testing::Test {
 TEST_F(MappedLoopTest, ForceGoesBackRotatedAndScaledAndIsClampedAfterTheMapping) {
   for (double scale : {0.01, 0.1, 1.0, 10.0}) {
     SCOPED_TRACE(scale);
-    TearDown();
     WorkspaceMappingParams p;
     p.scale = scale;
     p.rotation_wxyz = kQuarterTurnX;
