@@ -49,13 +49,20 @@ class BridgeSender {
     return b;
   }
   /// Waits for one command datagram (up to 5 s); false if none arrived or it did not decode.
-  bool receive(device::DeviceCommand* cmd, std::uint64_t* state_seq) {
+  bool receive(device::DeviceCommand* cmd, std::uint64_t* state_seq, int flags = 0) {
     unsigned char buf[256];
-    const ssize_t n = ::recv(fd_, buf, sizeof buf, 0);
+    const ssize_t n = ::recv(fd_, buf, sizeof buf, flags);
     if (n <= 0) return false;
     device::bridge::Header h;
     return device::bridge::decodeCommand(buf, static_cast<std::size_t>(n), &h, cmd, state_seq) ==
            device::bridge::DecodeStatus::kOk;
+  }
+  /// Waits for a command, then takes every queued one: the newest (false if none decoded).
+  bool receiveNewest(device::DeviceCommand* cmd, std::uint64_t* state_seq) {
+    if (!receive(cmd, state_seq)) return false;
+    while (receive(cmd, state_seq, MSG_DONTWAIT)) {
+    }
+    return true;
   }
 
  private:
