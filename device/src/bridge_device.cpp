@@ -147,7 +147,10 @@ IoStatus BridgeDevice::readAt(std::int64_t now_ns, DeviceState* out) noexcept {
     socklen_t from_len = sizeof from;
     const ssize_t n = ::recvfrom(fd_, buf_.data(), buf_.size(), MSG_DONTWAIT | MSG_TRUNC,
                                  reinterpret_cast<sockaddr*>(&from), &from_len);
-    if (n < 0) break;   // EAGAIN: drained (or an ICMP error: nothing to read either)
+    if (n < 0) {
+      if (errno == EAGAIN || errno == EWOULDBLOCK) break;   // drained
+      continue;   // a reported ICMP error (the client went away): the queue may hold more
+    }
     bridge::Header h;
     DeviceState s;
     // MSG_TRUNC: n is the datagram's real length, so an oversized one is refused too

@@ -12,6 +12,7 @@
 
 #include "clutch_key.h"
 #include "tactus/device/backends.h"
+#include "tactus/device/bridge_device.h"
 #include "tactus/device/device.h"
 #include "tactus/haptic/haptic_loop.h"
 #include "tactus/haptic/supervisor.h"
@@ -45,7 +46,8 @@ int main(int argc, char** argv) {
   haptic::HapticSettings settings;
   app.add_option("--segment", segment, "Shared-memory segment name")->capture_default_str();
   app.add_option("--device", device_name,
-                 "Device backend: simulated, replay, null, or a plugin .so path")
+                 "Device backend: simulated, replay, null, bridge (network; device/README.md), "
+                 "or a plugin .so path")
       ->capture_default_str();
   app.add_option("--device-option", device_options, "Backend option key=value (repeatable)");
   app.add_option("--rate", rate_hz, "Loop rate [Hz]")
@@ -180,6 +182,10 @@ int main(int argc, char** argv) {
                    rt_summary);
     }
 
+    // the network bridge's packet counters go into the status line
+    device::Device* inner = dev.get();
+    if (auto* rec = dynamic_cast<device::RecordingDevice*>(inner)) inner = &rec->inner();
+    const auto* bridge = dynamic_cast<const device::BridgeDevice*>(inner);
     const std::int64_t t0 = shared::monotonicNs();
     std::int64_t last_status = t0;
     std::uint64_t last_ticks = 0;
@@ -201,12 +207,14 @@ int main(int argc, char** argv) {
                          static_cast<double>(now - last_status),
                      loop.counters().snapshots_taken.load(), loop.counters().stale_ticks.load(),
                      loop.counters().clamped.load(), supervisor.attached() ? "attached" : "absent");
+        if (bridge != nullptr) spdlog::info("{}", bridge->describeCounters());
         last_ticks = ticks;
         last_status = now;
       }
       std::this_thread::sleep_for(std::chrono::milliseconds(50));
     }
     spdlog::info("stopping: {} ticks", loop.counters().ticks.load());
+    if (bridge != nullptr) spdlog::info("{}", bridge->describeCounters());
     supervisor.detach();
     loop_stop.store(true);
     rt.join();
