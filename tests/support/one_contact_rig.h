@@ -65,6 +65,15 @@ class OneContactRig {
   }
 
   haptic::HapticLoop& loop() { return *loop_; }
+  /// n ticks one millisecond apart, advancing t_ns; the last tick's output.
+  haptic::TickOutput tickEveryMs(int n, std::int64_t& t_ns) {
+    haptic::TickOutput out;
+    for (int i = 0; i < n; ++i) {
+      t_ns += 1'000'000;
+      out = loop_->tick(t_ns, t_ns);
+    }
+    return out;
+  }
   /// The device sample (scene frame) the simulation received last.
   shared::DeviceSample sample() { return samples_->latest(); }
 

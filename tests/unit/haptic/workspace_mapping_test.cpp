@@ -97,15 +97,21 @@ class MappedLoopTest : public ::testing::Test {
   void publish(double gap_m, double w_m_per_n, double z_star) {
     rig_->publish(gap_m, w_m_per_n, z_star, t_);
   }
-  TickOutput tick(int n) {
-    TickOutput out;
-    for (int i = 0; i < n; ++i) {
-      t_ += 1'000'000;
-      out = loop_->tick(t_, t_);
-    }
-    return out;
-  }
+  TickOutput tick(int n) { return rig_->tickEveryMs(n, t_); }
   shared::DeviceSample sample() { return rig_->sample(); }
+  // Starts with a quarter turn about x, the hand at the device origin touching the tissue at
+  // scene z = 0 (forces engaged).
+  void startTouching(double scale, std::array<double, 3> offset_m, int clutch_button) {
+    WorkspaceMappingParams p;
+    p.scale = scale;
+    p.offset_m = offset_m;
+    p.rotation_wxyz = kQuarterTurnX;
+    p.clutch_button = clutch_button;
+    start(p);
+    device_.state.pos_m = {0.0, 0.0, 0.0};
+    publish(0.0, 1e-3, 0.0);
+    tick(10);
+  }
 
   test::ScriptedDevice device_;
   HapticSettings settings_;
@@ -120,13 +126,7 @@ class MappedLoopTest : public ::testing::Test {
 TEST_F(MappedLoopTest, ForceGoesBackRotatedAndScaledAndIsClampedAfterTheMapping) {
   for (double scale : {0.01, 0.1, 1.0, 10.0}) {
     SCOPED_TRACE(scale);
-    WorkspaceMappingParams p;
-    p.scale = scale;
-    p.rotation_wxyz = kQuarterTurnX;
-    start(p);
-    device_.state.pos_m = {0.0, 0.0, 0.0};
-    publish(0.0, 1e-3, 0.0);                        // touching at the snapshot pose: engages
-    tick(5);
+    startTouching(scale, {0.0, 0.0, 0.0}, -1);
     device_.state.pos_m = {0.0, -0.001, 0.0};       // 1 mm down into the tissue (device -y)
     TickOutput out = tick(3);
     EXPECT_NEAR(sample().pos_m[2], -0.001 * scale, 1e-15);   // the simulation sees scene -z
@@ -144,15 +144,7 @@ TEST_F(MappedLoopTest, ForceGoesBackRotatedAndScaledAndIsClampedAfterTheMapping)
 }
 
 TEST_F(MappedLoopTest, TheClutchHoldsTheInstrumentAndReleasesWithoutAJump) {
-  WorkspaceMappingParams p;
-  p.scale = 2.0;
-  p.offset_m = {0.1, 0.0, 0.0};
-  p.rotation_wxyz = kQuarterTurnX;
-  p.clutch_button = 2;
-  start(p);
-  device_.state.pos_m = {0.0, 0.0, 0.0};
-  publish(0.0, 1e-3, 0.0);
-  tick(5);
+  startTouching(2.0, {0.1, 0.0, 0.0}, 2);
   device_.state.pos_m = {0.0, -0.001, 0.0};   // pressing: 2 mm into the tissue in the scene
   const TickOutput pressing = tick(3);
   EXPECT_NEAR(pressing.force_n[1], 1.0, 1e-9);
@@ -197,15 +189,7 @@ TEST_F(MappedLoopTest, TheClutchHoldsTheInstrumentAndReleasesWithoutAJump) {
 }
 
 TEST_F(MappedLoopTest, AMappedTickWithTheClutchAllocatesNothing) {
-  WorkspaceMappingParams p;
-  p.scale = 0.5;
-  p.offset_m = {0.0, 0.01, -0.02};
-  p.rotation_wxyz = kQuarterTurnX;
-  p.clutch_button = 0;
-  start(p);
-  device_.state.pos_m = {0.0, 0.0, 0.0};
-  publish(0.0, 1e-3, 0.0);
-  tick(10);
+  startTouching(0.5, {0.0, 0.01, -0.02}, 0);
   test::AllocScope scope;
   for (int i = 0; i < 200; ++i) {
     if (i % 20 == 0) publish(-0.001 * (i % 3), 1e-3, 0.0);
