@@ -367,6 +367,10 @@ TEST(HapticDeviceOptions, BackendsRejectNonsenseWithAClearMessage) {
       {"replay", "speed=1e308", "option speed=1e308 must be in"},
       {"replay", "speed=-1", "option speed=-1 must be in"},
       {"null", "pose=0,1e300,0", "option pose component"},
+      {"bridge", "port=70000", "option port=70000 must be in"},
+      {"bridge", "timeout_ms=0", "option timeout_ms=0 must be in"},
+      {"bridge", "max_force=1e308", "option max_force=1e308 must be in"},
+      {"bridge", "bind=10.1.2.3", "allow_remote=1"},
   };
   for (const Case& c : cases) {
     device::DeviceConfig config;
