@@ -420,6 +420,11 @@ TEST(HapticServerCli, ForceRateAndWatchdogOptionsRejectNonsense) {
       {"--rate nan", "--rate"},         {"--rate 1e9", "--rate"},
       {"--tolerance nan", "--tolerance"}, {"--max-sweeps 0", "--max-sweeps"},
       {"--device-option mass=-1 --device simulated", "mass=-1"},
+      {"--workspace-scale 0", "--workspace-scale"}, {"--workspace-scale nan", "--workspace-scale"},
+      {"--workspace-rotation 1,0,0,0.5", "unit quaternion"},
+      {"--workspace-offset 0,nan,0", "offset[1]"}, {"--workspace-offset 0,1e9,0", "offset[1]"},
+      {"--clutch-button 40", "--clutch-button"},
+      {"--device bridge --device-option bind=0.0.0.0", "allow_remote=1"},
   };
   for (const auto& [args, expect] : cases) {
     std::string out;
@@ -434,6 +439,13 @@ TEST(HapticServerCli, ForceRateAndWatchdogOptionsRejectNonsense) {
   std::string out;
   EXPECT_EQ(runHapticServer("--device null --max-force 4 --slew 500 --force-scale 0.5", &out), 0)
       << out;
+  EXPECT_EQ(runHapticServer("--device null --workspace-scale 2 --workspace-offset 0,0,0.1 "
+                            "--workspace-rotation 0.7071067811865476,0,0,0.7071067811865476 "
+                            "--clutch-button 0",
+                            &out),
+            0)
+      << out;
+  EXPECT_THAT(out, HasSubstr("workspace: scale 2"));
 }
 
 // The simulation publishes W exactly symmetric for a real frictional scene, says so with
