@@ -110,7 +110,8 @@ int main(int argc, char** argv) {
         std::printf("%llu states sent, %llu commands (%llu bad), force %.3f %.3f %.3f N, "
                     "hand at %.4f %.4f %.4f m\n",
                     static_cast<unsigned long long>(seq),
-                    static_cast<unsigned long long>(commands), static_cast<unsigned long long>(bad),
+                    static_cast<unsigned long long>(commands),
+                    static_cast<unsigned long long>(bad),
                     command.force_n[0], command.force_n[1], command.force_n[2], state.pos_m[0],
                     state.pos_m[1], state.pos_m[2]);
         std::fflush(stdout);

@@ -88,7 +88,9 @@ void BridgeDevice::close() noexcept {
   fd_ = -1;
 }
 
-IoStatus BridgeDevice::read(DeviceState* out) noexcept { return readAt(shared::monotonicNs(), out); }
+IoStatus BridgeDevice::read(DeviceState* out) noexcept {
+  return readAt(shared::monotonicNs(), out);
+}
 
 void BridgeDevice::take(const bridge::Header& h, const DeviceState& s, const sockaddr_in& from,
                         std::int64_t now_ns) noexcept {

@@ -50,7 +50,9 @@ inline bool feedBridge(const std::string& bytes) {
   if (ct == bridge::DecodeStatus::kOk) {
     if (datagram.size() != bridge::kCommandBytes) throw std::logic_error("command of wrong size");
     for (double f : c.force_n) {
-      if (!(std::abs(f) <= bridge::kMaxCommandComponent)) throw std::logic_error("force unbounded");
+      if (!(std::abs(f) <= bridge::kMaxCommandComponent)) {
+        throw std::logic_error("force unbounded");
+      }
     }
   }
   return st == bridge::DecodeStatus::kOk || ct == bridge::DecodeStatus::kOk;

@@ -713,7 +713,8 @@ class SceneParser {
   }
 
   // The device -> scene mapping (shared::WorkspaceMappingLimits are the hard ranges).
-  void readWorkspace(const YAML::Node& n, const std::string& p, shared::WorkspaceMappingParams* w) {
+  void readWorkspace(const YAML::Node& n, const std::string& p,
+                     shared::WorkspaceMappingParams* w) {
     using L = shared::WorkspaceMappingLimits;
     checkKeys(n, p, {"scale", "offset", "rotation_deg", "quaternion", "clutch_button"});
     number(n, p, "scale", &w->scale, kPositive, Range{L::kMinScale, L::kMaxScale},

@@ -41,7 +41,9 @@ class BridgeDeviceTest : public ::testing::Test {
     IoStatus any = IoStatus::kNoData;
     for (int i = 0; i < 50'000 && handled(device_->counters()) < count; ++i) {
       if (device_->readAt(now, out) == IoStatus::kOk) any = IoStatus::kOk;
-      if (handled(device_->counters()) < count) std::this_thread::sleep_for(std::chrono::microseconds(100));
+      if (handled(device_->counters()) < count) {
+        std::this_thread::sleep_for(std::chrono::microseconds(100));
+      }
     }
     EXPECT_EQ(handled(device_->counters()), count) << "datagrams not delivered";
     return any;
@@ -138,7 +140,8 @@ TEST_F(BridgeDeviceTest, MalformedDatagramsAreCountedAndDroppedNeverUsed) {
   for (int i = 0; i < 200; ++i) {
     std::vector<unsigned char> junk(rng() % 300);
     for (auto& b : junk) b = static_cast<unsigned char>(rng());
-    if (i % 2 == 0 && junk.size() >= 8) std::memcpy(junk.data(), valid().data(), 8);  // good header start
+    // every other one starts with a good magic, version and type
+    if (i % 2 == 0 && junk.size() >= 8) std::memcpy(junk.data(), valid().data(), 8);
     bad.push_back(junk);
   }
   out.pos_m = {7, 7, 7};

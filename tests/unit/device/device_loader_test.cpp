@@ -64,8 +64,8 @@ TEST(DeviceLoader, BadOptionsAreExplained) {
 
 TEST(DeviceLoader, UnknownNameSaysWhatIsAvailable) {
   const std::string msg = loadError("phantom_omni");
-  EXPECT_THAT(msg, HasSubstr("device backend 'phantom_omni' is not built in (bridge, null, replay, "
-                             "simulated)"));
+  EXPECT_THAT(msg, HasSubstr("device backend 'phantom_omni' is not built in (bridge, null, "
+                             "replay, simulated)"));
   EXPECT_THAT(msg, HasSubstr("libphantom_omni.so"));
   EXPECT_THAT(msg, HasSubstr("TACTUS_DEVICE_PATH"));
 }

@@ -46,7 +46,9 @@ class WorkspaceMapping {
       noexcept;
 
   /// Any thread: a clutch request besides the button (a key for a device without buttons).
-  void setClutchRequest(bool held) noexcept { clutch_request_.store(held, std::memory_order_relaxed); }
+  void setClutchRequest(bool held) noexcept {
+    clutch_request_.store(held, std::memory_order_relaxed);
+  }
   /// The clutch state after the last toScene().
   bool clutched() const noexcept { return clutched_; }
   /// The current scene position of the device origin (re-based by each clutch release).

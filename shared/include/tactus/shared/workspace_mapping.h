@@ -29,7 +29,7 @@ struct WorkspaceMappingParams {
   double scale = 1.0;                                ///< scene metres per device metre
   std::array<double, 3> offset_m{};                  ///< scene position of the device origin
   std::array<double, 4> rotation_wxyz{1.0, 0.0, 0.0, 0.0};  ///< device -> scene, unit
-  int clutch_button = -1;                            ///< device button bit that clutches (-1: none)
+  int clutch_button = -1;                            ///< button bit that clutches (-1: none)
 
   /// Empty when every field is finite and in range (WorkspaceMappingLimits), else a message
   /// naming the first bad field, its value and the range.
