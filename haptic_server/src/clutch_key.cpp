@@ -1,5 +1,5 @@
 // Space bar -> clutch toggle (non-real-time thread).
-#include "clutch_key.h"
+#include "tactus/haptic/clutch_key.h"
 
 #include <poll.h>
 #include <unistd.h>
@@ -8,13 +8,13 @@
 
 namespace tactus::haptic {
 
-ClutchKey::ClutchKey(WorkspaceMapping& mapping) : mapping_(mapping) {
-  if (::isatty(STDIN_FILENO) == 0 || ::tcgetattr(STDIN_FILENO, &saved_) != 0) return;
+ClutchKey::ClutchKey(WorkspaceMapping& mapping, int fd) : mapping_(mapping), fd_(fd) {
+  if (::isatty(fd_) == 0 || ::tcgetattr(fd_, &saved_) != 0) return;
   termios raw = saved_;
   raw.c_lflag &= static_cast<tcflag_t>(~(ICANON | ECHO));
   raw.c_cc[VMIN] = 1;
   raw.c_cc[VTIME] = 0;
-  if (::tcsetattr(STDIN_FILENO, TCSANOW, &raw) != 0) return;
+  if (::tcsetattr(fd_, TCSANOW, &raw) != 0) return;
   active_ = true;
   thread_ = std::thread([this] { listen(); });
 }
@@ -23,16 +23,16 @@ ClutchKey::~ClutchKey() {
   if (!active_) return;
   stop_.store(true);
   thread_.join();
-  ::tcsetattr(STDIN_FILENO, TCSANOW, &saved_);
+  ::tcsetattr(fd_, TCSANOW, &saved_);
 }
 
 void ClutchKey::listen() {
   bool held = false;
   while (!stop_.load()) {
-    pollfd p{STDIN_FILENO, POLLIN, 0};
+    pollfd p{fd_, POLLIN, 0};
     if (::poll(&p, 1, 100) <= 0) continue;
     char c = 0;
-    if (::read(STDIN_FILENO, &c, 1) != 1) return;   // end of input: leave the clutch as it is
+    if (::read(fd_, &c, 1) != 1) return;   // end of input: leave the clutch as it is
     if (c != ' ') continue;
     held = !held;
     mapping_.setClutchRequest(held);

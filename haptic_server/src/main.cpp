@@ -10,10 +10,10 @@
 #include <optional>
 #include <thread>
 
-#include "clutch_key.h"
 #include "tactus/device/backends.h"
 #include "tactus/device/bridge_device.h"
 #include "tactus/device/device.h"
+#include "tactus/haptic/clutch_key.h"
 #include "tactus/haptic/haptic_loop.h"
 #include "tactus/haptic/supervisor.h"
 #include "tactus/shared/cli_checks.h"
