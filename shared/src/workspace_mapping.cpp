@@ -1,6 +1,7 @@
 // Range checks of the workspace mapping parameters.
 #include "tactus/shared/workspace_mapping.h"
 
+#include <Eigen/Geometry>
 #include <cmath>
 #include <iomanip>
 #include <sstream>
@@ -54,6 +55,21 @@ void WorkspaceMappingParams::validate() const {
 bool WorkspaceMappingParams::isIdentity() const noexcept {
   return scale == 1.0 && offset_m == std::array<double, 3>{} &&
          rotation_wxyz == std::array<double, 4>{1.0, 0.0, 0.0, 0.0} && clutch_button < 0;
+}
+
+void WorkspaceMappingParams::sceneToDevice(std::array<double, 3>& pos_m,
+                                           std::array<double, 4>& quat_wxyz) const noexcept {
+  const auto& r = rotation_wxyz;
+  const Eigen::Quaterniond to_device =
+      Eigen::Quaterniond(r[0], r[1], r[2], r[3]).normalized().conjugate();
+  const Eigen::Vector3d p = to_device * (Eigen::Vector3d(pos_m[0], pos_m[1], pos_m[2]) -
+                                         Eigen::Vector3d(offset_m[0], offset_m[1], offset_m[2])) /
+                            scale;
+  const Eigen::Quaterniond q =
+      (to_device * Eigen::Quaterniond(quat_wxyz[0], quat_wxyz[1], quat_wxyz[2], quat_wxyz[3]))
+          .normalized();
+  pos_m = {p.x(), p.y(), p.z()};
+  quat_wxyz = {q.w(), q.x(), q.y(), q.z()};
 }
 
 }  // namespace tactus::shared

@@ -50,6 +50,32 @@ TEST(WorkspaceMappingParams, RejectsNonFiniteOrOutOfRangeValues) {
   EXPECT_THROW(mapping.configure(p), Error);
 }
 
+// A scene-frame script taken to the device frame (sim_server --export-trajectory) comes back
+// where it was written once the device's mapping takes it to the scene again.
+TEST(WorkspaceMapping, SceneToDeviceIsTheInverseOfThePoseMap) {
+  WorkspaceMappingParams p;
+  p.scale = 3.0;
+  p.offset_m = {0.2, -0.1, 0.05};
+  const double a = 0.3;
+  p.rotation_wxyz = {std::cos(a), 0.0, std::sin(a) * 0.6, std::sin(a) * 0.8};
+  WorkspaceMapping mapping;
+  mapping.configure(p);
+  for (int i = 0; i < 20; ++i) {
+    const double b = 0.1 * i;
+    std::array<double, 3> pos{0.01 * i - 0.05, 0.3 - 0.02 * i, 0.07 * std::sin(b)};
+    std::array<double, 4> q{std::cos(b), std::sin(b), 0.0, 0.0};
+    const auto scene_pos = pos;
+    const auto scene_q = q;
+    p.sceneToDevice(pos, q);
+    device::DeviceState s;
+    s.pos_m = pos;
+    s.quat_wxyz = q;
+    mapping.toScene(s);
+    for (int k = 0; k < 3; ++k) EXPECT_NEAR(s.pos_m[k], scene_pos[k], 1e-15) << i;
+    for (int k = 0; k < 4; ++k) EXPECT_NEAR(s.quat_wxyz[k], scene_q[k], 1e-15) << i;
+  }
+}
+
 TEST(WorkspaceMapping, MapsThePoseAndBringsTheWrenchBackExactly) {
   WorkspaceMapping mapping;
   WorkspaceMappingParams p;

@@ -37,6 +37,11 @@ struct WorkspaceMappingParams {
   /// Throws tactus::Error with problem() when it is not empty.
   void validate() const;
   bool isIdentity() const noexcept;
+  /// The inverse of the pose map without clutch re-basing: p = R^T (p_scene - offset) / scale,
+  /// q = R^T q_scene (unit). For scripts written in the scene frame that a device replays
+  /// (sim_server --export-trajectory), so the mapping brings them back where they were written.
+  void sceneToDevice(std::array<double, 3>& pos_m, std::array<double, 4>& quat_wxyz) const
+      noexcept;
 };
 
 }  // namespace tactus::shared
