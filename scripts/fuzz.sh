@@ -33,7 +33,7 @@ if ! [[ "$seconds" =~ ^[0-9]+$ && "$seconds" -gt 0 ]]; then
   exit 2
 fi
 
-parsers=(mesh scene trajectory fclib compliance_cache)
+parsers=(mesh scene trajectory fclib compliance_cache bridge)
 if [[ -n "$only" ]]; then IFS=, read -r -a parsers <<< "$only"; fi
 
 # clang and the compiler-rt runtime (libFuzzer, sanitizers); only needed here, so not in

@@ -108,8 +108,13 @@ if [[ $haptic -eq 1 ]]; then
       >>"$run_dir/sim_export.log" 2>&1 &&
       device_opts=(--device-option "trajectory=$run_dir/trajectory.csv" --device-option loop=true)
   fi
+  # the scene's haptics section as haptic_server options (the workspace mapping)
+  scene_haptic_opts=()
+  mapfile -t scene_haptic_opts < <("$build/sim_server/sim_server" "$scene" --print-haptic-options \
+    2>>"$run_dir/sim_export.log" || true)
   "$build/haptic_server/haptic_server" --segment "$segment" --device "$device" \
-    "${device_opts[@]}" --core "$core" --rate "$rate" >"$run_dir/haptic.log" 2>&1 &
+    "${device_opts[@]}" "${scene_haptic_opts[@]}" --core "$core" --rate "$rate" \
+    >"$run_dir/haptic.log" 2>&1 &
   haptic_pid=$!
   echo "$haptic_pid" >"$run_dir/haptic.pid"
 fi

@@ -6,6 +6,7 @@
 #include <functional>
 
 #include "tactus/device/backends.h"
+#include "tactus/device/bridge_device.h"
 #include "tactus/device/device.h"
 #include "tactus/device/plugin_abi.h"
 
@@ -18,6 +19,7 @@ using Factory = std::function<std::unique_ptr<Device>(const DeviceConfig&)>;
 // Built-in backends, in a static table (vendor backends behind CMake options would go here).
 const std::map<std::string, Factory>& builtinTable() {
   static const std::map<std::string, Factory> table = {
+      {"bridge", [](const DeviceConfig& c) { return std::make_unique<BridgeDevice>(c); }},
       {"null", [](const DeviceConfig& c) { return std::make_unique<NullDevice>(c); }},
       {"replay", [](const DeviceConfig& c) { return std::make_unique<ReplayDevice>(c); }},
       {"simulated", [](const DeviceConfig& c) { return std::make_unique<SimulatedDevice>(c); }},

@@ -167,7 +167,8 @@ void HapticLoop::pushRateLimited(NoisyEvent which, std::uint32_t code, std::int6
 }
 
 device::IoStatus HapticLoop::readDevice(std::int64_t now, TickOutput& out) noexcept {
-  device::IoStatus io = device_.read(&state_);
+  device::IoStatus io = device_.read(&raw_state_);
+  if (io == device::IoStatus::kOk) state_ = raw_state_;
   if (io == device::IoStatus::kOk && state_.t_ns > 0 &&
       ageNs(now, state_.t_ns) > watchdog_ns_) {
     // a sample stamped long ago: the device stopped updating (disconnected, stuck driver)
@@ -178,6 +179,7 @@ device::IoStatus HapticLoop::readDevice(std::int64_t now, TickOutput& out) noexc
     if (finite(state_.pos_m) && std::isfinite(state_.quat_wxyz[0]) &&
         std::isfinite(state_.quat_wxyz[1]) && std::isfinite(state_.quat_wxyz[2]) &&
         std::isfinite(state_.quat_wxyz[3])) {
+      mapping_.toScene(state_);   // the one place where the device pose becomes the scene's
       last_pose_.pos_m = Eigen::Vector3d(state_.pos_m[0], state_.pos_m[1], state_.pos_m[2]);
       Eigen::Quaterniond q(state_.quat_wxyz[0], state_.quat_wxyz[1], state_.quat_wxyz[2],
                            state_.quat_wxyz[3]);
@@ -332,6 +334,7 @@ TickOutput HapticLoop::tick(std::int64_t scheduled_ns, std::int64_t woken_ns) no
   const device::IoStatus io = readDevice(now, out);
   publishSample(now, io);
   takeSnapshot(now, out);
+  mapping_.wrenchToDevice(out.force_n, out.torque_nm);   // the chain then clamps in device frame
   std::array<double, 3> force{};
   std::array<double, 3> torque{};
   applySafetyChain(dt, out, force, torque);

@@ -7,16 +7,20 @@
 #include <chrono>
 #include <cmath>
 #include <csignal>
+#include <optional>
 #include <thread>
 
 #include "tactus/device/backends.h"
+#include "tactus/device/bridge_device.h"
 #include "tactus/device/device.h"
+#include "tactus/haptic/clutch_key.h"
 #include "tactus/haptic/haptic_loop.h"
 #include "tactus/haptic/supervisor.h"
 #include "tactus/shared/cli_checks.h"
 #include "tactus/shared/clock.h"
 #include "tactus/shared/file_io.h"
 #include "tactus/shared/rt.h"
+#include "tactus/shared/workspace_mapping.h"
 
 namespace {
 std::atomic<bool> g_stop{false};
@@ -42,7 +46,8 @@ int main(int argc, char** argv) {
   haptic::HapticSettings settings;
   app.add_option("--segment", segment, "Shared-memory segment name")->capture_default_str();
   app.add_option("--device", device_name,
-                 "Device backend: simulated, replay, null, or a plugin .so path")
+                 "Device backend: simulated, replay, null, bridge (network; device/README.md), "
+                 "or a plugin .so path")
       ->capture_default_str();
   app.add_option("--device-option", device_options, "Backend option key=value (repeatable)");
   app.add_option("--rate", rate_hz, "Loop rate [Hz]")
@@ -67,6 +72,25 @@ int main(int argc, char** argv) {
   app.add_option("--tolerance", settings.tolerance, "NSGS tolerance")
       ->check(shared::finiteAbove(0.0, Limits::kMaxTolerance))->capture_default_str();
   app.add_flag("--render-torque", settings.render_torque, "Render torques too");
+  // the device -> scene workspace mapping (docs/design.md, "Workspace mapping")
+  shared::WorkspaceMappingParams workspace;
+  std::vector<double> workspace_offset, workspace_rotation;
+  bool clutch_key = false;
+  app.add_option("--workspace-scale", workspace.scale, "Scene metres per device metre")
+      ->check(shared::finiteRange(shared::WorkspaceMappingLimits::kMinScale,
+                                  shared::WorkspaceMappingLimits::kMaxScale))
+      ->capture_default_str();
+  app.add_option("--workspace-offset", workspace_offset,
+                 "Scene position of the device origin x,y,z [m]")
+      ->delimiter(',')->expected(3);
+  app.add_option("--workspace-rotation", workspace_rotation,
+                 "Device -> scene rotation, unit quaternion w,x,y,z")
+      ->delimiter(',')->expected(4);
+  app.add_option("--clutch-button", workspace.clutch_button,
+                 "Device button (bit) that clutches; -1: none")
+      ->check(CLI::Range(-1, shared::WorkspaceMappingLimits::kMaxButton))->capture_default_str();
+  app.add_flag("--clutch-key", clutch_key,
+               "On a terminal, the space bar toggles the clutch (devices without a button)");
   app.add_option("--duration", duration_s,
                  "Stop after S seconds; 0 (the default): run until SIGINT, SIGTERM or SIGHUP")
       ->check(shared::finiteRange(0.0, 1e7, "s"));
@@ -82,6 +106,14 @@ int main(int argc, char** argv) {
 
   try {
     shared::Segment::validateName(segment);
+    if (!workspace_offset.empty()) {
+      workspace.offset_m = {workspace_offset[0], workspace_offset[1], workspace_offset[2]};
+    }
+    if (!workspace_rotation.empty()) {
+      workspace.rotation_wxyz = {workspace_rotation[0], workspace_rotation[1],
+                                 workspace_rotation[2], workspace_rotation[3]};
+    }
+    workspace.validate();
     device::DeviceConfig config;
     for (const auto& kv : device_options) device::addDeviceOption(config, kv);
     std::unique_ptr<device::Device> dev = device::loadDevice(device_name, config);
@@ -94,6 +126,17 @@ int main(int argc, char** argv) {
 
     // validates the settings and combines the clamp with the device's own limit
     haptic::HapticLoop loop(*dev, settings);
+    loop.workspaceMapping().configure(workspace);
+    std::optional<haptic::ClutchKey> key;
+    if (clutch_key) key.emplace(loop.workspaceMapping());
+    if (!workspace.isIdentity()) {
+      spdlog::info("workspace: scale {}, offset ({}, {}, {}) m, rotation ({}, {}, {}, {}), "
+                   "clutch button {}{}", workspace.scale, workspace.offset_m[0],
+                   workspace.offset_m[1], workspace.offset_m[2], workspace.rotation_wxyz[0],
+                   workspace.rotation_wxyz[1], workspace.rotation_wxyz[2],
+                   workspace.rotation_wxyz[3], workspace.clutch_button,
+                   key && key->active() ? ", space bar clutches" : "");
+    }
     if (loop.forceLimitN() < settings.max_force_n) {
       spdlog::info("clamping to the device's maximum force {} N", loop.forceLimitN());
     }
@@ -139,6 +182,10 @@ int main(int argc, char** argv) {
                    rt_summary);
     }
 
+    // the network bridge's packet counters go into the status line
+    device::Device* inner = dev.get();
+    if (auto* rec = dynamic_cast<device::RecordingDevice*>(inner)) inner = &rec->inner();
+    const auto* bridge = dynamic_cast<const device::BridgeDevice*>(inner);
     const std::int64_t t0 = shared::monotonicNs();
     std::int64_t last_status = t0;
     std::uint64_t last_ticks = 0;
@@ -160,12 +207,14 @@ int main(int argc, char** argv) {
                          static_cast<double>(now - last_status),
                      loop.counters().snapshots_taken.load(), loop.counters().stale_ticks.load(),
                      loop.counters().clamped.load(), supervisor.attached() ? "attached" : "absent");
+        if (bridge != nullptr) spdlog::info("{}", bridge->describeCounters());
         last_ticks = ticks;
         last_status = now;
       }
       std::this_thread::sleep_for(std::chrono::milliseconds(50));
     }
     spdlog::info("stopping: {} ticks", loop.counters().ticks.load());
+    if (bridge != nullptr) spdlog::info("{}", bridge->describeCounters());
     supervisor.detach();
     loop_stop.store(true);
     rt.join();

@@ -11,6 +11,7 @@
 
 #include "tactus/shared/cli_checks.h"
 #include "tactus/sim/runner.h"
+#include "tactus/sim/scene.h"
 #include "tactus/shared/error.h"
 #include "tactus/shared/file_io.h"
 
@@ -43,6 +44,10 @@ int main(int argc, char** argv) {
   app.add_option("--stats-json", opt.stats_json, "Write per-stage statistics as JSON to FILE");
   app.add_option("--export-trajectory", opt.export_trajectory,
                  "Write the scene's scripted instrument trajectory as a device CSV and exit");
+  bool print_haptic_options = false;
+  app.add_flag("--print-haptic-options", print_haptic_options,
+               "Print haptic_server's options for the scene's haptics section (workspace "
+               "mapping), one per line, and exit");
   app.add_option("--record-snapshots", opt.record_snapshots,
                  "Record every step's contact snapshot (simulated time stamps) to FILE, written "
                  "at the end of the run, for tactus-jitter --replay FILE");
@@ -60,6 +65,13 @@ int main(int argc, char** argv) {
   std::signal(SIGTERM, onSignal);
   std::signal(SIGHUP, onSignal);  // the terminal closed: stop cleanly (removes the segment)
   try {
+    if (print_haptic_options) {
+      const tactus::sim::SceneSpec spec = tactus::sim::loadScene(opt.scene_path);
+      for (const std::string& o : tactus::sim::hapticServerOptions(spec.haptics)) {
+        std::printf("%s\n", o.c_str());
+      }
+      return 0;
+    }
     return tactus::sim::runSimulation(opt, g_stop);
   } catch (const tactus::Cancelled& e) {
     spdlog::error("{}; exiting", e.what());

@@ -367,6 +367,10 @@ TEST(HapticDeviceOptions, BackendsRejectNonsenseWithAClearMessage) {
       {"replay", "speed=1e308", "option speed=1e308 must be in"},
       {"replay", "speed=-1", "option speed=-1 must be in"},
       {"null", "pose=0,1e300,0", "option pose component"},
+      {"bridge", "port=70000", "option port=70000 must be in"},
+      {"bridge", "timeout_ms=0", "option timeout_ms=0 must be in"},
+      {"bridge", "max_force=1e308", "option max_force=1e308 must be in"},
+      {"bridge", "bind=10.1.2.3", "allow_remote=1"},
   };
   for (const Case& c : cases) {
     device::DeviceConfig config;
@@ -416,6 +420,11 @@ TEST(HapticServerCli, ForceRateAndWatchdogOptionsRejectNonsense) {
       {"--rate nan", "--rate"},         {"--rate 1e9", "--rate"},
       {"--tolerance nan", "--tolerance"}, {"--max-sweeps 0", "--max-sweeps"},
       {"--device-option mass=-1 --device simulated", "mass=-1"},
+      {"--workspace-scale 0", "--workspace-scale"}, {"--workspace-scale nan", "--workspace-scale"},
+      {"--workspace-rotation 1,0,0,0.5", "unit quaternion"},
+      {"--workspace-offset 0,nan,0", "offset[1]"}, {"--workspace-offset 0,1e9,0", "offset[1]"},
+      {"--clutch-button 40", "--clutch-button"},
+      {"--device bridge --device-option bind=0.0.0.0", "allow_remote=1"},
   };
   for (const auto& [args, expect] : cases) {
     std::string out;
@@ -430,6 +439,13 @@ TEST(HapticServerCli, ForceRateAndWatchdogOptionsRejectNonsense) {
   std::string out;
   EXPECT_EQ(runHapticServer("--device null --max-force 4 --slew 500 --force-scale 0.5", &out), 0)
       << out;
+  EXPECT_EQ(runHapticServer("--device null --workspace-scale 2 --workspace-offset 0,0,0.1 "
+                            "--workspace-rotation 0.7071067811865476,0,0,0.7071067811865476 "
+                            "--clutch-button 0",
+                            &out),
+            0)
+      << out;
+  EXPECT_THAT(out, HasSubstr("workspace: scale 2"));
 }
 
 // The simulation publishes W exactly symmetric for a real frictional scene, says so with

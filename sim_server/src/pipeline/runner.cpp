@@ -159,10 +159,13 @@ void exportTrajectory(const SceneSpec& spec, const std::filesystem::path& csv, d
   for (long k = 0; k <= n && out.ok(); ++k) {
     const double t = std::min(end, static_cast<double>(k) * dt_s);
     const DeviceTarget d = sim.scriptedTarget(t);
-    const auto& q = d.pose.rot;
+    // the hand replays it in the device frame: the workspace mapping takes it back to the scene
+    std::array<double, 3> p{d.pose.pos_m.x(), d.pose.pos_m.y(), d.pose.pos_m.z()};
+    std::array<double, 4> q{d.pose.rot.w(), d.pose.rot.x(), d.pose.rot.y(), d.pose.rot.z()};
+    if (!spec.haptics.workspace.isIdentity()) spec.haptics.workspace.sceneToDevice(p, q);
     out.write(fmt::format("{:.6f},{:.9g},{:.9g},{:.9g},{:.9g},{:.9g},{:.9g},{:.9g},{:.9g}\n", t,
-                          d.pose.pos_m.x(), d.pose.pos_m.y(), d.pose.pos_m.z(), q.w(), q.x(),
-                          q.y(), q.z(), d.gripper_opening * spec.instrument.max_opening_rad));
+                          p[0], p[1], p[2], q[0], q[1], q[2], q[3],
+                          d.gripper_opening * spec.instrument.max_opening_rad));
   }
   out.commit();
 }

@@ -94,7 +94,7 @@ void SceneParser::readSolver(const YAML::Node& n, SolverSpec* s) {
 void SceneParser::readHaptics(const YAML::Node& n, HapticsSpec* h) {
   const std::string p = "haptics";
   checkKeys(n, p, {"enabled", "rate", "device", "force_scale", "max_force", "watchdog_ms",
-                   "max_sweeps_per_tick", "nsgs_tolerance"});
+                   "max_sweeps_per_tick", "nsgs_tolerance", "workspace"});
   h->enabled = true;  // a haptics section turns haptics on unless it says otherwise
   boolean(n, p, "enabled", &h->enabled);
   number(n, p, "rate", &h->rate_hz, kPositive, kAtMost(1e5), Range{100.0, 1e4});
@@ -105,6 +105,26 @@ void SceneParser::readHaptics(const YAML::Node& n, HapticsSpec* h) {
   integer(n, p, "max_sweeps_per_tick", &h->max_sweeps_per_tick, 1, 1'000'000, 10'000);
   number(n, p, "nsgs_tolerance", &h->nsgs_tolerance, kPositive, Range{-kInf, 1.0, false, true},
          kPositiveUpTo(1e-2));
+  YAML::Node w;
+  if (section(n, p, "workspace", &w)) readWorkspace(w, p + ".workspace", &h->workspace);
+}
+
+// The device -> scene mapping (shared::WorkspaceMappingLimits are the hard ranges).
+void SceneParser::readWorkspace(const YAML::Node& n, const std::string& p,
+                                shared::WorkspaceMappingParams* w) {
+  using L = shared::WorkspaceMappingLimits;
+  checkKeys(n, p, {"scale", "offset", "rotation_deg", "quaternion", "clutch_button"});
+  number(n, p, "scale", &w->scale, kPositive, Range{L::kMinScale, L::kMaxScale},
+         Range{0.1, 10.0});
+  Eigen::Vector3d offset;
+  if (vector<3>(n, p, "offset", &offset, Range{-L::kMaxOffsetM, L::kMaxOffsetM},
+                Range{-2.0, 2.0})) {
+    w->offset_m = {offset.x(), offset.y(), offset.z()};
+  }
+  Eigen::Quaterniond q = Eigen::Quaterniond::Identity();
+  orientation(n, p, &q);
+  w->rotation_wxyz = {q.w(), q.x(), q.y(), q.z()};
+  integer(n, p, "clutch_button", &w->clutch_button, -1, L::kMaxButton);
 }
 
 void SceneParser::readOutput(const YAML::Node& n, OutputSpec* o) {

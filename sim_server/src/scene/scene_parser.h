@@ -165,6 +165,8 @@ class SceneParser {
   void readTrajectory(const YAML::Node& list, const std::string& path, InstrumentSpec* in);
   void readSolver(const YAML::Node& n, SolverSpec* s);                           // scene_loader.cpp
   void readHaptics(const YAML::Node& n, HapticsSpec* h);
+  void readWorkspace(const YAML::Node& n, const std::string& p,
+                     shared::WorkspaceMappingParams* w);
   void readOutput(const YAML::Node& n, OutputSpec* o);
 
   std::string name_;

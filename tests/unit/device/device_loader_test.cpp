@@ -30,7 +30,8 @@ std::string loadError(const std::string& name, const DeviceConfig& config = {}) 
 }
 
 TEST(DeviceLoader, BuiltinsByName) {
-  EXPECT_EQ(builtinDeviceNames(), (std::vector<std::string>{"null", "replay", "simulated"}));
+  EXPECT_EQ(builtinDeviceNames(),
+            (std::vector<std::string>{"bridge", "null", "replay", "simulated"}));
   auto sim = loadDevice("");  // the default
   EXPECT_EQ(sim->info().model, "tactus simulated hand");
   EXPECT_NE(dynamic_cast<SimulatedDevice*>(sim.get()), nullptr);
@@ -63,8 +64,8 @@ TEST(DeviceLoader, BadOptionsAreExplained) {
 
 TEST(DeviceLoader, UnknownNameSaysWhatIsAvailable) {
   const std::string msg = loadError("phantom_omni");
-  EXPECT_THAT(msg, HasSubstr("device backend 'phantom_omni' is not built in (null, replay, "
-                             "simulated)"));
+  EXPECT_THAT(msg, HasSubstr("device backend 'phantom_omni' is not built in (bridge, null, "
+                             "replay, simulated)"));
   EXPECT_THAT(msg, HasSubstr("libphantom_omni.so"));
   EXPECT_THAT(msg, HasSubstr("TACTUS_DEVICE_PATH"));
 }

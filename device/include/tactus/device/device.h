@@ -73,14 +73,14 @@ class Device {
   [[nodiscard]] virtual IoStatus write(const DeviceCommand& cmd) noexcept = 0;
 };
 
-/// Names of the built-in backends ("null", "replay", "simulated").
+/// Names of the built-in backends ("bridge", "null", "replay", "simulated").
 std::vector<std::string> builtinDeviceNames();
 
 /// The default backend: "simulated".
 inline constexpr std::string_view kDefaultDevice = "simulated";
 
 /// Creates a backend (not opened yet):
-///   - a built-in name: "simulated" (default), "replay", "null";
+///   - a built-in name: "simulated" (default), "replay", "null", "bridge" (bridge_device.h);
 ///   - a path to a plugin .so (contains '/' or ends in ".so");
 ///   - another name X: libX.so searched in $TACTUS_DEVICE_PATH (':'-separated), then by the
 ///     dynamic loader's usual search.

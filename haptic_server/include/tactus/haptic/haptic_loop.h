@@ -25,6 +25,7 @@
 #include <vector>
 
 #include "tactus/device/device.h"
+#include "tactus/haptic/workspace_mapping.h"
 #include "tactus/shared/delassus_blocks.h"
 #include "tactus/shared/event_ring.h"
 #include "tactus/shared/stats_ring.h"
@@ -192,6 +193,10 @@ class HapticLoop {
     adoption_context_ = context;
   }
 
+  /// The device's workspace mapping (identity by default): configure() it before the first
+  /// tick; setClutchRequest() from any thread.
+  WorkspaceMapping& workspaceMapping() noexcept { return mapping_; }
+
   HapticCounters& counters() noexcept { return counters_; }
   shared::EventRing& events() noexcept { return events_; }
   const HapticSettings& settings() const noexcept { return settings_; }
@@ -243,7 +248,9 @@ class HapticLoop {
   std::uint64_t snapshot_seq_ = 0;
   std::uint64_t tick_index_ = 0;
   std::uint64_t sample_seq_ = 0;
-  device::DeviceState state_{};
+  device::DeviceState raw_state_{};   ///< the device's last sample, device frame
+  device::DeviceState state_{};       ///< the same mapped to the scene frame
+  WorkspaceMapping mapping_;
   shared::Pose last_pose_;
   bool have_pose_ = false;
   bool engaged_ = false;

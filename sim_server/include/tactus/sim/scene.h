@@ -13,6 +13,8 @@
 #include <string>
 #include <vector>
 
+#include "tactus/shared/workspace_mapping.h"
+
 namespace tactus::sim {
 
 enum class MaterialLaw { kLinear, kCorotational };
@@ -171,7 +173,14 @@ struct HapticsSpec {
   double watchdog_ms = 50.0;
   int max_sweeps_per_tick = 50;
   double nsgs_tolerance = 1e-6;
+  /// device -> scene mapping and clutch button (haptics.workspace; docs/design.md)
+  shared::WorkspaceMappingParams workspace;
 };
+
+/// haptic_server's options for the scene's haptics section (today the workspace mapping:
+/// `--workspace-scale=S`, ...), one per item; scripts/start.sh passes them on
+/// (sim_server --print-haptic-options).
+std::vector<std::string> hapticServerOptions(const HapticsSpec& haptics);
 
 struct OutputSpec {
   bool enabled = false;
@@ -206,3 +215,4 @@ SceneSpec parseScene(const std::string& yaml, const std::string& name,
                      const std::filesystem::path& base_dir);
 
 }  // namespace tactus::sim
+
