@@ -39,19 +39,24 @@ SceneSpec scene(const char* file) {
   return spec;
 }
 
-void expectHeldAndWellPosed(const PadGraspResult& r) {
+void printResult(const PadGraspResult& r) {
   std::printf("held nodes %d: rise %.2f mm of the tool's %.2f mm (%.1f %%); min tet volume ratio "
-              "%.3f; contacts max %d (%d distinct jaw-points, %d held by both jaws, %d distinct "
-              "nodes); %d contact steps, "
+              "%.3f (node patches %.3f); contacts max %d (%d distinct jaw-points, %d held by both jaws, %d distinct "
+              "nodes); while held max %d contacts on %d distinct nodes; %d contact steps, "
               "%d unconverged, sweeps median %.0f max %.0f; total normal force max %.3f N, "
               "load max %.3f N; geometric penetration max %.3f mm median %.4f mm\n",
               r.held_nodes, 1e3 * r.held_rise_m, 1e3 * r.tool_rise_m,
-              100.0 * r.held_rise_m / r.tool_rise_m, r.min_volume_ratio, r.max_contacts,
+              100.0 * r.held_rise_m / r.tool_rise_m, r.min_volume_ratio, r.min_patch_volume_ratio,
+              r.max_contacts,
               r.max_distinct_points, r.max_points_held_by_both_jaws, r.max_distinct_nodes,
-              r.contact_steps, r.unconverged_steps,
+              r.max_contacts_held, r.max_distinct_nodes_held, r.contact_steps, r.unconverged_steps,
               median(r.sweeps), r.sweeps.empty() ? 0.0 : *std::max_element(r.sweeps.begin(), r.sweeps.end()),
               r.max_total_normal_n, r.max_load_n, 1e3 * r.max_geometric_penetration_m,
               1e3 * median(r.geometric_penetration_m));
+}
+
+void expectHeldAndWellPosed(const PadGraspResult& r) {
+  printResult(r);
   EXPECT_GT(r.tool_rise_m, 0.018);
   EXPECT_GT(r.held_nodes, 2);
   EXPECT_GE(r.held_rise_m, 0.9 * r.tool_rise_m);
@@ -82,13 +87,35 @@ INSTANTIATE_TEST_SUITE_P(
                       ApproachPerturbation{Eigen::Vector3d(0.003, 0.0, -0.003), 0.0},
                       ApproachPerturbation{Eigen::Vector3d(-0.003, 0.002, 0.0), 10.0}));
 
-// liver_grasp_23k (6259 nodes; its compliance is 1.6 GB): the nominal approach, and the scene
-// where the pads reach the paper's count of 150 contacts on distinct tissue points.
+// liver_grasp_23k (6259 nodes; its compliance is 1.6 GB, built once in about 20 s into
+// .cache/compliance-23k; the run takes 1-3 min). What holds: the lobe rises with the tool, every
+// contact step's NSGS reaches its tolerance, the forces stay within the liver2 bound, no tissue
+// point has two contacts from one jaw, and while the lobe is lifted and held the pads touch 150
+// distinct tissue nodes or more (the paper's count on distinct features).
+TEST(PadGrasp23kTest, NominalApproachLiftsTheLobeAndConverges) {
+  SceneSpec spec = loadScene(std::string(TACTUS_SOURCE_DIR) + "/scenes/liver_grasp_23k.yaml");
+  const PadGraspResult r = test_support::runPadGrasp(spec, {});
+  printResult(r);
+  EXPECT_GT(r.tool_rise_m, 0.018);
+  EXPECT_GT(r.held_nodes, 2);
+  EXPECT_GE(r.held_rise_m, 0.9 * r.tool_rise_m);
+  EXPECT_EQ(r.unconverged_steps, 0);
+  EXPECT_EQ(r.max_distinct_points, r.max_contacts);
+  EXPECT_GT(r.max_total_normal_n, r.max_load_n);
+  EXPECT_LT(r.max_total_normal_n, 30.0 * r.max_load_n);
+  EXPECT_GE(r.max_distinct_nodes_held, 150);
+}
+
+// The rest of issue 15 on liver_grasp_23k, not reached (README.md, "liver_grasp_23k: why NSGS
+// stalled"): the smallest tet volume (slivers of quality 0.004 in the lobe invert under gravity
+// alone, and a few node patches under the jaws invert) and median sweeps <= 50 (137 measured).
+// Run with --gtest_also_run_disabled_tests.
 TEST(PadGrasp23kTest, DISABLED_NominalApproachHoldsTheLobe) {
   SceneSpec spec = loadScene(std::string(TACTUS_SOURCE_DIR) + "/scenes/liver_grasp_23k.yaml");
   const PadGraspResult r = test_support::runPadGrasp(spec, {});
   expectHeldAndWellPosed(r);
   EXPECT_GE(r.max_contacts, 150);
+  EXPECT_GE(r.max_distinct_nodes_held, 150);
 }
 
 }  // namespace
