@@ -403,6 +403,26 @@ TEST_F(FilesTest, StatsJsonIsNotOverwrittenUnlessAsked) {
   EXPECT_THAT(readAll(stats), HasSubstr("\"stages_ms\""));
 }
 
+// The runner times its VTK output (after the step and its publication, outside total) under the
+// "output" stage of the statistics: a run writing a frame every step reports a nonzero output
+// time (the row read 0 while nothing filled StageTimes::output_s).
+TEST_F(FilesTest, StatsJsonReportsTheVtkOutputTime) {
+  const fs::path scene = cubeScene();
+  const fs::path stats = dir_ / "stats.json";
+  const fs::path out_dir = dir_ / "vtk";
+  const RunResult r = run({kSim, scene.string(), "--steps", "3", "--output", out_dir.string(),
+                           "--output-every", "1", "--stats-json", stats.string()});
+  ASSERT_TRUE(r.exited) << r.output;
+  ASSERT_EQ(r.code, 0) << r.output;
+  const std::string js = readAll(stats);
+  const std::string key = "\"output\": {\"median\": ";
+  const std::size_t at = js.find(key);
+  ASSERT_NE(at, std::string::npos) << js;
+  const double output_median_ms = std::stod(js.substr(at + key.size()));
+  EXPECT_GT(output_median_ms, 0.0) << js;
+  EXPECT_TRUE(fs::exists(out_dir / "series.pvd"));
+}
+
 TEST_F(FilesTest, ExportTrajectoryChecksWritesAndRefusesOverwrite) {
   const fs::path scene = cubeScene();
   RunResult r = run({kSim, scene.string(), "--export-trajectory", "/dev/full"});

@@ -34,7 +34,7 @@ class ComplianceModel final : public TissueCompliance {
 public:
   ComplianceModel(ComplianceKind kind, FemBody &body,
                   const ComplianceOptions &opt)
-      : kind_(kind), body_(&body), opt_(opt) {
+      : kind_(kind), opt_(opt), body_(&body) {
     if (!(opt.h_s > 0.0))
       throw Error("makeCompliance: h_s must be > 0");
     const int n = body.nodeCount();
@@ -350,18 +350,23 @@ private:
     }
   }
 
+  // Model, state and scratch (docs/design.md, "Model, state, scratch"):
+  // model: fixed once built (the kind, the options, the rest block C0 on the surface or its
+  // diagonal), with how it was built (info_, whose skipped_row_nodes is a running statistic).
   ComplianceKind kind_;
-  FemBody *body_;
   ComplianceOptions opt_;
   RestBlock blk_;
   std::vector<double> diag_;         // uncoupled: per surface node
+  ComplianceBuildInfo info_;
+  // state: what update() refreshes once per step and addW/correction read
+  FemBody *body_;                    // the body whose state (and exact compliance) is read
   std::vector<Eigen::Matrix3d> rot_; // warped: node rotations rest -> current
+  // scratch: per call of addW/correction; local_ is kept all -1 between calls
   std::vector<int> local_;           // node -> index in touched_, -1 otherwise
   std::vector<int> touched_;
   std::vector<RowTerms> terms_;
   Eigen::MatrixXd cuu_, g_, gt_, wd_, e_, x_;
   Eigen::VectorXd r_;
-  ComplianceBuildInfo info_;
 };
 
 } // namespace

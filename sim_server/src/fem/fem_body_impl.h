@@ -22,7 +22,15 @@ inline constexpr int kEntriesPerElement = 78;
 // The element loop's offsets into A's values: per block (a, b), a >= b, one per column.
 inline constexpr int kBlockOffsetsPerElement = 30;
 
-struct FemBody::Impl {
+// FemBody's data in three groups, in the manner of the pipeline's SimulationModel /
+// SimulationState / StepScratch (docs/design.md, "Model, state, scratch"):
+//  * FemModel: what the mesh, material and options define, set by init and not changed by a step
+//    (plus the rest-shape factorisation and the surface, derived from them once on demand);
+//  * FemState: what a step (or solveStatic) changes and the next step or a query reads;
+//  * FemScratch: buffers a step reuses; their values mean nothing between calls.
+// FemBody::Impl derives from all three so that its member functions (fem_assembly.cpp,
+// fem_solve.cpp, ...) name the members as before; the group a member belongs to is its type's.
+struct FemModel {
   TetMesh mesh;
   FemMaterial material;
   FemSolverOptions options;
@@ -36,15 +44,12 @@ struct FemBody::Impl {
   std::vector<int> dof_base;  // first reduced DOF of each node, -1 when fixed
   int n_free = 0;             // reduced DOFs
 
-  Eigen::VectorXd rest, q, v, mass;
+  Eigen::VectorXd rest, mass;
 
   // per element: shape function gradients (columns g_0..g_3) and rest volume
   std::vector<Eigen::Matrix<double, 3, 4>> grad;
   std::vector<double> volume;
-  std::vector<Eigen::Matrix3d> rotation;
 
-  // system matrix A (lower triangle, fixed pattern) and where each element writes
-  Sparse a;
   // The element loop's copy of the element data, in assembly order: sorted by their nodes'
   // lowest reduced DOF, then second lowest, ..., so that consecutive elements scatter into
   // nearby memory; the local nodes of each by ascending reduced DOF.
@@ -56,41 +61,66 @@ struct FemBody::Impl {
     double vol;                     // = volume[index]
   };
   std::vector<AssemblyElement> assembly_elems;
-  // per assembly element and block (a, b), a >= b, in order (0,0), (1,0), (1,1), (2,0), ...:
-  // for each column j of the block, the position in A's values of its first entry (row p of
-  // column q + j, or row p + j on the diagonal, with p, q the DOFs of nodes a, b); -1: a node is
-  // fixed
+  // where each element writes into A's fixed pattern: per assembly element and block (a, b),
+  // a >= b, in order (0,0), (1,0), (1,1), (2,0), ...: for each column j of the block, the
+  // position in A's values of its first entry (row p of column q + j, or row p + j on the
+  // diagonal, with p, q the DOFs of nodes a, b); -1: a node is fixed
   std::vector<int> block_offset;
   std::vector<int> diag_offset;  // per reduced DOF
+
+  // rotation groups: nodes tied by short edges share one node rotation
+  std::vector<int> rot_group;   // node -> group index (empty: every node on its own)
+  int rot_group_count = 0;
+
+  std::uint64_t hash = 0;       // restHash: identity of mesh, material, fixed nodes
+
+  // Derived from the model on first demand (ensureRestFactor, surfaceNodes), never changed by a
+  // step: the rest-shape system matrix and its factorisation for the step rest_h, and the
+  // surface nodes.
+  Sparse a_rest;
+  fem_detail::CholmodSolver chol_rest;
+  double rest_h = -1.0;
+  std::vector<int> surface;
+  bool surface_ready = false;
+};
+
+struct FemState {
+  Eigen::VectorXd q, v;
+  // per element: rotation at the positions of the last element loop (nodeRotations, the
+  // warped compliance and the preconditioner read it after the step)
+  std::vector<Eigen::Matrix3d> rotation;
+  // The system matrix A (lower triangle). Its pattern is the model's (block_offset and
+  // diag_offset index it, fixed at init); its values are the last step's A (or solveStatic's K),
+  // kept as state because the compliance queries factorise it after the step
+  // (ensureCurrentFactor).
+  Sparse a;
+  // the factor of record and what it holds
   fem_detail::CholmodSolver chol;
   bool chol_current = false;     // chol holds the factor of the current `a`
   bool a_is_step_matrix = false; // `a` is freeMotion's A (not solveStatic's K)
   fem_detail::ReusedFactorSolver reuse{{}};  // LinearSolverKind::kCholmodReuse (factor: chol)
   // kCholmodReuse on a corotational body: node rotations of the factor's step (per free node, in
-  // DOF order) and this step's rotations relative to them (the preconditioner's warp)
-  std::vector<Eigen::Matrix3d> factor_node_rot, relative_rot;
+  // DOF order)
+  std::vector<Eigen::Matrix3d> factor_node_rot;
   double compliance_scale = 0.0; // C = compliance_scale * A^-1 for the current `a`
   double last_h = 0.0;
+  // the last two steps' dv (reduced): the iterative solvers' warm start
+  Eigen::VectorXd dv_prev, dv_prev2;
+};
 
-  // rest-shape factorisation
-  Sparse a_rest;
-  fem_detail::CholmodSolver chol_rest;
-  double rest_h = -1.0;
-
+struct FemScratch {
   // step buffers (reduced or full)
-  Eigen::VectorXd f_int, rhs_full, rhs, dv, dv_prev, dv_prev2;
+  Eigen::VectorXd f_int, rhs_full, rhs, dv;
   Eigen::VectorXd cg_t, jacobi_inv;
   fem_detail::CgBuffers cg;
   std::vector<Eigen::Matrix3d> node_rot, node_acc;  // warped preconditioner
+  // kCholmodReuse: this step's node rotations relative to the factor's (the preconditioner's warp)
+  std::vector<Eigen::Matrix3d> relative_rot;
+  std::vector<Eigen::Matrix3d> group_acc;           // averageRotations' per-group sums
+};
 
-  // rotation groups: nodes tied by short edges share one node rotation
-  std::vector<int> rot_group;   // node -> group index (empty: every node on its own)
-  int rot_group_count = 0;
-  std::vector<Eigen::Matrix3d> group_acc;
-
-  std::vector<int> surface;
-  bool surface_ready = false;
-  std::uint64_t hash = 0;
+struct FemBody::Impl : FemModel, FemState, FemScratch {
+  // statistics and logging, outside the physics
   Counters counters;
   bool inversion_warned = false;   // "inverted elements" is logged once per body
 

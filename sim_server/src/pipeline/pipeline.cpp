@@ -13,15 +13,8 @@
 namespace tactus::sim {
 
 shared::ContactProblemView ContactProblemData::view() const {
-  shared::ContactProblemView v;
-  v.contacts = contacts;
-  v.rows = rows;
-  v.row_offset = row_offset.data();
-  v.W = W.data();
-  v.ld = rows;
-  v.delta_free = delta_free.data();
-  v.mu = mu.data();
-  return v;
+  return shared::denseProblemView(contacts, rows, row_offset.data(), W.data(), rows,
+                                  delta_free.data(), mu.data());
 }
 
 // One step, the paper's stages in order (docs/design.md section 2): the free motion, the contacts

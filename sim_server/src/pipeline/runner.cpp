@@ -239,12 +239,12 @@ int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
       if (link) link->deviceTarget(target);
       sim.setDeviceTarget(target);
     }
-    const StepReport report = sim.step();
-    stats.add(report);
+    StepReport report = sim.step();
     if (link) {
       // a simulation whose segment was removed or replaced publishes into nothing: stop
       if (const std::string why = link->displacedReason(shared::monotonicNs()); !why.empty()) {
         spdlog::error("{}", why);
+        stats.add(report);
         exit_code = 3;
         break;
       }
@@ -257,7 +257,12 @@ int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
                     std::llround(sim.time() * 1e9), 0, slot);
       recorder->append(slot.view(), std::llround(sim.time() * 1e9));
     }
+    // VTK output after the snapshot is published (the haptic side does not wait for it), timed
+    // into the step's statistics outside total_s
+    const std::int64_t t_output = shared::monotonicNs();
     sim.writeOutputIfDue();
+    report.times.output_s = shared::secondsSinceNs(t_output);
+    stats.add(report);
     if (!report.finite) {
       spdlog::error("step {}: the state became non-finite; stopping", k);
       exit_code = 2;

@@ -9,10 +9,12 @@
 //   StepScratch      (step_scratch.h)   what a step rebuilds and reuses: rows, W, free state
 //   OutputWriter, PipelineCounters      output and statistics, outside the physics
 //
-// The physics objects keep their own parameters beside their state: FemBody its rest shape,
-// material and K0, TissueCompliance its C0 (warped, rest, uncoupled), Instrument its spec. They
-// live in SimulationState because a step changes them; what they hold of the model is built
-// from this one and not changed by a step either.
+// The physics objects carry the same split inside them: FemBody's data is FemModel (rest shape,
+// material, element data, A's pattern, the rest factorisation), FemState (q, v, rotations, the
+// factor of record) and FemScratch (the step's buffers) (fem_body_impl.h); TissueCompliance's C0
+// is its model, its rotations its state; Instrument's spec and workspace its model, its pose and
+// twist its state. They live whole in SimulationState because a step changes them; what they
+// hold of the model is built from this one and not changed by a step either.
 
 #include <Eigen/Geometry>
 #include <string>

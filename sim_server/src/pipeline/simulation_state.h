@@ -20,9 +20,11 @@ namespace tactus::sim {
 
 /// One tissue's physics objects.
 struct TissueState {
-  /// Positions q, velocities v and the FEM's factorisation (its rest data and K0 inside it).
+  /// Positions q, velocities v and the FEM's factorisation (FemState), with its model (rest
+  /// data, element data: FemModel) and step buffers (FemScratch) inside it (fem_body_impl.h).
   std::unique_ptr<FemBody> body;
-  /// C0 and the rotations of the last updateCompliance (only with an instrument).
+  /// C0 (its model) and the rotations of the last updateCompliance (its state); only with an
+  /// instrument.
   std::unique_ptr<TissueCompliance> compliance;
   /// The surface's AABB trees, refit at every detection, and the contacts they found; the
   /// feature-side memory of the pad and sphere queries carries to the next step (collision.h).

@@ -79,6 +79,12 @@ struct ComplianceBuildInfo {
   long skipped_row_nodes = 0;              ///< row nodes ignored because not on the surface
 };
 
+/// A tissue's compliance model. Model, state and scratch (docs/design.md, "Model, state,
+/// scratch"): the model is what makeCompliance builds (the kind, the options, C0 on the surface
+/// or its diagonal) and does not change afterwards; the state is what update() refreshes once a
+/// step (the warped model's node rotations, the body whose factor the exact model uses); addW and
+/// correction only use scratch reused from call to call (compliance.cpp lists the members by
+/// group).
 class TissueCompliance {
  public:
   virtual ~TissueCompliance() = default;

@@ -216,6 +216,16 @@ class Instrument {
   void updateFeatures();
   void updatePadFeatures();
 
+  // Model, state and scratch (docs/design.md, "Model, state, scratch"); the members stay in one
+  // list (the god object is small and copied whole for the start-of-step contacts,
+  // StepScratch::tool_start):
+  //  * model, fixed after construction and setWorkspace: spec_, workspace_, grip_dynamic_;
+  //  * state, changed by freeMotion / applyCorrection / applyGripCorrection / reset: pose_,
+  //    twist_, target_, target_twist_, opening_, grip_rate_, and what the last free motion
+  //    leaves for the correction and freeMotionSensitivity: h_s_, theta0_, rot_step_;
+  //  * derived from the state: features_ (the geometry at pose_ and opening_, recomputed after
+  //    every change; its storage is sized once, so no scratch reallocates in a step);
+  //  * statistics: clamped_targets_.
   InstrumentSpec spec_;
   BoxSpec workspace_{Eigen::Vector3d::Constant(-kDefaultWorkspaceHalfM),
                      Eigen::Vector3d::Constant(kDefaultWorkspaceHalfM)};

@@ -40,8 +40,10 @@ struct StageTimes {
   double build_w_s = 0.0;              ///< buildW: contact rows H, delta_free, W = H C H^T
   double solve_contacts_s = 0.0;       ///< solveContacts: warm start and NSGS
   double constrained_motion_s = 0.0;   ///< constrainedMotion: dq = C H^T f, tool dx = C6 H^T f
-  /// VTK output: not part of step() (writeOutputIfDue); 0 unless the caller fills it, which
-  /// sim_server's runner does not yet do (its "output" row reads 0)
+  /// VTK output: not part of step() nor of total_s (writeOutputIfDue); 0 unless the caller fills
+  /// it. sim_server's runner times its writeOutputIfDue call, made after the step's snapshot is
+  /// published, into its "output" row (the steps without a frame due read ~0); tactus-bench
+  /// writes no output.
   double output_s = 0.0;
   double total_s = 0.0;                ///< the whole step() call
 };
