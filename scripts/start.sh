@@ -7,6 +7,7 @@
 # Usage: scripts/start.sh [SCENE.yaml] [--device NAME|PATH.so] [--device-option k=v]...
 #                         [--duration S] [--segment NAME] [--run-dir DIR] [--no-haptic]
 #                         [--core N] [--rate HZ] [--view [--view-port N]] [--no-build]
+#        --rate: the haptic loop's rate (default: the scene's haptics.rate, else 1000 Hz)
 #        --view: also serve the live view in a browser (scripts/view; http://127.0.0.1:8090/)
 #        --run-dir: logs there (default run/<date-time>, which run/latest then points to)
 #        --no-build: use the binaries already built. Exit status: 0 after a clean run or stop,
@@ -23,11 +24,11 @@ segment="tactus"
 run_dir=""
 haptic=1
 core=-1
-rate=1000
+rate=""
 view=0
 view_port=8090
 build_first=1
-usage() { sed -n '2,13p' "$0" | sed 's/^# \{0,1\}//'; }
+usage() { sed -n '2,14p' "$0" | sed 's/^# \{0,1\}//'; }
 while [[ $# -gt 0 ]]; do
   case "$1" in
     -h|--help) usage; exit 0 ;;
@@ -108,12 +109,20 @@ if [[ $haptic -eq 1 ]]; then
       >>"$run_dir/sim_export.log" 2>&1 &&
       device_opts=(--device-option "trajectory=$run_dir/trajectory.csv" --device-option loop=true)
   fi
-  # the scene's haptics section as haptic_server options (the workspace mapping)
+  # the scene's haptics section as haptic_server options (rate, force clamp and scale, watchdog,
+  # sweep budget, tolerance, workspace mapping); --rate on this command line wins over the scene's
   scene_haptic_opts=()
   mapfile -t scene_haptic_opts < <("$build/sim_server/sim_server" "$scene" --print-haptic-options \
     2>>"$run_dir/sim_export.log" || true)
+  rate_opts=()
+  if [[ -n "$rate" ]]; then
+    rate_opts=(--rate "$rate")
+    kept=()
+    for o in "${scene_haptic_opts[@]}"; do [[ "$o" == --rate=* ]] || kept+=("$o"); done
+    scene_haptic_opts=("${kept[@]}")
+  fi
   "$build/haptic_server/haptic_server" --segment "$segment" --device "$device" \
-    "${device_opts[@]}" "${scene_haptic_opts[@]}" --core "$core" --rate "$rate" \
+    "${device_opts[@]}" "${scene_haptic_opts[@]}" "${rate_opts[@]}" --core "$core" \
     >"$run_dir/haptic.log" 2>&1 &
   haptic_pid=$!
   echo "$haptic_pid" >"$run_dir/haptic.pid"

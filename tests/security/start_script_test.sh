@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # scripts/start.sh exit status and run dir: 0 after a clean --duration run, non-zero for a bad
 # scene and for a missing device plugin; an explicit --run-dir leaves the checkout's run/latest
-# alone; no segment is left behind. Uses the built binaries (--no-build), a temp run dir and
+# alone; no segment is left behind; the scene's haptics clamp and rate reach haptic_server and
+# --rate overrides the rate. Uses the built binaries (--no-build), a temp run dir and
 # unique segment names; every run is bounded by `timeout`.
 #
 # Usage: start_script_test.sh SOURCE_DIR BUILD_DIR
@@ -43,6 +44,22 @@ run bad_scene "$tmp/bad.yaml" --duration 3
 run no_plugin "$scene" --duration 3 --device "$tmp/no_such_plugin.so"
 [[ $rc -ne 0 && $rc -ne 124 && $rc -ne 137 ]] || fail "missing plugin: exit $rc (want a failure)"
 grep -q "haptic_server exited" "$tmp/no_plugin.out" || fail "missing plugin: no message"
+
+# the scene's haptics section reaches haptic_server (clamp, rate), and --rate on the command line
+# wins over the scene's rate. The copy sits beside the original so its relative mesh path holds.
+limits_scene="$src/tests/data/scenes/.start_test_limits_$$.yaml"
+trap 'cleanup; rm -f "$limits_scene"' EXIT
+sed 's/^haptics: .*$/haptics: {enabled: true, watchdog_ms: 50, rate: 500, max_force: 2.5}/' \
+  "$scene" >"$limits_scene"
+grep -q 'max_force: 2.5' "$limits_scene" || fail "could not write the limits scene"
+run limits "$limits_scene" --duration 2
+[[ $rc -eq 0 ]] || fail "limits scene: exit $rc"
+grep -q "max force 2.5 N, loop 500 Hz" "$tmp/limits/haptic.log" ||
+  { fail "the scene's max_force/rate did not reach haptic_server"; tail -5 "$tmp/limits/haptic.log" >&2; }
+run limits_rate "$limits_scene" --duration 2 --rate 800
+grep -q "max force 2.5 N, loop 800 Hz" "$tmp/limits_rate/haptic.log" ||
+  { fail "--rate 800 did not win over the scene's rate"; tail -5 "$tmp/limits_rate/haptic.log" >&2; }
+rm -f "$limits_scene"
 
 run bad_duration "$scene" --duration nan
 [[ $rc -eq 2 ]] || fail "--duration nan: exit $rc (want 2)"

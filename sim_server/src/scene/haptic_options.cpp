@@ -6,8 +6,17 @@
 namespace tactus::sim {
 
 std::vector<std::string> hapticServerOptions(const HapticsSpec& haptics) {
-  const shared::WorkspaceMappingParams& w = haptics.workspace;
   std::vector<std::string> options;
+  if (!haptics.enabled) return options;  // no haptics section: haptic_server's own defaults
+  // the loop's rate, clamp and solver budget (the scene parser checked them against the same
+  // hard ranges haptic_server applies: shared/haptic_limits.h)
+  options.push_back(fmt::format("--rate={:.17g}", haptics.rate_hz));
+  options.push_back(fmt::format("--max-force={:.17g}", haptics.max_force_n));
+  options.push_back(fmt::format("--force-scale={:.17g}", haptics.force_scale));
+  options.push_back(fmt::format("--watchdog-ms={:.17g}", haptics.watchdog_ms));
+  options.push_back(fmt::format("--max-sweeps={}", haptics.max_sweeps_per_tick));
+  options.push_back(fmt::format("--tolerance={:.17g}", haptics.nsgs_tolerance));
+  const shared::WorkspaceMappingParams& w = haptics.workspace;
   if (w.isIdentity()) return options;
   options.push_back(fmt::format("--workspace-scale={:.17g}", w.scale));
   options.push_back(fmt::format("--workspace-offset={:.17g},{:.17g},{:.17g}", w.offset_m[0],

@@ -11,6 +11,7 @@
 #include <string>
 
 #include "scene_parser.h"
+#include "tactus/shared/haptic_limits.h"
 #include "tactus/shared/error.h"
 #include "tactus/shared/file_io.h"
 #include "tactus/sim/scene.h"
@@ -92,17 +93,22 @@ void SceneParser::readSolver(const YAML::Node& n, SolverSpec* s) {
 }
 
 void SceneParser::readHaptics(const YAML::Node& n, HapticsSpec* h) {
+  // the hard ranges are haptic_server's own (a scene value reaches it through start.sh)
+  using L = shared::HapticLimits;
   const std::string p = "haptics";
   checkKeys(n, p, {"enabled", "rate", "device", "force_scale", "max_force", "watchdog_ms",
                    "max_sweeps_per_tick", "nsgs_tolerance", "workspace"});
   h->enabled = true;  // a haptics section turns haptics on unless it says otherwise
   boolean(n, p, "enabled", &h->enabled);
-  number(n, p, "rate", &h->rate_hz, kPositive, kAtMost(1e5), Range{100.0, 1e4});
+  number(n, p, "rate", &h->rate_hz, kPositive, Range{L::kMinRateHz, L::kMaxRateHz},
+         Range{100.0, L::kMaxRateHz});
   string(n, p, "device", &h->device);
-  number(n, p, "force_scale", &h->force_scale, kNonNegative, kAtMost(1e3), kNonNegativeUpTo(10.0));
-  number(n, p, "max_force", &h->max_force_n, kPositive, kAtMost(1e3), kPositiveUpTo(40.0));
-  number(n, p, "watchdog_ms", &h->watchdog_ms, kPositive, kAtMost(1e5), kPositiveUpTo(1e3));
-  integer(n, p, "max_sweeps_per_tick", &h->max_sweeps_per_tick, 1, 1'000'000, 10'000);
+  number(n, p, "force_scale", &h->force_scale, kNonNegative, kAtMost(L::kMaxForceScale),
+         kNonNegativeUpTo(L::kMaxForceScale));
+  number(n, p, "max_force", &h->max_force_n, kPositive, kAtMost(L::kMaxForceN), kPositiveUpTo(40.0));
+  number(n, p, "watchdog_ms", &h->watchdog_ms, kPositive, kAtMost(L::kMaxWatchdogMs),
+         kPositiveUpTo(1e3));
+  integer(n, p, "max_sweeps_per_tick", &h->max_sweeps_per_tick, 1, L::kMaxSweeps, 10'000);
   number(n, p, "nsgs_tolerance", &h->nsgs_tolerance, kPositive, Range{-kInf, 1.0, false, true},
          kPositiveUpTo(1e-2));
   YAML::Node w;

@@ -422,9 +422,9 @@ TEST(Scene, AbsurdValuesAreErrorsWithFileLineColumnAndField) {
   EXPECT_THAT(sceneError(kHead + "instrument: {mass: 1e30}\n"),
               StartsWith("s.yaml:4:20: instrument.mass: must be <= 1000"));
   EXPECT_THAT(sceneError(kHead + "haptics: {max_force: 1e9}\n"),
-              StartsWith("s.yaml:4:22: haptics.max_force: must be <= 1000"));
+              StartsWith("s.yaml:4:22: haptics.max_force: must be <= 50"));
   EXPECT_THAT(sceneError(kHead + "haptics: {rate: 1e12}\n"),
-              StartsWith("s.yaml:4:17: haptics.rate: must be <= 100000"));
+              StartsWith("s.yaml:4:17: haptics.rate: must be in [50, 4000]"));
   EXPECT_THAT(sceneError(kHead + "duration: 1e300\n"),
               StartsWith("s.yaml:4:11: duration: must be <= 10000000"));
   EXPECT_THAT(sceneError(kHead + "solver: {nsgs_max_sweeps: 2000000000}\n"),
@@ -450,8 +450,8 @@ TEST(Scene, UnusualValuesAreWarningsWithFileLineColumnAndField) {
                                      "0.3")));
   EXPECT_THAT(sceneWarnings(kHead + "solver: {max_contacts: 3000}\n"),
               ElementsAre(StartsWith("s.yaml:4:24: solver.max_contacts: unusual value 3000")));
-  EXPECT_THAT(sceneWarnings(kHead + "haptics: {max_force: 100}\n"),
-              ElementsAre(HasSubstr("haptics.max_force: unusual value 100")));
+  EXPECT_THAT(sceneWarnings(kHead + "haptics: {max_force: 45}\n"),
+              ElementsAre(HasSubstr("haptics.max_force: unusual value 45")));
   // warnings come in document order, and a usual scene has none
   EXPECT_THAT(sceneWarnings(kHead + "    material: {young_modulus: 2, density: 50000}\n"),
               ElementsAre(StartsWith("s.yaml:4:31: tissues[0].material.young_modulus"),

@@ -41,15 +41,23 @@ TEST(SceneWorkspace, ParsesScaleOffsetRotationAndClutchButton) {
   EXPECT_EQ(w.clutch_button, 1);
   EXPECT_EQ(w.problem(), "");
   EXPECT_THAT(hapticServerOptions(s.haptics),
-              ElementsAre("--workspace-scale=2.5",
+              ElementsAre("--rate=1000", "--max-force=8", "--force-scale=1", "--watchdog-ms=50",
+                          "--max-sweeps=50", "--tolerance=9.9999999999999995e-07",
+                          "--workspace-scale=2.5",
                           "--workspace-offset=0.10000000000000001,-0.20000000000000001,"
                           "0.29999999999999999",
                           StartsWith("--workspace-rotation=0.707106781186547"),
                           "--clutch-button=1"));
-  // no workspace section: the identity, no options
-  const SceneSpec plain = parseScene(kHead + "haptics: {max_force: 4}\n", "s.yaml", kScenes);
+  // no workspace section: the identity, no workspace options, but the scene's clamp and rate
+  // reach haptic_server (start.sh passed only the workspace before: a scene's max_force was lost)
+  const SceneSpec plain =
+      parseScene(kHead + "haptics: {max_force: 4, rate: 2000}\n", "s.yaml", kScenes);
   EXPECT_TRUE(plain.haptics.workspace.isIdentity());
-  EXPECT_TRUE(hapticServerOptions(plain.haptics).empty());
+  EXPECT_THAT(hapticServerOptions(plain.haptics),
+              ElementsAre("--rate=2000", "--max-force=4", "--force-scale=1", "--watchdog-ms=50",
+                          "--max-sweeps=50", "--tolerance=9.9999999999999995e-07"));
+  // haptics off: haptic_server keeps its own defaults
+  EXPECT_TRUE(hapticServerOptions(parseScene(kHead, "s.yaml", kScenes).haptics).empty());
 }
 
 TEST(SceneWorkspace, OutOfRangeValuesAreErrorsWithTheirPosition) {

@@ -28,6 +28,7 @@
 #include "tactus/haptic/workspace_mapping.h"
 #include "tactus/shared/delassus_blocks.h"
 #include "tactus/shared/event_ring.h"
+#include "tactus/shared/haptic_limits.h"
 #include "tactus/shared/stats_ring.h"
 #include "tactus/shared/messages.h"
 #include "tactus/shared/nsgs.h"
@@ -39,14 +40,19 @@ namespace tactus::haptic {
 /// Accepted ranges of HapticSettings (validate() and haptic_server's options use the same
 /// bounds). The force and torque ceilings also bound the tick's final guard.
 struct HapticSettingsLimits {
-  static constexpr double kMaxForceScale = 10.0;          ///< force_scale in [0, this]
-  static constexpr double kMaxForceN = 50.0;              ///< max_force_n in (0, this] N
+  /// force_scale in [0, this]
+  static constexpr double kMaxForceScale = shared::HapticLimits::kMaxForceScale;
+  /// max_force_n in (0, this] N
+  static constexpr double kMaxForceN = shared::HapticLimits::kMaxForceN;
   static constexpr double kMaxTorqueNm = 5.0;             ///< max_torque_nm in (0, this] N m
   static constexpr double kMaxSlewNPerS = 1e6;            ///< slew_n_per_s in (0, this] N/s
-  static constexpr double kMaxWatchdogMs = 10'000.0;      ///< watchdog_ms in (0, this] ms
+  /// watchdog_ms in (0, this] ms
+  static constexpr double kMaxWatchdogMs = shared::HapticLimits::kMaxWatchdogMs;
   static constexpr double kMaxFadeMs = 10'000.0;          ///< fade_ms in [0, this] ms
-  static constexpr int kMaxSweeps = 100'000;              ///< max_sweeps in [1, this]
-  static constexpr double kMaxTolerance = 1.0;            ///< tolerance in (0, this]
+  /// max_sweeps in [1, this]
+  static constexpr int kMaxSweeps = shared::HapticLimits::kMaxSweeps;
+  /// tolerance in (0, this]
+  static constexpr double kMaxTolerance = shared::HapticLimits::kMaxTolerance;
   /// period_ns in (0, this] ns, solve_budget_ns in [0, this] ns (0: sweeps only)
   static constexpr std::int64_t kMaxPeriodNs = 1'000'000'000;
   /// Limits below this are treated as zero by the guard (no force rather than denormal maths).

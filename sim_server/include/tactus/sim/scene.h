@@ -177,9 +177,11 @@ struct HapticsSpec {
   shared::WorkspaceMappingParams workspace;
 };
 
-/// haptic_server's options for the scene's haptics section (today the workspace mapping:
-/// `--workspace-scale=S`, ...), one per item; scripts/start.sh passes them on
-/// (sim_server --print-haptic-options).
+/// haptic_server's options for the scene's haptics section, one per item (`--rate=R`,
+/// `--max-force=F`, `--force-scale`, `--watchdog-ms`, `--max-sweeps`, `--tolerance`, then the
+/// workspace mapping `--workspace-scale=S`, ... when it is not the identity); none when haptics
+/// is off. scripts/start.sh passes them on (sim_server --print-haptic-options), so the clamp a
+/// scene sets is the one the device gets.
 std::vector<std::string> hapticServerOptions(const HapticsSpec& haptics);
 
 struct OutputSpec {
