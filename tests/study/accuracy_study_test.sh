@@ -2,7 +2,10 @@
 # ctest `study`: runs scripts/accuracy-study --quick into a temporary directory and checks its
 # outputs: every file present and non-empty, reference rows with zero error, every error finite,
 # the grasp producing contact forces, the exact compliance close to its own reference, and the
-# W error ordering warped < rest < uncoupled.
+# W error ordering warped < rest < uncoupled. Haptic loop: R1 (the exact step at the tick's pose)
+# replays a step exactly, R1 and R2 agree with each other's rows, the converged local model is
+# closer to R1 than holding the force and renders R1's stiffness on the slow press, the
+# references are passive and holding the force on a tap is not.
 # Usage: accuracy_study_test.sh TACTUS_ACCURACY_BINARY REPO_ROOT
 set -euo pipefail
 bin="$1"
@@ -27,27 +30,25 @@ def rows(name):
         return list(csv.DictReader(f))
 sim = rows("sim_accuracy.csv")
 hap = rows("haptic_accuracy.csv")
+meta = {r["key"]: r["value"] for r in rows("meta.csv")}
 err_cols = ["force_rel_rms", "force_peak_err_n", "max_penetration_mm", "complementarity_max_nm"]
-for name, table, cols in [("sim", sim, err_cols + ["energy_dev_rel", "nsgs_error_max"]),
-                          ("haptic", hap, err_cols + ["work_dev_mj"])]:
-    if not table:
-        fails.append(f"{name}: no rows")
-    refs = [r for r in table if r["is_reference"] == "1"]
-    if not refs:
-        fails.append(f"{name}: no reference row")
-    for r in table:
-        for c in cols:
-            if not math.isfinite(float(r[c])):
-                fails.append(f"{name}: {c} not finite in {r}")
-    for r in refs:
-        for c in ["force_rel_rms", "force_peak_err_n"] + (["energy_dev_rel"] if name == "sim"
-                                                           else ["work_dev_mj"]):
-            if float(r[c]) != 0.0:
-                fails.append(f"{name}: reference row has {c} = {r[c]}")
-        if float(r["force_ref_peak_n"]) < 0.1:
-            fails.append(f"{name}: the reference never pushes (peak {r['force_ref_peak_n']} N)")
-    if not any(float(r["force_rel_rms"]) > 0 for r in table if r["is_reference"] == "0"):
-        fails.append(f"{name}: every variant has zero error (nothing was compared)")
+if not sim:
+    fails.append("sim: no rows")
+refs = [r for r in sim if r["is_reference"] == "1"]
+if not refs:
+    fails.append("sim: no reference row")
+for r in sim:
+    for c in err_cols + ["energy_dev_rel", "nsgs_error_max"]:
+        if not math.isfinite(float(r[c])):
+            fails.append(f"sim: {c} not finite in {r}")
+for r in refs:
+    for c in ["force_rel_rms", "force_peak_err_n", "energy_dev_rel"]:
+        if float(r[c]) != 0.0:
+            fails.append(f"sim: reference row has {c} = {r[c]}")
+    if float(r["force_ref_peak_n"]) < 0.1:
+        fails.append(f"sim: the reference never pushes (peak {r['force_ref_peak_n']} N)")
+if not any(float(r["force_rel_rms"]) > 0 for r in sim if r["is_reference"] == "0"):
+    fails.append("sim: every variant has zero error (nothing was compared)")
 exact = [r for r in sim if r["study"] == "compliance" and r["label"] == "exact"]
 if not exact or float(exact[0]["force_rel_rms"]) > 0.01:
     fails.append("exact compliance at tolerance 1e-6 is not within 1 % of its reference")
@@ -55,10 +56,59 @@ if not exact or float(exact[0]["force_rel_rms"]) > 0.01:
 w = {r["compliance"]: float(r["w_rel_err_median"]) for r in rows("w_accuracy.csv")}
 if not all(math.isfinite(v) for v in w.values()) or not (w["warped"] < w["rest"] < w["uncoupled"]):
     fails.append(f"W error ordering warped < rest < uncoupled violated: {w}")
-if any(int(r["ticks_compared"]) <= 0 for r in hap):
-    fails.append("haptic: a row compared no ticks")
+
+# ---- haptic loop
+hcols = ["err_r1_rel_rms", "err_r1_max_n", "err_r2_rel_rms", "err_r2_max_n", "stiffness_npm",
+         "max_penetration_mm", "energy_to_hand_mj", "tick_us_median"]
+for r in hap:
+    for c in hcols:
+        if not math.isfinite(float(r[c])):
+            fails.append(f"haptic: {c} not finite in {r}")
+    if int(r["ticks_compared"]) <= 0:
+        fails.append(f"haptic: a row compared no ticks: {r}")
+# R1 restored from a saved state and stepped reproduces the step it replays
+if float(meta["replay_max_rel_diff"]) > 1e-6:
+    fails.append(f"R1 replay differs from the run it replays: {meta['replay_max_rel_diff']}")
+cases = {}
+for r in hap:
+    cases.setdefault((r["motion"], r["rate_hz"], r["sim_hz"]), {})[
+        (r["method"], int(r["sweeps_per_tick"]))] = r
+if {k[0] for k in cases} != {"slow_press", "tremor", "fast_tap"}:
+    fails.append(f"haptic: motions missing: {sorted(cases)}")
+def f(r, c):
+    return float(r[c])
+for key, m in cases.items():
+    r1, r2 = m.get(("r1", 0)), m.get(("r2", 0))
+    hold, conv = m.get(("hold", 0)), m.get(("local", 0))
+    if not (r1 and r2 and hold and conv and ("local", 1) in m and ("coupling", 0) in m
+            and ("extrapolate", 0) in m):
+        fails.append(f"haptic {key}: a method is missing: {sorted(m)}")
+        continue
+    if f(r1, "err_r1_max_n") != 0 or f(r2, "err_r2_max_n") != 0:
+        fails.append(f"haptic {key}: a reference differs from itself")
+    # the decomposition's two references are compared on the same ticks both ways
+    if abs(f(r1, "err_r2_max_n") - f(r2, "err_r1_max_n")) > 1e-9 * max(1.0, f(r1, "err_r2_max_n")):
+        fails.append(f"haptic {key}: |R1 - R2| differs between the R1 and R2 rows")
+    if f(r1, "force_r1_peak_n") < 0.1:
+        fails.append(f"haptic {key}: R1 never pushes (peak {r1['force_r1_peak_n']} N)")
+    # a damped tissue is passive: over a closed motion the references take energy from the hand
+    for ref in (r1, r2):
+        if f(ref, "energy_to_hand_mj") >= 0:
+            fails.append(f"haptic {key}: {ref['method']} gives the hand energy "
+                         f"({ref['energy_to_hand_mj']} mJ) over a closed motion")
+    if key[0] == "slow_press":
+        # the paper's claim: the local model follows the exact problem between snapshots
+        if not f(conv, "err_r1_rel_rms") < f(hold, "err_r1_rel_rms"):
+            fails.append(f"haptic {key}: converged local model not closer to R1 than hold: "
+                         f"{conv['err_r1_rel_rms']} vs {hold['err_r1_rel_rms']}")
+        k1 = f(conv, "stiffness_r1_npm")
+        if not (k1 > 0 and abs(f(conv, "stiffness_npm") - k1) < 0.2 * k1):
+            fails.append(f"haptic {key}: local model stiffness {conv['stiffness_npm']} N/m not "
+                         f"within 20 % of R1's {k1}")
+    if key[0] == "fast_tap" and not f(hold, "energy_to_hand_mj") > f(conv, "energy_to_hand_mj"):
+        fails.append(f"haptic {key}: holding the force is not more active than the local model")
 md = open(os.path.join(d, "accuracy.md")).read()
-if "| study |" not in md or "| rate [kHz] |" not in md:
+if "| study |" not in md or "| motion | method |" not in md:
     fails.append("accuracy.md lacks its tables")
 for f in fails:
     print("FAIL:", f, file=sys.stderr)
