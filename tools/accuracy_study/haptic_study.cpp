@@ -50,35 +50,6 @@ Eigen::Vector3d DeviceMotion::velocity(double t_s) const {
 
 namespace {
 
-// Everything a step of the pipeline starts from (the warm start of NSGS aside, which a tight
-// tolerance makes irrelevant, and kCholmod keeps no factor between steps).
-struct SavedState {
-  std::vector<Eigen::VectorXd> q, v;
-  std::unique_ptr<sim::Instrument> tool;
-};
-
-void save(sim::Simulation& sim, SavedState& s) {
-  s.q.resize(static_cast<std::size_t>(sim.tissueCount()));
-  s.v.resize(s.q.size());
-  for (int i = 0; i < sim.tissueCount(); ++i) {
-    s.q[static_cast<std::size_t>(i)] = sim.tissue(i).positions();
-    s.v[static_cast<std::size_t>(i)] = sim.tissue(i).velocities();
-  }
-  if (!s.tool) {
-    s.tool = std::make_unique<sim::Instrument>(*sim.instrument());
-  } else {
-    *s.tool = *sim.instrument();
-  }
-}
-
-void restore(sim::Simulation& sim, const SavedState& s) {
-  for (int i = 0; i < sim.tissueCount(); ++i) {
-    sim.tissue(i).positions() = s.q[static_cast<std::size_t>(i)];
-    sim.tissue(i).velocities() = s.v[static_cast<std::size_t>(i)];
-  }
-  *sim.instrument() = *s.tool;
-}
-
 struct Anchor {
   sim::DeviceTarget target;                // scripted pose and opening at t0, at rest
 };
@@ -89,15 +60,6 @@ sim::DeviceTarget deviceAt(const Anchor& a, const DeviceMotion& m, double t_rel_
   d.twist.setZero();
   d.twist.head<3>() = m.velocity(t_rel_s);
   return d;
-}
-
-// The exact reference configuration: exact W, direct CHOLMOD every step, tight NSGS.
-sim::SceneSpec referenceSpec(const Options& o, const sim::SceneSpec& base, const std::string& mesh,
-                             double h_s) {
-  sim::SceneSpec s = configure(o, base, mesh, h_s, sim::ComplianceKind::kExact, o.ref_tolerance,
-                               o.ref_sweeps);
-  s.solver.linear = sim::LinearSolverKind::kCholmod;
-  return s;
 }
 
 Eigen::Vector3d stepForce(sim::Simulation& sim, const sim::DeviceTarget& d, double& pen_m,

@@ -124,7 +124,7 @@ int run(Options& o) {
   const sim::SceneSpec& main_base = bases.at(sp.main_mesh);
   const double scene_tol = main_base.solver.nsgs_tolerance;
   const int scene_sweeps = main_base.solver.nsgs_max_sweeps;
-  if (!o.haptic_only) {
+  if (o.part == "all" || o.part == "sim") {
     fmt::print("part 1: simulation step ({} s of the script per run)\n", sp.duration_s);
     RunCache cache(o, sp.duration_s);
     std::vector<SimRow> rows;
@@ -199,15 +199,28 @@ int run(Options& o) {
       writeOutput(o, "sim_timeseries.csv", ts);
     }
   }
+  if (o.part == "all" || o.part == "states") {
+    // compliance models on the same states of one exact trajectory
+    const std::int64_t t_s = shared::monotonicNs();
+    const StateComparison sc =
+        compareStates(o, main_base, sp.main_mesh, sp.duration_s, quick ? 5 : 1);
+    writeOutput(o, "w_states.csv", statesCsv(sc));
+    fmt::print("  compliance models on {} states of the exact run ({} skipped: rows differ) in "
+               "{:.1f} s\n", sc.rows.size(), sc.skipped, shared::secondsSinceNs(t_s));
+  }
   const double part1_s = shared::secondsSinceNs(t_all);
 
   // ---- part 2: the haptic loop
-  fmt::print("part 2: haptic loop ({} mesh, window from {} s; R1, R2 and the methods)\n",
-             hp.mesh, hp.t0_s);
+  const bool run_haptic = o.part == "all" || o.part == "haptic";
+  if (run_haptic) {
+    fmt::print("part 2: haptic loop ({} mesh, window from {} s; R1, R2 and the methods)\n",
+               hp.mesh, hp.t0_s);
+  }
   const std::int64_t t_h = shared::monotonicNs();
   ReplayCheck replay;
-  const std::vector<HapticCase> cases = runHaptic(o, hp, replay);
-  writeOutput(o, "haptic_accuracy.csv", hapticCsv(cases, hp.mesh));
+  const std::vector<HapticCase> cases =
+      run_haptic ? runHaptic(o, hp, replay) : std::vector<HapticCase>{};
+  if (!cases.empty()) writeOutput(o, "haptic_accuracy.csv", hapticCsv(cases, hp.mesh));
   {
     // the force against time of every motion at the first (rate, step) pair
     std::string ts = "motion,series,t_s,fx_n,fy_n,fz_n\n";
@@ -216,7 +229,7 @@ int run(Options& o) {
       std::istringstream lines(hapticSeries(c, hp.t0_s));
       for (std::string line; std::getline(lines, line);) ts += c.motion + ',' + line + '\n';
     }
-    writeOutput(o, "haptic_timeseries.csv", ts);
+    if (!cases.empty()) writeOutput(o, "haptic_timeseries.csv", ts);
   }
   const double part2_s = shared::secondsSinceNs(t_h);
 
@@ -280,9 +293,11 @@ int main(int argc, char** argv) {
   app.add_flag("--overwrite", o.overwrite,
                "Replace the CSV files an earlier run left in --out (refused otherwise)");
   app.add_flag("--quick", quick, "Quick mode (< 2 min): coarse liver, short spans, few points");
-  app.add_flag("--haptic-only", o.haptic_only,
-               "Run part 2 (the haptic loop) only: haptic_accuracy.csv, haptic_timeseries.csv, "
-               "meta.csv (scripts/accuracy-study then skips the report)");
+  app.add_option("--part", o.part,
+                 "What to run: all, sim (the simulation step study), states (compliance models on "
+                 "the same states), haptic (the haptic loop); the report covers what exists")
+      ->check(CLI::IsMember({"all", "sim", "states", "haptic"}))
+      ->capture_default_str();
   app.add_flag("--with-23k", o.with_23k,
                "Add liver_23k to the mesh study (precomputes a 1.6 GB warped compliance; slow)");
   app.add_option("--root", root, "Repository root (scenes/ is read from it)")
@@ -304,6 +319,10 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--haptic-t0", o.haptic_t0_s, "Start of the haptic window on the script [s] "
                                                "(default 3: the jaws on the lobe)");
+  app.add_option("--coherence-bound", o.coherence_bound,
+                 "exact_below_coherence of the bounded warped model in the state comparison")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 1.0));
   app.add_option("--latency-steps", o.latency_steps,
                  "Simulation periods between a step's device sample and its snapshot's use")
       ->capture_default_str()

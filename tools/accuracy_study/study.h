@@ -41,11 +41,13 @@
 #include <Eigen/Core>
 #include <filesystem>
 #include <map>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include "tactus/shared/pose.h"
 #include "tactus/sim/compliance.h"
+#include "tactus/sim/instrument.h"
 #include "tactus/sim/pipeline.h"
 #include "tactus/sim/scene.h"
 
@@ -61,7 +63,9 @@ struct Options {
   fs::path cache_dir;                      ///< compliance caches
   bool overwrite = false;                  ///< replace CSV files an earlier run left in `out`
   bool with_23k = false;
-  bool haptic_only = false;                ///< skip part 1
+  std::string part = "all";                ///< all | sim | states | haptic
+  /// exact_below_coherence of the bounded warped model in the state comparison
+  double coherence_bound = 0.99;
   double duration_s = 0.0;                 ///< 0: per mode
   double early_until_s = 3.5;              ///< second error window: t <= this [s]
   double duration_23k_s = 3.5;             ///< span of the liver_23k runs [s]
@@ -138,6 +142,13 @@ struct SimRun {
   std::map<std::string, std::vector<double>> w_error;
 };
 
+/// W = H C H^T of the warped, rest and uncoupled models against the exact W of `sim` (an exact
+/// simulation, after a step) on rows x, y, z at the 24 free surface nodes nearest the tool; the
+/// relative Frobenius errors are appended to run.w_error by model name. `models` is built on
+/// first use (C0 cached in o.cache_dir).
+void probeCompliance(const Options& o, sim::Simulation& sim, const SimConfig& cfg,
+                     std::vector<std::unique_ptr<sim::TissueCompliance>>& models, SimRun& run);
+
 /// Runs `cfg` over duration_s of the scene's script; with probe_w, every 0.1 s of contact the
 /// compliance models are compared with the run's own W (probeCompliance).
 SimRun runSim(const Options& o, const sim::SceneSpec& base, const SimConfig& cfg,
@@ -163,6 +174,58 @@ struct SimRow {
 };
 /// sim_accuracy.csv's text.
 std::string simCsv(const std::vector<SimRow>& rows, double early_until_s);
+
+// ---- saved states (compliance_states.cpp)
+
+/// Everything a step of the pipeline starts from: tissue q, v and the god object (NSGS's warm
+/// start aside, which a tight tolerance makes irrelevant; a kCholmod body keeps no factor between
+/// steps).
+struct SavedState {
+  std::vector<Eigen::VectorXd> q, v;
+  std::unique_ptr<sim::Instrument> tool;
+};
+void save(sim::Simulation& sim, SavedState& s);
+void restore(sim::Simulation& sim, const SavedState& s);
+/// The exact reference configuration: exact W, direct CHOLMOD every step, NSGS at
+/// o.ref_tolerance.
+sim::SceneSpec referenceSpec(const Options& o, const sim::SceneSpec& base, const std::string& mesh,
+                             double h_s);
+
+// ---- part 1b: compliance models on the same states (compliance_states.cpp)
+
+/// One sampled state of the exact reference trajectory; per model (StateComparison::models).
+struct StateRow {
+  double t_s = 0.0;                        ///< start of the step
+  int contacts = 0;
+  double force_exact_n = 0.0;
+  std::vector<double> w_err;               ///< ||W_m - W_exact||_F / ||W_exact||_F, whole problem
+  std::vector<double> force_err;           ///< |F_m - F_exact| / |F_exact|
+  std::vector<double> probe_w_err;         ///< tissue W on the probe rows (probeCompliance)
+  std::vector<double> step_s, wbuild_s;    ///< the probe step's times
+  std::vector<bool> fallback;              ///< the bounded model used the exact W
+  int inverted_near = 0;                   ///< inverted elements at the probe nodes
+  double min_det_near = 1.0;
+  double min_coherence_near = 1.0;         ///< |sum v_e R_e|_F / (sqrt 3 sum v_e), 1: coherent
+};
+
+/// Compliance models compared on the same states: one exact reference run (referenceSpec, the
+/// scene's script and contact passes); every `every_steps` steps in contact its pre-step state is
+/// restored into one simulation per model (exact, warped, warped_bounded (warped with
+/// exact_below_coherence = o.coherence_bound), rest, uncoupled; one contact pass),
+/// which steps with the same device target: the same contacts, rows and delta_free, only W
+/// differs. Per state and model: the problem's W error, the contact force error against the
+/// exact model's, the probe's tissue W error, the step's times, and diagnostics of the elements
+/// at the nodes nearest the tool.
+struct StateComparison {
+  std::string mesh;
+  std::vector<std::string> models;         ///< models[0] = exact
+  std::vector<StateRow> rows;
+  int skipped = 0;                         ///< states whose probes assembled different rows
+};
+StateComparison compareStates(const Options& o, const sim::SceneSpec& base,
+                              const std::string& mesh, double duration_s, int every_steps);
+/// w_states.csv's text.
+std::string statesCsv(const StateComparison& sc);
 
 // ---- part 2: the haptic loop (haptic_study.cpp runs it, haptic_report.cpp measures it)
 
