@@ -5,7 +5,9 @@
 # W error ordering warped < rest < uncoupled. Haptic loop: R1 (the exact step at the tick's pose)
 # replays a step exactly, R1 and R2 agree with each other's rows, the converged local model is
 # closer to R1 than holding the force and renders R1's stiffness on the slow press, the
-# references are passive and holding the force on a tap is not.
+# references are passive and holding the force on a tap is not. Compliance on the same states: the
+# exact model's rows have zero error, the per-state W error orders warped < rest < uncoupled, and
+# the bounded warped model is the exact one where it fell back and the warped one elsewhere.
 # Usage: accuracy_study_test.sh TACTUS_ACCURACY_BINARY REPO_ROOT
 set -euo pipefail
 bin="$1"
@@ -15,7 +17,8 @@ trap 'rm -rf "$tmp"' EXIT
 TACTUS_ACCURACY_BIN="$bin" "$root/scripts/accuracy-study" --quick --out "$tmp/out" \
   --cache-dir "$tmp/cache"
 for f in sim_accuracy.csv haptic_accuracy.csv sim_timeseries.csv haptic_timeseries.csv meta.csv \
-         w_accuracy.csv accuracy.md accuracy_pareto.png accuracy_forces.png; do
+         w_accuracy.csv w_states.csv accuracy.md accuracy_pareto.png accuracy_forces.png \
+         accuracy_w_states.png; do
   if [[ ! -s "$tmp/out/$f" ]]; then
     echo "FAIL: $f is missing or empty" >&2
     exit 1
@@ -56,6 +59,32 @@ if not exact or float(exact[0]["force_rel_rms"]) > 0.01:
 w = {r["compliance"]: float(r["w_rel_err_median"]) for r in rows("w_accuracy.csv")}
 if not all(math.isfinite(v) for v in w.values()) or not (w["warped"] < w["rest"] < w["uncoupled"]):
     fails.append(f"W error ordering warped < rest < uncoupled violated: {w}")
+
+# ---- compliance models on the same states
+st = rows("w_states.csv")
+by = {}
+for r in st:
+    by.setdefault(r["model"], []).append(r)
+if set(by) != {"exact", "warped", "warped_bounded", "rest", "uncoupled"} or not by["exact"]:
+    fails.append(f"w_states: models missing: {sorted(by)}")
+else:
+    def med(v):
+        v = sorted(v)
+        return v[len(v) // 2]
+    if any(float(r["w_rel_err"]) != 0 or float(r["force_rel_err"]) != 0 for r in by["exact"]):
+        fails.append("w_states: the exact model differs from itself")
+    wm = {m: med([float(r["w_rel_err"]) for r in by[m]]) for m in by}
+    if not wm["warped"] < wm["rest"] < wm["uncoupled"]:
+        fails.append(f"w_states: per-state W error not ordered warped < rest < uncoupled: {wm}")
+    for wr, br in zip(by["warped"], by["warped_bounded"]):
+        if wr["t_s"] != br["t_s"]:
+            fails.append("w_states: models sampled different states")
+            break
+        e = float(br["w_rel_err"])
+        if br["exact_fallback"] == "1" and e > 1e-12:
+            fails.append(f"w_states: bounded model fell back at t {br['t_s']} but W error {e}")
+        if br["exact_fallback"] == "0" and abs(e - float(wr["w_rel_err"])) > 1e-9:
+            fails.append(f"w_states: bounded model kept warped at t {br['t_s']} but its W differs")
 
 # ---- haptic loop
 hcols = ["err_r1_rel_rms", "err_r1_max_n", "err_r2_rel_rms", "err_r2_max_n", "stiffness_npm",

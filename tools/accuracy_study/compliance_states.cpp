@@ -174,6 +174,7 @@ StateComparison compareStates(const Options& o, const sim::SceneSpec& base,
     row.contacts = ex.contacts;
     const Eigen::Vector3d f_ex = contactWrench(ex, ex.f.data(), ex.tool_pose.pos_m).head<3>();
     row.force_exact_n = f_ex.norm();
+    for (int c = 0; c < ex.contacts; ++c) row.normal_sum_n += ex.f[ex.row_offset[c]];
     for (const auto& p : problems) {
       row.w_err.push_back((p.W - ex.W).norm() / ex.W.norm());
       const Eigen::Vector3d f = contactWrench(p, p.f.data(), p.tool_pose.pos_m).head<3>();
@@ -205,13 +206,13 @@ StateComparison compareStates(const Options& o, const sim::SceneSpec& base,
 
 std::string statesCsv(const StateComparison& sc) {
   std::ostringstream out;
-  out << "mesh,t_s,model,contacts,force_exact_n,w_rel_err,force_rel_err,probe_w_rel_err,"
+  out << "mesh,t_s,model,contacts,force_exact_n,normal_force_sum_n,w_rel_err,force_rel_err,probe_w_rel_err,"
          "exact_fallback,step_ms,wbuild_ms,inverted_near,min_det_near,"
          "min_rotation_coherence_near\n";
   for (const StateRow& r : sc.rows) {
     for (std::size_t m = 0; m < sc.models.size(); ++m) {
       out << sc.mesh << ',' << fmtG(r.t_s) << ',' << sc.models[m] << ',' << r.contacts << ','
-          << fmtG(r.force_exact_n) << ',' << fmtG(r.w_err[m]) << ',' << fmtG(r.force_err[m])
+          << fmtG(r.force_exact_n) << ',' << fmtG(r.normal_sum_n) << ',' << fmtG(r.w_err[m]) << ',' << fmtG(r.force_err[m])
           << ',' << fmtG(r.probe_w_err[m]) << ',' << (r.fallback[m] ? 1 : 0) << ','
           << fmtG(1e3 * r.step_s[m]) << ','
           << fmtG(1e3 * r.wbuild_s[m]) << ',' << r.inverted_near << ','

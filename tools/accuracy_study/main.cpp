@@ -260,6 +260,7 @@ int run(Options& o) {
          << "haptic_latency_steps," << o.latency_steps << '\n'
          << "haptic_tolerance," << bases.begin()->second.haptics.nsgs_tolerance << '\n'
          << "tremor_mm," << o.tremor_mm << '\n'
+         << "coherence_bound," << o.coherence_bound << '\n'
          << "tremor_hz," << o.tremor_hz << '\n'
          << "with_23k," << (o.with_23k ? 1 : 0) << '\n'
          << "duration_23k_s," << o.duration_23k_s << '\n'

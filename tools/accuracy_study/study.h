@@ -65,7 +65,7 @@ struct Options {
   bool with_23k = false;
   std::string part = "all";                ///< all | sim | states | haptic
   /// exact_below_coherence of the bounded warped model in the state comparison
-  double coherence_bound = 0.99;
+  double coherence_bound = 0.9995;
   double duration_s = 0.0;                 ///< 0: per mode
   double early_until_s = 3.5;              ///< second error window: t <= this [s]
   double duration_23k_s = 3.5;             ///< span of the liver_23k runs [s]
@@ -198,6 +198,7 @@ struct StateRow {
   double t_s = 0.0;                        ///< start of the step
   int contacts = 0;
   double force_exact_n = 0.0;
+  double normal_sum_n = 0.0;               ///< sum of the exact solve's normal forces
   std::vector<double> w_err;               ///< ||W_m - W_exact||_F / ||W_exact||_F, whole problem
   std::vector<double> force_err;           ///< |F_m - F_exact| / |F_exact|
   std::vector<double> probe_w_err;         ///< tissue W on the probe rows (probeCompliance)
