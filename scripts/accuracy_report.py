@@ -118,10 +118,13 @@ def haptic_table(rows, meta):
         "|---|---|---|---|---|---|---|---|",
     ]
     for r in sorted([r for r in rows if is_main(r, meta)],
-                    key=lambda r: (r["motion"], method_key(r))):
+                    key=lambda r: (r["motion"], r.get("snapshot_w") != "scene",
+                                   method_key(r))):
         label = r["label"]
         if r["method"] in ("r1", "r2"):
             label = f"**{label}**"
+        if r.get("snapshot_w") == "exact":
+            label += " [exact-W snapshots]"
         out.append(
             f"| {r['motion']} | {label} "
             f"| {pct(num(r, 'err_r1_rel_rms'))} / {num(r, 'err_r1_max_n'):.3f} "
@@ -140,16 +143,19 @@ def rates_table(rows):
     head = "| motion | haptic [kHz] | simulation [Hz] | " + " | ".join(
         f"{lab} vs R1 / R2 [%]" for _, _, lab in shown) + " |"
     out = [head, "|" + "---|" * (3 + len(shown))]
-    cases = sorted({(r["motion"], num(r, "rate_hz"), num(r, "sim_hz")) for r in rows})
-    for motion, rate, sim_hz in cases:
+    cases = sorted({(r["motion"], num(r, "rate_hz"), num(r, "sim_hz"), r["snapshot_w"])
+                    for r in rows})
+    for motion, rate, sim_hz, snap in cases:
         sel = [r for r in rows if r["motion"] == motion and num(r, "rate_hz") == rate
-               and num(r, "sim_hz") == sim_hz]
+               and num(r, "sim_hz") == sim_hz and r["snapshot_w"] == snap]
         cells = []
         for method, sweeps, _ in shown:
             m = [r for r in sel if r["method"] == method and int(r["sweeps_per_tick"]) == sweeps]
             cells.append(f"{pct(num(m[0], 'err_r1_rel_rms'))} / {pct(num(m[0], 'err_r2_rel_rms'))}"
                          if m else "-")
-        out.append(f"| {motion} | {rate / 1000:g} | {sim_hz:g} | " + " | ".join(cells) + " |")
+        out.append(f"| {motion} | {rate / 1000:g} | {sim_hz:g}"
+                   f"{' (exact-W snapshots)' if snap == 'exact' else ''} | "
+                   + " | ".join(cells) + " |")
     return "\n".join(out)
 
 
@@ -166,9 +172,10 @@ def plot_haptic_pareto(ax, rows, key, title):
             seen.add(lab_key)
             lab = f"{r['method']}, {r['motion']}"
         alpha = 1.0 if r.get("_main") else 0.35
+        hollow = r.get("snapshot_w") == "exact"
         ax.scatter([max(num(r, "tick_us_median"), 1e-2)], [num(r, f"{key}_rel_rms")], s=30,
-                   color=c, marker=MOTION_MARKERS.get(r["motion"], "x"), alpha=alpha, label=lab,
-                   zorder=3)
+                   facecolors="none" if hollow else c, edgecolors=c,
+                   marker=MOTION_MARKERS.get(r["motion"], "x"), alpha=alpha, label=lab, zorder=3)
         if r.get("_main") and r["method"] == "local":
             ax.annotate("conv." if sweeps <= 0 else str(sweeps),
                         (max(num(r, "tick_us_median"), 1e-2), num(r, f"{key}_rel_rms")),
@@ -194,7 +201,8 @@ def plot_pareto(sim_rows, hap_rows, meta, path):
                        f"(b) haptic methods vs R1 (the exact step at the tick's pose), "
                        f"{meta.get('haptic_mesh')}; solid: {main}", )
     plot_haptic_pareto(axes[-1], hap_rows, "err_r2",
-                       "(c) haptic methods vs R2 (the full model at the haptic rate)")
+                       "(c) haptic methods vs R2 (the full model at the haptic rate); "
+                       "hollow: exact-W snapshots")
     fig.suptitle(f"Tactus accuracy vs time ({meta.get('date', '')}, {meta.get('mode', '')} "
                  f"mode; {meta.get('machine', '')})", fontsize=9)
     fig.tight_layout()
@@ -519,6 +527,9 @@ R1's on the same periods in brackets); **penetration** of the rendered tool's li
 (hold and extrapolation: the held forces at the device pose; virtual coupling: at the god
 object's pose); **energy into the hand** `sum F . dx_h` over the closed motion (> 0: the
 rendering is active, it gives the hand energy); time per tick (R1, R2: the full step).
+Rows marked *exact-W snapshots* run the multi-rate simulation with the exact compliance instead
+of the scene's {meta['haptic_mesh']} model (its own R1, same R2): what is left against R1 is the
+local model's linearisation alone.
 
 At {float(meta['haptic_rate_hz']) / 1000:g} kHz with the simulation at {float(meta['haptic_sim_hz']):g} Hz:
 

@@ -100,9 +100,10 @@ if float(meta["replay_max_rel_diff"]) > 1e-6:
     fails.append(f"R1 replay differs from the run it replays: {meta['replay_max_rel_diff']}")
 cases = {}
 for r in hap:
-    cases.setdefault((r["motion"], r["rate_hz"], r["sim_hz"]), {})[
+    cases.setdefault((r["motion"], r["rate_hz"], r["sim_hz"], r["snapshot_w"]), {})[
         (r["method"], int(r["sweeps_per_tick"]))] = r
-if {k[0] for k in cases} != {"slow_press", "tremor", "fast_tap"}:
+if {k[0] for k in cases} != {"slow_press", "tremor", "fast_tap"} or \
+        {k[3] for k in cases} != {"scene", "exact"}:
     fails.append(f"haptic: motions missing: {sorted(cases)}")
 def f(r, c):
     return float(r[c])

@@ -105,7 +105,7 @@ Measures measure(const HapticCase& c, const MethodSeries& s) {
 
 std::string hapticCsv(const std::vector<HapticCase>& cases, const std::string& mesh) {
   std::ostringstream out;
-  out << "motion,mesh,rate_hz,sim_hz,method,label,sweeps_per_tick,ticks_compared,"
+  out << "motion,mesh,rate_hz,sim_hz,snapshot_w,method,label,sweeps_per_tick,ticks_compared,"
          "force_r1_peak_n,err_r1_rel_rms,err_r1_max_n,err_r2_rel_rms,err_r2_max_n,"
          "stiffness_npm,stiffness_r1_npm,stiffness_periods,max_penetration_mm,"
          "energy_to_hand_mj,tick_us_median\n";
@@ -113,7 +113,8 @@ std::string hapticCsv(const std::vector<HapticCase>& cases, const std::string& m
     for (const MethodSeries& s : c.series) {
       const Measures m = measure(c, s);
       out << c.motion << ',' << mesh << ',' << fmtG(c.rate_hz) << ',' << fmtG(1.0 / c.sim_h_s)
-          << ',' << s.method << ',' << s.label << ',' << s.sweeps << ',' << m.compared << ','
+          << ',' << c.snapshot_w << ',' << s.method << ',' << s.label << ',' << s.sweeps << ','
+          << m.compared << ','
           << fmtG(m.ref_peak_n) << ',' << fmtG(m.err_r1_rel) << ',' << fmtG(m.err_r1_max_n)
           << ',' << fmtG(m.err_r2_rel) << ',' << fmtG(m.err_r2_max_n) << ','
           << fmtG(m.stiffness_npm) << ',' << fmtG(m.stiffness_r1_npm) << ','

@@ -184,7 +184,8 @@ void runCase(const Options& o, const sim::SceneSpec& base, const HapticPlan& pla
   }
   const long ticks = std::lround(m.duration_s() * rate);
   const long lat = o.latency_steps;
-  const sim::ComplianceKind kind = base.tissues.at(0).compliance;
+  const sim::ComplianceKind kind =
+      hc.snapshot_w == "exact" ? sim::ComplianceKind::kExact : base.tissues.at(0).compliance;
   sim::Simulation sim(configure(o, base, plan.mesh, h, kind, base.solver.nsgs_tolerance,
                                 base.solver.nsgs_max_sweeps));
   restore(sim, pre.state);
@@ -329,18 +330,24 @@ std::vector<HapticCase> runHaptic(const Options& o, const HapticPlan& plan, Repl
         fmt::print("  {:<10} R2 at {:>4.0f} Hz: {:.1f} s\n", m.name, rate,
                    shared::secondsSinceNs(t0));
       }
-      const std::int64_t t0 = shared::monotonicNs();
-      HapticCase hc;
-      hc.motion = m.name;
-      hc.rate_hz = rate;
-      hc.sim_h_s = h;
-      hc.settle_s = 0.5 * m.lead_in_s;
-      hc.series.push_back(r2.at(rate));
-      runCase(o, base, plan, pre, m, hc);
-      fmt::print("  {:<10} {:>4.0f} Hz, simulation at {:>3.0f} Hz: R1 and methods {:.1f} s\n",
-                 m.name, rate, 1.0 / h, shared::secondsSinceNs(t0));
-      std::fflush(stdout);
-      cases.push_back(std::move(hc));
+      const bool first = rate == plan.rates.front().first && h == plan.rates.front().second;
+      for (const char* w : {"scene", "exact"}) {
+        if (std::string(w) == "exact" && !(first && plan.exact_snapshots)) continue;
+        const std::int64_t t0 = shared::monotonicNs();
+        HapticCase hc;
+        hc.motion = m.name;
+        hc.rate_hz = rate;
+        hc.sim_h_s = h;
+        hc.snapshot_w = w;
+        hc.settle_s = 0.5 * m.lead_in_s;
+        hc.series.push_back(r2.at(rate));
+        runCase(o, base, plan, pre, m, hc);
+        fmt::print("  {:<10} {:>4.0f} Hz, simulation at {:>3.0f} Hz ({} W): R1 and methods "
+                   "{:.1f} s\n",
+                   m.name, rate, 1.0 / h, w, shared::secondsSinceNs(t0));
+        std::fflush(stdout);
+        cases.push_back(std::move(hc));
+      }
     }
   }
   return cases;

@@ -225,7 +225,9 @@ int run(Options& o) {
     // the force against time of every motion at the first (rate, step) pair
     std::string ts = "motion,series,t_s,fx_n,fy_n,fz_n\n";
     for (const HapticCase& c : cases) {
-      if (c.rate_hz != hp.rates.front().first || c.sim_h_s != hp.rates.front().second) continue;
+      if (c.rate_hz != hp.rates.front().first || c.sim_h_s != hp.rates.front().second ||
+          c.snapshot_w != "scene")
+        continue;
       std::istringstream lines(hapticSeries(c, hp.t0_s));
       for (std::string line; std::getline(lines, line);) ts += c.motion + ',' + line + '\n';
     }

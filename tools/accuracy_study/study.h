@@ -267,6 +267,9 @@ struct HapticCase {
   std::string motion;
   double rate_hz = 1000.0;
   double sim_h_s = 0.01;
+  /// W of the multi-rate simulation's snapshots: "scene" (the scene's model) or "exact"
+  /// (isolates the local model's linearisation from the compliance model's error)
+  std::string snapshot_w = "scene";
   /// ticks before this are not measured: R2 starts stepping at 1/rate from a state the scene's
   /// step left, a transient of a few ms (half the motion's still lead-in)
   double settle_s = 0.05;
@@ -281,6 +284,8 @@ struct HapticPlan {
   std::vector<DeviceMotion> motions;
   /// (haptic rate [Hz], simulation step [s]) pairs; the step a multiple of the tick
   std::vector<std::pair<double, double>> rates;
+  /// the first pair once more with exact-W snapshots (HapticCase::snapshot_w)
+  bool exact_snapshots = true;
   std::vector<int> budgets;                ///< local model sweeps per tick; <= 0: converged
   int replay_steps = 20;                   ///< steps of the R1 replay check
 };
