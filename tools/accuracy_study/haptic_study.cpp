@@ -323,16 +323,18 @@ std::vector<HapticCase> runHaptic(const Options& o, const HapticPlan& plan, Repl
   std::vector<HapticCase> cases;
   for (const DeviceMotion& m : motions) {
     std::map<double, MethodSeries> r2;
-    for (const auto& [rate, h] : plan.rates) {
+    for (std::size_t pair = 0; pair < plan.rates.size(); ++pair) {
+      const auto [rate, h] = plan.rates[pair];
       if (r2.find(rate) == r2.end()) {
         const std::int64_t t0 = shared::monotonicNs();
         r2.emplace(rate, runR2(o, base, plan, pre, m, rate));
         fmt::print("  {:<10} R2 at {:>4.0f} Hz: {:.1f} s\n", m.name, rate,
                    shared::secondsSinceNs(t0));
       }
-      const bool first = rate == plan.rates.front().first && h == plan.rates.front().second;
       for (const char* w : {"scene", "exact"}) {
-        if (std::string(w) == "exact" && !(first && plan.exact_snapshots)) continue;
+        if (std::string(w) == "exact" && static_cast<int>(pair) >= plan.exact_snapshot_pairs) {
+          continue;
+        }
         const std::int64_t t0 = shared::monotonicNs();
         HapticCase hc;
         hc.motion = m.name;

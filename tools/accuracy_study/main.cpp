@@ -111,6 +111,7 @@ int run(Options& o) {
     hp.rates = {{1000.0, 0.01}, {1000.0, 0.04}, {1000.0, 0.02}, {1000.0, 0.005},
                 {500.0, 0.01},  {2000.0, 0.01}, {4000.0, 0.01}};
     hp.motions = hapticMotions(o, 1.0, 3e-3, 0.5);
+    hp.exact_snapshot_pairs = static_cast<int>(hp.rates.size());
   }
   if (o.duration_s > 0.0) sp.duration_s = o.duration_s;
   hp.budgets = {1, 3, 10, 0};

@@ -284,8 +284,8 @@ struct HapticPlan {
   std::vector<DeviceMotion> motions;
   /// (haptic rate [Hz], simulation step [s]) pairs; the step a multiple of the tick
   std::vector<std::pair<double, double>> rates;
-  /// the first pair once more with exact-W snapshots (HapticCase::snapshot_w)
-  bool exact_snapshots = true;
+  /// the first this many pairs once more with exact-W snapshots (HapticCase::snapshot_w)
+  int exact_snapshot_pairs = 1;
   std::vector<int> budgets;                ///< local model sweeps per tick; <= 0: converged
   int replay_steps = 20;                   ///< steps of the R1 replay check
 };
