@@ -260,7 +260,7 @@ def force_series(rows):
 
 
 def plot_forces(sim_ts, hap_ts, meta, path):
-    fig, axes = plt.subplots(1, 2 if sim_ts else 1, figsize=(13 if sim_ts else 7, 4.4),
+    fig, axes = plt.subplots(1, 3 if sim_ts else 2, figsize=(19 if sim_ts else 13, 4.4),
                              squeeze=False)
     axes = axes[0]
     if sim_ts:
@@ -273,26 +273,26 @@ def plot_forces(sim_ts, hap_ts, meta, path):
         ax1.set_title(f"(a) compliance models, {meta.get('sim_main_mesh', '')}", fontsize=10)
         ax1.grid(True, alpha=0.3)
         ax1.legend(fontsize=7)
-    ax2 = axes[-1]
     styles = {"R1": ("k", 2.0, "-"), "R2": ("tab:gray", 1.6, "--"),
               "hold the snapshot's force": ("tab:red", 1.0, "-"),
               "linear extrapolation of the force": ("tab:orange", 0.8, ":"),
               "local model converged": ("tab:blue", 1.2, "-"),
               "local model 1 sweep": ("tab:cyan", 0.8, "-.")}
-    tap = [r for r in hap_ts if r["motion"] == "fast_tap"]
-    for name, (t, f) in force_series(tap).items():
-        if name.startswith("virtual coupling"):
-            ax2.plot(t, f, lw=0.8, color="tab:purple", ls=":", label=name)
-        elif name in styles:
-            c, lw, ls = styles[name]
-            ax2.plot(t, f, lw=lw, color=c, ls=ls, label=name)
-    ax2.set_xlabel("t [s]")
-    ax2.set_ylabel("|contact force on the grasper| [N]")
-    ax2.set_title(f"(b) a fast tap (2 mm in 60 ms) at {float(meta['haptic_rate_hz']) / 1000:g} kHz, "
-                  f"simulation {float(meta['haptic_sim_hz']):g} Hz, {meta.get('haptic_mesh')}",
-                  fontsize=10)
-    ax2.grid(True, alpha=0.3)
-    ax2.legend(fontsize=7)
+    for ax2, snap, tag in [(axes[-2], "exact", "(b)"), (axes[-1], "scene", "(c)")]:
+        tap = [r for r in hap_ts if r["motion"] == "fast_tap" and r.get("snapshot_w") == snap]
+        for name, (t, f) in force_series(tap).items():
+            if name.startswith("virtual coupling"):
+                ax2.plot(t, f, lw=0.8, color="tab:purple", ls=":", label=name)
+            elif name in styles:
+                c, lw, ls = styles[name]
+                ax2.plot(t, f, lw=lw, color=c, ls=ls, label=name)
+        ax2.set_xlabel("t [s]")
+        ax2.set_ylabel("|contact force on the grasper| [N]")
+        ax2.set_title(f"{tag} fast tap (2 mm, 60 ms), {float(meta['haptic_rate_hz']) / 1000:g} kHz"
+                      f" / {float(meta['haptic_sim_hz']):g} Hz, {meta.get('haptic_mesh')}, "
+                      f"{'exact-W' if snap == 'exact' else 'scene-W'} snapshots", fontsize=9)
+        ax2.grid(True, alpha=0.3)
+        ax2.legend(fontsize=6)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

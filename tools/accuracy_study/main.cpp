@@ -223,14 +223,14 @@ int run(Options& o) {
       run_haptic ? runHaptic(o, hp, replay) : std::vector<HapticCase>{};
   if (!cases.empty()) writeOutput(o, "haptic_accuracy.csv", hapticCsv(cases, hp.mesh));
   {
-    // the force against time of every motion at the first (rate, step) pair
-    std::string ts = "motion,series,t_s,fx_n,fy_n,fz_n\n";
+    // the force against time of every motion at the first (rate, step) pair, both snapshot Ws
+    std::string ts = "motion,snapshot_w,series,t_s,fx_n,fy_n,fz_n\n";
     for (const HapticCase& c : cases) {
-      if (c.rate_hz != hp.rates.front().first || c.sim_h_s != hp.rates.front().second ||
-          c.snapshot_w != "scene")
-        continue;
+      if (c.rate_hz != hp.rates.front().first || c.sim_h_s != hp.rates.front().second) continue;
       std::istringstream lines(hapticSeries(c, hp.t0_s));
-      for (std::string line; std::getline(lines, line);) ts += c.motion + ',' + line + '\n';
+      for (std::string line; std::getline(lines, line);) {
+        ts += c.motion + ',' + c.snapshot_w + ',' + line + '\n';
+      }
     }
     if (!cases.empty()) writeOutput(o, "haptic_timeseries.csv", ts);
   }
