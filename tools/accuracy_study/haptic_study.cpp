@@ -1,12 +1,12 @@
-// Part 2 of the accuracy study: the haptic local model against the full model re-simulated at
-// the haptic rate (see study.h).
+// Part 2 of the accuracy study: the haptic loop's methods against R1 (the exact step at the
+// tick's pose from the snapshot's state) and R2 (the full model at the haptic rate); see study.h.
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
 #include <cmath>
 #include <map>
-#include <sstream>
+#include <memory>
 
 #include "study.h"
 #include "tactus/shared/clock.h"
@@ -17,289 +17,342 @@
 
 namespace tactus::study {
 
-void TickSeries::pushInvalid() {
+void MethodSeries::push(const Eigen::Vector3d& f, double pen, double t_s) {
+  force.push_back(f);
+  penetration.push_back(pen);
+  time_s.push_back(t_s);
+  valid.push_back(true);
+}
+
+void MethodSeries::pushInvalid() {
   force.push_back(Eigen::Vector3d::Zero());
   penetration.push_back(0.0);
-  complementarity.push_back(0.0);
   time_s.push_back(0.0);
-  sweeps.push_back(0.0);
-  residual.push_back(0.0);
   valid.push_back(false);
+}
+
+Eigen::Vector3d DeviceMotion::offset(double t_s) const {
+  const double u = (t_s - lead_in_s) / motion_s;
+  if (u <= 0.0 || u >= 1.0) return Eigen::Vector3d::Zero();
+  if (name == "tremor") return amplitude_m * std::sin(2.0 * M_PI * freq_hz * motion_s * u) * dir;
+  return amplitude_m * 0.5 * (1.0 - std::cos(2.0 * M_PI * u)) * dir;
+}
+
+Eigen::Vector3d DeviceMotion::velocity(double t_s) const {
+  const double u = (t_s - lead_in_s) / motion_s;
+  if (u <= 0.0 || u >= 1.0) return Eigen::Vector3d::Zero();
+  if (name == "tremor") {
+    const double w = 2.0 * M_PI * freq_hz;
+    return amplitude_m * w * std::cos(w * motion_s * u) * dir;
+  }
+  return amplitude_m * M_PI / motion_s * std::sin(2.0 * M_PI * u) * dir;
 }
 
 namespace {
 
-struct Tremor {
-  double amp_m = 0.0;
-  double freq_hz = 6.0;
-  Eigen::Vector3d dir = Eigen::Vector3d(0.5, 0.3, 0.8).normalized();
+struct Anchor {
+  sim::DeviceTarget target;                // scripted pose and opening at t0, at rest
 };
 
-// The device: the scripted target plus a sinusoidal tremor (position and its velocity).
-sim::DeviceTarget deviceAt(const sim::Simulation& sim, const Tremor& tr, double t_s) {
-  sim::DeviceTarget d = sim.scriptedTarget(t_s);
-  const double w = 2.0 * M_PI * tr.freq_hz;
-  d.pose.pos_m += tr.amp_m * std::sin(w * t_s) * tr.dir;
-  d.twist.head<3>() += tr.amp_m * w * std::cos(w * t_s) * tr.dir;
+sim::DeviceTarget deviceAt(const Anchor& a, const DeviceMotion& m, double t_rel_s) {
+  sim::DeviceTarget d = a.target;
+  d.pose.pos_m += m.offset(t_rel_s);
+  d.twist.setZero();
+  d.twist.head<3>() = m.velocity(t_rel_s);
   return d;
 }
 
-struct WindowState {
-  std::vector<Eigen::VectorXd> q, v;
-  shared::Pose tool_pose;
-  double opening = 1.0;
-};
-
-void seed(sim::Simulation& sim, const WindowState& s) {
-  for (int i = 0; i < sim.tissueCount(); ++i) {
-    sim.tissue(i).positions() = s.q[static_cast<std::size_t>(i)];
-    sim.tissue(i).velocities() = s.v[static_cast<std::size_t>(i)];
-  }
-  sim.instrument()->reset(s.tool_pose, s.opening);
+Eigen::Vector3d stepForce(sim::Simulation& sim, const sim::DeviceTarget& d, double& pen_m,
+                          double& step_s) {
+  sim.setDeviceTarget(d);
+  const sim::StepReport r = sim.step();
+  if (!r.finite) throw NumericalError("haptic study: a reference step diverged");
+  const sim::ContactProblemData& p = sim.lastProblem();
+  pen_m = r.max_penetration_m;
+  step_s = r.times.total_s;
+  return contactWrench(p, p.f.data(), p.tool_pose.pos_m).head<3>();
 }
 
 struct LocalModel {
-  int budget = 0;                          // sweeps per tick (0: hold)
+  int budget = 0;                          // sweeps per tick
   double tol = 1e-6;
   shared::NsgsWorkspace ws;
   std::vector<double> f, df, delta;
   long snapshot = -1;
 };
 
-// One tick of the local model on `p` (a copy of the snapshot) at device pose x_h, mirroring
-// HapticLoop::solveLocalModel without the safety chain. Returns the force; fills metrics.
-void localTick(LocalModel& lm, const sim::ContactProblemData& p, long snapshot,
-               const shared::Pose& x_h, TickSeries& out) {
+// One tick of the local model on the snapshot `p` at device pose x_h, as
+// HapticLoop::solveLocalModel (safety chain aside). Returns the force; the penetration of the
+// linearised problem after the solve goes to pen_m, the timed part to tick_s.
+Eigen::Vector3d localTick(LocalModel& lm, const sim::ContactProblemData& p, long snapshot,
+                          const shared::Pose& x_h, double& pen_m, double& tick_s) {
   const int m = p.rows;
+  pen_m = 0.0;
+  tick_s = 0.0;
+  if (m == 0) return Eigen::Vector3d::Zero();
   const std::int64_t t0 = shared::monotonicNs();
-  Eigen::Vector3d force = Eigen::Vector3d::Zero();
-  int sweeps = 0;
-  if (m > 0) {
-    if (lm.snapshot != snapshot) {
-      // a new snapshot: warm start from the simulation's forces
-      lm.snapshot = snapshot;
-      std::copy_n(p.f.data(), m, lm.f.begin());
-    }
-    const shared::Vector6d dx = shared::poseDifference(x_h, p.device_pose);
-    for (int r = 0; r < m; ++r) lm.df[r] = p.delta_free[r] + p.J.row(r).dot(dx);
-    shared::ContactProblemView view = p.view();
-    view.delta_free = lm.df.data();
-    if (lm.budget > 0) {
-      shared::NsgsSettings ns;
-      ns.tolerance = lm.tol;
-      ns.max_sweeps = lm.budget;
-      ns.time_budget_ns = 0;
-      const shared::NsgsResult res = shared::solveNsgs(view, ns, lm.ws, lm.f.data());
-      if (res.status == shared::NsgsStatus::kNonFinite) std::fill_n(lm.f.begin(), m, 0.0);
-      sweeps = res.sweeps;
-    }
-    force = contactWrench(p, lm.f.data(), p.tool_pose.pos_m + dx.head<3>()).head<3>();
+  if (lm.snapshot != snapshot) {
+    lm.snapshot = snapshot;                // a new snapshot: warm start from its forces
+    std::copy_n(p.f.data(), m, lm.f.begin());
   }
-  out.time_s.push_back(shared::secondsSinceNs(t0));
-  out.force.push_back(force);
-  out.sweeps.push_back(sweeps);
-  // metrics outside the timed part
-  double pen = 0.0, comp = 0.0, res = 0.0;
-  if (m > 0) {
-    shared::ContactProblemView view = p.view();
-    view.delta_free = lm.df.data();
-    res = shared::naturalMapError(view, lm.f.data(), lm.delta.data());
-    for (int c = 0; c < p.contacts; ++c) {
-      const int r0 = p.row_offset[c];
-      pen = std::max(pen, -lm.delta[r0]);
-      comp = std::max(comp, std::abs(lm.delta[r0] * lm.f[r0]));
-    }
+  const shared::Vector6d dx = shared::poseDifference(x_h, p.device_pose);
+  for (int r = 0; r < m; ++r) lm.df[r] = p.delta_free[r] + p.J.row(r).dot(dx);
+  shared::ContactProblemView view = p.view();
+  view.delta_free = lm.df.data();
+  shared::NsgsSettings ns;
+  ns.tolerance = lm.tol;
+  ns.max_sweeps = lm.budget;
+  ns.time_budget_ns = 0;
+  ns.coupling = shared::NsgsCoupling::kSymmetricRowUpdate;   // the pipeline's W is symmetric
+  const shared::NsgsResult res = shared::solveNsgs(view, ns, lm.ws, lm.f.data());
+  if (res.status == shared::NsgsStatus::kNonFinite) std::fill_n(lm.f.begin(), m, 0.0);
+  const Eigen::Vector3d force =
+      contactWrench(p, lm.f.data(), p.tool_pose.pos_m + dx.head<3>()).head<3>();
+  tick_s = shared::secondsSinceNs(t0);
+  shared::naturalMapError(view, lm.f.data(), lm.delta.data());
+  for (int c = 0; c < p.contacts; ++c) pen_m = std::max(pen_m, -lm.delta[p.row_offset[c]]);
+  return force;
+}
+
+// Penetration of the linearised problem of snapshot `p` at device pose x_h with forces f held.
+double heldPenetration(const sim::ContactProblemData& p, const shared::Pose& x_h) {
+  if (p.rows == 0) return 0.0;
+  const shared::Vector6d dx = shared::poseDifference(x_h, p.device_pose);
+  double pen = 0.0;
+  for (int c = 0; c < p.contacts; ++c) {
+    const int r = p.row_offset[c];
+    const double d = p.W.row(r).dot(p.f) + p.delta_free[r] + p.J.row(r).dot(dx);
+    pen = std::max(pen, -d);
   }
-  out.penetration.push_back(pen);
-  out.complementarity.push_back(comp);
-  out.residual.push_back(res);
-  out.valid.push_back(true);
+  return pen;
+}
+
+struct Prefix {
+  SavedState state;
+  Anchor anchor;
+  Eigen::Vector3d force = Eigen::Vector3d::Zero();   // contact force at t0
+};
+
+// The scene's script at its own step up to t0: the state every run of the window starts from.
+Prefix runPrefix(const Options& o, const sim::SceneSpec& base, const HapticPlan& plan) {
+  const sim::ComplianceKind kind = base.tissues.at(0).compliance;
+  sim::Simulation sim(configure(o, base, plan.mesh, base.time_step_s, kind,
+                                base.solver.nsgs_tolerance, base.solver.nsgs_max_sweeps));
+  const long steps = std::lround(plan.t0_s / base.time_step_s);
+  for (long k = 0; k < steps; ++k) {
+    sim.setDeviceTarget(sim.scriptedTarget(sim.time()));
+    if (!sim.step().finite) throw NumericalError("haptic study: the prefix diverged");
+  }
+  Prefix p;
+  save(sim, p.state);
+  p.anchor.target = sim.scriptedTarget(plan.t0_s);
+  p.anchor.target.twist.setZero();
+  const sim::ContactProblemData& pr = sim.lastProblem();
+  p.force = contactWrench(pr, pr.f.data(), pr.tool_pose.pos_m).head<3>();
+  return p;
+}
+
+// R2: the full model at the haptic rate along the motion.
+MethodSeries runR2(const Options& o, const sim::SceneSpec& base, const HapticPlan& plan,
+                   const Prefix& pre, const DeviceMotion& m, double rate) {
+  MethodSeries s;
+  s.method = "r2";
+  s.label = "R2: full model at the haptic rate";
+  const double dt = 1.0 / rate;
+  sim::Simulation sim(referenceSpec(o, base, plan.mesh, dt));
+  restore(sim, pre.state);
+  const long ticks = std::lround(m.duration_s() * rate);
+  for (long j = 0; j < ticks; ++j) {
+    double pen = 0.0, step_s = 0.0;
+    const Eigen::Vector3d f =
+        stepForce(sim, deviceAt(pre.anchor, m, static_cast<double>(j) * dt), pen, step_s);
+    s.push(f, pen, step_s);
+  }
+  return s;
+}
+
+// R1 and every method of one (motion, rate, step) case; case_.series[1] (R2) is given.
+void runCase(const Options& o, const sim::SceneSpec& base, const HapticPlan& plan,
+             const Prefix& pre, const DeviceMotion& m, HapticCase& hc) {
+  const double rate = hc.rate_hz;
+  const double dt = 1.0 / rate;
+  const double h = hc.sim_h_s;
+  const long n = std::lround(h * rate);
+  if (n < 1 || std::abs(static_cast<double>(n) - h * rate) > 1e-9) {
+    throw Error(fmt::format("haptic: the simulation step {} ms is not a multiple of the tick {} ms",
+                            1e3 * h, 1e3 * dt));
+  }
+  const long ticks = std::lround(m.duration_s() * rate);
+  const long lat = o.latency_steps;
+  const sim::ComplianceKind kind =
+      hc.snapshot_w == "exact" ? sim::ComplianceKind::kExact : base.tissues.at(0).compliance;
+  sim::Simulation sim(configure(o, base, plan.mesh, h, kind, base.solver.nsgs_tolerance,
+                                base.solver.nsgs_max_sweeps));
+  restore(sim, pre.state);
+  sim::Simulation r1sim(referenceSpec(o, base, plan.mesh, h));
+  const sim::InstrumentSpec& ins = base.instrument;
+
+  // series: r1, r2 (given), hold, extrapolate, coupling, local per budget
+  MethodSeries r1;
+  r1.method = "r1";
+  r1.label = "R1: exact step at the tick's pose";
+  std::vector<MethodSeries> out(3);
+  out[0].method = "hold";
+  out[0].label = "hold the snapshot's force";
+  out[1].method = "extrapolate";
+  out[1].label = "linear extrapolation of the force";
+  out[2].method = "coupling";
+  out[2].label = fmt::format("virtual coupling to the god object ({} N/m)", ins.coupling_k_npm);
+  std::vector<LocalModel> models(plan.budgets.size());
+  const int cap_rows = 3 * base.solver.max_contacts;
+  for (std::size_t b = 0; b < plan.budgets.size(); ++b) {
+    const bool converged = plan.budgets[b] <= 0;
+    models[b].budget = converged ? std::max(1000, o.ref_sweeps) : plan.budgets[b];
+    models[b].tol = converged ? o.ref_tolerance : base.haptics.nsgs_tolerance;
+    models[b].ws.reserve(cap_rows, base.solver.max_contacts);
+    models[b].f.assign(static_cast<std::size_t>(cap_rows), 0.0);
+    models[b].df.assign(static_cast<std::size_t>(cap_rows), 0.0);
+    models[b].delta.assign(static_cast<std::size_t>(cap_rows), 0.0);
+    MethodSeries s;
+    s.method = "local";
+    s.sweeps = plan.budgets[b];
+    s.label = converged ? std::string("local model converged")
+                        : fmt::format("local model {} sweep{}", plan.budgets[b],
+                                      plan.budgets[b] == 1 ? "" : "s");
+    out.push_back(std::move(s));
+  }
+  const long first = std::min(ticks, lat * n);   // no snapshot yet
+  hc.snapshot.assign(static_cast<std::size_t>(ticks), -1);
+  for (long j = 0; j < first; ++j) {
+    r1.pushInvalid();
+    for (auto& s : out) s.pushInvalid();
+  }
+  SavedState before;
+  Eigen::Vector3d f_prev = Eigen::Vector3d::Zero();
+  for (long k = 0; (k + lat) * n < ticks; ++k) {
+    const double t_k = static_cast<double>(k) * h;
+    save(sim, before);
+    sim.setDeviceTarget(deviceAt(pre.anchor, m, t_k));
+    if (!sim.step().finite) throw NumericalError("haptic multi-rate simulation diverged");
+    const sim::ContactProblemData& snap = sim.lastProblem();
+    const Eigen::Vector3d f_k = contactWrench(snap, snap.f.data(), snap.tool_pose.pos_m).head<3>();
+    if (k == 0) f_prev = f_k;
+    const sim::Instrument& god = *sim.instrument();
+    const double snap_pen = heldPenetration(snap, snap.device_pose);
+    for (long j = (k + lat) * n; j < std::min(ticks, (k + lat + 1) * n); ++j) {
+      const double t = static_cast<double>(j) * dt;
+      const sim::DeviceTarget d = deviceAt(pre.anchor, m, t);
+      hc.snapshot[static_cast<std::size_t>(j)] = k;
+      // R1: the full step from the snapshot's pre-step state at the tick's pose
+      restore(r1sim, before);
+      double pen = 0.0, step_s = 0.0;
+      const Eigen::Vector3d f_r1 = stepForce(r1sim, d, pen, step_s);
+      r1.push(f_r1, pen, step_s);
+      const double held_pen = heldPenetration(snap, d.pose);
+      std::int64_t t0 = shared::monotonicNs();
+      const Eigen::Vector3d f_hold = f_k;
+      out[0].push(f_hold, held_pen, shared::secondsSinceNs(t0));
+      t0 = shared::monotonicNs();
+      const Eigen::Vector3d f_ex = f_k + (f_k - f_prev) * ((t - t_k) / h);
+      out[1].push(f_ex, held_pen, shared::secondsSinceNs(t0));
+      t0 = shared::monotonicNs();
+      const Eigen::Vector3d f_vc = ins.coupling_k_npm * (god.pose().pos_m - d.pose.pos_m) +
+                                   ins.coupling_b_nspm * (god.twist().head<3>() -
+                                                          d.twist.head<3>());
+      out[2].push(f_vc, snap_pen, shared::secondsSinceNs(t0));
+      for (std::size_t b = 0; b < models.size(); ++b) {
+        double lpen = 0.0, tick_s = 0.0;
+        const Eigen::Vector3d f = localTick(models[b], snap, k, d.pose, lpen, tick_s);
+        out[3 + b].push(f, lpen, tick_s);
+      }
+    }
+    f_prev = f_k;
+  }
+  hc.device_pos.resize(static_cast<std::size_t>(ticks));
+  for (long j = 0; j < ticks; ++j) {
+    hc.device_pos[static_cast<std::size_t>(j)] =
+        deviceAt(pre.anchor, m, static_cast<double>(j) * dt).pose.pos_m;
+  }
+  std::vector<MethodSeries> all;
+  all.push_back(std::move(r1));
+  all.push_back(std::move(hc.series.at(0)));
+  for (auto& s : out) all.push_back(std::move(s));
+  hc.series = std::move(all);
+}
+
+// The R1 machinery's consistency (ReplayCheck).
+ReplayCheck replayCheck(const Options& o, const sim::SceneSpec& base, const HapticPlan& plan,
+                        const Prefix& pre, const DeviceMotion& m, double h) {
+  ReplayCheck rc;
+  sim::Simulation sim(referenceSpec(o, base, plan.mesh, h));
+  sim::Simulation replay(referenceSpec(o, base, plan.mesh, h));
+  restore(sim, pre.state);
+  SavedState before;
+  double max_diff = 0.0;
+  for (int k = 0; k < plan.replay_steps; ++k) {
+    const sim::DeviceTarget d = deviceAt(pre.anchor, m, static_cast<double>(k) * h);
+    save(sim, before);
+    double pen = 0.0, step_s = 0.0;
+    const Eigen::Vector3d f = stepForce(sim, d, pen, step_s);
+    restore(replay, before);
+    const Eigen::Vector3d f_replay = stepForce(replay, d, pen, step_s);
+    max_diff = std::max(max_diff, (f - f_replay).norm());
+    rc.max_force_n = std::max(rc.max_force_n, f.norm());
+    ++rc.steps;
+  }
+  rc.max_rel_diff = rc.max_force_n > 0.0 ? max_diff / rc.max_force_n : 0.0;
+  return rc;
 }
 
 }  // namespace
 
-// Runs the window for every rate, budget and simulation step.
-std::vector<HapticRow> runHaptic(const Options& o, const HapticPlan& plan) {
+std::vector<HapticCase> runHaptic(const Options& o, const HapticPlan& plan, ReplayCheck& replay) {
   const sim::SceneSpec base = meshScene(o, plan.mesh);
-  const sim::ComplianceKind scene_kind = base.tissues.at(0).compliance;
-  const sim::ComplianceKind ref_kind = o.haptic_ref_compliance == "scene"
-                                           ? scene_kind
-                                           : parseCompliance(o.haptic_ref_compliance);
-  Tremor tremor;
-  tremor.amp_m = 1e-3 * o.tremor_mm;
-  tremor.freq_hz = o.tremor_hz;
-  const double h_scene = base.time_step_s;
-
-  // prefix at the scene's step up to t0 (scripted device, no tremor before t0)
   spdlog::info("haptic: prefix 0 .. {} s", plan.t0_s);
-  WindowState state;
-  {
-    sim::Simulation sim(configure(o, base, plan.mesh, h_scene, scene_kind,
-                                  base.solver.nsgs_tolerance, base.solver.nsgs_max_sweeps));
-    const long steps = std::lround(plan.t0_s / h_scene);
-    Tremor still;
-    still.amp_m = 0.0;
-    for (long k = 0; k < steps; ++k) {
-      sim.setDeviceTarget(deviceAt(sim, still, sim.time()));
-      sim.step();
-    }
-    for (int i = 0; i < sim.tissueCount(); ++i) {
-      state.q.push_back(sim.tissue(i).positions());
-      state.v.push_back(sim.tissue(i).velocities());
-    }
-    state.tool_pose = sim.instrument()->pose();
-    state.opening = sim.instrument()->gripperOpening();
+  const Prefix pre = runPrefix(o, base, plan);
+  // presses go into the tissue: against the contact force at t0 (else along -x, the approach)
+  const Eigen::Vector3d into = pre.force.norm() > 0.05 ? Eigen::Vector3d(-pre.force.normalized())
+                                                       : Eigen::Vector3d(-Eigen::Vector3d::UnitX());
+  std::vector<DeviceMotion> motions = plan.motions;
+  for (DeviceMotion& m : motions) {
+    if (m.name != "tremor") m.dir = into;
   }
-
-  std::vector<HapticRow> rows;
-  for (const double rate : plan.rates_hz) {
-    const double dt = 1.0 / rate;
-    const long ticks = std::lround(plan.window_s * rate);
-    // reference: the full model re-simulated at every tick
-    spdlog::info("haptic: reference at {} Hz ({} steps)", rate, ticks);
-    HapticRow ref;
-    ref.kind = "reference";
-    ref.rate_hz = rate;
-    ref.sim_h_s = dt;
-    {
-      sim::Simulation sim(configure(o, base, plan.mesh, dt, ref_kind, o.ref_tolerance,
-                                    o.ref_sweeps));
-      seed(sim, state);
-      for (long j = 0; j < ticks; ++j) {
-        const double t = plan.t0_s + static_cast<double>(j) * dt;
-        sim.setDeviceTarget(deviceAt(sim, tremor, t));
-        const sim::StepReport r = sim.step();
-        if (!r.finite) throw NumericalError(fmt::format("haptic reference {} Hz diverged", rate));
-        const sim::ContactProblemData& p = sim.lastProblem();
-        ref.series.force.push_back(contactWrench(p, p.f.data(), p.tool_pose.pos_m).head<3>());
-        ref.series.penetration.push_back(r.max_penetration_m);
-        ref.series.complementarity.push_back(r.complementarity);
-        ref.series.time_s.push_back(r.times.total_s);
-        ref.series.sweeps.push_back(r.nsgs.sweeps);
-        ref.series.residual.push_back(r.nsgs.error);
-        ref.series.valid.push_back(true);
-        ref.series.device_pos.push_back(deviceAt(sim, tremor, t).pose.pos_m);
+  replay = replayCheck(o, base, plan, pre, motions.front(), base.time_step_s);
+  fmt::print("  R1 replay check: {} steps, max force difference {:.2e} of {:.3f} N\n",
+             replay.steps, replay.max_rel_diff, replay.max_force_n);
+  std::vector<HapticCase> cases;
+  for (const DeviceMotion& m : motions) {
+    std::map<double, MethodSeries> r2;
+    for (std::size_t pair = 0; pair < plan.rates.size(); ++pair) {
+      const auto [rate, h] = plan.rates[pair];
+      if (r2.find(rate) == r2.end()) {
+        const std::int64_t t0 = shared::monotonicNs();
+        r2.emplace(rate, runR2(o, base, plan, pre, m, rate));
+        fmt::print("  {:<10} R2 at {:>4.0f} Hz: {:.1f} s\n", m.name, rate,
+                   shared::secondsSinceNs(t0));
       }
-    }
-    rows.push_back(std::move(ref));
-
-    for (const double h_sim : plan.sim_h_s) {
-      const long n = std::lround(h_sim * rate);
-      if (n < 1 || std::abs(static_cast<double>(n) - h_sim * rate) > 1e-9) {
-        throw Error(fmt::format("haptic: the simulation step {} ms is not a multiple of the tick "
-                                "{} ms",
-                                1e3 * h_sim, 1e3 * dt));
-      }
-      // the multi-rate model: one simulation, every budget on its snapshots
-      std::vector<LocalModel> models(plan.budgets.size());
-      std::vector<HapticRow> local(plan.budgets.size());
-      for (std::size_t b = 0; b < plan.budgets.size(); ++b) {
-        const int cap_rows = 3 * base.solver.max_contacts;
-        models[b].budget = plan.budgets[b];
-        models[b].tol = base.haptics.nsgs_tolerance;
-        models[b].ws.reserve(cap_rows, base.solver.max_contacts);
-        models[b].f.assign(static_cast<std::size_t>(cap_rows), 0.0);
-        models[b].df.assign(static_cast<std::size_t>(cap_rows), 0.0);
-        models[b].delta.assign(static_cast<std::size_t>(cap_rows), 0.0);
-        local[b].kind = plan.budgets[b] == 0 ? "hold" : "local";
-        local[b].rate_hz = rate;
-        local[b].sim_h_s = h_sim;
-        local[b].sweeps = plan.budgets[b];
-      }
-      sim::Simulation sim(configure(o, base, plan.mesh, h_sim, scene_kind,
-                                    base.solver.nsgs_tolerance, base.solver.nsgs_max_sweeps));
-      seed(sim, state);
-      const long sim_steps = ticks / n;
-      const long lat = o.latency_steps;
-      // ticks before the first snapshot arrives are not compared
-      for (auto& row : local) {
-        for (long j = 0; j < std::min(ticks, lat * n); ++j) {
-          row.series.pushInvalid();
+      for (const char* w : {"scene", "exact"}) {
+        if (std::string(w) == "exact" && static_cast<int>(pair) >= plan.exact_snapshot_pairs) {
+          continue;
         }
-      }
-      for (long k = 0; k < sim_steps; ++k) {
-        const double t_k = plan.t0_s + static_cast<double>(k) * h_sim;
-        sim.setDeviceTarget(deviceAt(sim, tremor, t_k));
-        const sim::StepReport r = sim.step();
-        if (!r.finite) throw NumericalError("haptic multi-rate simulation diverged");
-        const sim::ContactProblemData snap = sim.lastProblem();
-        for (long j = (k + lat) * n; j < std::min(ticks, (k + lat + 1) * n); ++j) {
-          const double t = plan.t0_s + static_cast<double>(j) * dt;
-          const shared::Pose x_h = deviceAt(sim, tremor, t).pose;
-          for (std::size_t b = 0; b < models.size(); ++b) {
-            localTick(models[b], snap, k, x_h, local[b].series);
-          }
-        }
-      }
-      for (auto& row : local) {
-        // pad to the reference's length (ticks after the last snapshot's span)
-        while (static_cast<long>(row.series.force.size()) < ticks) {
-          row.series.pushInvalid();
-        }
-        rows.push_back(std::move(row));
+        const std::int64_t t0 = shared::monotonicNs();
+        HapticCase hc;
+        hc.motion = m.name;
+        hc.rate_hz = rate;
+        hc.sim_h_s = h;
+        hc.snapshot_w = w;
+        hc.settle_s = 0.5 * m.lead_in_s;
+        hc.series.push_back(r2.at(rate));
+        runCase(o, base, plan, pre, m, hc);
+        fmt::print("  {:<10} {:>4.0f} Hz, simulation at {:>3.0f} Hz ({} W): R1 and methods "
+                   "{:.1f} s\n",
+                   m.name, rate, 1.0 / h, w, shared::secondsSinceNs(t0));
+        std::fflush(stdout);
+        cases.push_back(std::move(hc));
       }
     }
   }
-  return rows;
-}
-
-std::string hapticCsv(const std::vector<HapticRow>& rows, const HapticPlan& plan) {
-  std::ostringstream out;
-  out << "kind,mesh,rate_hz,sim_h_ms,sweeps_per_tick,is_reference,ticks_compared,force_rel_rms,"
-         "force_peak_err_n,force_ref_peak_n,max_penetration_mm,complementarity_max_nm,"
-         "residual_median,work_ref_mj,work_dev_mj,tick_us_median,sweeps_median\n";
-  std::map<double, const HapticRow*> refs;
-  for (const HapticRow& r : rows) {
-    if (r.kind == "reference") refs[r.rate_hz] = &r;
-  }
-  for (const HapticRow& r : rows) {
-    const HapticRow& ref = *refs.at(r.rate_hz);
-    const bool is_ref = &r == &ref;
-    double num = 0.0, den = 0.0, peak = 0.0, ref_peak = 0.0, pen = 0.0, comp = 0.0;
-    double work = 0.0, work_ref = 0.0;  // [J]
-    long compared = 0;
-    std::vector<double> times, sweeps, resid;
-    // ticks compared: those every row of this rate has (the latest first-snapshot tick)
-    long first = 0;
-    for (const HapticRow& other : rows) {
-      if (other.rate_hz != r.rate_hz) continue;
-      long j = 0;
-      while (j < static_cast<long>(other.series.valid.size()) &&
-             !other.series.valid[static_cast<std::size_t>(j)])
-        ++j;
-      first = std::max(first, j);
-    }
-    const long n = static_cast<long>(r.series.force.size());
-    for (long j = first; j < n; ++j) {
-      const auto i = static_cast<std::size_t>(j);
-      if (!r.series.valid[i] || !ref.series.valid[i]) continue;
-      ++compared;
-      const double d = (r.series.force[i] - ref.series.force[i]).norm();
-      num += d * d;
-      den += ref.series.force[i].squaredNorm();
-      peak = std::max(peak, d);
-      ref_peak = std::max(ref_peak, ref.series.force[i].norm());
-      pen = std::max(pen, r.series.penetration[i]);
-      comp = std::max(comp, r.series.complementarity[i]);
-      times.push_back(r.series.time_s[i]);
-      sweeps.push_back(r.series.sweeps[i]);
-      resid.push_back(r.series.residual[i]);
-      // work of the force on the hand over the tick's device motion: F_j . (x_{j+1} - x_j)
-      if (j + 1 < n) {
-        const Eigen::Vector3d dp = ref.series.device_pos[i + 1] - ref.series.device_pos[i];
-        work += r.series.force[i].dot(dp);
-        work_ref += ref.series.force[i].dot(dp);
-      }
-    }
-    out << r.kind << ',' << plan.mesh << ',' << fmtG(r.rate_hz) << ',' << fmtG(1e3 * r.sim_h_s)
-        << ',' << r.sweeps << ',' << (is_ref ? 1 : 0) << ',' << compared << ','
-        << fmtG(den > 0.0 ? std::sqrt(num / den) : 0.0) << ',' << fmtG(peak) << ','
-        << fmtG(ref_peak) << ',' << fmtG(1e3 * pen) << ',' << fmtG(comp) << ','
-        << fmtG(median(resid)) << ',' << fmtG(1e3 * work_ref) << ','
-        << fmtG(1e3 * (work - work_ref))
-        << ',' << fmtG(1e6 * median(times)) << ',' << fmtG(median(sweeps)) << '\n';
-  }
-  return out.str();
+  return cases;
 }
 
 }  // namespace tactus::study

@@ -57,6 +57,26 @@ class RunCache {
   std::map<std::string, std::unique_ptr<SimRun>> runs_;
 };
 
+// The haptic study's device motions: a slow press of `press_m` over press_s, a tremor of
+// o.tremor_mm at o.tremor_hz over tremor_s, a 2 mm tap in 60 ms.
+std::vector<DeviceMotion> hapticMotions(const Options& o, double press_s, double press_m,
+                                        double tremor_s) {
+  DeviceMotion press, tremor, tap;
+  press.name = "slow_press";
+  press.motion_s = press_s;
+  press.amplitude_m = press_m;
+  tremor.name = "tremor";
+  tremor.motion_s = tremor_s;
+  tremor.amplitude_m = 1e-3 * o.tremor_mm;
+  tremor.freq_hz = o.tremor_hz;
+  tremor.dir = Eigen::Vector3d(0.5, 0.3, 0.8).normalized();
+  tap.name = "fast_tap";
+  tap.motion_s = 0.06;
+  tap.amplitude_m = 2e-3;
+  tap.tail_s = 0.1;
+  return {press, tremor, tap};
+}
+
 std::string tolLabel(double tol) { return fmt::format("{:.0e}", tol); }
 
 int run(Options& o) {
@@ -75,11 +95,8 @@ int run(Options& o) {
     sp.budgets = {10};
     sp.time_steps_s = {0.02};
     hp.mesh = "liver";
-    hp.rates_hz = {500.0, 1000.0};
-    hp.budgets = {0, 10};
-    hp.sim_h_s = {0.01};
-    hp.t0_s = 2.6;
-    hp.window_s = 0.3;
+    hp.rates = {{1000.0, 0.01}, {1000.0, 0.02}, {500.0, 0.01}};
+    hp.motions = hapticMotions(o, 0.4, 2e-3, 0.25);
   } else {
     sp.main_mesh = "liver2";
     sp.meshes = {"liver", "liver2"};
@@ -91,121 +108,131 @@ int run(Options& o) {
     sp.budgets = {3, 10, 30, 100};
     sp.time_steps_s = {0.0025, 0.005, 0.02};
     hp.mesh = "liver2";
-    hp.rates_hz = {500.0, 1000.0, 2000.0, 4000.0};
-    hp.budgets = {0, 1, 3, 10, 40};
-    hp.sim_h_s = {0.01, 0.02};
-    hp.t0_s = 2.0;
-    hp.window_s = 2.5;
+    hp.rates = {{1000.0, 0.01}, {1000.0, 0.04}, {1000.0, 0.02}, {1000.0, 0.005},
+                {500.0, 0.01},  {2000.0, 0.01}, {4000.0, 0.01}};
+    hp.motions = hapticMotions(o, 1.0, 3e-3, 0.5);
+    hp.exact_snapshot_pairs = static_cast<int>(hp.rates.size());
   }
   if (o.duration_s > 0.0) sp.duration_s = o.duration_s;
-  if (o.haptic_t0_s > 0.0) hp.t0_s = o.haptic_t0_s;
-  if (o.haptic_window_s > 0.0) hp.window_s = o.haptic_window_s;
+  hp.budgets = {1, 3, 10, 0};
+  hp.t0_s = o.haptic_t0_s > 0.0 ? o.haptic_t0_s : 3.0;
   fs::create_directories(o.out);
   fs::create_directories(o.cache_dir);
 
   // ---- part 1: the simulation step
-  fmt::print("part 1: simulation step ({} s of the script per run)\n", sp.duration_s);
-  RunCache cache(o, sp.duration_s);
-  std::vector<SimRow> rows;
   std::map<std::string, sim::SceneSpec> bases;
   for (const std::string& m : sp.meshes) bases[m] = meshScene(o, m);
   const sim::SceneSpec& main_base = bases.at(sp.main_mesh);
-  const double h_main = main_base.time_step_s;
   const double scene_tol = main_base.solver.nsgs_tolerance;
   const int scene_sweeps = main_base.solver.nsgs_max_sweeps;
-  const SimRun* main_ref = nullptr;
-  std::vector<const SimRun*> w_probes;
-  for (const std::string& m : sp.meshes) {
-    const sim::SceneSpec& base = bases.at(m);
-    // liver_23k (opt-in): ~0.4 s per step here, so a shorter span and no second exact run
-    const bool big = m == "liver_23k";
-    const double dur = big ? o.duration_23k_s : 0.0;
-    const SimRun& ref = cache.get(base, {m, h_main, sim::ComplianceKind::kExact, o.ref_tolerance,
-                                         o.ref_sweeps}, dur, true);
-    w_probes.push_back(&ref);
-    if (m == sp.main_mesh) main_ref = &ref;
-    rows.push_back({"compliance", "reference", &ref, &ref});
-    for (const sim::ComplianceKind k : sp.compliances) {
-      if (big && k == sim::ComplianceKind::kExact) continue;
-      const SimRun& r = cache.get(base, {m, h_main, k, scene_tol, scene_sweeps}, dur);
-      rows.push_back({"compliance", complianceName(k), &r, &ref});
-    }
-  }
-  for (const double tol : sp.tolerances) {
-    const SimRun& r = cache.get(main_base, {sp.main_mesh, h_main, sim::ComplianceKind::kWarped,
-                                            tol, o.ref_sweeps});
-    rows.push_back({"tolerance", "tol " + tolLabel(tol), &r, main_ref});
-  }
-  for (const int b : sp.budgets) {
-    const SimRun& r = cache.get(main_base, {sp.main_mesh, h_main, sim::ComplianceKind::kWarped,
-                                            1e-12, b});
-    rows.push_back({"sweeps", fmt::format("{} sweeps", b), &r, main_ref});
-  }
-  {
-    std::vector<double> hs = sp.time_steps_s;
-    hs.push_back(h_main);
-    std::sort(hs.begin(), hs.end());
-    hs.erase(std::unique(hs.begin(), hs.end()), hs.end());
-    const SimRun& ref = cache.get(main_base, {sp.main_mesh, hs.front(),
-                                              sim::ComplianceKind::kExact, o.ref_tolerance,
-                                              o.ref_sweeps});
-    for (const double h : hs) {
-      const SimRun& ex = cache.get(main_base, {sp.main_mesh, h, sim::ComplianceKind::kExact,
-                                               o.ref_tolerance, o.ref_sweeps});
-      rows.push_back({"time_step", &ex == &ref ? "reference" : fmt::format("exact h {} ms",
-                                                                           1e3 * h),
-                      &ex, &ref});
-      const SimRun& wa = cache.get(main_base, {sp.main_mesh, h, sim::ComplianceKind::kWarped,
-                                               scene_tol, scene_sweeps});
-      rows.push_back({"time_step", fmt::format("warped h {} ms", 1e3 * h), &wa, &ref});
-    }
-  }
-  writeOutput(o, "sim_accuracy.csv", simCsv(rows, o.early_until_s));
-  {
-    std::ostringstream w;
-    w << "mesh,tets,compliance,samples,w_rel_err_median,w_rel_err_max\n";
-    for (const SimRun* r : w_probes) {
-      for (const auto& [name, v] : r->w_error) {
-        w << r->cfg.mesh << ',' << r->tets << ',' << name << ',' << v.size() << ','
-          << fmtG(median(v)) << ',' << fmtG(v.empty() ? 0.0 : *std::max_element(v.begin(),
-                                                                                 v.end()))
-          << '\n';
+  if (o.part == "all" || o.part == "sim") {
+    fmt::print("part 1: simulation step ({} s of the script per run)\n", sp.duration_s);
+    RunCache cache(o, sp.duration_s);
+    std::vector<SimRow> rows;
+    const double h_main = main_base.time_step_s;
+    const SimRun* main_ref = nullptr;
+    std::vector<const SimRun*> w_probes;
+    for (const std::string& m : sp.meshes) {
+      const sim::SceneSpec& base = bases.at(m);
+      // liver_23k (opt-in): ~0.4 s per step here, so a shorter span and no second exact run
+      const bool big = m == "liver_23k";
+      const double dur = big ? o.duration_23k_s : 0.0;
+      const SimRun& ref = cache.get(base, {m, h_main, sim::ComplianceKind::kExact, o.ref_tolerance,
+                                           o.ref_sweeps}, dur, true);
+      w_probes.push_back(&ref);
+      if (m == sp.main_mesh) main_ref = &ref;
+      rows.push_back({"compliance", "reference", &ref, &ref});
+      for (const sim::ComplianceKind k : sp.compliances) {
+        if (big && k == sim::ComplianceKind::kExact) continue;
+        const SimRun& r = cache.get(base, {m, h_main, k, scene_tol, scene_sweeps}, dur);
+        rows.push_back({"compliance", complianceName(k), &r, &ref});
       }
     }
-    writeOutput(o, "w_accuracy.csv", w.str());
-  }
-  {
-    std::string ts = "series,t_s,fx_n,fy_n,fz_n\n";
-    for (const SimRow& r : rows) {
-      if (r.study != "compliance" || r.run->cfg.mesh != sp.main_mesh) continue;
-      appendSeries(ts, r.label, r.run->t, r.run->force);
+    for (const double tol : sp.tolerances) {
+      const SimRun& r = cache.get(main_base, {sp.main_mesh, h_main, sim::ComplianceKind::kWarped,
+                                              tol, o.ref_sweeps});
+      rows.push_back({"tolerance", "tol " + tolLabel(tol), &r, main_ref});
     }
-    writeOutput(o, "sim_timeseries.csv", ts);
+    for (const int b : sp.budgets) {
+      const SimRun& r = cache.get(main_base, {sp.main_mesh, h_main, sim::ComplianceKind::kWarped,
+                                              1e-12, b});
+      rows.push_back({"sweeps", fmt::format("{} sweeps", b), &r, main_ref});
+    }
+    {
+      std::vector<double> hs = sp.time_steps_s;
+      hs.push_back(h_main);
+      std::sort(hs.begin(), hs.end());
+      hs.erase(std::unique(hs.begin(), hs.end()), hs.end());
+      const SimRun& ref = cache.get(main_base, {sp.main_mesh, hs.front(),
+                                                sim::ComplianceKind::kExact, o.ref_tolerance,
+                                                o.ref_sweeps});
+      for (const double h : hs) {
+        const SimRun& ex = cache.get(main_base, {sp.main_mesh, h, sim::ComplianceKind::kExact,
+                                                 o.ref_tolerance, o.ref_sweeps});
+        rows.push_back({"time_step", &ex == &ref ? "reference" : fmt::format("exact h {} ms",
+                                                                             1e3 * h),
+                        &ex, &ref});
+        const SimRun& wa = cache.get(main_base, {sp.main_mesh, h, sim::ComplianceKind::kWarped,
+                                                 scene_tol, scene_sweeps});
+        rows.push_back({"time_step", fmt::format("warped h {} ms", 1e3 * h), &wa, &ref});
+      }
+    }
+    writeOutput(o, "sim_accuracy.csv", simCsv(rows, o.early_until_s));
+    {
+      std::ostringstream w;
+      w << "mesh,tets,compliance,samples,w_rel_err_median,w_rel_err_max\n";
+      for (const SimRun* r : w_probes) {
+        for (const auto& [name, v] : r->w_error) {
+          w << r->cfg.mesh << ',' << r->tets << ',' << name << ',' << v.size() << ','
+            << fmtG(median(v)) << ',' << fmtG(v.empty() ? 0.0 : *std::max_element(v.begin(),
+                                                                                   v.end()))
+            << '\n';
+        }
+      }
+      writeOutput(o, "w_accuracy.csv", w.str());
+    }
+    {
+      std::string ts = "series,t_s,fx_n,fy_n,fz_n\n";
+      for (const SimRow& r : rows) {
+        if (r.study != "compliance" || r.run->cfg.mesh != sp.main_mesh) continue;
+        appendSeries(ts, r.label, r.run->t, r.run->force);
+      }
+      writeOutput(o, "sim_timeseries.csv", ts);
+    }
+  }
+  if (o.part == "all" || o.part == "states") {
+    // compliance models on the same states of one exact trajectory
+    const std::int64_t t_s = shared::monotonicNs();
+    const StateComparison sc =
+        compareStates(o, main_base, sp.main_mesh, sp.duration_s, quick ? 5 : 1);
+    writeOutput(o, "w_states.csv", statesCsv(sc));
+    fmt::print("  compliance models on {} states of the exact run ({} skipped: rows differ) in "
+               "{:.1f} s\n", sc.rows.size(), sc.skipped, shared::secondsSinceNs(t_s));
   }
   const double part1_s = shared::secondsSinceNs(t_all);
 
-  // ---- part 2: the haptic local model
-  fmt::print("part 2: haptic local model ({} mesh, window {} .. {} s, rates {}, sweeps per tick "
-             "{})\n",
-             hp.mesh, hp.t0_s, hp.t0_s + hp.window_s, fmt::join(hp.rates_hz, "/"),
-             fmt::join(hp.budgets, "/"));
+  // ---- part 2: the haptic loop
+  const bool run_haptic = o.part == "all" || o.part == "haptic";
+  if (run_haptic) {
+    fmt::print("part 2: haptic loop ({} mesh, window from {} s; R1, R2 and the methods)\n",
+               hp.mesh, hp.t0_s);
+  }
   const std::int64_t t_h = shared::monotonicNs();
-  const std::vector<HapticRow> hrows = runHaptic(o, hp);
-  writeOutput(o, "haptic_accuracy.csv", hapticCsv(hrows, hp));
+  ReplayCheck replay;
+  const std::vector<HapticCase> cases =
+      run_haptic ? runHaptic(o, hp, replay) : std::vector<HapticCase>{};
+  if (!cases.empty()) writeOutput(o, "haptic_accuracy.csv", hapticCsv(cases, hp.mesh));
   {
-    std::string ts = "series,t_s,fx_n,fy_n,fz_n\n";
-    const double rate = hp.rates_hz.size() > 1 ? hp.rates_hz[1] : hp.rates_hz[0];
-    for (const HapticRow& r : hrows) {
-      if (r.rate_hz != rate) continue;
-      if (r.kind != "reference" && std::abs(r.sim_h_s - hp.sim_h_s.front()) > 1e-12) continue;
-      std::vector<double> t(r.series.force.size());
-      for (std::size_t j = 0; j < t.size(); ++j) t[j] = hp.t0_s + static_cast<double>(j) / rate;
-      const std::string name = r.kind == "reference" ? "reference"
-                               : r.kind == "hold"    ? "hold"
-                                                     : fmt::format("local {} sweeps", r.sweeps);
-      appendSeries(ts, name, t, r.series.force, &r.series.valid);
+    // the force against time of every motion at the first (rate, step) pair, both snapshot Ws
+    std::string ts = "motion,snapshot_w,series,t_s,fx_n,fy_n,fz_n\n";
+    for (const HapticCase& c : cases) {
+      if (c.rate_hz != hp.rates.front().first || c.sim_h_s != hp.rates.front().second) continue;
+      std::istringstream lines(hapticSeries(c, hp.t0_s));
+      for (std::string line; std::getline(lines, line);) {
+        ts += c.motion + ',' + c.snapshot_w + ',' + line + '\n';
+      }
     }
-    writeOutput(o, "haptic_timeseries.csv", ts);
+    if (!cases.empty()) writeOutput(o, "haptic_timeseries.csv", ts);
   }
   const double part2_s = shared::secondsSinceNs(t_h);
 
@@ -228,11 +255,15 @@ int run(Options& o) {
          << "scene_max_sweeps," << scene_sweeps << '\n'
          << "haptic_mesh," << hp.mesh << '\n'
          << "haptic_t0_s," << hp.t0_s << '\n'
-         << "haptic_window_s," << hp.window_s << '\n'
+         << "haptic_rate_hz," << hp.rates.front().first << '\n'
+         << "haptic_sim_hz," << 1.0 / hp.rates.front().second << '\n'
+         << "replay_steps," << replay.steps << '\n'
+         << "replay_max_rel_diff," << fmtG(replay.max_rel_diff) << '\n'
+         << "replay_max_force_n," << fmtG(replay.max_force_n) << '\n'
          << "haptic_latency_steps," << o.latency_steps << '\n'
          << "haptic_tolerance," << bases.begin()->second.haptics.nsgs_tolerance << '\n'
-         << "haptic_reference_compliance," << o.haptic_ref_compliance << '\n'
          << "tremor_mm," << o.tremor_mm << '\n'
+         << "coherence_bound," << o.coherence_bound << '\n'
          << "tremor_hz," << o.tremor_hz << '\n'
          << "with_23k," << (o.with_23k ? 1 : 0) << '\n'
          << "duration_23k_s," << o.duration_23k_s << '\n'
@@ -266,6 +297,11 @@ int main(int argc, char** argv) {
   app.add_flag("--overwrite", o.overwrite,
                "Replace the CSV files an earlier run left in --out (refused otherwise)");
   app.add_flag("--quick", quick, "Quick mode (< 2 min): coarse liver, short spans, few points");
+  app.add_option("--part", o.part,
+                 "What to run: all, sim (the simulation step study), states (compliance models on "
+                 "the same states), haptic (the haptic loop); the report covers what exists")
+      ->check(CLI::IsMember({"all", "sim", "states", "haptic"}))
+      ->capture_default_str();
   app.add_flag("--with-23k", o.with_23k,
                "Add liver_23k to the mesh study (precomputes a 1.6 GB warped compliance; slow)");
   app.add_option("--root", root, "Repository root (scenes/ is read from it)")
@@ -285,21 +321,19 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--ref-sweeps", o.ref_sweeps, "NSGS sweep cap of the references")
       ->capture_default_str();
-  app.add_option("--haptic-t0", o.haptic_t0_s, "Start of the haptic window [s] (default: 2 full, "
-                                               "2.6 quick)");
-  app.add_option("--haptic-window", o.haptic_window_s,
-                 "Length of the haptic window [s] (default: 2.5 full, 0.3 quick)");
+  app.add_option("--haptic-t0", o.haptic_t0_s, "Start of the haptic window on the script [s] "
+                                               "(default 3: the jaws on the lobe)");
+  app.add_option("--coherence-bound", o.coherence_bound,
+                 "exact_below_coherence of the bounded warped model in the state comparison")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 1.0));
   app.add_option("--latency-steps", o.latency_steps,
                  "Simulation periods between a step's device sample and its snapshot's use")
       ->capture_default_str()
       ->check(CLI::Range(0, 10));
-  app.add_option("--tremor-mm", o.tremor_mm, "Tremor amplitude added to the device path [mm]")
+  app.add_option("--tremor-mm", o.tremor_mm, "Amplitude of the tremor motion [mm]")
       ->capture_default_str();
-  app.add_option("--tremor-hz", o.tremor_hz, "Tremor frequency [Hz]")->capture_default_str();
-  app.add_option("--haptic-ref-compliance", o.haptic_ref_compliance,
-                 "Compliance of the haptic reference: scene (the scene's model, isolating the "
-                 "multi-rate error) or exact, warped, rest, uncoupled")
-      ->capture_default_str();
+  app.add_option("--tremor-hz", o.tremor_hz, "Frequency of the tremor motion [Hz]")->capture_default_str();
   app.add_option("--log-level", o.log_level, "spdlog level")
       ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error"}))
       ->capture_default_str();

@@ -16,8 +16,6 @@
 
 namespace tactus::study {
 
-namespace {
-
 // Probes the compliance models at the run's current state: rows = the x, y, z directions at
 // the (up to 24) surface nodes nearest the instrument; W of each model against the exact W.
 void probeCompliance(const Options& o, sim::Simulation& sim, const SimConfig& cfg,
@@ -64,8 +62,6 @@ void probeCompliance(const Options& o, sim::Simulation& sim, const SimConfig& cf
                                                          w_exact.norm());
   }
 }
-
-}  // namespace
 
 SimRun runSim(const Options& o, const sim::SceneSpec& base, const SimConfig& cfg,
               double duration_s, bool probe_w) {

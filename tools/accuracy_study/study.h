@@ -12,17 +12,28 @@
 // max |F - F_ref| over the reference's sample times (linear interpolation of the run), energy
 // deviation max |E - E_ref| / (max E_ref - min E_ref).
 //
-// Part 2, the haptic local model (haptic_study.cpp, paper 4.2). A prefix run at the scene's time
-// step brings the scene to the window start t0; its state (tissue q, v; tool pose and opening)
-// seeds every run of the window, so all start identical. The device follows the scripted
-// trajectory plus a small tremor. The reference at haptic rate r is a Simulation with time step
-// 1/r driven by the device at every tick (the full model re-simulated per tick). The multi-rate
-// model is a Simulation at the scene's time step whose snapshot k (device pose x_h(t_k)) serves
-// the ticks of [t_k + L h, t_k + (L + 1) h) (L = --latency-steps, 1: the step computed during one
-// period is rendered during the next); each tick moves delta_free = delta_free* + J (x_h [-] x_h*)
-// and re-solves with warm-started NSGS under a sweep budget exactly as
-// HapticLoop::solveLocalModel does (time budget off, so results do not depend on the machine's
-// load). Budget 0 is the zero-order hold of the snapshot's force (no local model).
+// Part 2, the haptic loop (haptic_study.cpp, paper 4.2). A prefix run at the scene's time step
+// brings the scene to the window start t0 (the jaws on the lobe); its state (tissue q, v; the
+// god object) seeds every run, so all start identical. The device then follows a closed motion
+// (DeviceMotion: slow press, tremor, fast tap) around the scripted pose at t0. Two references,
+// computed in the same run, separate the errors:
+//  * R1, the local model's own error: at every tick j, the simulation's state before the step
+//    whose snapshot serves j is restored into an exact simulation (exact W, direct CHOLMOD,
+//    tolerance --ref-tolerance) which takes one full step (collision redone, contact passes)
+//    at the simulation's time step with the device pose of tick j; its contact force is R1(j).
+//    The saved state is not advanced: R1 is the problem the local model linearises, solved
+//    exactly at the tick's pose.
+//  * R2, the time step's: a Simulation with time step 1/rate driven by the device at every tick
+//    (the full model re-simulated at the haptic rate).
+// The multi-rate simulation (the scene's compliance and solver at step h) publishes snapshot k
+// (device pose x_h(t_k)); it serves the ticks of [t_k + L h, t_k + (L + 1) h)
+// (L = --latency-steps). Methods on those ticks: hold (the snapshot's force), extrapolate
+// (F_k + (F_k - F_k-1)(t - t_k)/h), coupling (a virtual-coupling spring to the snapshot's god
+// object, F = K_c (p_god - x_h) + B_c (v_god - v_h) with the scene's coupling gains, re-evaluated
+// every tick: the CHAI3D-style proxy) and the local model (delta_free = delta_free* +
+// J (x_h [-] x_h*) and warm-started NSGS under a sweep budget, as HapticLoop::solveLocalModel,
+// time budget off so results do not depend on the machine's load). haptic_report.cpp turns the
+// series into errors against R1 and R2, stiffness felt, penetration, energy and time per tick.
 //
 // The tool links the simulation and the haptic loop, so it lives in tools/, apart from both
 // processes' rooms.
@@ -30,11 +41,13 @@
 #include <Eigen/Core>
 #include <filesystem>
 #include <map>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include "tactus/shared/pose.h"
 #include "tactus/sim/compliance.h"
+#include "tactus/sim/instrument.h"
 #include "tactus/sim/pipeline.h"
 #include "tactus/sim/scene.h"
 
@@ -50,17 +63,18 @@ struct Options {
   fs::path cache_dir;                      ///< compliance caches
   bool overwrite = false;                  ///< replace CSV files an earlier run left in `out`
   bool with_23k = false;
+  std::string part = "all";                ///< all | sim | states | haptic
+  /// exact_below_coherence of the bounded warped model in the state comparison
+  double coherence_bound = 0.9995;
   double duration_s = 0.0;                 ///< 0: per mode
   double early_until_s = 3.5;              ///< second error window: t <= this [s]
   double duration_23k_s = 3.5;             ///< span of the liver_23k runs [s]
   double ref_tolerance = 1e-9;
   int ref_sweeps = 3000;
   double haptic_t0_s = 0.0;                ///< 0: per mode
-  double haptic_window_s = 0.0;            ///< 0: per mode
   int latency_steps = 1;
   double tremor_mm = 0.5;
-  double tremor_hz = 6.0;
-  std::string haptic_ref_compliance = "scene";
+  double tremor_hz = 8.0;
   std::string log_level = "warn";
 };
 
@@ -128,6 +142,13 @@ struct SimRun {
   std::map<std::string, std::vector<double>> w_error;
 };
 
+/// W = H C H^T of the warped, rest and uncoupled models against the exact W of `sim` (an exact
+/// simulation, after a step) on rows x, y, z at the 24 free surface nodes nearest the tool; the
+/// relative Frobenius errors are appended to run.w_error by model name. `models` is built on
+/// first use (C0 cached in o.cache_dir).
+void probeCompliance(const Options& o, sim::Simulation& sim, const SimConfig& cfg,
+                     std::vector<std::unique_ptr<sim::TissueCompliance>>& models, SimRun& run);
+
 /// Runs `cfg` over duration_s of the scene's script; with probe_w, every 0.1 s of contact the
 /// compliance models are compared with the run's own W (probeCompliance).
 SimRun runSim(const Options& o, const sim::SceneSpec& base, const SimConfig& cfg,
@@ -154,42 +175,136 @@ struct SimRow {
 /// sim_accuracy.csv's text.
 std::string simCsv(const std::vector<SimRow>& rows, double early_until_s);
 
-// ---- part 2: the haptic local model (haptic_study.cpp)
+// ---- saved states (compliance_states.cpp)
 
-/// One tick series (reference or local model) over the window.
-struct TickSeries {
-  std::vector<Eigen::Vector3d> force;      ///< per tick [N]
-  std::vector<double> penetration;         ///< linearised: max(0, -min delta_n) [m]
-  std::vector<double> complementarity;     ///< max |f_n delta_n| [N m]
-  std::vector<double> time_s;              ///< per tick (local: the tick; reference: the step)
-  std::vector<double> sweeps, residual;
+/// Everything a step of the pipeline starts from: tissue q, v and the god object (NSGS's warm
+/// start aside, which a tight tolerance makes irrelevant; a kCholmod body keeps no factor between
+/// steps).
+struct SavedState {
+  std::vector<Eigen::VectorXd> q, v;
+  std::unique_ptr<sim::Instrument> tool;
+};
+void save(sim::Simulation& sim, SavedState& s);
+void restore(sim::Simulation& sim, const SavedState& s);
+/// The exact reference configuration: exact W, direct CHOLMOD every step, NSGS at
+/// o.ref_tolerance.
+sim::SceneSpec referenceSpec(const Options& o, const sim::SceneSpec& base, const std::string& mesh,
+                             double h_s);
+
+// ---- part 1b: compliance models on the same states (compliance_states.cpp)
+
+/// One sampled state of the exact reference trajectory; per model (StateComparison::models).
+struct StateRow {
+  double t_s = 0.0;                        ///< start of the step
+  int contacts = 0;
+  double force_exact_n = 0.0;
+  double normal_sum_n = 0.0;               ///< sum of the exact solve's normal forces
+  std::vector<double> w_err;               ///< ||W_m - W_exact||_F / ||W_exact||_F, whole problem
+  std::vector<double> force_err;           ///< |F_m - F_exact| / |F_exact|
+  std::vector<double> probe_w_err;         ///< tissue W on the probe rows (probeCompliance)
+  std::vector<double> step_s, wbuild_s;    ///< the probe step's times
+  std::vector<bool> fallback;              ///< the bounded model used the exact W
+  int inverted_near = 0;                   ///< inverted elements at the probe nodes
+  double min_det_near = 1.0;
+  double min_coherence_near = 1.0;         ///< |sum v_e R_e|_F / (sqrt 3 sum v_e), 1: coherent
+};
+
+/// Compliance models compared on the same states: one exact reference run (referenceSpec, the
+/// scene's script and contact passes); every `every_steps` steps in contact its pre-step state is
+/// restored into one simulation per model (exact, warped, warped_bounded (warped with
+/// exact_below_coherence = o.coherence_bound), rest, uncoupled; one contact pass),
+/// which steps with the same device target: the same contacts, rows and delta_free, only W
+/// differs. Per state and model: the problem's W error, the contact force error against the
+/// exact model's, the probe's tissue W error, the step's times, and diagnostics of the elements
+/// at the nodes nearest the tool.
+struct StateComparison {
+  std::string mesh;
+  std::vector<std::string> models;         ///< models[0] = exact
+  std::vector<StateRow> rows;
+  int skipped = 0;                         ///< states whose probes assembled different rows
+};
+StateComparison compareStates(const Options& o, const sim::SceneSpec& base,
+                              const std::string& mesh, double duration_s, int every_steps);
+/// w_states.csv's text.
+std::string statesCsv(const StateComparison& sc);
+
+// ---- part 2: the haptic loop (haptic_study.cpp runs it, haptic_report.cpp measures it)
+
+/// A closed device motion relative to the anchor pose (the scripted pose at the window start):
+/// still for lead_in_s, then the motion, which starts and ends at zero offset. Deterministic.
+///  * slow_press: raised cosine 0 -> amplitude -> 0 along `dir` (into the tissue) over motion_s
+///  * tremor:     amplitude sin(2 pi freq t) along `dir` (oblique), whole cycles
+///  * fast_tap:   raised cosine press and release along `dir` over motion_s (tens of ms)
+struct DeviceMotion {
+  std::string name;
+  double lead_in_s = 0.1;
+  double motion_s = 1.0;
+  double tail_s = 0.05;                    ///< still after the motion
+  double amplitude_m = 3e-3;
+  double freq_hz = 0.0;                    ///< tremor only
+  Eigen::Vector3d dir = Eigen::Vector3d::UnitX();
+  double duration_s() const { return lead_in_s + motion_s + tail_s; }
+  Eigen::Vector3d offset(double t_s) const;      ///< t_s from the window start [m]
+  Eigen::Vector3d velocity(double t_s) const;    ///< d offset / dt [m/s]
+};
+
+/// What one rendering method gives the hand at every tick of a case.
+struct MethodSeries {
+  std::string method;                      ///< r1 | r2 | hold | extrapolate | coupling | local
+  std::string label;                       ///< for tables and plots
+  int sweeps = 0;                          ///< local: sweeps per tick (budget)
+  std::vector<Eigen::Vector3d> force;      ///< contact force on the tool = force on the hand [N]
+  /// linearised penetration of the tool the method renders: max(0, -min delta_n) [m]
+  std::vector<double> penetration;
+  std::vector<double> time_s;              ///< per tick (r1, r2: the full step)
   std::vector<bool> valid;
-  std::vector<Eigen::Vector3d> device_pos;  ///< reference only: x_h(t_j) [m]
-
-  /// A tick with no snapshot to compare (before the first arrives, after the last one's span).
+  void push(const Eigen::Vector3d& f, double pen, double t_s);
   void pushInvalid();
 };
 
-struct HapticRow {
-  std::string kind;                        ///< reference | local | hold
-  double rate_hz = 0.0;
-  double sim_h_s = 0.0;
-  int sweeps = 0;
-  TickSeries series;
+/// One device motion at one haptic rate and one simulation step: R1, R2 and every method.
+struct HapticCase {
+  std::string motion;
+  double rate_hz = 1000.0;
+  double sim_h_s = 0.01;
+  /// W of the multi-rate simulation's snapshots: "scene" (the scene's model) or "exact"
+  /// (isolates the local model's linearisation from the compliance model's error)
+  std::string snapshot_w = "scene";
+  /// ticks before this are not measured: R2 starts stepping at 1/rate from a state the scene's
+  /// step left, a transient of a few ms (half the motion's still lead-in)
+  double settle_s = 0.05;
+  std::vector<Eigen::Vector3d> device_pos; ///< x_h(t_j) per tick [m]
+  std::vector<long> snapshot;              ///< per tick: the snapshot serving it (-1: none)
+  std::vector<MethodSeries> series;        ///< series[0] = R1, series[1] = R2
 };
 
 struct HapticPlan {
   std::string mesh = "liver2";
-  std::vector<double> rates_hz;
-  std::vector<int> budgets;
-  std::vector<double> sim_h_s;
-  double t0_s = 2.0;
-  double window_s = 1.0;
+  double t0_s = 3.0;                       ///< window start on the scene's script
+  std::vector<DeviceMotion> motions;
+  /// (haptic rate [Hz], simulation step [s]) pairs; the step a multiple of the tick
+  std::vector<std::pair<double, double>> rates;
+  /// the first this many pairs once more with exact-W snapshots (HapticCase::snapshot_w)
+  int exact_snapshot_pairs = 1;
+  std::vector<int> budgets;                ///< local model sweeps per tick; <= 0: converged
+  int replay_steps = 20;                   ///< steps of the R1 replay check
 };
 
-/// Runs the window for every rate, budget and simulation step.
-std::vector<HapticRow> runHaptic(const Options& o, const HapticPlan& plan);
-/// haptic_accuracy.csv's text.
-std::string hapticCsv(const std::vector<HapticRow>& rows, const HapticPlan& plan);
+/// Consistency of R1 (restoring a saved state into the reference simulation and stepping it):
+/// an exact simulation run along the first motion, each of its steps replayed from the saved
+/// pre-step state with the same device target; the largest force difference relative to the
+/// largest force.
+struct ReplayCheck {
+  int steps = 0;
+  double max_rel_diff = 0.0;
+  double max_force_n = 0.0;
+};
+
+/// Runs every motion at every (rate, step) pair; fills `replay`.
+std::vector<HapticCase> runHaptic(const Options& o, const HapticPlan& plan, ReplayCheck& replay);
+/// haptic_accuracy.csv's text (haptic_report.cpp; the metrics are described there).
+std::string hapticCsv(const std::vector<HapticCase>& cases, const std::string& mesh);
+/// Force series of one case in long format (haptic_timeseries.csv).
+std::string hapticSeries(const HapticCase& c, double t0_s);
 
 }  // namespace tactus::study

@@ -48,8 +48,9 @@ public:
 
   void update(FemBody &body) override {
     body_ = &body;
+    active_ = kind_;
     if (kind_ == ComplianceKind::kWarped)
-      body.nodeRotations(rot_);
+      body.nodeRotations(rot_, opt_.exact_below_coherence > 0.0 ? &coherence_ : nullptr);
   }
 
   void addW(std::span<const TissueRow> rows,
@@ -57,11 +58,12 @@ public:
     const int m = static_cast<int>(rows.size());
     if (m == 0)
       return;
+    chooseModel(rows);
     const int u = collect(rows);
     const int du = 3 * u;
     // G = C_UU P, column by column from 3x3 blocks
     g_.resize(du, m);
-    if (kind_ == ComplianceKind::kUncoupled) {
+    if (active_ == ComplianceKind::kUncoupled) {
       g_.setZero();
       for (int l = 0; l < m; ++l)
         for (int t = 0; t < terms_[l].count; ++t) {
@@ -113,10 +115,10 @@ public:
         r_.segment<3>(3 * touched_[terms_[k].local[t]]) +=
             f[k] * terms_[k].p[t];
     // exact correction of a warped model: back to world axes, r = H^T f
-    if (opt_.exact_correction && kind_ == ComplianceKind::kWarped)
+    if (opt_.exact_correction && active_ == ComplianceKind::kWarped)
       for (int node : touched_)
         r_.segment<3>(3 * node) = rot_[node] * r_.segment<3>(3 * node).eval();
-    switch (opt_.exact_correction ? ComplianceKind::kExact : kind_) {
+    switch (opt_.exact_correction ? ComplianceKind::kExact : active_) {
     case ComplianceKind::kExact:
       body.solveCompliance(r_, dq);
       break;
@@ -289,7 +291,7 @@ private:
   int collect(std::span<const TissueRow> rows) {
     touched_.clear();
     terms_.resize(rows.size());
-    const bool surface_only = kind_ != ComplianceKind::kExact;
+    const bool surface_only = active_ != ComplianceKind::kExact;
     const int n = body_->nodeCount();
     for (std::size_t k = 0; k < rows.size(); ++k) {
       RowTerms &rt = terms_[k];
@@ -310,7 +312,7 @@ private:
           touched_.push_back(node);
         }
         Eigen::Vector3d p = rows[k].weight[t] * rows[k].dir;
-        if (kind_ == ComplianceKind::kWarped)
+        if (active_ == ComplianceKind::kWarped)
           p = rot_[node].transpose() * p;
         rt.local[rt.count] = local_[node];
         rt.p[rt.count] = p;
@@ -318,6 +320,26 @@ private:
       }
     }
     return static_cast<int>(touched_.size());
+  }
+
+  // Warped with a coherence bound: this call (and the correction after it) uses the exact
+  // compliance when a node the rows touch has its element rotations spread below the bound.
+  void chooseModel(std::span<const TissueRow> rows) {
+    active_ = kind_;
+    if (kind_ != ComplianceKind::kWarped || !(opt_.exact_below_coherence > 0.0) ||
+        coherence_.empty())
+      return;
+    for (const TissueRow &row : rows)
+      for (int t = 0; t < 3; ++t) {
+        const int node = row.node[t];
+        if (node >= 0 && row.weight[t] != 0.0 &&
+            node < static_cast<int>(coherence_.size()) &&
+            coherence_[node] < opt_.exact_below_coherence) {
+          active_ = ComplianceKind::kExact;
+          ++info_.exact_fallbacks;
+          return;
+        }
+      }
   }
 
   void release() {
@@ -330,7 +352,7 @@ private:
   void gatherCuu(int u) {
     const int du = 3 * u;
     cuu_.resize(du, du);
-    if (kind_ == ComplianceKind::kExact) {
+    if (active_ == ComplianceKind::kExact) {
       const int n = body_->nodeCount();
       e_.setZero(3 * n, du);
       for (int a = 0; a < u; ++a)
@@ -361,6 +383,8 @@ private:
   // state: what update() refreshes once per step and addW/correction read
   FemBody *body_;                    // the body whose state (and exact compliance) is read
   std::vector<Eigen::Matrix3d> rot_; // warped: node rotations rest -> current
+  std::vector<double> coherence_;    // warped with the bound: per node
+  ComplianceKind active_ = kind_;    // this step's model (kind_, or exact: chooseModel)
   // scratch: per call of addW/correction; local_ is kept all -1 between calls
   std::vector<int> local_;           // node -> index in touched_, -1 otherwise
   std::vector<int> touched_;

@@ -5,15 +5,29 @@
 
 namespace tactus::sim {
 
-void FemBody::nodeRotations(std::vector<Eigen::Matrix3d>& out) const {
+void FemBody::nodeRotations(std::vector<Eigen::Matrix3d>& out,
+                            std::vector<double>* coherence) const {
   Impl& m = *impl_;
   out.assign(m.n, Eigen::Matrix3d::Identity());
+  if (coherence != nullptr) coherence->assign(m.n, 1.0);
   if (!m.corotational) return;
   std::vector<Eigen::Matrix3d> element_rot(m.mesh.tetCount()), acc;
   for (int e = 0; e < m.mesh.tetCount(); ++e)
     element_rot[e] = fem_detail::polarRotation(m.elementF(e, m.q));
   m.counters.rotation_extractions += m.mesh.tetCount();
   m.averageRotations(element_rot, acc, out);
+  if (coherence == nullptr) return;
+  // |sum v_e R_e|_F / (sqrt(3) sum v_e) over the same elements (and groups) as the average
+  std::vector<double> weight(static_cast<std::size_t>(m.n), 0.0);
+  for (int e = 0; e < m.mesh.tetCount(); ++e)
+    for (int k = 0; k < 4; ++k) weight[m.mesh.tets[e][k]] += m.volume[e];
+  if (!m.rot_group.empty()) {
+    std::vector<double> group(static_cast<std::size_t>(m.rot_group_count), 0.0);
+    for (int i = 0; i < m.n; ++i) group[m.rot_group[i]] += weight[i];
+    for (int i = 0; i < m.n; ++i) weight[i] = group[m.rot_group[i]];
+  }
+  for (int i = 0; i < m.n; ++i)
+    (*coherence)[i] = weight[i] > 0.0 ? acc[i].norm() / (std::sqrt(3.0) * weight[i]) : 1.0;
 }
 
 void FemBody::stresses(std::vector<Eigen::Matrix3d>& out) const {

@@ -94,7 +94,8 @@ void SceneParser::readTissue(const YAML::Node& t, const std::string& path, Tissu
   if (section(t, path, "fixed", &n)) readFixed(n, join(path, "fixed"), tissue);
   if (section(t, path, "compliance", &n)) {
     const std::string p = join(path, "compliance");
-    checkKeys(n, p, {"model", "cache_dir", "correction", "c0_precision"});
+    checkKeys(n, p, {"model", "cache_dir", "correction", "c0_precision",
+                     "exact_below_coherence"});
     choice(n, p, "model", &tissue->compliance,
            {{"exact", ComplianceKind::kExact}, {"warped", ComplianceKind::kWarped},
             {"rest", ComplianceKind::kRest}, {"uncoupled", ComplianceKind::kUncoupled}});
@@ -103,6 +104,8 @@ void SceneParser::readTissue(const YAML::Node& t, const std::string& path, Tissu
     choice(n, p, "correction", &tissue->exact_correction, {{"model", false}, {"exact", true}});
     choice(n, p, "c0_precision", &tissue->c0_single_precision,
            {{"double", false}, {"float", true}});
+    number(n, p, "exact_below_coherence", &tissue->exact_below_coherence, kNonNegative,
+           kAtMost(1.0), kNonNegativeUpTo(1.0));
   }
 }
 

@@ -106,7 +106,9 @@ TEST(CholmodReuse, RefreshesTheFactorOnlyWhenTheMatrixDrifts) {
   for (int s = 0; s < 200; ++s) {
     const FemStepStats st = moving.freeMotion(kH);
     ASSERT_TRUE(st.ok);
-    if (s == 0) EXPECT_TRUE(st.factor_refreshed);   // no factor yet
+    if (s == 0) {
+      EXPECT_TRUE(st.factor_refreshed);  // no factor yet
+    }
     if (s > 0 && st.factor_refreshed) ++refreshed_after_first;
     if (!st.factor_refreshed) max_iterations = std::max(max_iterations, st.cg_iterations);
   }

@@ -67,6 +67,16 @@ struct ComplianceOptions {
   /// exactly what W predicted (it differs by H (C - C_model) H^T f; contact passes re-solve
   /// it). Off by default: the paper's scheme corrects with the model itself (R C0 R^T).
   bool exact_correction = false;
+  /// Warped model's bound (0: off). Its W error grows like the squared spread of the element
+  /// rotations between the contact nodes (FemBody::nodeRotations' coherence), which jaws that
+  /// crush elements make large (liver2 pinch: W errors of 16-35 % where the nodes nearest the
+  /// jaws reach coherence 0.94-0.97 and det F 0.2-0.4, README "Accuracy against time"). The
+  /// contact nodes themselves stay more coherent, so the bound is an empirical threshold on
+  /// them: when some node the rows touch has a coherence below this value, that step's W and
+  /// correction use the exact compliance instead (3|U| solves with the free motion's
+  /// factorisation); ComplianceBuildInfo::exact_fallbacks counts those calls. 0.9995 keeps
+  /// liver2's grasp under 7 % (probe W error).
+  double exact_below_coherence = 0.0;
 };
 
 /// How the model was built (for logs and tests).
@@ -77,6 +87,8 @@ struct ComplianceBuildInfo {
   double precompute_s = 0.0;               ///< C0 factorisation + solves (0 when loaded)
   int surface_nodes = 0;                   ///< nodes whose C0 block is stored
   long skipped_row_nodes = 0;              ///< row nodes ignored because not on the surface
+  /// warped with exact_below_coherence: addW calls that used the exact compliance
+  long exact_fallbacks = 0;
 };
 
 /// A tissue's compliance model. Model, state and scratch (docs/design.md, "Model, state,

@@ -173,7 +173,13 @@ class FemBody {
   /// of the opposite face) are not grouped; volume weighting keeps their rotation's influence
   /// small wherever a node also has well-shaped elements. The warped PCG preconditioner uses the
   /// same groups.
-  void nodeRotations(std::vector<Eigen::Matrix3d>& out) const;
+  ///
+  /// `coherence` (optional): per node, |sum v_e R_e|_F / (sqrt(3) sum v_e) over the elements
+  /// (and group) the average uses: 1 when they all rotate alike, smaller as their rotations
+  /// spread (about 1 - theta^2/3 for a spread of theta rad). The warped compliance's error grows
+  /// like the spread squared (README "Accuracy against time": elements crushed by a grasp).
+  void nodeRotations(std::vector<Eigen::Matrix3d>& out,
+                     std::vector<double>* coherence = nullptr) const;
 
   /// Per-element volume ratio det F = current signed volume / rest volume at the current
   /// positions (<= 0: inverted).

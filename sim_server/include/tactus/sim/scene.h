@@ -66,6 +66,8 @@ struct TissueSpec {
   bool exact_correction = false;
   /// compliance.c0_precision: float -> ComplianceOptions::c0_single_precision
   bool c0_single_precision = false;
+  /// compliance.exact_below_coherence -> ComplianceOptions::exact_below_coherence (0: off)
+  double exact_below_coherence = 0.0;
 };
 
 /// A pose: position [m] and orientation (unit quaternion), world frame.
