@@ -112,8 +112,8 @@ int run(const BenchOptions& o) {
   // a private segment with the capacity sim_server would create for this scene
   const std::string seg_name = fmt::format("tactus-bench-{}", static_cast<long>(::getpid()));
   shared::Segment seg = shared::Segment::create(
-      seg_name, shared::SegmentCapacity::forContacts(spec.solver.max_contacts,
-                                                     spec.instrument.friction_mu > 0.0));
+      seg_name, shared::SegmentCapacity::forContacts(sim::problemContactCapacity(spec),
+                                                     sim::anyFriction(spec)));
   shared::SnapshotPublisher pub = seg.snapshotPublisher();
   shared::SnapshotSubscriber sub = seg.snapshotSubscriber();
   shared::NsgsWorkspace ws(seg.capacity().max_rows, seg.capacity().max_contacts);
@@ -155,7 +155,9 @@ int run(const BenchOptions& o) {
   }
   const std::int64_t t0 = shared::monotonicNs();
   for (long k = 0; k < steps; ++k) {
-    sim.setDeviceTarget(sim.scriptedTarget(sim.time()));
+    for (int i = 0; i < sim.instrumentCount(); ++i) {
+      sim.setDeviceTarget(i, sim.scriptedTarget(i, sim.time()));
+    }
     const sim::StepReport r = sim.step();
     if (!r.finite) throw NumericalError(fmt::format("step {}: the state became non-finite", k));
     const std::int64_t tp = shared::monotonicNs();

@@ -215,8 +215,8 @@ int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
         options.record_snapshots,
         shared::OutputOptions{.overwrite = options.overwrite,
                               .overwrite_hint = "pass --overwrite to replace it"});
-    const shared::SegmentCapacity cap = shared::SegmentCapacity::forContacts(
-        spec.solver.max_contacts, spec.instrument.friction_mu > 0.0);
+    const shared::SegmentCapacity cap =
+        shared::SegmentCapacity::forContacts(problemContactCapacity(spec), anyFriction(spec));
     record_layout = shared::SnapshotLayout::forCapacity(cap.max_rows, cap.max_contacts);
     record_slot.assign(record_layout.total_bytes / sizeof(double) + 1, 0.0);
   }
@@ -234,10 +234,10 @@ int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
     if (offline && k >= options.steps) break;
     if (!offline && duration > 0.0 && sim.time() >= duration - 1e-12) break;
     // device target: the newest haptic sample when fresh, else the scene's script
-    if (sim.hasInstrument()) {
-      DeviceTarget target = sim.scriptedTarget(sim.time());
-      if (link) link->deviceTarget(target);
-      sim.setDeviceTarget(target);
+    for (int i = 0; i < sim.instrumentCount(); ++i) {
+      DeviceTarget target = sim.scriptedTarget(i, sim.time());
+      if (link && i == 0) link->deviceTarget(target);
+      sim.setDeviceTarget(i, target);
     }
     StepReport report = sim.step();
     if (link) {

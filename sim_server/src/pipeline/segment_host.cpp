@@ -23,8 +23,8 @@ Eigen::Vector3d boundedNorm(Eigen::Vector3d v, double max_norm) {
 
 SegmentHost::SegmentHost(const std::string& name, const SceneSpec& spec, const BoxSpec& workspace)
     : segment_(shared::Segment::create(
-          name, shared::SegmentCapacity::forContacts(spec.solver.max_contacts,
-                                                     spec.instrument.friction_mu > 0.0))),
+          name, shared::SegmentCapacity::forContacts(problemContactCapacity(spec),
+                                                     anyFriction(spec)))),
       publisher_(segment_.snapshotPublisher()),
       device_(segment_.deviceReader()),
       watchdog_ns_(static_cast<std::int64_t>(spec.haptics.watchdog_ms * 1e6)),

@@ -20,6 +20,10 @@
 
 namespace tactus::shared {
 
+/// Instruments a scene may have, and so devices one haptic_server serves and per-instrument
+/// blocks a snapshot carries (docs/design.md, "Several instruments and devices").
+inline constexpr int kMaxInstruments = 4;
+
 /// A device / instrument pose: position, orientation and gripper opening.
 struct PoseSample {
   std::array<double, 3> pos_m{};
