@@ -4,7 +4,8 @@
 # line every second, and stops both cleanly on Ctrl-C, SIGTERM, SIGHUP (terminal closed) or at
 # the end of --duration S (0, the default: until stopped).
 #
-# Usage: scripts/start.sh [SCENE.yaml] [--device NAME|PATH.so] [--device-option k=v]...
+# A scene with several instruments (scenes/liver_bimanual.yaml) gets one simulated hand each.
+# Usage: scripts/start.sh [SCENE.yaml] [--device NAME|PATH.so] [--device-option [I:]k=v]...
 #                         [--duration S] [--segment NAME] [--run-dir DIR] [--no-haptic]
 #                         [--core N] [--rate HZ] [--view [--view-port N]] [--no-build]
 #        --view: also serve the live view in a browser (scripts/view; http://127.0.0.1:8090/)
@@ -27,7 +28,7 @@ rate=1000
 view=0
 view_port=8090
 build_first=1
-usage() { sed -n '2,13p' "$0" | sed 's/^# \{0,1\}//'; }
+usage() { sed -n '2,14p' "$0" | sed 's/^# \{0,1\}//'; }
 while [[ $# -gt 0 ]]; do
   case "$1" in
     -h|--help) usage; exit 0 ;;
@@ -102,17 +103,26 @@ sim_pid=$!
 echo "$sim_pid" >"$run_dir/sim.pid"
 
 if [[ $haptic -eq 1 ]]; then
+  device_args=(--device "$device")
   if [[ "$device" == "simulated" && ${#device_opts[@]} -eq 0 ]]; then
-    # the simulated hand follows the scene's scripted trajectory
-    "$build/sim_server/sim_server" "$scene" --overwrite --export-trajectory "$run_dir/trajectory.csv" \
-      >>"$run_dir/sim_export.log" 2>&1 &&
-      device_opts=(--device-option "trajectory=$run_dir/trajectory.csv" --device-option loop=true)
+    # one simulated hand per instrument, each following its instrument's scripted trajectory
+    # (trajectory.csv for instrument 0, trajectoryI.csv for instrument I)
+    instruments=$("$build/sim_server/sim_server" "$scene" --print-instrument-count \
+      2>>"$run_dir/sim_export.log" || echo 1)
+    [[ "$instruments" =~ ^[1-9]$ ]] || instruments=1
+    for ((i = 0; i < instruments; i++)); do
+      csv="$run_dir/trajectory$( ((i > 0)) && echo "$i").csv"
+      (( i > 0 )) && device_args+=(--device simulated)
+      "$build/sim_server/sim_server" "$scene" --overwrite --export-trajectory "$csv" \
+        --export-instrument "$i" >>"$run_dir/sim_export.log" 2>&1 &&
+        device_opts+=(--device-option "$i:trajectory=$csv" --device-option "$i:loop=true")
+    done
   fi
   # the scene's haptics section as haptic_server options (the workspace mapping)
   scene_haptic_opts=()
   mapfile -t scene_haptic_opts < <("$build/sim_server/sim_server" "$scene" --print-haptic-options \
     2>>"$run_dir/sim_export.log" || true)
-  "$build/haptic_server/haptic_server" --segment "$segment" --device "$device" \
+  "$build/haptic_server/haptic_server" --segment "$segment" "${device_args[@]}" \
     "${device_opts[@]}" "${scene_haptic_opts[@]}" --core "$core" --rate "$rate" \
     >"$run_dir/haptic.log" 2>&1 &
   haptic_pid=$!
