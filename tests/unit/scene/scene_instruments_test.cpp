@@ -7,6 +7,7 @@
 
 #include "tactus/shared/error.h"
 #include "tactus/shared/messages.h"
+#include "../../support/scene_snippet.h"
 #include "tactus/sim/scene.h"
 
 namespace tactus::sim {
@@ -15,17 +16,9 @@ namespace {
 using ::testing::HasSubstr;
 using ::testing::StartsWith;
 
-const std::filesystem::path kScenes = std::filesystem::path(TACTUS_TEST_DATA_DIR) / "scenes";
-const std::string kHead = "time_step: 0.01\ntissues:\n  - mesh: ../meshes/liver.msh\n";
-
-std::string error(const std::string& yaml) {
-  try {
-    parseScene(kHead + yaml, "s.yaml", kScenes);
-  } catch (const SceneError& e) {
-    return e.what();
-  }
-  return "(no error)";
-}
+const std::filesystem::path& kScenes = test_support::kSceneDir;
+const std::string& kHead = test_support::kSceneHead;
+std::string error(const std::string& yaml) { return test_support::snippetError(yaml); }
 
 TEST(SceneInstruments, ListGivesEachInstrumentItsOwnValues) {
   const SceneSpec s = parseScene(kHead +
