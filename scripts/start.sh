@@ -111,8 +111,11 @@ if [[ $haptic -eq 1 ]]; then
       2>>"$run_dir/sim_export.log" || echo 1)
     [[ "$instruments" =~ ^[1-9]$ ]] || instruments=1
     for ((i = 0; i < instruments; i++)); do
-      csv="$run_dir/trajectory$( ((i > 0)) && echo "$i").csv"
-      (( i > 0 )) && device_args+=(--device simulated)
+      csv="$run_dir/trajectory.csv"
+      if (( i > 0 )); then
+        csv="$run_dir/trajectory$i.csv"
+        device_args+=(--device simulated)
+      fi
       "$build/sim_server/sim_server" "$scene" --overwrite --export-trajectory "$csv" \
         --export-instrument "$i" >>"$run_dir/sim_export.log" 2>&1 &&
         device_opts+=(--device-option "$i:trajectory=$csv" --device-option "$i:loop=true")
