@@ -4,7 +4,8 @@
 # line every second, and stops both cleanly on Ctrl-C, SIGTERM, SIGHUP (terminal closed) or at
 # the end of --duration S (0, the default: until stopped).
 #
-# Usage: scripts/start.sh [SCENE.yaml] [--device NAME|PATH.so] [--device-option k=v]...
+# A scene with several instruments (scenes/liver_bimanual.yaml) gets one simulated hand each.
+# Usage: scripts/start.sh [SCENE.yaml] [--device NAME|PATH.so] [--device-option [I:]k=v]...
 #                         [--duration S] [--segment NAME] [--run-dir DIR] [--no-haptic]
 #                         [--core N] [--rate HZ] [--view [--view-port N]] [--no-build]
 #        --rate: the haptic loop's rate (default: the scene's haptics.rate, else 1000 Hz)
@@ -103,11 +104,23 @@ sim_pid=$!
 echo "$sim_pid" >"$run_dir/sim.pid"
 
 if [[ $haptic -eq 1 ]]; then
+  device_args=(--device "$device")
   if [[ "$device" == "simulated" && ${#device_opts[@]} -eq 0 ]]; then
-    # the simulated hand follows the scene's scripted trajectory
-    "$build/sim_server/sim_server" "$scene" --overwrite --export-trajectory "$run_dir/trajectory.csv" \
-      >>"$run_dir/sim_export.log" 2>&1 &&
-      device_opts=(--device-option "trajectory=$run_dir/trajectory.csv" --device-option loop=true)
+    # one simulated hand per instrument, each following its instrument's scripted trajectory
+    # (trajectory.csv for instrument 0, trajectoryI.csv for instrument I)
+    instruments=$("$build/sim_server/sim_server" "$scene" --print-instrument-count \
+      2>>"$run_dir/sim_export.log" || echo 1)
+    [[ "$instruments" =~ ^[1-9]$ ]] || instruments=1
+    for ((i = 0; i < instruments; i++)); do
+      csv="$run_dir/trajectory.csv"
+      if (( i > 0 )); then
+        csv="$run_dir/trajectory$i.csv"
+        device_args+=(--device simulated)
+      fi
+      "$build/sim_server/sim_server" "$scene" --overwrite --export-trajectory "$csv" \
+        --export-instrument "$i" >>"$run_dir/sim_export.log" 2>&1 &&
+        device_opts+=(--device-option "$i:trajectory=$csv" --device-option "$i:loop=true")
+    done
   fi
   # the scene's haptics section as haptic_server options (rate, force clamp and scale, watchdog,
   # sweep budget, tolerance, workspace mapping); --rate on this command line wins over the scene's
@@ -121,7 +134,7 @@ if [[ $haptic -eq 1 ]]; then
     for o in "${scene_haptic_opts[@]}"; do [[ "$o" == --rate=* ]] || kept+=("$o"); done
     scene_haptic_opts=("${kept[@]}")
   fi
-  "$build/haptic_server/haptic_server" --segment "$segment" --device "$device" \
+  "$build/haptic_server/haptic_server" --segment "$segment" "${device_args[@]}" \
     "${device_opts[@]}" "${scene_haptic_opts[@]}" "${rate_opts[@]}" --core "$core" \
     >"$run_dir/haptic.log" 2>&1 &
   haptic_pid=$!

@@ -85,37 +85,57 @@ const char* eventName(std::uint32_t code) noexcept {
 AttachedSegment::AttachedSegment(shared::Segment&& s)
     : segment(std::move(s)),
       snapshots(segment.snapshotSubscriber()),
-      samples(segment.deviceWriter()),
       stats(segment.statsWriter()),
       workspace(segment.capacity().max_rows, segment.capacity().max_contacts),
       delta_free(static_cast<std::size_t>(segment.capacity().max_rows), 0.0),
       f(static_cast<std::size_t>(segment.capacity().max_rows), 0.0),
       last_delta_free(static_cast<std::size_t>(segment.capacity().max_rows), 0.0),
-      blocks(segment.capacity().max_rows, segment.capacity().max_contacts) {}
+      row_instrument(static_cast<std::size_t>(segment.capacity().max_rows), 0),
+      blocks(segment.capacity().max_rows, segment.capacity().max_contacts) {
+  sample_writers = std::clamp(segment.capacity().devices, 0, shared::kMaxInstruments);
+  for (int i = 0; i < sample_writers; ++i) samples[static_cast<std::size_t>(i)] = segment.deviceWriter(i);
+}
 
 HapticLoop::HapticLoop(device::Device& device, const HapticSettings& settings)
-    : device_(device), settings_(settings) {
+    : settings_(settings) {
   settings_.validate();
-  initLimits();
+  channels_[0].device = &device;
+  initLimits(channels_[0]);
+}
+
+HapticLoop::HapticLoop(std::span<device::Device* const> devices, const HapticSettings& settings)
+    : settings_(settings) {
+  settings_.validate();
+  if (devices.empty() || devices.size() > static_cast<std::size_t>(shared::kMaxInstruments)) {
+    throw Error("haptic loop: " + std::to_string(devices.size()) + " devices (1 to " +
+                std::to_string(shared::kMaxInstruments) + ")");
+  }
+  device_count_ = static_cast<int>(devices.size());
+  for (std::size_t i = 0; i < devices.size(); ++i) {
+    if (devices[i] == nullptr) throw Error("haptic loop: device " + std::to_string(i) + " is null");
+    channels_[i].device = devices[i];
+    initLimits(channels_[i]);
+  }
 }
 
 HapticLoop::HapticLoop(device::Device& device, const HapticSettings& settings,
                        UncheckedSettingsForTest)
-    : device_(device), settings_(settings) {
-  initLimits();
+    : settings_(settings) {
+  channels_[0].device = &device;
+  initLimits(channels_[0]);
 }
 
-void HapticLoop::initLimits() {
-  force_limit_n_ = sanitizeLimit(settings_.max_force_n, HapticSettingsLimits::kMaxForceN);
-  torque_limit_nm_ = sanitizeLimit(settings_.max_torque_nm, HapticSettingsLimits::kMaxTorqueNm);
+void HapticLoop::initLimits(DeviceChannel& ch) {
+  ch.force_limit_n = sanitizeLimit(settings_.max_force_n, HapticSettingsLimits::kMaxForceN);
+  ch.torque_limit_nm = sanitizeLimit(settings_.max_torque_nm, HapticSettingsLimits::kMaxTorqueNm);
   const double watchdog_ns = settings_.watchdog_ms * 1e6;
   watchdog_ns_ = std::isfinite(watchdog_ns) && watchdog_ns > 0.0 && watchdog_ns < 1e18
                      ? static_cast<std::int64_t>(watchdog_ns)
                      : 0;
-  const device::DeviceInfo info = device_.info();
+  const device::DeviceInfo info = ch.device->info();
   const double device_max = info.max_force_n;
   if (std::isfinite(device_max) && device_max > 0.0) {
-    force_limit_n_ = std::min(force_limit_n_, device_max);
+    ch.force_limit_n = std::min(ch.force_limit_n, device_max);
   } else if (device_max != 0.0) {
     spdlog::warn("device '{}' reports a maximum force of {} N: ignored (must be finite and > 0)",
                  info.model, device_max);
@@ -166,75 +186,77 @@ void HapticLoop::pushRateLimited(NoisyEvent which, std::uint32_t code, std::int6
   pushEvent(code, a, b);
 }
 
-device::IoStatus HapticLoop::readDevice(std::int64_t now, TickOutput& out) noexcept {
-  device::IoStatus io = device_.read(&raw_state_);
-  if (io == device::IoStatus::kOk) state_ = raw_state_;
-  if (io == device::IoStatus::kOk && state_.t_ns > 0 &&
-      ageNs(now, state_.t_ns) > watchdog_ns_) {
+device::IoStatus HapticLoop::readDevice(DeviceChannel& ch, int i, std::int64_t now,
+                                        TickOutput& out) noexcept {
+  device::IoStatus io = ch.device->read(&ch.raw_state);
+  if (io == device::IoStatus::kOk) ch.state = ch.raw_state;
+  if (io == device::IoStatus::kOk && ch.state.t_ns > 0 &&
+      ageNs(now, ch.state.t_ns) > watchdog_ns_) {
     // a sample stamped long ago: the device stopped updating (disconnected, stuck driver)
     counters_.stale_device_samples.fetch_add(1, std::memory_order_relaxed);
     io = device::IoStatus::kFault;
   }
   if (io == device::IoStatus::kOk) {
-    if (finite(state_.pos_m) && std::isfinite(state_.quat_wxyz[0]) &&
-        std::isfinite(state_.quat_wxyz[1]) && std::isfinite(state_.quat_wxyz[2]) &&
-        std::isfinite(state_.quat_wxyz[3])) {
-      mapping_.toScene(state_);   // the one place where the device pose becomes the scene's
-      last_pose_.pos_m = Eigen::Vector3d(state_.pos_m[0], state_.pos_m[1], state_.pos_m[2]);
-      Eigen::Quaterniond q(state_.quat_wxyz[0], state_.quat_wxyz[1], state_.quat_wxyz[2],
-                           state_.quat_wxyz[3]);
-      last_pose_.rot = q.norm() > 1e-9 ? q.normalized() : Eigen::Quaterniond::Identity();
-      have_pose_ = true;
-      if (device_fault_) pushEvent(kEventDeviceRecovered);
-      device_fault_ = false;
+    const auto& q = ch.state.quat_wxyz;
+    if (finite(ch.state.pos_m) && std::isfinite(q[0]) && std::isfinite(q[1]) &&
+        std::isfinite(q[2]) && std::isfinite(q[3])) {
+      ch.mapping.toScene(ch.state);   // the one place where the device pose becomes the scene's
+      const auto& p = ch.state.pos_m;
+      ch.last_pose.pos_m = Eigen::Vector3d(p[0], p[1], p[2]);
+      const Eigen::Quaterniond rot(q[0], q[1], q[2], q[3]);
+      ch.last_pose.rot = rot.norm() > 1e-9 ? rot.normalized() : Eigen::Quaterniond::Identity();
+      ch.have_pose = true;
+      if (ch.device_fault) pushEvent(kEventDeviceRecovered, i);
+      ch.device_fault = false;
     } else {
       counters_.non_finite_input.fetch_add(1, std::memory_order_relaxed);
-      if (!device_fault_) pushEvent(kEventNonFinite);
-      device_fault_ = true;
+      if (!ch.device_fault) pushEvent(kEventNonFinite, 0.0, i);
+      ch.device_fault = true;
       out.flags |= shared::kStatsDeviceFault;
     }
   } else if (io == device::IoStatus::kNoData) {
     counters_.device_no_data.fetch_add(1, std::memory_order_relaxed);
     out.flags |= shared::kStatsDeviceNoData;
-    if (!no_data_) pushRateLimited(kNoisyNoData, shared::kEventDeviceNoData, now);
+    if (!ch.no_data) pushRateLimited(kNoisyNoData, shared::kEventDeviceNoData, now, i);
   } else {
     counters_.device_faults.fetch_add(1, std::memory_order_relaxed);
-    if (!device_fault_) pushEvent(shared::kEventDeviceFault);
-    device_fault_ = true;
+    if (!ch.device_fault) pushEvent(shared::kEventDeviceFault, i);
+    ch.device_fault = true;
     out.flags |= shared::kStatsDeviceFault;
   }
 
-  no_data_ = io == device::IoStatus::kNoData;
+  ch.no_data = io == device::IoStatus::kNoData;
 
   return io;
 }
 
-// Publishes the device sample (pose held on no data, fault flagged).
-void HapticLoop::publishSample(std::int64_t now, device::IoStatus io) noexcept {
-  if (link_ != nullptr) {
-    shared::DeviceSample& s = link_->samples.buffer();
-    s.seq = ++sample_seq_;
-    s.t_ns = now;
-    for (int i = 0; i < 3; ++i) {
-      s.pos_m[i] = last_pose_.pos_m[i];
-      s.vel_mps[i] = std::isfinite(state_.vel_mps[i]) ? state_.vel_mps[i] : 0.0;
-      s.angvel_radps[i] = std::isfinite(state_.angvel_radps[i]) ? state_.angvel_radps[i] : 0.0;
-      s.force_n[i] = last_force_n_[i];
-      s.torque_nm[i] = last_torque_nm_[i];
-    }
-    s.quat_wxyz = {last_pose_.rot.w(), last_pose_.rot.x(), last_pose_.rot.y(), last_pose_.rot.z()};
-    s.gripper_rad = std::isfinite(state_.gripper_rad) ? state_.gripper_rad : 0.0;
-    s.buttons = state_.buttons;
-    s.status = (device_fault_ ? shared::kDeviceFault : 0u) |
-               (io == device::IoStatus::kOk ? shared::kDeviceOk : 0u) |
-               (io == device::IoStatus::kNoData ? shared::kDeviceNoData : 0u) |
-               (engaged_ ? shared::kDeviceForcesEnabled : 0u) |
-               (gain_ < 1.0 && engaged_ ? shared::kDeviceForceFading : 0u) |
-               (clamped_ ? shared::kDeviceForceClamped : 0u);
-    s.snapshot_seq = snapshot_seq_;
-    link_->samples.publish();
+// Publishes device i's sample (pose held on no data, fault flagged).
+void HapticLoop::publishSample(DeviceChannel& ch, int i, std::int64_t now,
+                               device::IoStatus io) noexcept {
+  if (link_ == nullptr || i >= link_->sample_writers) return;
+  auto& writer = link_->samples[static_cast<std::size_t>(i)];
+  shared::DeviceSample& s = writer.buffer();
+  s.seq = ++ch.sample_seq;
+  s.t_ns = now;
+  for (int k = 0; k < 3; ++k) {
+    s.pos_m[k] = ch.last_pose.pos_m[k];
+    s.vel_mps[k] = std::isfinite(ch.state.vel_mps[k]) ? ch.state.vel_mps[k] : 0.0;
+    s.angvel_radps[k] = std::isfinite(ch.state.angvel_radps[k]) ? ch.state.angvel_radps[k] : 0.0;
+    s.force_n[k] = ch.last_force_n[k];
+    s.torque_nm[k] = ch.last_torque_nm[k];
   }
-
+  const Eigen::Quaterniond& r = ch.last_pose.rot;
+  s.quat_wxyz = {r.w(), r.x(), r.y(), r.z()};
+  s.gripper_rad = std::isfinite(ch.state.gripper_rad) ? ch.state.gripper_rad : 0.0;
+  s.buttons = ch.state.buttons;
+  s.status = (ch.device_fault ? shared::kDeviceFault : 0u) |
+             (io == device::IoStatus::kOk ? shared::kDeviceOk : 0u) |
+             (io == device::IoStatus::kNoData ? shared::kDeviceNoData : 0u) |
+             (ch.engaged ? shared::kDeviceForcesEnabled : 0u) |
+             (ch.gain < 1.0 && ch.engaged ? shared::kDeviceForceFading : 0u) |
+             (ch.clamped ? shared::kDeviceForceClamped : 0u);
+  s.snapshot_seq = snapshot_seq_;
+  writer.publish();
 }
 
 // The newest snapshot, its age, and the local model.
@@ -259,7 +281,16 @@ void HapticLoop::takeSnapshot(std::int64_t now, TickOutput& out) noexcept {
         std::copy_n(snap.f(), m, link_->f.begin());
         if (shutting) pushEvent(kEventSimShuttingDown);
       }
-      if (!stale && have_pose_ && !device_fault_) solveLocalModel(*link_, snap, last_pose_, out);
+      // each device at its last pose (held while it faults); solved while some device has a
+      // live pose
+      std::array<const shared::Pose*, shared::kMaxInstruments> poses{};
+      bool live = false;
+      for (int i = 0; i < device_count_; ++i) {
+        const DeviceChannel& ch = channels_[static_cast<std::size_t>(i)];
+        if (ch.have_pose) poses[static_cast<std::size_t>(i)] = &ch.last_pose;
+        live = live || (ch.have_pose && !ch.device_fault);
+      }
+      if (!stale && live) solveLocalModel(*link_, snap, poses, out);
       if (stale != stale_) {
         pushEvent(stale ? shared::kEventSnapshotStale : shared::kEventSnapshotFresh,
                   stale ? static_cast<double>(age) : static_cast<double>(hdr.seq));
@@ -276,12 +307,12 @@ void HapticLoop::takeSnapshot(std::int64_t now, TickOutput& out) noexcept {
 
 }
 
-void HapticLoop::writeDevice(const std::array<double, 3>& force,
+void HapticLoop::writeDevice(DeviceChannel& ch, const std::array<double, 3>& force,
                              const std::array<double, 3>& torque) noexcept {
   device::DeviceCommand cmd;
   cmd.force_n = force;
   cmd.torque_nm = torque;
-  if (device_.write(cmd) != device::IoStatus::kOk) {
+  if (ch.device->write(cmd) != device::IoStatus::kOk) {
     counters_.write_faults.fetch_add(1, std::memory_order_relaxed);
   }
 }
@@ -300,6 +331,11 @@ void HapticLoop::recordStats(std::int64_t scheduled_ns, std::int64_t woken_ns,
   rec.residual = out.residual;
   rec.contacts = out.contacts;
   rec.force_norm_n = wrenchNorm(force);
+  rec.devices = out.devices;
+  for (int i = 0; i < out.devices; ++i) {
+    rec.device_force_norm_n[static_cast<std::size_t>(i)] =
+        wrenchNorm(out.device[static_cast<std::size_t>(i)].force_n);
+  }
   rec.snapshot_seq = snapshot_seq_;
   // an overrun: the tick's work ended more than one period after its scheduled start
   const std::int64_t late_ns = rec.finished_ns - scheduled_ns - settings_.period_ns;
@@ -331,15 +367,25 @@ TickOutput HapticLoop::tick(std::int64_t scheduled_ns, std::int64_t woken_ns) no
   last_tick_ns_ = now;
 
   adoptOfferedLink();   // never waits
-  const device::IoStatus io = readDevice(now, out);
-  publishSample(now, io);
-  takeSnapshot(now, out);
-  mapping_.wrenchToDevice(out.force_n, out.torque_nm);   // the chain then clamps in device frame
-  std::array<double, 3> force{};
-  std::array<double, 3> torque{};
-  applySafetyChain(dt, out, force, torque);
-  writeDevice(force, torque);
-  recordStats(scheduled_ns, woken_ns, out, force);
+  out.devices = device_count_;
+  for (int i = 0; i < device_count_; ++i) {
+    DeviceChannel& ch = channels_[static_cast<std::size_t>(i)];
+    publishSample(ch, i, now, readDevice(ch, i, now, out));
+  }
+  takeSnapshot(now, out);   // one solve: the wrench on each instrument in out.device[i]
+  std::array<double, 3> force0{};
+  for (int i = 0; i < device_count_; ++i) {
+    DeviceChannel& ch = channels_[static_cast<std::size_t>(i)];
+    DeviceTickOutput& dev = out.device[static_cast<std::size_t>(i)];
+    ch.mapping.wrenchToDevice(dev.force_n, dev.torque_nm);   // the chain clamps in device frame
+    std::array<double, 3> force{};
+    std::array<double, 3> torque{};
+    applySafetyChain(ch, dt, out, dev, force, torque);
+    writeDevice(ch, force, torque);
+    if (i == 0) force0 = force;
+  }
+  static_cast<DeviceTickOutput&>(out) = out.device[0];
+  recordStats(scheduled_ns, woken_ns, out, force0);
   ++tick_index_;
   counters_.ticks.fetch_add(1, std::memory_order_relaxed);
   return out;

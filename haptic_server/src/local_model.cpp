@@ -22,10 +22,32 @@ shared::Pose toPose(const shared::PoseSample& s) noexcept {
   return p;
 }
 
+// Instrument i's block of the snapshot header (instrument 0: the header's own fields, which
+// repeat block 0, so a snapshot of one instrument without blocks works too).
+const shared::PoseSample& devicePoseOf(const shared::ContactSnapshotHeader& h, int i) noexcept {
+  return i == 0 ? h.device_pose : h.instrument[static_cast<std::size_t>(i)].device_pose;
+}
+const shared::PoseSample& toolPoseOf(const shared::ContactSnapshotHeader& h, int i) noexcept {
+  return i == 0 ? h.tool_pose : h.instrument[static_cast<std::size_t>(i)].tool_pose;
+}
+
 }  // namespace
 
 void HapticLoop::solveLocalModel(AttachedSegment& link, const shared::SnapshotView& snap,
                                  const shared::Pose& device_pose, TickOutput& out) noexcept {
+  std::array<const shared::Pose*, shared::kMaxInstruments> poses{};
+  for (int i = 1; i < device_count_; ++i) {
+    const DeviceChannel& ch = channels_[static_cast<std::size_t>(i)];
+    if (ch.have_pose) poses[static_cast<std::size_t>(i)] = &ch.last_pose;
+  }
+  poses[0] = &device_pose;
+  solveLocalModel(link, snap, poses, out);
+}
+
+void HapticLoop::solveLocalModel(
+    AttachedSegment& link, const shared::SnapshotView& snap,
+    const std::array<const shared::Pose*, shared::kMaxInstruments>& poses,
+    TickOutput& out) noexcept {
   shared::NsgsWorkspace& workspace = link.workspace;
   std::vector<double>& delta_free = link.delta_free;
   std::vector<double>& f = link.f;
@@ -38,17 +60,43 @@ void HapticLoop::solveLocalModel(AttachedSegment& link, const shared::SnapshotVi
     pushEvent(kEventSnapshotTooLarge, m);
     return;
   }
-  // delta_free(t) = delta_free* + J (x_h [-] x_h*)
-  const shared::Pose x_star = toPose(hdr.device_pose);
-  const shared::Vector6d dx = shared::poseDifference(device_pose, x_star);
+  // the instruments of the snapshot (0 or 1 blocks: one instrument) and each one's device
+  // displacement since x_h* (zero for a device without a pose, or an instrument without device)
+  const int tools = std::clamp(hdr.instruments, 1, shared::kMaxInstruments);
+  std::array<shared::Vector6d, shared::kMaxInstruments> dx;
+  for (int i = 0; i < tools; ++i) {
+    const shared::Pose* pose = i < device_count_ ? poses[static_cast<std::size_t>(i)] : nullptr;
+    dx[static_cast<std::size_t>(i)] =
+        pose != nullptr ? shared::poseDifference(*pose, toPose(devicePoseOf(hdr, i)))
+                        : shared::Vector6d::Zero();
+  }
+  // each row's instrument; a contact naming no instrument of the snapshot (corrupt) moves with
+  // none and pushes none (kNoInstrument)
+  constexpr int kNoInstrument = -1;
+  int* row_tool = link.row_instrument.data();
+  const std::int32_t* ro = snap.rowOffset();
+  const std::int32_t* ci = snap.contactInstrument();
+  if (tools == 1) {
+    std::fill_n(row_tool, m, 0);
+  } else {
+    std::fill_n(row_tool, m, kNoInstrument);
+    for (int c = 0; c < nc; ++c) {
+      const int r0 = std::clamp(ro[c], 0, m);
+      const int r1 = std::clamp(ro[c + 1], r0, m);
+      const int tool = ci[c] >= 0 && ci[c] < tools ? ci[c] : kNoInstrument;
+      for (int r = r0; r < r1; ++r) row_tool[r] = tool;
+    }
+  }
+  // delta_free(t) = delta_free* + J (x_h [-] x_h*), each row with its own instrument's device
   const double* df = snap.deltaFree();
   const double* J = snap.J();
   const bool move = (hdr.flags & shared::kSnapshotHasJacobian) != 0;
   for (int r = 0; r < m; ++r) {
     double d = df[r];
-    if (move) {
+    if (move && row_tool[r] != kNoInstrument) {
       const double* jr = J + 6 * r;
-      for (int k = 0; k < 6; ++k) d += jr[k] * dx[k];
+      const shared::Vector6d& dxr = dx[static_cast<std::size_t>(row_tool[r])];
+      for (int k = 0; k < 6; ++k) d += jr[k] * dxr[k];
     }
     delta_free[r] = d;
   }
@@ -109,29 +157,42 @@ void HapticLoop::solveLocalModel(AttachedSegment& link, const shared::SnapshotVi
     }
   }
   not_converged_ = not_converged;
-  // wrench on the instrument from the contact forces (frame rows n, t1, t2)
-  const std::int32_t* ro = snap.rowOffset();
+  // wrench on each instrument from its contacts' forces (frame rows n, t1, t2)
   const double* pt = snap.contactPoint();
   const double* nn = snap.contactNormal();
   const double* tt = snap.contactTangent();
-  const Eigen::Vector3d origin = toPose(hdr.tool_pose).pos_m + dx.head<3>();
-  Eigen::Vector3d force = Eigen::Vector3d::Zero();
-  Eigen::Vector3d torque = Eigen::Vector3d::Zero();
+  std::array<Eigen::Vector3d, shared::kMaxInstruments> origin;
+  std::array<Eigen::Vector3d, shared::kMaxInstruments> force;
+  std::array<Eigen::Vector3d, shared::kMaxInstruments> torque;
+  for (int i = 0; i < tools; ++i) {
+    const auto k = static_cast<std::size_t>(i);
+    origin[k] = toPose(toolPoseOf(hdr, i)).pos_m + dx[k].head<3>();
+    force[k].setZero();
+    torque[k].setZero();
+  }
   for (int c = 0; c < nc; ++c) {
     const int r0 = ro[c];
     const int rows = ro[c + 1] - r0;
+    const int tool = row_tool[r0];   // NSGS checked the offsets
+    if (tool == kNoInstrument) continue;
+    const auto k = static_cast<std::size_t>(tool);
     Eigen::Vector3d fc = f[r0] * Eigen::Vector3d(nn[3 * c], nn[3 * c + 1], nn[3 * c + 2]);
     if (rows == 3) {
       fc += f[r0 + 1] * Eigen::Vector3d(tt[6 * c], tt[6 * c + 1], tt[6 * c + 2]);
       fc += f[r0 + 2] * Eigen::Vector3d(tt[6 * c + 3], tt[6 * c + 4], tt[6 * c + 5]);
     }
-    force += fc;
-    torque += (Eigen::Vector3d(pt[3 * c], pt[3 * c + 1], pt[3 * c + 2]) - origin).cross(fc);
+    force[k] += fc;
+    torque[k] += (Eigen::Vector3d(pt[3 * c], pt[3 * c + 1], pt[3 * c + 2]) - origin[k]).cross(fc);
   }
-  for (int i = 0; i < 3; ++i) {
-    out.force_n[i] = force[i];
-    out.torque_nm[i] = torque[i];
+  for (int i = 0; i < tools && i < device_count_; ++i) {
+    const auto k = static_cast<std::size_t>(i);
+    for (int j = 0; j < 3; ++j) {
+      out.device[k].force_n[j] = force[k][j];
+      out.device[k].torque_nm[j] = torque[k][j];
+    }
   }
+  out.force_n = out.device[0].force_n;
+  out.torque_nm = out.device[0].torque_nm;
 }
 
 }  // namespace tactus::haptic

@@ -14,6 +14,7 @@
 #include "tactus/device/bridge_device.h"
 #include "tactus/device/device.h"
 #include "tactus/haptic/clutch_key.h"
+#include "tactus/haptic/device_options.h"
 #include "tactus/haptic/haptic_loop.h"
 #include "tactus/haptic/supervisor.h"
 #include "tactus/shared/cli_checks.h"
@@ -34,7 +35,7 @@ int main(int argc, char** argv) {
   using namespace tactus;
   CLI::App app{"Tactus haptic server: renders contact forces at 1 kHz or more"};
   std::string segment = "tactus";
-  std::string device_name{device::kDefaultDevice};
+  std::vector<std::string> device_names;
   std::vector<std::string> device_options;
   double rate_hz = 1000.0;
   int core = -1;
@@ -45,11 +46,13 @@ int main(int argc, char** argv) {
   std::string log_level = "info";
   haptic::HapticSettings settings;
   app.add_option("--segment", segment, "Shared-memory segment name")->capture_default_str();
-  app.add_option("--device", device_name,
+  app.add_option("--device", device_names,
                  "Device backend: simulated, replay, null, bridge (network; device/README.md), "
-                 "or a plugin .so path")
-      ->capture_default_str();
-  app.add_option("--device-option", device_options, "Backend option key=value (repeatable)");
+                 "or a plugin .so path; repeat for several devices (device i drives the scene's "
+                 "instrument i; default: one simulated device)");
+  app.add_option("--device-option", device_options,
+                 "Backend option key=value (repeatable); I:key=value for device I (0-based), "
+                 "key=value for device 0");
   app.add_option("--rate", rate_hz, "Loop rate [Hz]")
       ->check(shared::finiteRange(50.0, 4000.0, "Hz"))->capture_default_str();
   app.add_option("--core", core, "CPU core to pin the loop to (-1: the last core)");
@@ -114,19 +117,28 @@ int main(int argc, char** argv) {
                                  workspace_rotation[2], workspace_rotation[3]};
     }
     workspace.validate();
-    device::DeviceConfig config;
-    for (const auto& kv : device_options) device::addDeviceOption(config, kv);
-    std::unique_ptr<device::Device> dev = device::loadDevice(device_name, config);
-    dev->open();
-    dev->calibrate();
-    const device::DeviceInfo info = dev->info();
-    settings.render_torque = settings.render_torque && info.has_rotation;
+    if (device_names.empty()) device_names.emplace_back(device::kDefaultDevice);
+    const std::vector<device::DeviceConfig> configs =
+        haptic::splitDeviceOptions(device_options, device_names.size());
+    std::vector<std::unique_ptr<device::Device>> devs;
+    std::vector<device::Device*> dev_ptrs;
+    bool all_rotation = true;
+    for (std::size_t i = 0; i < device_names.size(); ++i) {
+      devs.push_back(device::loadDevice(device_names[i], configs[i]));
+      devs.back()->open();
+      devs.back()->calibrate();
+      all_rotation = all_rotation && devs.back()->info().has_rotation;
+      dev_ptrs.push_back(devs.back().get());
+    }
+    device::Device* dev = devs.front().get();
+    settings.render_torque = settings.render_torque && all_rotation;
     settings.period_ns = static_cast<std::int64_t>(std::llround(1e9 / rate_hz));
     settings.solve_budget_ns = settings.period_ns * 4 / 10;
 
-    // validates the settings and combines the clamp with the device's own limit
-    haptic::HapticLoop loop(*dev, settings);
-    loop.workspaceMapping().configure(workspace);
+    // validates the settings and combines each clamp with its device's own limit (one loop for
+    // every device: docs/design.md, "Several instruments and devices")
+    haptic::HapticLoop loop(dev_ptrs, settings);
+    for (int i = 0; i < loop.deviceCount(); ++i) loop.workspaceMapping(i).configure(workspace);
     std::optional<haptic::ClutchKey> key;
     if (clutch_key) key.emplace(loop.workspaceMapping());
     if (!workspace.isIdentity()) {
@@ -140,8 +152,11 @@ int main(int argc, char** argv) {
     if (loop.forceLimitN() < settings.max_force_n) {
       spdlog::info("clamping to the device's maximum force {} N", loop.forceLimitN());
     }
-    spdlog::info("device '{}' ({}), max force {} N, loop {} Hz", device_name, info.model,
-                 loop.forceLimitN(), rate_hz);
+    for (int i = 0; i < loop.deviceCount(); ++i) {
+      spdlog::info("device {} '{}' ({}), max force {} N, loop {} Hz", i,
+                   device_names[static_cast<std::size_t>(i)],
+                   devs[static_cast<std::size_t>(i)]->info().model, loop.forceLimitN(i), rate_hz);
+    }
 
     haptic::Supervisor supervisor(loop, segment);
     if (core < 0) core = shared::availableCpuCount() - 1;
@@ -150,7 +165,7 @@ int main(int argc, char** argv) {
     std::string rt_summary;
     std::atomic<bool> rt_ready{false};
     std::exception_ptr rt_error;
-    dev->enableForces(true);
+    for (auto& d : devs) d->enableForces(true);
     std::thread rt([&] {
       try {
         rt_summary = shared::setupRealtimeThread(
@@ -167,8 +182,8 @@ int main(int argc, char** argv) {
         const shared::TimerTick t = timer.wait();
         loop.tick(t.scheduled_ns, t.woken_ns);
       }
-      // leave the device with zero force
-      (void)dev->write(device::DeviceCommand{});
+      // leave every device with zero force
+      for (auto& d : devs) (void)d->write(device::DeviceCommand{});
     });
     while (!rt_ready.load()) std::this_thread::sleep_for(std::chrono::milliseconds(1));
     if (rt_error) {
@@ -183,7 +198,7 @@ int main(int argc, char** argv) {
     }
 
     // the network bridge's packet counters go into the status line
-    device::Device* inner = dev.get();
+    device::Device* inner = dev;
     if (auto* rec = dynamic_cast<device::RecordingDevice*>(inner)) inner = &rec->inner();
     const auto* bridge = dynamic_cast<const device::BridgeDevice*>(inner);
     const std::int64_t t0 = shared::monotonicNs();
@@ -219,15 +234,20 @@ int main(int argc, char** argv) {
     loop_stop.store(true);
     rt.join();
     supervisor.drainEvents();
-    dev->enableForces(false);
-    dev->close();
-    if (fatal) std::rethrow_exception(fatal);
-    if (const auto* rec = dynamic_cast<const device::RecordingDevice*>(dev.get());
-        rec != nullptr && !rec->writeError().empty()) {
-      spdlog::error("recording not saved: {}", rec->writeError());
-      return 1;
+    for (auto& d : devs) {
+      d->enableForces(false);
+      d->close();
     }
-    return 0;
+    if (fatal) std::rethrow_exception(fatal);
+    int code = 0;
+    for (const auto& d : devs) {
+      if (const auto* rec = dynamic_cast<const device::RecordingDevice*>(d.get());
+          rec != nullptr && !rec->writeError().empty()) {
+        spdlog::error("recording not saved: {}", rec->writeError());
+        code = 1;
+      }
+    }
+    return code;
   } catch (const std::exception& e) {
     spdlog::error("{}", e.what());
     return 1;

@@ -64,57 +64,58 @@ bool guardWrench(std::array<double, 3>& force_n, std::array<double, 3>& torque_n
   return changed;
 }
 
-void HapticLoop::applySafetyChain(double dt, TickOutput& out, std::array<double, 3>& force,
+void HapticLoop::applySafetyChain(DeviceChannel& ch, double dt, TickOutput& out,
+                                  DeviceTickOutput& dev, std::array<double, 3>& force,
                                   std::array<double, 3>& torque) noexcept {
   // scale, engage gate, fade, clamp, slew
   for (int i = 0; i < 3; ++i) {
-    force[i] = settings_.force_scale * out.force_n[i];
-    torque[i] = settings_.render_torque ? settings_.force_scale * out.torque_nm[i] : 0.0;
+    force[i] = settings_.force_scale * dev.force_n[i];
+    torque[i] = settings_.render_torque ? settings_.force_scale * dev.torque_nm[i] : 0.0;
   }
   if (!finite(force) || !finite(torque)) {
     force = {};
     torque = {};
   }
-  out.unlimited_force_norm_n = wrenchNorm(force);
-  const bool usable = !out.stale && have_pose_ && !device_fault_;
-  if (!engaged_ && usable && out.unlimited_force_norm_n < settings_.engage_threshold_n) {
-    engaged_ = true;
-    pushEvent(kEventEngaged, out.unlimited_force_norm_n);
+  dev.unlimited_force_norm_n = wrenchNorm(force);
+  const bool usable = !out.stale && ch.have_pose && !ch.device_fault;
+  if (!ch.engaged && usable && dev.unlimited_force_norm_n < settings_.engage_threshold_n) {
+    ch.engaged = true;
+    pushEvent(kEventEngaged, dev.unlimited_force_norm_n);
   }
-  const double target_gain = (usable && engaged_) ? 1.0 : 0.0;
+  const double target_gain = (usable && ch.engaged) ? 1.0 : 0.0;
   const double ramp = settings_.fade_ms > 0.0 ? dt / (1e-3 * settings_.fade_ms) : 1.0;
-  gain_ = target_gain > gain_ ? std::min(target_gain, gain_ + ramp)
-                              : std::max(target_gain, gain_ - ramp);
-  if (!(gain_ >= 0.0 && gain_ <= 1.0)) gain_ = 0.0;   // NaN ramp (unchecked settings)
+  ch.gain = target_gain > ch.gain ? std::min(target_gain, ch.gain + ramp)
+                              : std::max(target_gain, ch.gain - ramp);
+  if (!(ch.gain >= 0.0 && ch.gain <= 1.0)) ch.gain = 0.0;   // NaN ramp (unchecked settings)
   for (int i = 0; i < 3; ++i) {
-    force[i] *= gain_;
-    torque[i] *= gain_;
+    force[i] *= ch.gain;
+    torque[i] *= ch.gain;
   }
   const double requested_n = wrenchNorm(force);
-  const bool clamped = clampNorm(force, force_limit_n_);
+  const bool clamped = clampNorm(force, ch.force_limit_n);
   if (clamped) {
     out.flags |= shared::kStatsForceClamped;
     counters_.clamped.fetch_add(1, std::memory_order_relaxed);
-    if (!clamped_) {
+    if (!ch.clamped) {
       pushRateLimited(kNoisyClamped, shared::kEventForceClamped, last_tick_ns_, requested_n,
                       wrenchNorm(force));
     }
   }
-  clamped_ = clamped;
-  clampNorm(torque, torque_limit_nm_);
-  slewLimit(force, last_force_n_, settings_.slew_n_per_s * dt);
+  ch.clamped = clamped;
+  clampNorm(torque, ch.torque_limit_nm);
+  slewLimit(force, ch.last_force_n, settings_.slew_n_per_s * dt);
   // the slew limiter never lets a faded command exceed the clamp
-  clampNorm(force, force_limit_n_);
+  clampNorm(force, ch.force_limit_n);
 
   // last stage, whatever the settings: finite and within the clamps
-  if (guardWrench(force, torque, force_limit_n_, torque_limit_nm_)) {
+  if (guardWrench(force, torque, ch.force_limit_n, ch.torque_limit_nm)) {
     counters_.guard_interventions.fetch_add(1, std::memory_order_relaxed);
   }
-  out.force_n = force;
-  out.torque_nm = torque;
-  out.gain = gain_;
-  last_force_n_ = force;
-  last_torque_nm_ = torque;
+  dev.force_n = force;
+  dev.torque_nm = torque;
+  dev.gain = ch.gain;
+  ch.last_force_n = force;
+  ch.last_torque_nm = torque;
 }
 
 }  // namespace tactus::haptic

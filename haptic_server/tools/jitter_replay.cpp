@@ -25,11 +25,23 @@ std::int64_t firstStepNs(const std::vector<shared::RecordedSnapshot>& s) {
   return 10'000'000;
 }
 
-std::vector<shared::PoseSample> devicePoses(const std::vector<shared::RecordedSnapshot>& s) {
-  std::vector<shared::PoseSample> poses;
-  poses.reserve(s.size());
-  for (const auto& r : s) poses.push_back(r.header.device_pose);
-  return poses;
+// One device per instrument of the recording (its largest instrument count), each circling
+// about its own instrument's device pose of each snapshot.
+std::vector<std::unique_ptr<CircleDevice>> devicesFor(const std::vector<shared::RecordedSnapshot>& s) {
+  int instruments = 1;
+  for (const auto& r : s) instruments = std::max(instruments, r.header.instruments);
+  std::vector<std::unique_ptr<CircleDevice>> devices;
+  for (int i = 0; i < instruments; ++i) {
+    std::vector<shared::PoseSample> poses;
+    poses.reserve(s.size());
+    for (const auto& r : s) {
+      poses.push_back(i == 0 ? r.header.device_pose
+                             : r.header.instrument[static_cast<std::size_t>(i)].device_pose);
+    }
+    devices.push_back(std::make_unique<CircleDevice>(
+        std::move(poses), i == 0 ? "jitter replay device" : "jitter replay device " + std::to_string(i)));
+  }
+  return devices;
 }
 
 shared::SegmentCapacity capacityFor(const std::vector<shared::RecordedSnapshot>& s) {
@@ -62,7 +74,7 @@ ReplayRig::ReplayRig(std::vector<shared::RecordedSnapshot> snapshots, const Repl
       rig_(fmt::format("tactus-jitter-replay-{}-{}", static_cast<long>(::getpid()),
                        g_replay_counter++),
            capacityFor(snapshots_),
-           std::make_unique<CircleDevice>(devicePoses(snapshots_), "jitter replay device"),
+           devicesFor(snapshots_),
            RigLoopOptions{options, watchdogMs(snapshots_)}) {
   pass_ns_ = snapshots_.back().t_ns - snapshots_.front().t_ns + firstStepNs(snapshots_);
   publish(0);
@@ -72,7 +84,7 @@ void ReplayRig::publish(std::size_t index) {
   rig_.publish([&](shared::SnapshotWriter slot, std::uint64_t seq) {
     snapshots_[index].writeTo(slot, seq, shared::monotonicNs());  // fits: capacity is the maximum
     slot.header().flags &= ~static_cast<std::uint32_t>(shared::kSnapshotShuttingDown);
-    rig_.device().follow(index);
+    for (std::size_t i = 0; i < rig_.deviceCount(); ++i) rig_.device(i).follow(index);
   });
 }
 

@@ -49,6 +49,8 @@ class ReplayRig {
   std::size_t snapshotCount() const { return snapshots_.size(); }
   int maxRows() const { return rig_.segment().capacity().max_rows; }
   int maxContacts() const { return rig_.segment().capacity().max_contacts; }
+  /// Devices the loop serves: one per instrument of the recording.
+  int devices() const { return rig_.segment().capacity().devices; }
   /// What the real-time set-up refused (empty: pinned, SCHED_FIFO, memory locked).
   const std::string& rtSummary() const { return rig_.rtSummary(); }
   HapticLoop& loop() { return rig_.loop(); }

@@ -58,19 +58,40 @@ device::IoStatus CircleDevice::write(const device::DeviceCommand&) noexcept {
   return device::IoStatus::kOk;
 }
 
+namespace {
+
+std::vector<std::unique_ptr<CircleDevice>> one(std::unique_ptr<CircleDevice> device) {
+  std::vector<std::unique_ptr<CircleDevice>> v;
+  v.push_back(std::move(device));
+  return v;
+}
+
+shared::SegmentCapacity withDevices(shared::SegmentCapacity c, std::size_t devices) {
+  c.devices = static_cast<std::int32_t>(devices);
+  return c;
+}
+
+}  // namespace
+
 LoopRig::LoopRig(const std::string& segment_name, const shared::SegmentCapacity& capacity,
                  std::unique_ptr<CircleDevice> device, const RigLoopOptions& options)
+    : LoopRig(segment_name, capacity, one(std::move(device)), options) {}
+
+LoopRig::LoopRig(const std::string& segment_name, shared::SegmentCapacity capacity,
+                 std::vector<std::unique_ptr<CircleDevice>> devices, const RigLoopOptions& options)
     : options_(options),
-      segment_(shared::Segment::create(segment_name, capacity)),
+      segment_(shared::Segment::create(segment_name, withDevices(capacity, devices.size()))),
       publisher_(segment_.snapshotPublisher()),
-      device_(std::move(device)) {
+      devices_(std::move(devices)) {
   settings_.period_ns = static_cast<std::int64_t>(std::llround(1e9 / options.rate_hz));
   settings_.solve_budget_ns = static_cast<std::int64_t>(options.solve_budget_fraction *
                                                         static_cast<double>(settings_.period_ns));
   settings_.max_sweeps = options.max_sweeps;
   settings_.engage_threshold_n = 1e9;
   settings_.watchdog_ms = options.watchdog_ms;
-  loop_ = std::make_unique<HapticLoop>(*device_, settings_);
+  std::vector<device::Device*> ptrs;
+  for (const auto& d : devices_) ptrs.push_back(d.get());
+  loop_ = std::make_unique<HapticLoop>(ptrs, settings_);
   link_ = std::make_unique<AttachedSegment>(
       shared::Segment::open(segment_.name(), shared::Access::kReadWrite));
   core_ = options.core >= 0 ? options.core : shared::availableCpuCount() - 1;
@@ -102,7 +123,7 @@ void LoopRig::start(std::function<void()> publisher) {
       const shared::TimerTick t = timer.wait();
       loop_->tick(t.scheduled_ns, t.woken_ns);
     }
-    (void)device_->write(device::DeviceCommand{});
+    for (const auto& d : devices_) (void)d->write(device::DeviceCommand{});
   });
   while (!ready.load()) std::this_thread::sleep_for(std::chrono::milliseconds(1));
   publisher_thread_ = std::thread(std::move(publisher));

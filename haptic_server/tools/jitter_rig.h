@@ -70,6 +70,10 @@ class LoopRig {
   /// Throws tactus::Error subclasses.
   LoopRig(const std::string& segment_name, const shared::SegmentCapacity& capacity,
           std::unique_ptr<CircleDevice> device, const RigLoopOptions& options);
+  /// The same with one device per instrument (1 .. shared::kMaxInstruments), all served by the
+  /// one loop; the segment gets one device buffer each.
+  LoopRig(const std::string& segment_name, shared::SegmentCapacity capacity,
+          std::vector<std::unique_ptr<CircleDevice>> devices, const RigLoopOptions& options);
   ~LoopRig();
   LoopRig(const LoopRig&) = delete;
   LoopRig& operator=(const LoopRig&) = delete;
@@ -90,7 +94,8 @@ class LoopRig {
   /// What the real-time set-up refused (empty: pinned, SCHED_FIFO, memory locked).
   const std::string& rtSummary() const { return rt_summary_; }
   HapticLoop& loop() { return *loop_; }
-  CircleDevice& device() { return *device_; }
+  CircleDevice& device(std::size_t i = 0) { return *devices_.at(i); }
+  std::size_t deviceCount() const { return devices_.size(); }
   std::uint64_t published() const { return published_.load(std::memory_order_relaxed); }
 
  private:
@@ -98,7 +103,7 @@ class LoopRig {
   shared::Segment segment_;
   shared::SnapshotPublisher publisher_;
   HapticSettings settings_;
-  std::unique_ptr<CircleDevice> device_;
+  std::vector<std::unique_ptr<CircleDevice>> devices_;
   std::unique_ptr<HapticLoop> loop_;
   std::unique_ptr<AttachedSegment> link_;
   int core_ = -1;

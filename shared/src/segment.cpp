@@ -101,6 +101,10 @@ Segment Segment::create(const std::string& name, SegmentCapacity capacity,
                        std::to_string(capacity.display_vertices) + ", display_triangles " +
                        std::to_string(capacity.display_triangles) + ")");
   }
+  if (capacity.devices < 1 || capacity.devices > kMaxInstruments) {
+    throw SegmentError("segment '" + name + "': " + std::to_string(capacity.devices) +
+                       " devices (1 to " + std::to_string(kMaxInstruments) + " allowed)");
+  }
   const SegmentLayout layout = SegmentLayout::forCapacity(capacity);
   if (layout.total_bytes > kMaxSegmentBytes) {
     throw SegmentError("segment '" + name + "': capacity " + std::to_string(capacity.max_rows) +
@@ -174,6 +178,7 @@ Segment Segment::create(const std::string& name, SegmentCapacity capacity,
   h->stats_capacity = kStatsRingCapacity;
   h->stats_record_bytes = sizeof(StatsRecord);
   h->snapshot_header_bytes = sizeof(ContactSnapshotHeader);
+  h->devices = static_cast<std::uint32_t>(capacity.devices);
   h->display_max_vertices = layout.display.capacity.max_vertices;
   h->display_max_triangles = layout.display.capacity.max_triangles;
   h->display_max_contacts = layout.display.capacity.max_contacts;
@@ -188,7 +193,10 @@ Segment Segment::create(const std::string& name, SegmentCapacity capacity,
     std::memset(base + layout.topology_offset, 0, layout.topology_bytes);
   }
   initTripleBuffer(base + layout.snapshot_offset, layout.snapshot.total_bytes);
-  initTripleBuffer(base + layout.device_offset, sizeof(DeviceSample));
+  for (std::int32_t i = 0; i < capacity.devices; ++i) {
+    const std::size_t at = layout.device_offset + static_cast<std::size_t>(i) * layout.device_stride_bytes;
+    initTripleBuffer(base + at, sizeof(DeviceSample));
+  }
   initSeqRing<StatsRecord>(base + layout.stats_offset, kStatsRingCapacity);
   // release: everything above is visible to an attacher that acquires the magic
   __atomic_store_n(&h->magic, kSegmentMagic, __ATOMIC_RELEASE);
@@ -282,12 +290,18 @@ TryOpenResult Segment::tryOpen(const std::string& name, Access access) {
     r.message = "segment '" + name + "' has a negative capacity: " + fix;
     return r;
   }
+  if (h->devices < 1 || h->devices > static_cast<std::uint32_t>(kMaxInstruments)) {
+    r.message = "segment '" + name + "' says it has " + std::to_string(h->devices) +
+                " devices (1 to " + std::to_string(kMaxInstruments) + " allowed): " + fix;
+    return r;
+  }
   // every part must sit where this build would put it for the stored capacity
   SegmentCapacity stored;
   stored.max_rows = h->max_rows;
   stored.max_contacts = h->max_contacts;
   stored.display_vertices = h->display_max_vertices;
   stored.display_triangles = h->display_max_triangles;
+  stored.devices = static_cast<std::int32_t>(h->devices);
   const SegmentLayout l = SegmentLayout::forCapacity(stored);
   std::ostringstream diff;
   bool any = false;
@@ -344,6 +358,7 @@ SegmentCapacity Segment::capacity() const noexcept {
   c.max_contacts = impl_->header->max_contacts;
   c.display_vertices = impl_->header->display_max_vertices;
   c.display_triangles = impl_->header->display_max_triangles;
+  c.devices = static_cast<std::int32_t>(impl_->header->devices);
   return c;
 }
 std::uint64_t Segment::generation() const noexcept { return impl_->header->generation; }
@@ -374,16 +389,26 @@ SnapshotSubscriber Segment::snapshotSubscriber() {
       impl_->snapshot_layout);
 }
 
-TripleWriter<DeviceSample> Segment::deviceWriter() {
-  unsigned char* b = writableBase("the device-sample writer");
-  return TripleWriter<DeviceSample>(
-      reinterpret_cast<TripleBufferControl*>(b + impl_->header->device_offset));
+// Device i's triple buffer (checked against the stored device count).
+TripleBufferControl* Segment::deviceBuffer(int i, const char* what) {
+  unsigned char* b = writableBase(what);
+  const auto devices = static_cast<int>(impl_->header->devices);
+  if (i < 0 || i >= devices) {
+    throw SegmentError("segment '" + impl_->name + "' has " + std::to_string(devices) +
+                       " device(s): no device " + std::to_string(i) + " (" + what + ")");
+  }
+  const SegmentLayout l = SegmentLayout::forCapacity(capacity());
+  return reinterpret_cast<TripleBufferControl*>(
+      b + impl_->header->device_offset + static_cast<std::size_t>(i) * l.device_stride_bytes);
 }
 
-TripleReader<DeviceSample> Segment::deviceReader() {
-  unsigned char* b = writableBase("the device-sample reader (it swaps triple-buffer slots)");
+TripleWriter<DeviceSample> Segment::deviceWriter(int i) {
+  return TripleWriter<DeviceSample>(deviceBuffer(i, "the device-sample writer"));
+}
+
+TripleReader<DeviceSample> Segment::deviceReader(int i) {
   return TripleReader<DeviceSample>(
-      reinterpret_cast<TripleBufferControl*>(b + impl_->header->device_offset));
+      deviceBuffer(i, "the device-sample reader (it swaps triple-buffer slots)"));
 }
 
 StatsRingWriter Segment::statsWriter() {

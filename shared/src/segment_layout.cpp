@@ -1,6 +1,7 @@
 // Where each part of the shared-memory segment lies (docs/design.md section 3, "Layout"): the
 // header, the snapshot and device triple buffers, the stats ring and the optional display frames,
 // each on its own cache lines.
+#include <algorithm>
 #include "tactus/shared/segment.h"
 
 namespace tactus::shared {
@@ -13,7 +14,8 @@ SegmentLayout SegmentLayout::forCapacity(SegmentCapacity capacity) noexcept {
   l.snapshot_bytes = tripleBufferBytes(l.snapshot.total_bytes);
   at = roundUpToCacheLine(at + l.snapshot_bytes);
   l.device_offset = at;
-  l.device_bytes = tripleBufferBytes(sizeof(DeviceSample));
+  l.device_stride_bytes = roundUpToCacheLine(tripleBufferBytes(sizeof(DeviceSample)));
+  l.device_bytes = static_cast<std::size_t>(std::max(capacity.devices, 0)) * l.device_stride_bytes;
   at = roundUpToCacheLine(at + l.device_bytes);
   l.stats_offset = at;
   l.stats_bytes = seqRingBytes<StatsRecord>(kStatsRingCapacity);

@@ -36,6 +36,7 @@ std::string_view bytesOf(const T* data, std::size_t n) {
 // Bytes of a record's arrays for m rows and nc contacts (both already bounded).
 std::uint64_t arrayBytes(std::uint64_t m, std::uint64_t nc) {
   return (nc + 1) * sizeof(std::int32_t) + nc * sizeof(std::uint64_t) +
+         nc * sizeof(std::int32_t) +   // contact_instrument
          (nc + m * m + 2 * m + 6 * m + 3 * nc + 3 * nc + 6 * nc) * sizeof(double);
 }
 
@@ -64,6 +65,11 @@ bool RecordedSnapshot::writeTo(SnapshotWriter slot, std::uint64_t seq,
   std::copy(contact_point_m.begin(), contact_point_m.end(), slot.contactPoint());
   std::copy(contact_normal.begin(), contact_normal.end(), slot.contactNormal());
   std::copy(contact_tangent.begin(), contact_tangent.end(), slot.contactTangent());
+  if (contact_instrument.size() == static_cast<std::size_t>(nc)) {
+    std::copy(contact_instrument.begin(), contact_instrument.end(), slot.contactInstrument());
+  } else {   // a problem made in memory for one instrument
+    std::fill_n(slot.contactInstrument(), nc, 0);
+  }
   return true;
 }
 
@@ -108,7 +114,8 @@ void SnapshotFileWriter::append(const SnapshotView& s, std::int64_t t_ns) {
   out_.write(bytesOf(s.J(), um * 6));
   out_.write(bytesOf(s.contactPoint(), unc * 3));
   out_.write(bytesOf(s.contactNormal(), unc * 3));
-  if (!out_.write(bytesOf(s.contactTangent(), unc * 6))) throw FileError(out_.error());
+  out_.write(bytesOf(s.contactTangent(), unc * 6));
+  if (!out_.write(bytesOf(s.contactInstrument(), unc))) throw FileError(out_.error());
   ++count_;
 }
 
@@ -186,6 +193,7 @@ std::vector<RecordedSnapshot> readSnapshotFile(const std::filesystem::path& path
     readArray(in, s.contact_point_m, unc * 3);
     readArray(in, s.contact_normal, unc * 3);
     readArray(in, s.contact_tangent, unc * 6);
+    readArray(in, s.contact_instrument, unc);
     if (s.row_offset[0] != 0 || s.row_offset[unc] != m) {
       throw bad("row offsets do not run from 0 to rows");
     }
@@ -202,14 +210,28 @@ std::vector<RecordedSnapshot> readSnapshotFile(const std::filesystem::path& path
     }
     const ContactSnapshotHeader& h = s.header;
     if (!std::isfinite(h.h_s) || !std::isfinite(h.solver_error)) throw bad("non-finite header");
-    for (const PoseSample* p : {&h.device_pose, &h.tool_pose}) {
-      for (double x : p->pos_m) {
+    if (h.instruments < 0 || h.instruments > kMaxInstruments) {
+      throw bad(cat(h.instruments, " instruments (0 to ", kMaxInstruments, ")"));
+    }
+    const std::int32_t tools = std::max(1, h.instruments);
+    if (std::any_of(s.contact_instrument.begin(), s.contact_instrument.end(),
+                    [tools](std::int32_t i) { return i < 0 || i >= tools; })) {
+      throw bad(cat("a contact's instrument is not in 0..", tools - 1));
+    }
+    auto check_pose = [&bad](const PoseSample& p) {
+      for (double x : p.pos_m) {
         if (!std::isfinite(x)) throw bad("non-finite pose");
       }
-      for (double x : p->quat_wxyz) {
+      for (double x : p.quat_wxyz) {
         if (!std::isfinite(x)) throw bad("non-finite pose");
       }
-      if (!std::isfinite(p->gripper_rad)) throw bad("non-finite pose");
+      if (!std::isfinite(p.gripper_rad)) throw bad("non-finite pose");
+    };
+    check_pose(h.device_pose);
+    check_pose(h.tool_pose);
+    for (std::int32_t i = 0; i < h.instruments; ++i) {
+      check_pose(h.instrument[static_cast<std::size_t>(i)].device_pose);
+      check_pose(h.instrument[static_cast<std::size_t>(i)].tool_pose);
     }
     if (!out.empty() && s.t_ns < out.back().t_ns) throw bad("time goes backwards");
     at += kFixed + need;

@@ -14,6 +14,7 @@
 #include "tactus/sim/scene.h"
 #include "tactus/shared/error.h"
 #include "tactus/shared/file_io.h"
+#include "tactus/shared/messages.h"
 
 namespace {
 // the one stop flag: loading, C0 precomputation and file reads poll it too
@@ -44,6 +45,12 @@ int main(int argc, char** argv) {
   app.add_option("--stats-json", opt.stats_json, "Write per-stage statistics as JSON to FILE");
   app.add_option("--export-trajectory", opt.export_trajectory,
                  "Write the scene's scripted instrument trajectory as a device CSV and exit");
+  app.add_option("--export-instrument", opt.export_instrument,
+                 "Whose trajectory --export-trajectory writes (0-based instrument index)")
+      ->check(CLI::Range(0, tactus::shared::kMaxInstruments - 1));
+  bool print_instrument_count = false;
+  app.add_flag("--print-instrument-count", print_instrument_count,
+               "Print the scene's number of instruments (devices haptic_server serves) and exit");
   bool print_haptic_options = false;
   app.add_flag("--print-haptic-options", print_haptic_options,
                "Print haptic_server's options for the scene's haptics section (workspace "
@@ -65,6 +72,10 @@ int main(int argc, char** argv) {
   std::signal(SIGTERM, onSignal);
   std::signal(SIGHUP, onSignal);  // the terminal closed: stop cleanly (removes the segment)
   try {
+    if (print_instrument_count) {
+      std::printf("%d\n", tactus::sim::instrumentCount(tactus::sim::loadScene(opt.scene_path)));
+      return 0;
+    }
     if (print_haptic_options) {
       const tactus::sim::SceneSpec spec = tactus::sim::loadScene(opt.scene_path);
       for (const std::string& o : tactus::sim::hapticServerOptions(spec.haptics)) {

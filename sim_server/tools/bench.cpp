@@ -82,6 +82,7 @@ struct BenchOptions {
   double contact_compliance = -1.0;    ///< >= 0: overrides instrument.contact_compliance [m/N]
   double pad_width_mm = -1.0;          ///< >= 0: overrides instrument.grasper.pad_width
   std::string linear;                  ///< non-empty: overrides solver.linear
+  int instruments = 0;                 ///< > 0: keep only the scene's first N instruments
 };
 
 int run(const BenchOptions& o) {
@@ -94,6 +95,9 @@ int run(const BenchOptions& o) {
   if (o.grip_stiffness >= 0.0) spec.instrument.grip_k_nmprad = o.grip_stiffness;
   if (o.contact_compliance >= 0.0) spec.instrument.contact_compliance_mpn = o.contact_compliance;
   if (o.pad_width_mm >= 0.0) spec.instrument.pad_width_m = 1e-3 * o.pad_width_mm;
+  if (o.instruments > 0 && o.instruments < sim::instrumentCount(spec)) {
+    spec.additional_instruments.resize(static_cast<std::size_t>(o.instruments - 1));
+  }
   if (o.linear == "cholmod") spec.solver.linear = sim::LinearSolverKind::kCholmod;
   if (o.linear == "pcg") spec.solver.linear = sim::LinearSolverKind::kPcg;
   if (o.linear == "cholmod_reuse") spec.solver.linear = sim::LinearSolverKind::kCholmodReuse;
@@ -112,8 +116,8 @@ int run(const BenchOptions& o) {
   // a private segment with the capacity sim_server would create for this scene
   const std::string seg_name = fmt::format("tactus-bench-{}", static_cast<long>(::getpid()));
   shared::Segment seg = shared::Segment::create(
-      seg_name, shared::SegmentCapacity::forContacts(spec.solver.max_contacts,
-                                                     spec.instrument.friction_mu > 0.0));
+      seg_name, shared::SegmentCapacity::forContacts(sim::problemContactCapacity(spec),
+                                                     sim::anyFriction(spec)));
   shared::SnapshotPublisher pub = seg.snapshotPublisher();
   shared::SnapshotSubscriber sub = seg.snapshotSubscriber();
   shared::NsgsWorkspace ws(seg.capacity().max_rows, seg.capacity().max_contacts);
@@ -155,7 +159,9 @@ int run(const BenchOptions& o) {
   }
   const std::int64_t t0 = shared::monotonicNs();
   for (long k = 0; k < steps; ++k) {
-    sim.setDeviceTarget(sim.scriptedTarget(sim.time()));
+    for (int i = 0; i < sim.instrumentCount(); ++i) {
+      sim.setDeviceTarget(i, sim.scriptedTarget(i, sim.time()));
+    }
     const sim::StepReport r = sim.step();
     if (!r.finite) throw NumericalError(fmt::format("step {}: the state became non-finite", k));
     const std::int64_t tp = shared::monotonicNs();
@@ -363,6 +369,9 @@ int main(int argc, char** argv) {
                  "Override the grasper's flat pad width [mm] (0: round jaws)");
   app.add_option("--min-contacts", o.min_contacts,
                  "Also report the stages over the steps with at least this many contacts");
+  app.add_option("--instruments", o.instruments,
+                 "Keep only the scene's first N instruments (two hands against one)")
+      ->check(CLI::Range(1, shared::kMaxInstruments));
   app.add_option("--linear", o.linear, "Override the scene's solver.linear")
       ->check(CLI::IsMember({"cholmod", "pcg", "cholmod_reuse"}));
   app.add_option("--log-level", o.log_level, "spdlog level of the simulation library")

@@ -133,10 +133,23 @@ int main(int argc, char** argv) {
       const double sim_hz =
           last_snapshot > 0 ? static_cast<double>(newest.snapshot_seq - last_snapshot) / dt : 0.0;
       last_snapshot = newest.snapshot_seq;
-      std::printf("[status] sim %6.1f Hz | haptic %7.1f Hz | contacts %3lld | force %6.3f N | "
+      // one force per device ("force 0.611 N", or "forces 0.611 0.402 N" for two devices)
+      char forces[96];   // "forces" + at most kMaxInstruments " %6.3f" + " N": fits
+      if (newest.devices > 1) {
+        int at = std::snprintf(forces, sizeof(forces), "forces");
+        const std::int64_t n = std::min<std::int64_t>(newest.devices, kMaxInstruments);
+        for (std::int64_t i = 0; i < n; ++i) {
+          at += std::snprintf(forces + at, sizeof(forces) - static_cast<std::size_t>(at), " %6.3f",
+                              newest.device_force_norm_n[static_cast<std::size_t>(i)]);
+        }
+        std::snprintf(forces + at, sizeof(forces) - static_cast<std::size_t>(at), " N");
+      } else {
+        std::snprintf(forces, sizeof(forces), "force %6.3f N", newest.force_norm_n);
+      }
+      std::printf("[status] sim %6.1f Hz | haptic %7.1f Hz | contacts %3lld | %s | "
                   "tick p99 %7.1f us | wake p99 %7.1f us%s\n",
                   sim_hz, static_cast<double>(count) / dt, static_cast<long long>(newest.contacts),
-                  newest.force_norm_n, p99(ticks_us), p99(period_err_us),
+                  forces, p99(ticks_us), p99(period_err_us),
                   (newest.flags & kStatsSnapshotStale) ? " | STALE" : "");
     }
     std::fflush(stdout);

@@ -181,9 +181,15 @@ const SurfaceMesh& Collision::surface() const { return impl_->surface; }
 
 void buildContactRows(std::span<const Contact> contacts, double mu,
                       const Eigen::Vector3d& tool_origin_m, ContactRows& out) {
+  buildContactRows(contacts, std::span<const double>(&mu, 1),
+                   std::span<const Eigen::Vector3d>(&tool_origin_m, 1), out);
+}
+
+void buildContactRows(std::span<const Contact> contacts, std::span<const double> mu,
+                      std::span<const Eigen::Vector3d> tool_origin_m, ContactRows& out) {
   const int nc = static_cast<int>(contacts.size());
-  const int per = mu > 0.0 ? 3 : 1;
-  const int rows = nc * per;
+  int rows = 0;
+  for (const Contact& c : contacts) rows += mu[static_cast<std::size_t>(c.instrument)] > 0.0 ? 3 : 1;
   out.row_offset.resize(nc + 1);
   out.tissue.resize(rows);
   out.tool.resize(rows, 6);
@@ -191,9 +197,12 @@ void buildContactRows(std::span<const Contact> contacts, double mu,
   out.row_offset[0] = 0;
   for (int i = 0; i < nc; ++i) {
     const Contact& c = contacts[i];
-    const Eigen::Matrix<double, 3, 6> jac = shared::pointJacobian(tool_origin_m, c.tool_point_m);
+    const auto inst = static_cast<std::size_t>(c.instrument);
+    const int per = mu[inst] > 0.0 ? 3 : 1;
+    const Eigen::Matrix<double, 3, 6> jac =
+        shared::pointJacobian(tool_origin_m[inst], c.tool_point_m);
     for (int d = 0; d < per; ++d) {
-      const int r = i * per + d;
+      const int r = out.row_offset[i] + d;
       const Eigen::Vector3d& dir = d == 0 ? c.n : (d == 1 ? c.t1 : c.t2);
       TissueRow& row = out.tissue[r];
       row.node = c.nodes;
@@ -202,7 +211,7 @@ void buildContactRows(std::span<const Contact> contacts, double mu,
       out.tool.row(r) = dir.transpose() * jac;
       out.delta_free[r] = d == 0 ? c.gap_m : 0.0;
     }
-    out.row_offset[i + 1] = (i + 1) * per;
+    out.row_offset[i + 1] = out.row_offset[i] + per;
   }
 }
 

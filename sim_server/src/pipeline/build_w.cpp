@@ -1,5 +1,7 @@
 // buildW: the contact problem of the detected contacts, W = H C H^T (paper eq. 11).
 #include <algorithm>
+#include <array>
+#include <span>
 
 #include "step_stages.h"
 #include "tactus/shared/clock.h"
@@ -9,13 +11,14 @@ namespace {
 
 // The jaw angle's column of one tissue's rows: a row's gap grows by dir . dp/dphi per radian of
 // opening (dynamic grip; zeros otherwise).
-void gripColumn(const std::vector<Contact>& found, const Instrument& detected, bool dynamic_grip,
+void gripColumn(const std::vector<Contact>& found, const std::vector<Instrument>& detected,
                 TissueScratch& tx) {
   tx.grip.assign(static_cast<std::size_t>(tx.rows.rows()), 0.0);
-  if (!dynamic_grip) return;
   for (std::size_t c = 0; c < found.size(); ++c) {
     const Contact& k = found[c];
-    const Eigen::Vector3d dp = detected.gripJacobian(k.feature, k.tool_point_m);
+    const Instrument& tool = detected[static_cast<std::size_t>(k.instrument)];
+    if (!tool.dynamicGrip()) continue;
+    const Eigen::Vector3d dp = tool.gripJacobian(k.feature, k.tool_point_m);
     const int r0 = tx.rows.row_offset[c];
     tx.grip[static_cast<std::size_t>(r0)] = k.n.dot(dp);
     if (tx.rows.row_offset[c + 1] - r0 == 3) {
@@ -29,15 +32,18 @@ void gripColumn(const std::vector<Contact>& found, const Instrument& detected, b
 // carried to the free state along the row (gap - H (x_detected - x_free)). t1, t2 rows: the
 // relative tangential displacement of the tool point over the free motion.
 void freeGaps(const SimulationModel& model, const StepScratch& scratch, const TissueState& ts,
-              TissueScratch& tx, const Instrument& detected, FoundAt found_at) {
+              TissueScratch& tx, const std::vector<Instrument>& detected_tools,
+              FoundAt found_at) {
   const bool relinearise = found_at != FoundAt::kFreeState;
-  const Instrument& tool_free = *scratch.tool_free;
-  const shared::Pose& free_pose = tool_free.pose();
-  const shared::Pose& tool_begin = scratch.tool_begin;
   const Eigen::VectorXd& q = found_at == FoundAt::kStepStart ? tx.q_begin : ts.body->positions();
   const std::vector<Contact>& found = *ts.found;
   for (std::size_t c = 0; c < found.size(); ++c) {
     const Contact& k = found[c];
+    const auto inst = static_cast<std::size_t>(k.instrument);
+    const Instrument& tool_free = scratch.tool_free[inst];
+    const Instrument& detected = detected_tools[inst];
+    const shared::Pose& free_pose = tool_free.pose();
+    const shared::Pose& tool_begin = scratch.tool_begin[inst];
     const int r0 = tx.rows.row_offset[c];
     Eigen::Vector3d tissue_free = Eigen::Vector3d::Zero();
     Eigen::Vector3d tissue_detected = Eigen::Vector3d::Zero();
@@ -53,7 +59,7 @@ void freeGaps(const SimulationModel& model, const StepScratch& scratch, const Ti
     if (relinearise && detected.dynamicGrip()) {
       // the jaw point at the free opening (first order in the opening change)
       const double dphi = (detected.gripperOpening() - tool_free.gripperOpening()) *
-                          model.spec.instrument.max_opening_rad;
+                          instrumentSpec(model.spec, k.instrument).max_opening_rad;
       tool_free_point -= dphi * tool_free.gripJacobian(k.feature, tool_free_point);
     }
     if (relinearise) {
@@ -88,17 +94,64 @@ int countDistinctNodes(const SimulationState& state, StepScratch& scratch) {
   return static_cast<int>(std::unique(keys.begin(), keys.end()) - keys.begin());
 }
 
+// + H_i C6_i H_i^T (+ c_g g g^T) over instrument i's rows, J's rows of instrument i (= H_i G_i)
+// and its contact compliance on their diagonal. The rows of one instrument are found through
+// scratch.row_instrument (all rows when it is the only one).
+void addToolCompliance(const SimulationModel& model, const SimulationState& state,
+                       StepScratch& scratch, int instrument, int rows) {
+  const double h = model.h_s;
+  ContactProblemData& p = scratch.problem;
+  const bool only = state.instruments.size() == 1;
+  const auto owns = [&](int r) {
+    return only || scratch.row_instrument[static_cast<std::size_t>(r)] == instrument;
+  };
+  const Instrument& tool = state.instruments[static_cast<std::size_t>(instrument)];
+  const shared::Matrix6d c6 = tool.compliance6(h);
+  const shared::Matrix6d l6 = c6.llt().matrixL();
+  const shared::Matrix6d g6 =
+      scratch.tool_free[static_cast<std::size_t>(instrument)].freeMotionSensitivity(h);
+  if (only) {
+    scratch.b_tool.noalias() = scratch.h_tool * l6;
+    p.J.noalias() = scratch.h_tool * g6;
+  } else {
+    scratch.b_tool.resize(rows, 6);
+    for (int r = 0; r < rows; ++r) {
+      if (!owns(r)) continue;
+      scratch.b_tool.row(r).noalias() = scratch.h_tool.row(r) * l6;
+      p.J.row(r).noalias() = scratch.h_tool.row(r) * g6;
+    }
+  }
+  const double c_grip = tool.gripCompliance(h);
+  for (int i = 0; i < rows; ++i) {
+    if (!owns(i)) continue;
+    const auto bi = scratch.b_tool.row(i);
+    double* wi = p.W.row(i).data();
+    const double gi = c_grip * p.grip[i];
+    for (int j = i; j < rows; ++j) {
+      if (!owns(j)) continue;
+      const double w = bi.dot(scratch.b_tool.row(j)) + gi * p.grip[j];
+      wi[j] += w;
+      if (j != i) p.W(j, i) += w;
+    }
+  }
+  // contact compliance (collision.h): W + c I, penetration c f_n per contact
+  const double c = instrumentSpec(model.spec, instrument).contact_compliance_mpn;
+  for (int r = 0; r < rows; ++r) {
+    if (owns(r)) p.W(r, r) += c;
+  }
+}
+
 // W = sum_tissue H C H^T + H_tool C6 H_tool^T (+ c_g g g^T, + c I), delta_free, J and the
 // per-contact data of the problem, from the rows of every tissue.
 void assembleProblem(const SimulationModel& model, SimulationState& state, StepScratch& scratch,
                      PipelineCounters& counters, int contacts, int rows) {
-  const double h = model.h_s;
   ContactProblemData& p = scratch.problem;
   p.contacts = contacts;
   p.rows = rows;
   p.row_offset.assign(1, 0);
   p.contact_id.resize(contacts);
-  p.mu.assign(contacts, model.spec.instrument.friction_mu);
+  p.mu.resize(contacts);
+  p.contact_instrument.resize(contacts);
   p.point_m.resize(contacts);
   p.normal.resize(contacts);
   p.tangent1.resize(contacts);
@@ -125,7 +178,13 @@ void assembleProblem(const SimulationModel& model, SimulationState& state, StepS
     ++counters.w_builds;
   }
   const std::vector<Contact>& all = scratch.all_contacts;
+  scratch.row_instrument.resize(static_cast<std::size_t>(rows));
   for (int c = 0; c < contacts; ++c) {
+    p.contact_instrument[c] = all[c].instrument;
+    p.mu[c] = instrumentSpec(model.spec, all[c].instrument).friction_mu;
+    for (int r = p.row_offset[c]; r < p.row_offset[c + 1]; ++r) {
+      scratch.row_instrument[static_cast<std::size_t>(r)] = all[c].instrument;
+    }
     p.contact_id[c] = all[c].id;
     p.point_m[c] = all[c].tissue_point_m;
     p.normal[c] = all[c].n;
@@ -136,34 +195,28 @@ void assembleProblem(const SimulationModel& model, SimulationState& state, StepS
   // + H_tool C6 H_tool^T = B B^T with B = H_tool L (C6 = L L^T), each pair (i, j) computed
   // once and written to both halves: W stays symmetric to the bit (the tissue blocks are), so
   // NSGS may use its symmetric sweep
-  // (+ c_g g g^T for a dynamic grip, g the jaw angle's column)
-  const Instrument& tool = *state.instrument;
-  const shared::Matrix6d c6 = tool.compliance6(h);
-  const shared::Matrix6d l6 = c6.llt().matrixL();
-  scratch.b_tool.noalias() = scratch.h_tool * l6;
-  const double c_grip = tool.gripCompliance(h);
-  for (int i = 0; i < rows; ++i) {
-    const auto bi = scratch.b_tool.row(i);
-    double* wi = p.W.row(i).data();
-    const double gi = c_grip * p.grip[i];
-    for (int j = i; j < rows; ++j) {
-      const double w = bi.dot(scratch.b_tool.row(j)) + gi * p.grip[j];
-      wi[j] += w;
-      if (j != i) p.W(j, i) += w;
-    }
+  // (+ c_g g g^T for a dynamic grip, g the jaw angle's column). Several instruments: each
+  // couples only its own rows (H_i C6_i H_i^T); the tissue blocks couple them all.
+  for (std::size_t i = 0; i < state.instruments.size(); ++i) {
+    addToolCompliance(model, state, scratch, static_cast<int>(i), rows);
   }
-  p.J.noalias() = scratch.h_tool * scratch.tool_free->freeMotionSensitivity(h);
-  // contact compliance (collision.h): W + c I, penetration c f_n per contact
-  p.W.diagonal().array() += model.spec.instrument.contact_compliance_mpn;
 }
 
 }  // namespace
 
 void buildW(const SimulationModel& model, SimulationState& state, StepScratch& scratch,
             StepReport& report, PipelineCounters& counters, FoundAt found_at) {
-  const double mu = model.spec.instrument.friction_mu;
-  const Instrument& detected =   // where the contacts were found
-      found_at == FoundAt::kStepStart ? *scratch.tool_start : *state.instrument;
+  const std::vector<Instrument>& detected =   // where the contacts were found
+      found_at == FoundAt::kStepStart ? scratch.tool_start : state.instruments;
+  // per instrument: friction and the tool origin of its rows (stack buffers: at most
+  // kMaxInstruments)
+  std::array<double, shared::kMaxInstruments> mu{};
+  std::array<Eigen::Vector3d, shared::kMaxInstruments> origin;
+  const std::size_t tools = detected.size();
+  for (std::size_t i = 0; i < tools; ++i) {
+    mu[i] = instrumentSpec(model.spec, static_cast<int>(i)).friction_mu;
+    origin[i] = detected[i].pose().pos_m;
+  }
   const std::int64_t t0 = shared::monotonicNs();
   int rows = 0;
   int contacts = 0;
@@ -173,9 +226,10 @@ void buildW(const SimulationModel& model, SimulationState& state, StepScratch& s
     const TissueState& ts = state.tissues[t];
     TissueScratch& tx = scratch.tissues[t];
     const std::vector<Contact>& found = *ts.found;
-    report.contacts_dropped += ts.collision->stats().overflow;
-    buildContactRows(found, mu, detected.pose().pos_m, tx.rows);
-    gripColumn(found, detected, state.instrument->dynamicGrip(), tx);
+    for (const auto& collision : ts.collisions) report.contacts_dropped += collision->stats().overflow;
+    buildContactRows(found, std::span<const double>(mu.data(), tools),
+                     std::span<const Eigen::Vector3d>(origin.data(), tools), tx.rows);
+    gripColumn(found, detected, tx);
     freeGaps(model, scratch, ts, tx, detected, found_at);
     tx.row_begin = rows;
     tx.contact_begin = contacts;
@@ -185,7 +239,7 @@ void buildW(const SimulationModel& model, SimulationState& state, StepScratch& s
   }
   assembleProblem(model, state, scratch, counters, contacts, rows);
   report.distinct_tissue_nodes = countDistinctNodes(state, scratch);
-  if (mu > 0.0) counters.tangential_rows += rows - contacts;
+  counters.tangential_rows += rows - contacts;   // 0 without friction
   report.contacts = contacts;
   report.rows = rows;
   report.times.build_w_s += shared::secondsSinceNs(t0);

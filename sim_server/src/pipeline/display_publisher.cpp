@@ -12,6 +12,30 @@
 #include "tactus/sim/mesh.h"
 
 namespace tactus::sim {
+namespace {
+
+// Appends a tool's drawable primitives to the frame from index n (up to the frame's limit). A
+// pad is drawn as three capsules along its length (both long edges and the middle); its sample
+// spheres lie inside it and are not drawn.
+void appendToolPrimitives(const Instrument& tool, shared::DisplayFrameHeader& h, int& n) {
+  for (const ToolFeature& feat : tool.features()) {
+    if (feat.face_only) continue;
+    const int copies = feat.shape == FeatureShape::kPad ? 3 : 1;
+    for (int c = 0; c < copies && n < shared::kMaxDisplayToolPrimitives; ++c) {
+      const Eigen::Vector3d shift = static_cast<double>(c - copies / 2) * feat.half_width_m;
+      shared::DisplayToolPrimitive& prim = h.tool_primitives[static_cast<std::size_t>(n++)];
+      for (int k = 0; k < 3; ++k) {
+        prim.a_m[k] = static_cast<float>(feat.a_m[k] + shift[k]);
+        prim.b_m[k] = static_cast<float>(
+            (feat.shape == FeatureShape::kSphere ? feat.a_m[k] : feat.b_m[k]) + shift[k]);
+      }
+      prim.radius_m = static_cast<float>(feat.radius_m);
+      prim.part = static_cast<std::uint32_t>(feat.part);
+    }
+  }
+}
+
+}  // namespace
 
 DisplayLink::DisplayLink(const std::string& segment_name, const Simulation& sim,
                          const DisplayOptions& options)
@@ -235,24 +259,10 @@ bool DisplayLink::publishNow(const Simulation& sim, const StepReport* report) {
     h.tool_quat_wxyz = {pose.rot.w(), pose.rot.x(), pose.rot.y(), pose.rot.z()};
     h.gripper_opening = tool->gripperOpening();
     h.gripper_angle_rad = tool->gripperOpening() * tool->spec().max_opening_rad;
+    // every instrument's primitives (world coordinates) go into the one list, so the view draws
+    // them all; the pose, type, opening and force are instrument 0's
     int n = 0;
-    // a pad is drawn as three capsules along its length (both long edges and the middle); its
-    // sample spheres lie inside it and are not drawn
-    for (const ToolFeature& feat : tool->features()) {
-      if (feat.face_only) continue;
-      const int copies = feat.shape == FeatureShape::kPad ? 3 : 1;
-      for (int c = 0; c < copies && n < shared::kMaxDisplayToolPrimitives; ++c) {
-        const Eigen::Vector3d shift = static_cast<double>(c - copies / 2) * feat.half_width_m;
-        shared::DisplayToolPrimitive& prim = h.tool_primitives[static_cast<std::size_t>(n++)];
-        for (int k = 0; k < 3; ++k) {
-          prim.a_m[k] = static_cast<float>(feat.a_m[k] + shift[k]);
-          prim.b_m[k] = static_cast<float>(
-              (feat.shape == FeatureShape::kSphere ? feat.a_m[k] : feat.b_m[k]) + shift[k]);
-        }
-        prim.radius_m = static_cast<float>(feat.radius_m);
-        prim.part = static_cast<std::uint32_t>(feat.part);
-      }
-    }
+    for (int t = 0; t < sim.instrumentCount(); ++t) appendToolPrimitives(sim.instrument(t), h, n);
     h.tool_primitive_count = n;
     const Eigen::Matrix<double, 6, 1> w = sim.renderedWrench();
     h.tool_force_n = {w[0], w[1], w[2]};

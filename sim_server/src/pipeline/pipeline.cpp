@@ -32,18 +32,15 @@ StepReport Simulation::step() {
 
   // step_start: contacts at the start-of-step state (buildW carries them to the free state, from
   // q_begin and tool_start)
-  if (s.instrument && detect_at_start) {
+  const bool tools = !s.instruments.empty();
+  if (tools && detect_at_start) {
     detectCollisions(m, s, x, report, counters);
-    if (!x.tool_start) {
-      x.tool_start = std::make_unique<Instrument>(*s.instrument);
-    } else {
-      *x.tool_start = *s.instrument;
-    }
+    x.tool_start = s.instruments;
   }
 
   freeMotion(m, s, x, report);
 
-  if (s.instrument) {
+  if (tools) {
     updateCompliance(s, report);
     keepFreeState(s, x);
     if (!detect_at_start) detectCollisions(m, s, x, report, counters);
@@ -58,7 +55,10 @@ StepReport Simulation::step() {
       report.contact_passes = pass + 1;
       if (!nextContactPass(m, s, x, report, counters, pass, previous_gap)) break;
     }
-    x.problem.tool_pose = s.instrument->pose();
+    for (std::size_t i = 0; i < s.instruments.size(); ++i) {
+      x.problem.instruments[i].tool_pose = s.instruments[i].pose();
+    }
+    x.problem.tool_pose = s.instruments[0].pose();
   }
 
   s.t_s += m.h_s;
@@ -72,9 +72,8 @@ StepReport Simulation::step() {
     report.finite = report.finite && ts.body->positions().allFinite() &&
                     ts.body->velocities().allFinite();
   }
-  if (s.instrument) {
-    report.finite = report.finite && s.instrument->pose().pos_m.allFinite() &&
-                    s.instrument->twist().allFinite();
+  for (const Instrument& tool : s.instruments) {
+    report.finite = report.finite && tool.pose().pos_m.allFinite() && tool.twist().allFinite();
   }
   report.times.total_s = shared::secondsSinceNs(t_step);
   return report;
@@ -84,35 +83,44 @@ StepReport Simulation::step() {
 // god object: the pose is held at the last valid target (at rest), a bad twist is zeroed and a
 // bad gripper value keeps the last opening. Without this guard one NaN sample made the
 // instrument's pose NaN for good (hard_cases: NonFiniteDeviceTargetsDoNotCorruptTheSimulation).
-void Simulation::setDeviceTarget(const DeviceTarget& target) {
+void Simulation::setDeviceTarget(const DeviceTarget& target) { setDeviceTarget(0, target); }
+
+void Simulation::setDeviceTarget(int i, const DeviceTarget& target) {
   SimulationState& s = impl_->state;
+  const auto k = static_cast<std::size_t>(i);
+  if (k >= s.targets.size()) return;   // no such instrument: nothing to drive
+  DeviceTarget& current = s.targets[k];
+  char& rejected = s.target_rejected[k];
   const double qn = target.pose.rot.norm();
   const bool pose_ok = target.pose.pos_m.allFinite() && target.pose.rot.coeffs().allFinite() &&
                        std::isfinite(qn) && qn > 1e-9;
   const bool twist_ok = target.twist.allFinite();
   const bool gripper_ok = std::isfinite(target.gripper_opening);
   if (pose_ok && twist_ok && gripper_ok) {
-    if (s.target_rejected) spdlog::info("device target finite again");
-    s.target_rejected = false;
-    s.target = target;
+    if (rejected) spdlog::info("device target finite again");
+    rejected = false;
+    current = target;
     return;
   }
-  if (!s.target_rejected) {
+  if (!rejected) {
     spdlog::warn("non-finite device target ({}{}{}) ignored: holding the last valid target",
                  pose_ok ? "" : "pose ", twist_ok ? "" : "twist ", gripper_ok ? "" : "gripper");
   }
-  s.target_rejected = true;
+  rejected = true;
   if (pose_ok) {
-    s.target.pose = target.pose;
-    s.target.twist = twist_ok ? target.twist : Eigen::Matrix<double, 6, 1>::Zero();
+    current.pose = target.pose;
+    current.twist = twist_ok ? target.twist : Eigen::Matrix<double, 6, 1>::Zero();
   } else {
-    s.target.twist.setZero();
+    current.twist.setZero();
   }
-  if (gripper_ok) s.target.gripper_opening = target.gripper_opening;
+  if (gripper_ok) current.gripper_opening = target.gripper_opening;
 }
 
 const SceneSpec& Simulation::spec() const { return impl_->model.spec; }
-bool Simulation::hasInstrument() const { return impl_->state.instrument != nullptr; }
+bool Simulation::hasInstrument() const { return !impl_->state.instruments.empty(); }
+int Simulation::instrumentCount() const {
+  return static_cast<int>(impl_->state.instruments.size());
+}
 double Simulation::time() const { return impl_->state.t_s; }
 long Simulation::stepIndex() const { return impl_->state.step; }
 int Simulation::tissueCount() const { return static_cast<int>(impl_->state.tissues.size()); }
@@ -126,12 +134,20 @@ std::span<const Contact> Simulation::contacts(int i) const {
 TissueCompliance* Simulation::compliance(int i) {
   return impl_->state.tissues.at(i).compliance.get();
 }
-Instrument* Simulation::instrument() { return impl_->state.instrument.get(); }
+Instrument* Simulation::instrument() {
+  return impl_->state.instruments.empty() ? nullptr : &impl_->state.instruments[0];
+}
+Instrument& Simulation::instrument(int i) {
+  return impl_->state.instruments.at(static_cast<std::size_t>(i));
+}
+const Instrument& Simulation::instrument(int i) const {
+  return impl_->state.instruments.at(static_cast<std::size_t>(i));
+}
 const ContactProblemData& Simulation::lastProblem() const { return impl_->scratch.problem; }
 const PipelineCounters& Simulation::counters() const { return impl_->counters; }
 
 double Simulation::geometricMinGap() {
-  if (!impl_->state.instrument) return std::numeric_limits<double>::infinity();
+  if (impl_->state.instruments.empty()) return std::numeric_limits<double>::infinity();
   return queryContacts(impl_->model, impl_->state, impl_->scratch);
 }
 
@@ -140,13 +156,17 @@ double Simulation::totalEnergy() const {
   for (const TissueState& ts : impl_->state.tissues) {
     e += ts.body->kineticEnergy() + ts.body->elasticEnergy() + ts.body->gravityEnergy();
   }
-  if (impl_->state.instrument) e += impl_->state.instrument->kineticEnergy();
+  for (const Instrument& tool : impl_->state.instruments) e += tool.kineticEnergy();
   return e;
 }
 
 Eigen::Matrix<double, 6, 1> Simulation::renderedWrench() const {
-  return impl_->state.instrument ? impl_->state.instrument->couplingWrench()
-                                 : Eigen::Matrix<double, 6, 1>::Zero();
+  return impl_->state.instruments.empty() ? Eigen::Matrix<double, 6, 1>::Zero()
+                                          : renderedWrench(0);
+}
+
+Eigen::Matrix<double, 6, 1> Simulation::renderedWrench(int i) const {
+  return instrument(i).couplingWrench();
 }
 
 void Simulation::writeOutputIfDue() {

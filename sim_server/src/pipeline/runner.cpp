@@ -144,13 +144,18 @@ static void refuseExistingSeries(const std::filesystem::path& dir) {
 }
 
 void exportTrajectory(const SceneSpec& spec, const std::filesystem::path& csv, double dt_s,
-                      bool overwrite) {
+                      bool overwrite, int instrument) {
   if (!spec.instrument.present) throw SceneError(spec.source.string() + ": no instrument to export");
+  if (instrument < 0 || instrument >= instrumentCount(spec)) {
+    throw SceneError(fmt::format("{}: no instrument {} to export (the scene has {})",
+                                 spec.source.string(), instrument, instrumentCount(spec)));
+  }
+  const InstrumentSpec& in = instrumentSpec(spec, instrument);
   // a Simulation is not needed: interpolate the keys directly
   SceneSpec light = spec;
   light.tissues.clear();
   Simulation sim(light);
-  const auto& keys = spec.instrument.trajectory;
+  const auto& keys = in.trajectory;
   const double end = keys.empty() ? 0.0 : keys.back().t_s;
   shared::OutputFile out(csv, "trajectory CSV",
                          {.overwrite = overwrite, .overwrite_hint = "pass --overwrite"});
@@ -158,14 +163,14 @@ void exportTrajectory(const SceneSpec& spec, const std::filesystem::path& csv, d
   const long n = static_cast<long>(std::ceil(end / dt_s));
   for (long k = 0; k <= n && out.ok(); ++k) {
     const double t = std::min(end, static_cast<double>(k) * dt_s);
-    const DeviceTarget d = sim.scriptedTarget(t);
+    const DeviceTarget d = sim.scriptedTarget(instrument, t);
     // the hand replays it in the device frame: the workspace mapping takes it back to the scene
     std::array<double, 3> p{d.pose.pos_m.x(), d.pose.pos_m.y(), d.pose.pos_m.z()};
     std::array<double, 4> q{d.pose.rot.w(), d.pose.rot.x(), d.pose.rot.y(), d.pose.rot.z()};
     if (!spec.haptics.workspace.isIdentity()) spec.haptics.workspace.sceneToDevice(p, q);
     out.write(fmt::format("{:.6f},{:.9g},{:.9g},{:.9g},{:.9g},{:.9g},{:.9g},{:.9g},{:.9g}\n", t,
                           p[0], p[1], p[2], q[0], q[1], q[2], q[3],
-                          d.gripper_opening * spec.instrument.max_opening_rad));
+                          d.gripper_opening * in.max_opening_rad));
   }
   out.commit();
 }
@@ -181,7 +186,8 @@ int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
                               .overwrite_hint = "pass --overwrite"});
   }
   if (!options.export_trajectory.empty()) {
-    exportTrajectory(spec, options.export_trajectory, 0.01, options.overwrite);
+    exportTrajectory(spec, options.export_trajectory, 0.01, options.overwrite,
+                     options.export_instrument);
     spdlog::info("trajectory written to {}", options.export_trajectory);
     return 0;
   }
@@ -201,7 +207,9 @@ int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
 
   std::unique_ptr<SegmentHost> link;
   if (spec.haptics.enabled && sim.hasInstrument()) {
-    link = std::make_unique<SegmentHost>(options.segment, spec, sim.instrument()->workspace());
+    std::vector<BoxSpec> workspaces;
+    for (int i = 0; i < sim.instrumentCount(); ++i) workspaces.push_back(sim.instrument(i).workspace());
+    link = std::make_unique<SegmentHost>(options.segment, spec, std::move(workspaces));
   }
   auto display = link ? std::make_unique<DisplayLink>(options.segment, sim) : nullptr;
 
@@ -215,8 +223,9 @@ int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
         options.record_snapshots,
         shared::OutputOptions{.overwrite = options.overwrite,
                               .overwrite_hint = "pass --overwrite to replace it"});
-    const shared::SegmentCapacity cap = shared::SegmentCapacity::forContacts(
-        spec.solver.max_contacts, spec.instrument.friction_mu > 0.0);
+    shared::SegmentCapacity cap =
+        shared::SegmentCapacity::forContacts(problemContactCapacity(spec), anyFriction(spec));
+    cap.devices = std::max(1, instrumentCount(spec));
     record_layout = shared::SnapshotLayout::forCapacity(cap.max_rows, cap.max_contacts);
     record_slot.assign(record_layout.total_bytes / sizeof(double) + 1, 0.0);
   }
@@ -234,10 +243,10 @@ int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
     if (offline && k >= options.steps) break;
     if (!offline && duration > 0.0 && sim.time() >= duration - 1e-12) break;
     // device target: the newest haptic sample when fresh, else the scene's script
-    if (sim.hasInstrument()) {
-      DeviceTarget target = sim.scriptedTarget(sim.time());
-      if (link) link->deviceTarget(target);
-      sim.setDeviceTarget(target);
+    for (int i = 0; i < sim.instrumentCount(); ++i) {
+      DeviceTarget target = sim.scriptedTarget(i, sim.time());
+      if (link) link->deviceTarget(i, target);
+      sim.setDeviceTarget(i, target);
     }
     StepReport report = sim.step();
     if (link) {

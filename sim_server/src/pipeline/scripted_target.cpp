@@ -37,4 +37,8 @@ DeviceTarget Simulation::scriptedTarget(double t_s) const {
   return sim::scriptedTarget(impl_->model.spec.instrument, t_s);
 }
 
+DeviceTarget Simulation::scriptedTarget(int i, double t_s) const {
+  return sim::scriptedTarget(instrumentSpec(impl_->model.spec, i), t_s);
+}
+
 }  // namespace tactus::sim

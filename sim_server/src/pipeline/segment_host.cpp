@@ -21,16 +21,31 @@ Eigen::Vector3d boundedNorm(Eigen::Vector3d v, double max_norm) {
 
 }  // namespace
 
-SegmentHost::SegmentHost(const std::string& name, const SceneSpec& spec, const BoxSpec& workspace)
-    : segment_(shared::Segment::create(
-          name, shared::SegmentCapacity::forContacts(spec.solver.max_contacts,
-                                                     spec.instrument.friction_mu > 0.0))),
+namespace {
+
+shared::SegmentCapacity capacityFor(const SceneSpec& spec, std::size_t devices) {
+  shared::SegmentCapacity c =
+      shared::SegmentCapacity::forContacts(problemContactCapacity(spec), anyFriction(spec));
+  c.devices = static_cast<std::int32_t>(std::max<std::size_t>(1, devices));
+  return c;
+}
+
+}  // namespace
+
+SegmentHost::SegmentHost(const std::string& name, const SceneSpec& spec,
+                         std::vector<BoxSpec> workspaces)
+    : segment_(shared::Segment::create(name, capacityFor(spec, workspaces.size()))),
       publisher_(segment_.snapshotPublisher()),
-      device_(segment_.deviceReader()),
-      watchdog_ns_(static_cast<std::int64_t>(spec.haptics.watchdog_ms * 1e6)),
-      max_opening_rad_(spec.instrument.max_opening_rad > 0.0 ? spec.instrument.max_opening_rad
-                                                             : 1.0),
-      workspace_(workspace) {
+      watchdog_ns_(static_cast<std::int64_t>(spec.haptics.watchdog_ms * 1e6)) {
+  for (std::size_t i = 0; i < workspaces.size(); ++i) {
+    DeviceLink& d = devices_.emplace_back();
+    d.reader = segment_.deviceReader(static_cast<int>(i));
+    const int n = instrumentCount(spec);
+    const double full_rad =
+        static_cast<int>(i) < n ? instrumentSpec(spec, static_cast<int>(i)).max_opening_rad : 1.0;
+    d.max_opening_rad = full_rad > 0.0 ? full_rad : 1.0;
+    d.workspace = workspaces[i];
+  }
   segment_.beat(shared::Side::kSim);
   if (!segment_.creationNote().empty()) spdlog::info("{}", segment_.creationNote());
   spdlog::info("segment '{}' created ({:.1f} MiB, up to {} contacts / {} rows)", name,
@@ -79,37 +94,43 @@ bool deviceTargetFromSample(const shared::DeviceSample& s, double max_opening_ra
   return true;
 }
 
-bool SegmentHost::deviceTarget(DeviceTarget& target) {
-  const shared::DeviceSample& s = device_.latest();
+bool SegmentHost::deviceTarget(int i, DeviceTarget& target) {
+  if (i < 0 || static_cast<std::size_t>(i) >= devices_.size()) return false;
+  DeviceLink& d = devices_[static_cast<std::size_t>(i)];
+  const shared::DeviceSample& s = d.reader.latest();
   const std::int64_t now = shared::monotonicNs();
   const bool fresh = deviceSampleFresh(s, now, watchdog_ns_);
-  if (fresh != device_active_) {
-    spdlog::info(fresh ? "device samples arriving: the instrument follows the device"
-                       : "no fresh device sample: the instrument follows the scene's script");
-    device_active_ = fresh;
+  if (fresh != d.device_active) {
+    if (fresh) {
+      spdlog::info("device samples arriving: the instrument follows the device (device {})", i);
+    } else {
+      spdlog::info("no fresh device sample: the instrument follows the scene's script (device {})",
+                   i);
+    }
+    d.device_active = fresh;
   }
   if (!fresh) {
-    have_good_ = false;   // the script took over: the next device sample starts afresh
+    d.have_good = false;   // the script took over: the next device sample starts afresh
     return false;
   }
-  if (!have_good_) {
+  if (!d.have_good) {
     // the device takes over from the script: its first sample is judged against the script
-    last_good_ = target;
-    last_good_.twist.setZero();
-    last_good_ns_ = now;
-    have_good_ = true;
+    d.last_good = target;
+    d.last_good.twist.setZero();
+    d.last_good_ns = now;
+    d.have_good = true;
   }
   DeviceTarget candidate = target;
-  const bool usable = deviceTargetFromSample(s, max_opening_rad_, candidate);
+  const bool usable = deviceTargetFromSample(s, d.max_opening_rad, candidate);
   // the raw position is judged (so 1e300 m never passes), the clamped one is used
-  const double dt_s = 1e-9 * static_cast<double>(std::max<std::int64_t>(0, now - last_good_ns_));
+  const double dt_s = 1e-9 * static_cast<double>(std::max<std::int64_t>(0, now - d.last_good_ns));
   const double allowed_m = kJumpAllowanceM + kMaxDeviceSpeedMps * dt_s;
-  const Eigen::Vector3d jump = candidate.pose.pos_m - last_good_.pose.pos_m;
+  const Eigen::Vector3d jump = candidate.pose.pos_m - d.last_good.pose.pos_m;
   const double jump_scale = jump.cwiseAbs().maxCoeff();   // |jump| without overflow
   const double jump_m = jump_scale > 0.0 ? jump_scale * (jump / jump_scale).norm() : 0.0;
   if (!usable || jump_m > allowed_m) {
     // hold the last accepted target, at rest
-    if (!rejecting_) {
+    if (!d.rejecting) {
       if (usable) {
         spdlog::warn("implausible device sample (a jump of {:.3g} m in {:.3g} ms): rejected, "
                      "holding the last good target until samples are sane",
@@ -118,25 +139,25 @@ bool SegmentHost::deviceTarget(DeviceTarget& target) {
         spdlog::warn("unusable device sample (non-finite pose or zero orientation): holding the "
                      "last good target until samples are sane");
       }
-      rejecting_ = true;
+      d.rejecting = true;
     }
     ++rejected_jumps_;
-    target = last_good_;
+    target = d.last_good;
     return true;
   }
-  if (rejecting_) {
+  if (d.rejecting) {
     spdlog::info("device samples plausible again: the instrument follows the device");
-    rejecting_ = false;
+    d.rejecting = false;
   }
   const Eigen::Vector3d raw = candidate.pose.pos_m;
-  candidate.pose.pos_m = raw.cwiseMax(workspace_.min_m).cwiseMin(workspace_.max_m);
+  candidate.pose.pos_m = raw.cwiseMax(d.workspace.min_m).cwiseMin(d.workspace.max_m);
   if (!(candidate.pose.pos_m == raw)) ++clamped_;
   target = candidate;
-  device_seq_ = s.seq;
+  d.device_seq = s.seq;
   ++samples_used_;
-  last_good_ = target;
-  last_good_.twist.setZero();
-  last_good_ns_ = now;
+  d.last_good = target;
+  d.last_good.twist.setZero();
+  d.last_good_ns = now;
   return true;
 }
 
@@ -183,12 +204,26 @@ bool writeSnapshot(const Simulation& sim, double max_opening_rad, std::uint64_t 
   };
   put_pose(hdr.device_pose, p.device_pose, p.device_gripper * max_opening_rad);
   put_pose(hdr.tool_pose, p.tool_pose, p.device_gripper * max_opening_rad);
+  // the per-instrument blocks (block 0 repeats the fields above)
+  const int tools = std::min<int>(static_cast<int>(p.instruments.size()), shared::kMaxInstruments);
+  hdr.instruments = tools;
+  for (int i = 0; i < tools; ++i) {
+    const InstrumentProblemData& in = p.instruments[static_cast<std::size_t>(i)];
+    shared::SnapshotInstrument& block = hdr.instrument[static_cast<std::size_t>(i)];
+    const double full_rad =
+        i == 0 ? max_opening_rad : instrumentSpec(sim.spec(), i).max_opening_rad;
+    block.device_seq = i == 0 ? device_seq : 0;
+    put_pose(block.device_pose, in.device_pose, in.device_gripper * full_rad);
+    put_pose(block.tool_pose, in.tool_pose, in.device_gripper * full_rad);
+  }
   const int ld = slot.ld();
   slot.rowOffset()[0] = 0;
   for (int c = 0; c <= contacts; ++c) slot.rowOffset()[c] = p.row_offset[c];
   for (int c = 0; c < contacts; ++c) {
     slot.contactId()[c] = p.contact_id[c];
     slot.mu()[c] = p.mu[c];
+    slot.contactInstrument()[c] =
+        c < static_cast<int>(p.contact_instrument.size()) ? p.contact_instrument[c] : 0;
     for (int k = 0; k < 3; ++k) {
       slot.contactPoint()[3 * c + k] = p.point_m[c][k];
       slot.contactNormal()[3 * c + k] = p.normal[c][k];
@@ -220,9 +255,13 @@ bool writeSnapshot(const Simulation& sim, double max_opening_rad, std::uint64_t 
 
 void SegmentHost::publish(const Simulation& sim) {
   auto slot = publisher_.slot();
-  if (!writeSnapshot(sim, max_opening_rad_, ++published_, shared::monotonicNs(), device_seq_,
-                     slot)) {
+  if (!writeSnapshot(sim, devices_.empty() ? 1.0 : devices_[0].max_opening_rad, ++published_,
+                     shared::monotonicNs(), devices_.empty() ? 0 : devices_[0].device_seq, slot)) {
     ++truncated_;
+  }
+  auto& hdr = slot.header();
+  for (std::size_t i = 0; i < devices_.size() && i < static_cast<std::size_t>(hdr.instruments); ++i) {
+    hdr.instrument[i].device_seq = devices_[i].device_seq;
   }
   publisher_.publish();
   segment_.beat(shared::Side::kSim);

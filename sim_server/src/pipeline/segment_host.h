@@ -24,6 +24,7 @@
 #include <Eigen/Core>
 #include <cstdint>
 #include <string>
+#include <vector>
 
 #include "tactus/shared/segment.h"
 #include "tactus/sim/pipeline.h"
@@ -42,16 +43,21 @@ inline constexpr std::int64_t kDisplacementCheckNs = 200'000'000;
 /// contact snapshots and reads the device samples (see the header comment).
 class SegmentHost {
  public:
-  /// Creates the segment `name` (replacing a stale one). Device positions are bounded to
-  /// `workspace` (the instrument's, see instrumentWorkspace). Throws tactus::SegmentError.
-  SegmentHost(const std::string& name, const SceneSpec& spec, const BoxSpec& workspace);
+  /// Creates the segment `name` (replacing a stale one) with one device buffer per instrument.
+  /// Device i's positions are bounded to workspaces[i] (instrument i's, see
+  /// instrumentWorkspace); one workspace: one device. Throws tactus::SegmentError.
+  SegmentHost(const std::string& name, const SceneSpec& spec, std::vector<BoxSpec> workspaces);
+  SegmentHost(const std::string& name, const SceneSpec& spec, const BoxSpec& workspace)
+      : SegmentHost(name, spec, std::vector<BoxSpec>{workspace}) {}
   ~SegmentHost();
 
-  /// Replaces `target` by the newest device sample when one arrived within the watchdog period
-  /// (bounded as described above; a rejected jump holds the last accepted target); otherwise
-  /// leaves the scripted target (the simulation holds or follows its script). True when the
-  /// device drives the target.
-  bool deviceTarget(DeviceTarget& target);
+  /// Replaces `target` by the newest sample of device `i` (instrument i's; 0 when not given)
+  /// when one arrived within the watchdog period (bounded as described above; a rejected jump
+  /// holds the last accepted target); otherwise leaves the scripted target (the simulation
+  /// holds or follows its script). True when the device drives the target. Each device is
+  /// judged on its own: one device silent or faulty leaves the others driving.
+  bool deviceTarget(DeviceTarget& target) { return deviceTarget(0, target); }
+  bool deviceTarget(int i, DeviceTarget& target);
   /// Publishes the last step's contact problem and beats the heartbeat.
   void publish(const Simulation& sim);
   /// One log line: haptic heartbeat age, device samples seen, snapshots published.
@@ -65,24 +71,28 @@ class SegmentHost {
   const shared::Segment& segment() const { return segment_; }
 
  private:
+  /// One device's end: its samples and what the jump filter remembers.
+  struct DeviceLink {
+    shared::TripleReader<shared::DeviceSample> reader;
+    double max_opening_rad = 1.0;                ///< device gripper angle of a fully open grasper
+    BoxSpec workspace;
+    std::uint64_t device_seq = 0;
+    bool device_active = false;
+    bool have_good = false;                      ///< an accepted sample exists
+    bool rejecting = false;                      ///< in an episode of rejected samples
+    DeviceTarget last_good;                      ///< the last accepted target (held on a jump)
+    std::int64_t last_good_ns = 0;               ///< when it was accepted (this clock)
+  };
   shared::Segment segment_;
   shared::SnapshotPublisher publisher_;
-  shared::TripleReader<shared::DeviceSample> device_;
+  std::vector<DeviceLink> devices_;
   std::int64_t watchdog_ns_ = 50'000'000;
-  double max_opening_rad_ = 1.0;                 ///< device gripper angle of a fully open grasper
-  BoxSpec workspace_;
   std::uint64_t published_ = 0;
-  std::uint64_t device_seq_ = 0;
   std::uint64_t samples_used_ = 0;
   std::uint64_t truncated_ = 0;
   std::uint64_t rejected_jumps_ = 0;
   std::uint64_t clamped_ = 0;
   std::uint64_t rejected_reported_ = 0;          ///< rejected_jumps_ at the last status line
-  bool device_active_ = false;
-  bool have_good_ = false;                        ///< an accepted sample exists
-  bool rejecting_ = false;                        ///< in an episode of rejected samples (logged once)
-  DeviceTarget last_good_;                        ///< the last accepted target (held on a jump)
-  std::int64_t last_good_ns_ = 0;                 ///< when it was accepted (this clock)
   std::int64_t next_displacement_check_ns_ = 0;
 };
 

@@ -38,12 +38,16 @@ TissueState buildTissueState(const SimulationModel& model, const TissueSpec& ts,
   state.compliance = makeCompliance(ts.compliance, *state.body, copt);
   spdlog::info("tissue '{}': {} compliance, {:.1f} MiB", ts.name, toString(ts.compliance),
                static_cast<double>(state.compliance->memoryBytes()) / (1024.0 * 1024.0));
-  CollisionOptions col;
-  col.alarm_distance_m = spec.instrument.alarm_distance_m;
-  col.contact_distance_m = spec.instrument.contact_distance_m;
-  col.max_contacts = spec.solver.max_contacts;
-  col.sphere_vs_triangle = spec.instrument.face_contacts;
-  state.collision = std::make_unique<Collision>(tissue.surface, state.body->positions(), col);
+  for (int i = 0; i < model.instrument_count; ++i) {
+    const InstrumentSpec& in = instrumentSpec(spec, i);
+    CollisionOptions col;
+    col.alarm_distance_m = in.alarm_distance_m;
+    col.contact_distance_m = in.contact_distance_m;
+    col.max_contacts = spec.solver.max_contacts;
+    col.sphere_vs_triangle = in.face_contacts;
+    state.collisions.push_back(
+        std::make_unique<Collision>(tissue.surface, state.body->positions(), col));
+  }
   return state;
 }
 
@@ -54,18 +58,27 @@ SimulationState buildState(const SimulationModel& model) {
   for (std::size_t t = 0; t < model.tissues.size(); ++t) {
     state.tissues.push_back(buildTissueState(model, model.spec.tissues[t], model.tissues[t]));
   }
-  if (model.has_instrument) {
-    state.instrument = std::make_unique<Instrument>(model.spec.instrument);
-    state.instrument->setWorkspace(model.instrument_workspace);
-    state.target = scriptedTarget(model.spec.instrument, 0.0);
-    state.instrument->reset(state.target.pose, state.target.gripper_opening);
+  for (int i = 0; i < model.instrument_count; ++i) {
+    const InstrumentSpec& in = instrumentSpec(model.spec, i);
+    Instrument& tool = state.instruments.emplace_back(in);
+    tool.setWorkspace(model.instrument_workspaces[static_cast<std::size_t>(i)]);
+    const DeviceTarget& target = state.targets.emplace_back(scriptedTarget(in, 0.0));
+    tool.reset(target.pose, target.gripper_opening);
   }
+  state.target_rejected.assign(state.instruments.size(), 0);
   return state;
 }
 
 StepScratch buildScratch(const SimulationModel& model) {
   StepScratch scratch;
   scratch.tissues.resize(model.tissues.size());
+  const auto n = static_cast<std::size_t>(model.instrument_count);
+  scratch.tool_begin.resize(n);
+  scratch.wrench.assign(n, shared::Vector6d::Zero());
+  scratch.previous_wrench.assign(n, shared::Vector6d::Zero());
+  scratch.grip_torque.assign(n, 0.0);
+  scratch.previous_grip_torque.assign(n, 0.0);
+  scratch.problem.instruments.resize(n);
   if (model.has_instrument) scratch.workspace.reserve(model.max_rows, model.spec.solver.max_contacts);
   scratch.problem.row_offset.assign(1, 0);
   return scratch;
@@ -97,9 +110,19 @@ std::vector<std::string> Simulation::stages() const {
     out.push_back("no instrument: no collision, no contact problem");
   } else {
     const auto& in = spec.instrument;
-    out.push_back(fmt::format("free motion of the {} god object (PD coupling k = {} N/m)",
-                              in.kind == InstrumentKind::kGrasper ? "grasper" : "probe",
-                              in.coupling_k_npm));
+    for (int i = 0; i < impl_->model.instrument_count; ++i) {
+      const InstrumentSpec& ii = instrumentSpec(spec, i);
+      out.push_back(fmt::format("free motion of the {} god object{} (PD coupling k = {} N/m)",
+                                ii.kind == InstrumentKind::kGrasper ? "grasper" : "probe",
+                                impl_->model.instrument_count > 1
+                                    ? fmt::format(" {} '{}'", i, ii.name)
+                                    : std::string(),
+                                ii.coupling_k_npm));
+    }
+    if (impl_->model.instrument_count > 1) {
+      out.push_back(fmt::format("{} instruments' contacts in one contact problem",
+                                impl_->model.instrument_count));
+    }
     out.push_back(fmt::format(
         "collision detection (BVH refit, alarm {} mm, at most {} contacts, {}, at the {})",
         1e3 * in.alarm_distance_m, spec.solver.max_contacts,

@@ -43,14 +43,19 @@ SimulationModel buildModel(const SceneSpec& spec) {
   model.h_s = spec.time_step_s;
   for (const TissueSpec& ts : spec.tissues) model.tissues.push_back(buildTissueModel(spec, ts));
   model.has_instrument = spec.instrument.present;
+  model.instrument_count = instrumentCount(spec);
   if (!model.has_instrument) return model;
   // the device target stays within a box around the scene at rest (instrument.h "Workspace")
   Eigen::AlignedBox3d bounds;
   for (const TissueModel& tissue : model.tissues) {
     for (Eigen::Index i = 0; i < tissue.mesh.nodes.cols(); ++i) bounds.extend(tissue.mesh.nodes.col(i));
   }
-  model.instrument_workspace = instrumentWorkspace(spec.instrument, bounds);
-  model.max_rows = (spec.instrument.friction_mu > 0.0 ? 3 : 1) * spec.solver.max_contacts;
+  model.max_rows = 0;
+  for (int i = 0; i < model.instrument_count; ++i) {
+    const InstrumentSpec& in = instrumentSpec(spec, i);
+    model.instrument_workspaces.push_back(instrumentWorkspace(in, bounds));
+    model.max_rows += (in.friction_mu > 0.0 ? 3 : 1) * spec.solver.max_contacts;
+  }
   model.nsgs.tolerance = spec.solver.nsgs_tolerance;
   model.nsgs.max_sweeps = spec.solver.nsgs_max_sweeps;
   model.nsgs.sor = spec.solver.nsgs_sor;

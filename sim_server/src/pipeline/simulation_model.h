@@ -39,9 +39,11 @@ struct SimulationModel {
   double h_s = 0.0;                      ///< time step
   std::vector<TissueModel> tissues;
   bool has_instrument = false;
+  int instrument_count = 0;              ///< instrumentCount(spec)
   int max_rows = 0;                      ///< rows of the largest contact problem
   shared::NsgsSettings nsgs;             ///< the simulation's NSGS settings
-  BoxSpec instrument_workspace;          ///< where the device target may go (instrument.h)
+  /// Per instrument: where its device target may go (instrument.h)
+  std::vector<BoxSpec> instrument_workspaces;
 };
 
 /// Loads and places the meshes, collects the fixed nodes and derives the solver settings.

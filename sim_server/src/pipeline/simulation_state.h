@@ -28,18 +28,24 @@ struct TissueState {
   std::unique_ptr<TissueCompliance> compliance;
   /// The surface's AABB trees, refit at every detection, and the contacts they found; the
   /// feature-side memory of the pad and sphere queries carries to the next step (collision.h).
-  std::unique_ptr<Collision> collision;
-  const std::vector<Contact>* found = nullptr;   ///< contacts of the last detection
+  /// One per instrument (each keeps its features' memory); with several instruments each
+  /// refits its own trees.
+  std::vector<std::unique_ptr<Collision>> collisions;
+  /// Contacts of the last detection, instrument by instrument: the one collision's list with
+  /// one instrument, else `merged`.
+  const std::vector<Contact>* found = nullptr;
+  std::vector<Contact> merged;                   ///< several instruments' contacts, in order
 };
 
 struct SimulationState {
   double t_s = 0.0;                         ///< simulated time
   long step = 0;                            ///< steps taken
   std::vector<TissueState> tissues;         ///< as SimulationModel::tissues
-  /// The god object: pose, twist, jaw opening (its parameters inside); null without instrument.
-  std::unique_ptr<Instrument> instrument;
-  DeviceTarget target;                      ///< the device target the next step follows
-  bool target_rejected = false;             ///< the last setDeviceTarget was non-finite
+  /// The god objects: pose, twist, jaw opening (their parameters inside); empty without
+  /// instrument. Instrument i follows targets[i].
+  std::vector<Instrument> instruments;
+  std::vector<DeviceTarget> targets;        ///< the device targets the next step follows
+  std::vector<char> target_rejected;        ///< the last setDeviceTarget(i) was non-finite
   /// The last solve's force per contact id (n, t1, t2): the next solve's warm start.
   std::unordered_map<std::uint64_t, std::array<double, 3>> warm_start_f;
 };

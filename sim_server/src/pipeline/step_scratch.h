@@ -38,18 +38,20 @@ struct StepScratch {
   ContactProblemData problem;
   shared::NsgsWorkspace workspace;
   std::vector<Contact> all_contacts;     ///< every tissue's contacts in row order
-  ToolRows h_tool;                       ///< H_tool, rows x 6
-  ToolRows b_tool;                       ///< H_tool L, C6 = L L^T
+  ToolRows h_tool;                       ///< H_tool, rows x 6 (each row: its own instrument's)
+  ToolRows b_tool;                       ///< H_tool L, C6 = L L^T (the row's instrument's L)
+  std::vector<int> row_instrument;       ///< per row: the instrument of its contact
   std::vector<std::int64_t> node_keys;   ///< countDistinctNodes
-  shared::Pose tool_begin;               ///< god object pose at the start of the step
-  std::unique_ptr<Instrument> tool_free; ///< god object after its free motion
+  // per instrument:
+  std::vector<shared::Pose> tool_begin;  ///< god object pose at the start of the step
+  std::vector<Instrument> tool_free;     ///< god object after its free motion
   /// god object at the start of the step (contact_detection: step_start; contacts found there)
-  std::unique_ptr<Instrument> tool_start;
+  std::vector<Instrument> tool_start;
   /// This pass's and the previous pass's tool wrench and grip torque (the blend of two passes)
-  Eigen::Matrix<double, 6, 1> wrench = Eigen::Matrix<double, 6, 1>::Zero();
-  Eigen::Matrix<double, 6, 1> previous_wrench = Eigen::Matrix<double, 6, 1>::Zero();
-  double grip_torque = 0.0;              ///< g^T f of the last correction (dynamic grip)
-  double previous_grip_torque = 0.0;
+  std::vector<shared::Vector6d> wrench;
+  std::vector<shared::Vector6d> previous_wrench;
+  std::vector<double> grip_torque;       ///< g^T f of the last correction (dynamic grip)
+  std::vector<double> previous_grip_torque;
   /// Smallest gap + c f_n of the last detection (penetration beyond the contact compliance)
   double min_excess_gap = 0.0;
 };

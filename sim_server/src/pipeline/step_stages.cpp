@@ -16,7 +16,7 @@ void freeMotion(const SimulationModel& model, SimulationState& state, StepScratc
   const std::int64_t t0 = shared::monotonicNs();
   for (std::size_t t = 0; t < state.tissues.size(); ++t) {
     FemBody& body = *state.tissues[t].body;
-    if (state.instrument) scratch.tissues[t].q_begin = body.positions();
+    if (!state.instruments.empty()) scratch.tissues[t].q_begin = body.positions();
     const FemStepStats st = body.freeMotion(h);
     if (!st.ok) report.finite = false;
     report.inverted_elements += st.inverted_elements;
@@ -24,27 +24,54 @@ void freeMotion(const SimulationModel& model, SimulationState& state, StepScratc
     if (st.factor_refreshed || model.spec.solver.linear == LinearSolverKind::kCholmod)
       ++report.fem_factorisations;
   }
-  if (state.instrument) {
-    const DeviceTarget& target = state.target;
-    scratch.tool_begin = state.instrument->pose();
-    state.instrument->freeMotion(h, target.pose, target.twist, target.gripper_opening);
-    scratch.problem.device_pose = target.pose;
-    scratch.problem.device_gripper = target.gripper_opening;
+  for (std::size_t i = 0; i < state.instruments.size(); ++i) {
+    const DeviceTarget& target = state.targets[i];
+    scratch.tool_begin[i] = state.instruments[i].pose();
+    state.instruments[i].freeMotion(h, target.pose, target.twist, target.gripper_opening);
+    scratch.problem.instruments[i].device_pose = target.pose;
+    scratch.problem.instruments[i].device_gripper = target.gripper_opening;
+  }
+  if (!state.instruments.empty()) {
+    scratch.problem.device_pose = state.targets[0].pose;
+    scratch.problem.device_gripper = state.targets[0].gripper_opening;
   }
   report.times.free_motion_s += shared::secondsSinceNs(t0);
 }
 
 // min_excess_gap: the smallest gap + c f_n, with f_n the normal force the contact (by id) had in
 // the last solve: the penetration beyond what the contact compliance c allows.
+namespace {
+
+// One tissue's contacts with every instrument: the one collision's list, or (several
+// instruments) their lists merged in instrument order, each contact tagged with its instrument.
+void detectTissue(SimulationState& state, TissueState& ts) {
+  const std::size_t n = state.instruments.size();
+  for (std::size_t i = 0; i < n; ++i) ts.collisions[i]->refit(ts.body->positions());
+  if (n == 1) {
+    ts.found = &ts.collisions[0]->detect(state.instruments[0]);
+    return;
+  }
+  ts.merged.clear();
+  for (std::size_t i = 0; i < n; ++i) {
+    for (Contact k : ts.collisions[i]->detect(state.instruments[i])) {
+      k.instrument = static_cast<int>(i);
+      k.id |= static_cast<std::uint64_t>(i) << 57;
+      ts.merged.push_back(k);
+    }
+  }
+  ts.found = &ts.merged;
+}
+
+}  // namespace
+
 double queryContacts(const SimulationModel& model, SimulationState& state, StepScratch& scratch) {
   double min_gap = std::numeric_limits<double>::infinity();
   scratch.min_excess_gap = min_gap;
-  const double c = model.spec.instrument.contact_compliance_mpn;
   for (TissueState& ts : state.tissues) {
-    ts.collision->refit(ts.body->positions());
-    ts.found = &ts.collision->detect(*state.instrument);
+    detectTissue(state, ts);
     for (const Contact& k : *ts.found) {
       min_gap = std::min(min_gap, k.gap_m);
+      const double c = instrumentSpec(model.spec, k.instrument).contact_compliance_mpn;
       double allowed = 0.0;
       if (c > 0.0) {
         const auto it = state.warm_start_f.find(k.id);
@@ -76,11 +103,7 @@ void keepFreeState(SimulationState& state, StepScratch& scratch) {
     scratch.tissues[t].q_free = state.tissues[t].body->positions();
     scratch.tissues[t].v_free = state.tissues[t].body->velocities();
   }
-  if (!scratch.tool_free) {
-    scratch.tool_free = std::make_unique<Instrument>(*state.instrument);
-  } else {
-    *scratch.tool_free = *state.instrument;
-  }
+  scratch.tool_free = state.instruments;
 }
 
 void solveContacts(const SimulationModel& model, SimulationState& state, StepScratch& scratch,
@@ -125,7 +148,7 @@ void restoreFreeState(SimulationState& state, const StepScratch& scratch) {
     state.tissues[t].body->positions() = scratch.tissues[t].q_free;
     state.tissues[t].body->velocities() = scratch.tissues[t].v_free;
   }
-  *state.instrument = *scratch.tool_free;
+  state.instruments = scratch.tool_free;
 }
 
 }  // namespace
@@ -140,7 +163,7 @@ void constrainedMotion(const SimulationModel& model, SimulationState& state, Ste
   if (restore_free) restoreFreeState(state, scratch);
   report.max_penetration_m = 0.0;
   report.complementarity = 0.0;
-  Instrument& tool = *state.instrument;
+  const std::size_t tools = state.instruments.size();
   if (rows > 0) {
     for (std::size_t t = 0; t < state.tissues.size(); ++t) {
       TissueState& ts = state.tissues[t];
@@ -150,12 +173,27 @@ void constrainedMotion(const SimulationModel& model, SimulationState& state, Ste
       ts.body->positions() += tx.dq;
       ts.body->velocities() += tx.dq / h;
     }
-    const shared::Vector6d wrench = scratch.h_tool.transpose() * p.f;
-    scratch.wrench = wrench;
-    report.tool_wrench = wrench;
-    tool.applyCorrection(wrench);
-    scratch.grip_torque = tool.dynamicGrip() ? p.grip.dot(p.f) : 0.0;
-    if (tool.dynamicGrip()) tool.applyGripCorrection(scratch.grip_torque);
+    // each instrument moves by C6 H_i^T f over its own rows
+    if (tools == 1) {
+      scratch.wrench[0] = scratch.h_tool.transpose() * p.f;
+      scratch.grip_torque[0] = state.instruments[0].dynamicGrip() ? p.grip.dot(p.f) : 0.0;
+    } else {
+      for (std::size_t i = 0; i < tools; ++i) {
+        scratch.wrench[i].setZero();
+        scratch.grip_torque[i] = 0.0;
+      }
+      for (int r = 0; r < rows; ++r) {
+        const auto i = static_cast<std::size_t>(scratch.row_instrument[static_cast<std::size_t>(r)]);
+        scratch.wrench[i] += scratch.h_tool.row(r).transpose() * p.f[r];
+        if (state.instruments[i].dynamicGrip()) scratch.grip_torque[i] += p.grip[r] * p.f[r];
+      }
+    }
+    for (std::size_t i = 0; i < tools; ++i) {
+      Instrument& tool = state.instruments[i];
+      tool.applyCorrection(scratch.wrench[i]);
+      if (tool.dynamicGrip()) tool.applyGripCorrection(scratch.grip_torque[i]);
+    }
+    report.tool_wrench = scratch.wrench[0];
     // linearised gaps after the correction: delta = W f + delta_free, left by NSGS on exit
     // (not when it refused the problem as larger than its workspace: then computed here)
     Eigen::VectorXd unsolved_delta;
@@ -174,9 +212,12 @@ void constrainedMotion(const SimulationModel& model, SimulationState& state, Ste
     report.max_penetration_m = pen;
     report.complementarity = comp;
   } else {
-    scratch.wrench.setZero();
-    scratch.grip_torque = 0.0;
+    for (std::size_t i = 0; i < tools; ++i) {
+      scratch.wrench[i].setZero();
+      scratch.grip_torque[i] = 0.0;
+    }
   }
+  report.tool_wrenches = scratch.wrench;
   report.times.constrained_motion_s += shared::secondsSinceNs(t0);
 }
 
@@ -195,12 +236,14 @@ void blendWithPreviousPass(const SimulationModel& model, SimulationState& state,
     body.positions() = tx.q_free + dq;
     body.velocities() = tx.v_free + dq / h;
   }
-  scratch.wrench = 0.5 * (scratch.wrench + scratch.previous_wrench);
-  scratch.grip_torque = 0.5 * (scratch.grip_torque + scratch.previous_grip_torque);
-  Instrument& tool = *state.instrument;
-  tool = *scratch.tool_free;
-  tool.applyCorrection(scratch.wrench);
-  if (tool.dynamicGrip()) tool.applyGripCorrection(scratch.grip_torque);
+  for (std::size_t i = 0; i < state.instruments.size(); ++i) {
+    scratch.wrench[i] = 0.5 * (scratch.wrench[i] + scratch.previous_wrench[i]);
+    scratch.grip_torque[i] = 0.5 * (scratch.grip_torque[i] + scratch.previous_grip_torque[i]);
+    Instrument& tool = state.instruments[i];
+    tool = scratch.tool_free[i];
+    tool.applyCorrection(scratch.wrench[i]);
+    if (tool.dynamicGrip()) tool.applyGripCorrection(scratch.grip_torque[i]);
+  }
 }
 
 }  // namespace

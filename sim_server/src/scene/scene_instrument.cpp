@@ -4,16 +4,24 @@
 #include <spdlog/fmt/fmt.h>
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
+
 #include "scene_parser.h"
+#include "tactus/shared/messages.h"
 
 namespace tactus::sim::scene_detail {
 
-void SceneParser::readInstrument(const YAML::Node& n, InstrumentSpec* in) {
-  const std::string p = "instrument";
+void SceneParser::readInstrument(const YAML::Node& n, const std::string& p, InstrumentSpec* in) {
   in->present = true;
-  checkKeys(n, p, {"type", "mass", "inertia", "coupling", "friction", "alarm_distance",
+  checkKeys(n, p, {"name", "type", "mass", "inertia", "coupling", "friction", "alarm_distance",
                    "contact_distance", "face_contacts", "contact_compliance", "probe",
                    "grasper", "initial_pose", "trajectory", "workspace"});
+  if (string(n, p, "name", &in->name)) {
+    const bool ok = in->name.size() <= 32 && std::all_of(in->name.begin(), in->name.end(), [](char c) {
+      return std::isalnum(static_cast<unsigned char>(c)) != 0 || c == '_' || c == '-';
+    });
+    if (!ok) error(n["name"], join(p, "name"), "must be 1 to 32 letters, digits, _ or -");
+  }
   choice(n, p, "type", &in->kind,
          {{"probe", InstrumentKind::kProbe}, {"grasper", InstrumentKind::kGrasper}});
   number(n, p, "mass", &in->mass_kg, kPositive, kAtMost(1e3), Range{1e-4, 10.0});
@@ -87,6 +95,50 @@ void SceneParser::readInstrument(const YAML::Node& n, InstrumentSpec* in) {
         error(s["max"], join(q, "max"), "must be >= min in every coordinate");
       } else {
         in->workspace = box;
+      }
+    }
+  }
+}
+
+// `instruments:` (a list of instrument maps, the first one becoming SceneSpec::instrument) or
+// the single `instrument:` map; not both.
+void SceneParser::readInstruments(const YAML::Node& root, SceneSpec* spec) {
+  const YAML::Node list = root["instruments"];
+  YAML::Node n;
+  if (!list.IsDefined()) {
+    if (section(root, "", "instrument", &n)) readInstrument(n, "instrument", &spec->instrument);
+    return;
+  }
+  if (root["instrument"].IsDefined()) {
+    error(root["instrument"], "instrument",
+          "give either `instrument:` (one) or `instruments:` (a list), not both");
+    return;
+  }
+  if (!list.IsSequence() || list.size() == 0 ||
+      list.size() > static_cast<std::size_t>(shared::kMaxInstruments)) {
+    error(list, "instruments",
+          fmt::format("must be a list of 1 to {} instrument maps (got {})",
+                      shared::kMaxInstruments,
+                      list.IsSequence() ? fmt::format("{} items", list.size()) : kindOf(list)));
+    return;
+  }
+  for (std::size_t i = 0; i < list.size(); ++i) {
+    const std::string p = fmt::format("instruments[{}]", i);
+    if (!list[i].IsMap()) {
+      error(list[i], p, "must be a map (an instrument: type, coupling, ...; got " +
+                            kindOf(list[i]) + ")");
+      continue;
+    }
+    InstrumentSpec* in = &spec->instrument;
+    if (i > 0) in = &spec->additional_instruments.emplace_back();
+    readInstrument(list[i], p, in);
+  }
+  for (std::size_t i = 1; i < list.size(); ++i) {
+    const std::string& name = spec->additional_instruments[i - 1].name;
+    for (std::size_t j = 0; j < i && !name.empty(); ++j) {
+      if (name == (j == 0 ? spec->instrument : spec->additional_instruments[j - 1]).name) {
+        error(list[i]["name"], fmt::format("instruments[{}].name", i),
+              fmt::format("'{}' is already the name of instruments[{}]", name, j));
       }
     }
   }

@@ -7,6 +7,7 @@
 #include <spdlog/spdlog.h>
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
 #include <limits>
 #include <string>
 
@@ -25,8 +26,8 @@ namespace scene_detail {
 constexpr std::size_t kMaxContactProblemBytes = std::size_t{2} << 30;
 
 void SceneParser::readRoot(const YAML::Node& root, SceneSpec* spec) {
-  checkKeys(root, "", {"time_step", "duration", "gravity", "tissues", "instrument", "solver",
-                       "haptics", "output"});
+  checkKeys(root, "", {"time_step", "duration", "gravity", "tissues", "instrument", "instruments",
+                       "solver", "haptics", "output"});
   require(root, "", "time_step");
   number(root, "", "time_step", &spec->time_step_s, kPositive, kAtMost(1.0), Range{1e-5, 0.05});
   number(root, "", "duration", &spec->duration_s, kNonNegative, kAtMost(1e7), Range{0.0, 86400.0});
@@ -36,13 +37,13 @@ void SceneParser::readRoot(const YAML::Node& root, SceneSpec* spec) {
   }
   readTissues(root, spec);
   YAML::Node n;
-  if (section(root, "", "instrument", &n)) readInstrument(n, &spec->instrument);
-  if (section(root, "", "solver", &n)) readSolver(n, &spec->solver);
+  readInstruments(root, spec);
+  if (section(root, "", "solver", &n)) readSolver(n, &spec->solver, instrumentCount(*spec));
   if (section(root, "", "haptics", &n)) readHaptics(n, &spec->haptics);
   if (section(root, "", "output", &n)) readOutput(n, &spec->output);
 }
 
-void SceneParser::readSolver(const YAML::Node& n, SolverSpec* s) {
+void SceneParser::readSolver(const YAML::Node& n, SolverSpec* s, int instruments) {
   const std::string p = "solver";
   checkKeys(n, p, {"linear", "cg_tolerance", "cg_max_iterations", "refactor_iterations",
                    "refactor_every_steps", "nsgs_tolerance",
@@ -65,20 +66,22 @@ void SceneParser::readSolver(const YAML::Node& n, SolverSpec* s) {
   // the shared segment's triple buffer: refuse what cannot be allocated, before trying
   if (integer(n, p, "max_contacts", &s->max_contacts, 1, std::numeric_limits<int>::max(),
               2000)) {
-    // (the layout is computed only for counts whose row count fits an int)
+    // (the layout is computed only for counts whose row count fits an int); the problem holds
+    // max_contacts per instrument
+    const long contacts = static_cast<long>(s->max_contacts) * std::max(1, instruments);
     const std::size_t bytes =
-        s->max_contacts > 1'000'000
+        contacts > 1'000'000
             ? std::numeric_limits<std::size_t>::max()
             : shared::SegmentLayout::forCapacity(
-                  shared::SegmentCapacity::forContacts(s->max_contacts))
+                  shared::SegmentCapacity::forContacts(static_cast<std::int32_t>(contacts)))
                   .total_bytes;
     if (bytes > kMaxContactProblemBytes) {
       error(n["max_contacts"], join(p, "max_contacts"),
             fmt::format("{} contacts need {} MiB for the contact problem (W is rows x rows "
-                        "doubles, 3 rows per contact), more than the {} MiB limit: lower it "
-                        "(at most about 3000)",
-                        s->max_contacts,
-                        s->max_contacts > 1'000'000 ? std::string("too many")
+                        "doubles, 3 rows per contact; max_contacts per instrument), more than "
+                        "the {} MiB limit: lower it (at most about 3000 in all)",
+                        contacts,
+                        contacts > 1'000'000 ? std::string("too many")
                                                     : std::to_string(bytes >> 20),
                         kMaxContactProblemBytes >> 20));
       s->max_contacts = SolverSpec{}.max_contacts;
@@ -168,6 +171,29 @@ SceneSpec loadScene(const std::filesystem::path& path) {
   SceneSpec spec = parseScene(text, path.string(), dir);
   spec.source = path;
   return spec;
+}
+
+int instrumentCount(const SceneSpec& spec) {
+  return spec.instrument.present ? 1 + static_cast<int>(spec.additional_instruments.size()) : 0;
+}
+
+const InstrumentSpec& instrumentSpec(const SceneSpec& spec, int i) {
+  return i == 0 ? spec.instrument : spec.additional_instruments.at(static_cast<std::size_t>(i - 1));
+}
+
+InstrumentSpec& instrumentSpec(SceneSpec& spec, int i) {
+  return i == 0 ? spec.instrument : spec.additional_instruments.at(static_cast<std::size_t>(i - 1));
+}
+
+int problemContactCapacity(const SceneSpec& spec) {
+  return std::max(1, instrumentCount(spec)) * spec.solver.max_contacts;
+}
+
+bool anyFriction(const SceneSpec& spec) {
+  for (int i = 0; i < instrumentCount(spec); ++i) {
+    if (instrumentSpec(spec, i).friction_mu > 0.0) return true;
+  }
+  return false;
 }
 
 }  // namespace tactus::sim

@@ -161,9 +161,11 @@ class SceneParser {
   void readTissues(const YAML::Node& root, SceneSpec* spec);                     // scene_tissue.cpp
   void readTissue(const YAML::Node& t, const std::string& path, TissueSpec* tissue);
   void readFixed(const YAML::Node& f, const std::string& path, TissueSpec* tissue);
-  void readInstrument(const YAML::Node& n, InstrumentSpec* in);             // scene_instrument.cpp
+  void readInstrument(const YAML::Node& n, const std::string& p,          // scene_instrument.cpp
+                      InstrumentSpec* in);
+  void readInstruments(const YAML::Node& root, SceneSpec* spec);
   void readTrajectory(const YAML::Node& list, const std::string& path, InstrumentSpec* in);
-  void readSolver(const YAML::Node& n, SolverSpec* s);                           // scene_loader.cpp
+  void readSolver(const YAML::Node& n, SolverSpec* s, int instruments);        // scene_loader.cpp
   void readHaptics(const YAML::Node& n, HapticsSpec* h);
   void readWorkspace(const YAML::Node& n, const std::string& p,
                      shared::WorkspaceMappingParams* w);

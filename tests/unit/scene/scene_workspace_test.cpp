@@ -7,6 +7,7 @@
 #include <filesystem>
 
 #include "tactus/shared/error.h"
+#include "../../support/scene_snippet.h"
 #include "tactus/sim/scene.h"
 
 namespace tactus::sim {
@@ -16,17 +17,9 @@ using ::testing::ElementsAre;
 using ::testing::HasSubstr;
 using ::testing::StartsWith;
 
-const std::filesystem::path kScenes = std::filesystem::path(TACTUS_TEST_DATA_DIR) / "scenes";
-const std::string kHead = "time_step: 0.01\ntissues:\n  - mesh: ../meshes/liver.msh\n";
-
-std::string error(const std::string& yaml) {
-  try {
-    parseScene(kHead + yaml, "s.yaml", kScenes);
-  } catch (const SceneError& e) {
-    return e.what();
-  }
-  return "(no error)";
-}
+const std::filesystem::path& kScenes = test_support::kSceneDir;
+const std::string& kHead = test_support::kSceneHead;
+std::string error(const std::string& yaml) { return test_support::snippetError(yaml); }
 
 TEST(SceneWorkspace, ParsesScaleOffsetRotationAndClutchButton) {
   const SceneSpec s = parseScene(

@@ -11,6 +11,13 @@
 // link to the simulation (the shared segment) is swapped by the non-real-time supervisor through
 // an atomic pointer with a hazard-pointer acknowledgement, so the tick never waits for it.
 //
+// Several devices (docs/design.md, "Several instruments and devices"): one loop serves up to
+// shared::kMaxInstruments devices, device i driving instrument i. Each tick reads every device,
+// moves delta_free with each device's displacement through the rows of its own instrument,
+// solves the one contact problem once, and renders to each device the wrench on its own
+// instrument through its own safety chain (mapping, engage gate, fade, clamp, slew, guard): a
+// device that faults or goes silent fades its own force only.
+//
 // Safety: HapticSettings::validate() (called by the HapticLoop constructor) rejects settings that
 // are not finite or out of range; whatever the settings, the tick's last stage (guardWrench)
 // writes only finite forces and torques within the effective clamps (the smaller of the
@@ -21,6 +28,7 @@
 #include <atomic>
 #include <cstdint>
 #include <memory>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -131,12 +139,15 @@ const char* eventName(std::uint32_t code) noexcept;
 struct AttachedSegment {
   shared::Segment segment;
   shared::SnapshotSubscriber snapshots;
-  shared::TripleWriter<shared::DeviceSample> samples;
+  /// Device i's samples (one per device the loop serves, up to the segment's device count).
+  std::array<shared::TripleWriter<shared::DeviceSample>, shared::kMaxInstruments> samples;
+  int sample_writers = 0;               ///< entries of `samples` attached
   shared::StatsRingWriter stats;
   shared::NsgsWorkspace workspace;
   std::vector<double> delta_free;       ///< moved delta_free (capacity rows)
   std::vector<double> f;                ///< forces, warm start across ticks
   std::vector<double> last_delta_free;  ///< delta_free of the last solve (capacity rows)
+  std::vector<int> row_instrument;      ///< per row of the adopted snapshot: its instrument
   std::uint64_t delta_seq = 0;          ///< snapshot whose W f + delta_free workspace.delta holds
   std::uint64_t ill_posed_seq = 0;      ///< last snapshot reported ill-posed (one event each)
   /// W's block form (shared::chooseStorage's rule), converted once per adopted snapshot in the
@@ -148,16 +159,23 @@ struct AttachedSegment {
   explicit AttachedSegment(shared::Segment&& s);
 };
 
-/// Output of one tick (for tests and tools).
-struct TickOutput {
-  std::array<double, 3> force_n{};
+/// What one tick renders to one device.
+struct DeviceTickOutput {
+  std::array<double, 3> force_n{};      ///< contact wrench on its instrument, then the command
   std::array<double, 3> torque_nm{};
   double unlimited_force_norm_n = 0.0;  ///< before clamp/slew/fade
+  double gain = 0.0;                    ///< fade/engage gain in [0, 1]
+};
+
+/// Output of one tick (for tests and tools). The DeviceTickOutput part is device 0's (a copy of
+/// device[0]).
+struct TickOutput : DeviceTickOutput {
+  int devices = 0;                      ///< entries of `device`
+  std::array<DeviceTickOutput, shared::kMaxInstruments> device{};
   int contacts = 0;
   int sweeps = 0;
   double residual = 0.0;
   std::int64_t solve_ns = 0;            ///< time in NSGS
-  double gain = 0.0;                    ///< fade/engage gain in [0, 1]
   bool stale = true;
   std::uint64_t snapshot_seq = 0;
   std::uint64_t flags = 0;              ///< shared::StatsFlags
@@ -166,12 +184,36 @@ struct TickOutput {
 /// Tag for the test-only constructor that skips HapticSettings::validate().
 struct UncheckedSettingsForTest {};
 
+/// One device the loop serves: its backend, workspace mapping, and the state of its safety chain.
+struct DeviceChannel {
+  device::Device* device = nullptr;
+  WorkspaceMapping mapping;
+  double force_limit_n = 0.0;      ///< min(settings, device), what the chain and guard clamp to
+  double torque_limit_nm = 0.0;
+  std::uint64_t sample_seq = 0;
+  device::DeviceState raw_state{}; ///< the device's last sample, device frame
+  device::DeviceState state{};     ///< the same mapped to the scene frame
+  shared::Pose last_pose;
+  bool have_pose = false;
+  bool engaged = false;
+  bool device_fault = false;
+  bool no_data = false;            ///< the last read returned kNoData (event on the transition)
+  bool clamped = false;            ///< the last command was clamped (sample flag, event)
+  double gain = 0.0;
+  std::array<double, 3> last_force_n{};
+  std::array<double, 3> last_torque_nm{};
+};
+
 class HapticLoop {
  public:
   /// `device` must be opened by the caller. Validates `settings` (throws tactus::Error) and
   /// reads device.info(): a max_force_n that is finite and > 0 lowers the force clamp; any other
   /// non-zero value is ignored with a warning.
   HapticLoop(device::Device& device, const HapticSettings& settings);
+  /// Several devices (1 .. shared::kMaxInstruments, each opened by the caller): device i drives
+  /// instrument i. Each gets its own clamp from its own info(). Throws tactus::Error on a bad
+  /// count or null device.
+  HapticLoop(std::span<device::Device* const> devices, const HapticSettings& settings);
   /// Tests only: no validation, so the final guard can be exercised with nonsense settings.
   HapticLoop(device::Device& device, const HapticSettings& settings, UncheckedSettingsForTest);
 
@@ -188,9 +230,11 @@ class HapticLoop {
   void offerLink(AttachedSegment* link) noexcept;
   AttachedSegment* linkInUse() const noexcept;
 
-  /// The force and torque clamps in use (settings and device combined, see the constructor).
-  double forceLimitN() const noexcept { return force_limit_n_; }
-  double torqueLimitNm() const noexcept { return torque_limit_nm_; }
+  /// The force and torque clamps in use (settings and device combined, see the constructor), of
+  /// device 0 or of device i.
+  double forceLimitN(int i = 0) const noexcept { return channel(i).force_limit_n; }
+  double torqueLimitNm(int i = 0) const noexcept { return channel(i).torque_limit_nm; }
+  int deviceCount() const noexcept { return device_count_; }
 
   /// Tests only: called by the tick between its first read of the offered link and publishing
   /// it as in use (to replay a supervisor acting while the real-time thread is stalled there).
@@ -199,9 +243,9 @@ class HapticLoop {
     adoption_context_ = context;
   }
 
-  /// The device's workspace mapping (identity by default): configure() it before the first
+  /// Device i's workspace mapping (identity by default): configure() it before the first
   /// tick; setClutchRequest() from any thread.
-  WorkspaceMapping& workspaceMapping() noexcept { return mapping_; }
+  WorkspaceMapping& workspaceMapping(int i = 0) noexcept { return channel(i).mapping; }
 
   HapticCounters& counters() noexcept { return counters_; }
   shared::EventRing& events() noexcept { return events_; }
@@ -211,8 +255,18 @@ class HapticLoop {
   friend struct HapticLoopPhases;
 
  private:
+  /// The local model with device 0 at `device_pose` and the other devices at their last poses.
   void solveLocalModel(AttachedSegment& link, const shared::SnapshotView& snap,
                        const shared::Pose& device_pose, TickOutput& out) noexcept;
+  /// The local model with device i at *poses[i] (nullptr: no pose, the device stays at x_h*):
+  /// one solve, the wrench on instrument i into out.device[i] (and device 0's into out).
+  void solveLocalModel(AttachedSegment& link, const shared::SnapshotView& snap,
+                       const std::array<const shared::Pose*, shared::kMaxInstruments>& poses,
+                       TickOutput& out) noexcept;
+  DeviceChannel& channel(int i) noexcept { return channels_[static_cast<std::size_t>(i)]; }
+  const DeviceChannel& channel(int i) const noexcept {
+    return channels_[static_cast<std::size_t>(i)];
+  }
   void pushEvent(std::uint32_t code, double a = 0.0, double b = 0.0) noexcept;
   /// Episode events that can recur every few ticks (no data, clamped, not converged, overrun):
   /// pushed at most once per second each, so the ring and the log are not flooded.
@@ -225,20 +279,39 @@ class HapticLoop {
   };
   void pushRateLimited(NoisyEvent which, std::uint32_t code, std::int64_t now_ns, double a = 0.0,
                        double b = 0.0) noexcept;
-  // the tick's phases, in order
+  // the tick's phases, in order (per device where they take a channel; the forms without one
+  // act on device 0, for the phase tests)
   void adoptOfferedLink() noexcept;
-  device::IoStatus readDevice(std::int64_t now, TickOutput& out) noexcept;
-  void publishSample(std::int64_t now, device::IoStatus io) noexcept;
+  device::IoStatus readDevice(DeviceChannel& ch, int i, std::int64_t now,
+                              TickOutput& out) noexcept;
+  device::IoStatus readDevice(std::int64_t now, TickOutput& out) noexcept {
+    return readDevice(channels_[0], 0, now, out);
+  }
+  void publishSample(DeviceChannel& ch, int i, std::int64_t now, device::IoStatus io) noexcept;
+  void publishSample(std::int64_t now, device::IoStatus io) noexcept {
+    publishSample(channels_[0], 0, now, io);
+  }
   void takeSnapshot(std::int64_t now, TickOutput& out) noexcept;   // and the local model
-  void writeDevice(const std::array<double, 3>& force,
+  void writeDevice(DeviceChannel& ch, const std::array<double, 3>& force,
                    const std::array<double, 3>& torque) noexcept;
+  void writeDevice(const std::array<double, 3>& force,
+                   const std::array<double, 3>& torque) noexcept {
+    writeDevice(channels_[0], force, torque);
+  }
   void recordStats(std::int64_t scheduled_ns, std::int64_t woken_ns, const TickOutput& out,
                    const std::array<double, 3>& force) noexcept;
+  /// `dev` holds the contact wrench on the channel's instrument (mapped to the device frame) on
+  /// entry and the command on exit; flags go to `out`.
+  void applySafetyChain(DeviceChannel& ch, double dt, TickOutput& out, DeviceTickOutput& dev,
+                        std::array<double, 3>& force, std::array<double, 3>& torque) noexcept;
   void applySafetyChain(double dt, TickOutput& out, std::array<double, 3>& force,
-                        std::array<double, 3>& torque) noexcept;
-  void initLimits();
+                        std::array<double, 3>& torque) noexcept {
+    applySafetyChain(channels_[0], dt, out, out, force, torque);
+  }
+  void initLimits(DeviceChannel& ch);
 
-  device::Device& device_;
+  std::array<DeviceChannel, shared::kMaxInstruments> channels_{};
+  int device_count_ = 1;
   HapticSettings settings_;
   HapticCounters counters_;
   shared::EventRing events_;
@@ -247,31 +320,15 @@ class HapticLoop {
   AttachedSegment* link_ = nullptr;
   void (*adoption_hook_)(void*) = nullptr;
   void* adoption_context_ = nullptr;
-  double force_limit_n_ = 0.0;     ///< min(settings, device), what the chain and guard clamp to
-  double torque_limit_nm_ = 0.0;
   std::int64_t watchdog_ns_ = 0;   ///< settings' watchdog (0 when not usable: always stale)
 
   std::uint64_t snapshot_seq_ = 0;
   std::uint64_t tick_index_ = 0;
-  std::uint64_t sample_seq_ = 0;
-  device::DeviceState raw_state_{};   ///< the device's last sample, device frame
-  device::DeviceState state_{};       ///< the same mapped to the scene frame
-  WorkspaceMapping mapping_;
-  shared::Pose last_pose_;
-  bool have_pose_ = false;
-  bool engaged_ = false;
   bool stale_ = true;
-  bool device_fault_ = false;
-  bool no_data_ = false;           ///< the last read returned kNoData (event on the transition)
-  bool clamped_ = false;           ///< the last command was clamped (sample flag, event)
   bool not_converged_ = false;     ///< the last solve did not converge (event on the transition)
   bool overrun_ = false;           ///< the last tick overran (event at the start of a burst)
   std::array<std::int64_t, kNoisyCount> noisy_event_ns_{};   ///< last push per NoisyEvent
   std::array<bool, kNoisyCount> noisy_pushed_{};             ///< pushed at least once
-  double gain_ = 0.0;
-  double last_force_norm_n_ = 0.0;
-  std::array<double, 3> last_force_n_{};
-  std::array<double, 3> last_torque_nm_{};
   std::int64_t last_tick_ns_ = 0;
 };
 

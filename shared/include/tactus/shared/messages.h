@@ -20,6 +20,10 @@
 
 namespace tactus::shared {
 
+/// Instruments a scene may have, and so devices one haptic_server serves and per-instrument
+/// blocks a snapshot carries (docs/design.md, "Several instruments and devices").
+inline constexpr int kMaxInstruments = 4;
+
 /// A device / instrument pose: position, orientation and gripper opening.
 struct PoseSample {
   std::array<double, 3> pos_m{};
@@ -39,8 +43,21 @@ enum SnapshotFlags : std::uint32_t {
   kSnapshotSymmetricW = 1u << 4,
 };
 
+/// One instrument's block of the snapshot header: where its device was (J's origin for the rows
+/// of its contacts) and where its god object ended the step.
+struct SnapshotInstrument {
+  std::uint64_t device_seq = 0;      ///< seq of the instrument's DeviceSample the step used
+  PoseSample device_pose;            ///< x_h* of the instrument's device
+  PoseSample tool_pose;              ///< the god object pose after the step
+};
+static_assert(std::is_trivially_copyable_v<SnapshotInstrument>);
+
 /// Fixed part of the contact snapshot (the haptic local model of
 /// ../../../../docs/design.md#the-haptic-local-model), at offset 0 of its triple-buffer slot.
+/// Several instruments (docs/design.md, "Several instruments and devices"): `instruments`
+/// blocks are valid, contact c belongs to instrument SnapshotView::contactInstrument()[c], and
+/// row r of J is d delta_free_r / d x_h of that instrument's device. device_seq, device_pose
+/// and tool_pose repeat instrument 0's block for readers of one instrument.
 struct ContactSnapshotHeader {
   std::uint64_t seq = 0;             ///< publish counter, 0 = nothing published yet
   std::int64_t t_ns = 0;             ///< monotonic time of publication
@@ -54,6 +71,9 @@ struct ContactSnapshotHeader {
   std::uint64_t device_seq = 0;      ///< seq of the DeviceSample the step used
   PoseSample device_pose;            ///< x_h*: the device pose used for this step (J's origin)
   PoseSample tool_pose;              ///< the instrument (god object) pose after the step
+  std::int32_t instruments = 0;      ///< valid blocks in `instrument` (0 .. kMaxInstruments)
+  std::int32_t reserved = 0;
+  std::array<SnapshotInstrument, kMaxInstruments> instrument{};
 };
 static_assert(std::is_trivially_copyable_v<ContactSnapshotHeader>);
 static_assert(std::is_standard_layout_v<ContactSnapshotHeader>);
@@ -73,6 +93,7 @@ struct SnapshotLayout {
   std::size_t contact_point_m = 0;   ///< double[cap_c * 3] world contact points
   std::size_t contact_normal = 0;    ///< double[cap_c * 3] world normals (local frame row n)
   std::size_t contact_tangent = 0;   ///< double[cap_c * 6] world t1 then t2 per contact
+  std::size_t contact_instrument = 0;  ///< int32[cap_c] the instrument of each contact
   std::size_t total_bytes = 0;       ///< slot payload size
 
   /// Layout for a capacity (max_rows >= 0, max_contacts >= 0). Pure function: both processes
@@ -100,6 +121,7 @@ struct SnapshotLayout {
     l.contact_point_m = place(c * 3 * sizeof(double));
     l.contact_normal = place(c * 3 * sizeof(double));
     l.contact_tangent = place(c * 6 * sizeof(double));
+    l.contact_instrument = place(c * sizeof(std::int32_t));
     l.total_bytes = at;
     return l;
   }
@@ -132,6 +154,9 @@ class SnapshotView {
   const double* contactPoint() const noexcept { return at<double>(layout_.contact_point_m); }
   const double* contactNormal() const noexcept { return at<double>(layout_.contact_normal); }
   const double* contactTangent() const noexcept { return at<double>(layout_.contact_tangent); }
+  const std::int32_t* contactInstrument() const noexcept {
+    return at<std::int32_t>(layout_.contact_instrument);
+  }
 
   /// The contact problem delta = W f + delta_free, pointing into the slot. Pass another
   /// delta_free (e.g. moved with the device) to solve the same problem from a local copy.
@@ -184,6 +209,7 @@ class SnapshotWriter {
   double* contactPoint() noexcept { return at<double>(layout_.contact_point_m); }
   double* contactNormal() noexcept { return at<double>(layout_.contact_normal); }
   double* contactTangent() noexcept { return at<double>(layout_.contact_tangent); }
+  std::int32_t* contactInstrument() noexcept { return at<std::int32_t>(layout_.contact_instrument); }
 
   /// Read-only view of the same slot.
   SnapshotView view() const noexcept { return SnapshotView(base_, layout_); }
@@ -291,9 +317,11 @@ struct StatsRecord {
   std::int64_t sweeps = 0;
   double residual = 0.0;             ///< natural-map error at exit
   std::int64_t contacts = 0;
-  double force_norm_n = 0.0;         ///< |rendered force|
+  double force_norm_n = 0.0;         ///< |rendered force| (device 0)
   std::uint64_t snapshot_seq = 0;
-  std::uint64_t flags = 0;           ///< StatsFlags
+  std::uint64_t flags = 0;           ///< StatsFlags (any device's)
+  std::int64_t devices = 0;          ///< devices served (entries of device_force_norm_n)
+  std::array<double, kMaxInstruments> device_force_norm_n{};   ///< |rendered force| per device
 };
 static_assert(std::is_trivially_copyable_v<StatsRecord>);
 static_assert(sizeof(StatsRecord) % 8 == 0);

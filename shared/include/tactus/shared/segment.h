@@ -5,7 +5,7 @@
 // Layout (fixed POD, offsets only, every part 64-byte aligned):
 //
 //   [ SegmentHeader | snapshot triple buffer (ContactSnapshot, runtime size)
-//                   | device triple buffer (DeviceSample) | stats ring (StatsRecord)
+//                   | device triple buffers (DeviceSample, one per device) | stats ring (StatsRecord)
 //                   | display frame triple buffer | display topology ]   (display.h; the
 //                   display part is absent when its capacity is zero)
 //
@@ -59,8 +59,10 @@ namespace tactus::shared {
 
 inline constexpr std::uint64_t kSegmentMagic = 0x3147'4553'5554'4354ULL;  // "TCTUSEG1" (LE)
 /// Bump on any change of SegmentHeader, the messages, the part layout or the ownership protocol
-/// (3: the creator holds the ownership lock, see the file comment).
-inline constexpr std::uint32_t kSegmentAbiVersion = 3;
+/// (3: the creator holds the ownership lock, see the file comment; 4: several instruments and
+/// devices: per-instrument blocks in the snapshot header, each contact's instrument, one device
+/// triple buffer per device, per-device forces in the stats record).
+inline constexpr std::uint32_t kSegmentAbiVersion = 4;
 /// Stats ring capacity: 8192 records (8 s at 1 kHz).
 inline constexpr std::uint64_t kStatsRingCapacity = 8192;
 /// A creator whose heartbeat (or creation time) is older than this is considered gone.
@@ -74,6 +76,8 @@ struct SegmentCapacity {
   /// are max_contacts. 0 vertices or triangles: no display part.
   std::int32_t display_vertices = kDefaultDisplayVertices;
   std::int32_t display_triangles = kDefaultDisplayTriangles;
+  /// Device triple buffers (haptic -> sim), one per instrument: 1 .. kMaxInstruments.
+  std::int32_t devices = 1;
   DisplayCapacity display() const noexcept {
     return {display_vertices, display_triangles, max_contacts};
   }
@@ -108,15 +112,15 @@ struct SegmentHeader {
   std::uint64_t snapshot_offset = 0;              ///< TripleBufferControl of the snapshots
   std::uint64_t snapshot_bytes = 0;               ///< whole triple buffer
   std::uint64_t snapshot_slot_bytes = 0;          ///< SnapshotLayout::total_bytes
-  std::uint64_t device_offset = 0;                ///< TripleBufferControl of the DeviceSamples
-  std::uint64_t device_bytes = 0;
+  std::uint64_t device_offset = 0;                ///< TripleBufferControl of device 0's samples
+  std::uint64_t device_bytes = 0;                 ///< all devices' (device_stride_bytes each)
   std::uint64_t device_slot_bytes = 0;            ///< sizeof(DeviceSample)
   std::uint64_t stats_offset = 0;                 ///< SeqRingControl of the stats ring
   std::uint64_t stats_bytes = 0;
   std::uint64_t stats_capacity = 0;
   std::uint64_t stats_record_bytes = 0;           ///< sizeof(StatsRecord)
   std::uint32_t snapshot_header_bytes = 0;        ///< sizeof(ContactSnapshotHeader)
-  std::uint32_t reserved0 = 0;
+  std::uint32_t devices = 0;                      ///< device triple buffers (since ABI 4)
   std::atomic<std::uint32_t> sim_shutdown{0};     ///< 1: the simulation is asked to stop
   std::atomic<std::uint32_t> haptic_shutdown{0};  ///< 1: the haptic loop is asked to stop
   std::atomic<std::int64_t> haptic_pid{0};        ///< the haptic side's claim (claimHaptic)
@@ -141,7 +145,8 @@ static_assert(std::atomic<std::uint32_t>::is_always_lock_free);
 struct SegmentLayout {
   SnapshotLayout snapshot;
   std::size_t snapshot_offset = 0, snapshot_bytes = 0;
-  std::size_t device_offset = 0, device_bytes = 0;
+  std::size_t device_offset = 0, device_bytes = 0;      ///< all devices' triple buffers
+  std::size_t device_stride_bytes = 0;                  ///< device i at device_offset + i * this
   std::size_t stats_offset = 0, stats_bytes = 0;
   DisplayLayout display;
   std::size_t display_offset = 0, display_bytes = 0;     ///< 0, 0 when the display is absent
@@ -218,8 +223,9 @@ class Segment {
   // both. One writer and one reader per triple buffer at a time.
   SnapshotPublisher snapshotPublisher();             ///< sim
   SnapshotSubscriber snapshotSubscriber();           ///< haptic
-  TripleWriter<DeviceSample> deviceWriter();         ///< haptic
-  TripleReader<DeviceSample> deviceReader();         ///< sim
+  /// Device i's samples (0 <= i < capacity().devices; SegmentError otherwise).
+  TripleWriter<DeviceSample> deviceWriter(int i = 0);   ///< haptic
+  TripleReader<DeviceSample> deviceReader(int i = 0);   ///< sim
   StatsRingWriter statsWriter();                     ///< haptic
   StatsRingReader statsReader(StatsRingReader::Start start = StatsRingReader::Start::kNewest) const;
   /// Display frames and topology (display.h). The publisher needs kReadWrite; the subscriber
@@ -254,6 +260,7 @@ class Segment {
   explicit Segment(std::unique_ptr<Impl> impl) noexcept;
   SegmentHeader* mutableHeader() noexcept;
   unsigned char* writableBase(const char* what);
+  TripleBufferControl* deviceBuffer(int i, const char* what);
   std::unique_ptr<Impl> impl_;
 };
 

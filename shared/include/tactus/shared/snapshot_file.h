@@ -4,14 +4,16 @@
 // problem later (tactus-jitter --replay FILE). Written by tactus-bench --record-snapshots FILE.
 //
 // Format (native byte order, little-endian hosts; every count checked when reading):
-//   file header (24 bytes): magic "TACTSNAP", uint32 version (1), uint32 sizeof(record header),
+//   file header (24 bytes): magic "TACTSNAP", uint32 version (2), uint32 sizeof(record header),
 //                           uint64 reserved (0); then snapshots up to the end of the file
 //   per snapshot: uint64 t_ns (the run's timeline, from its first snapshot or any origin),
 //                 ContactSnapshotHeader (raw), then with m = rows, nc = contacts, packed (ld = m):
 //                 int32 row_offset[nc + 1], uint64 contact_id[nc], double mu[nc],
 //                 double W[m * m] (row-major), double delta_free[m], double f[m],
 //                 double J[m * 6], double contact_point_m[nc * 3], double contact_normal[nc * 3],
-//                 double contact_tangent[nc * 6]
+//                 double contact_tangent[nc * 6], int32 contact_instrument[nc]
+// (version 2: the header's instrument blocks and contact_instrument; version 1 files, written
+// before several instruments, are refused with their version)
 // The reader rejects a file that is not a regular file, larger than kMaxSnapshotFileBytes, has a
 // wrong magic/version/record size, a count or size that does not fit the bytes left (checked
 // before allocating), inconsistent row offsets, non-finite values, a negative friction
@@ -33,7 +35,7 @@ inline constexpr std::uint64_t kMaxSnapshotFileBytes = std::uint64_t{2} << 30;  
 /// Largest problem a recorded snapshot may hold.
 inline constexpr std::int32_t kMaxRecordedRows = 6000;
 inline constexpr std::int32_t kMaxRecordedContacts = 6000;
-inline constexpr std::uint32_t kSnapshotFileVersion = 1;
+inline constexpr std::uint32_t kSnapshotFileVersion = 2;
 
 /// One recorded snapshot, arrays packed with ld = rows.
 struct RecordedSnapshot {
@@ -42,6 +44,7 @@ struct RecordedSnapshot {
   std::vector<std::int32_t> row_offset;
   std::vector<std::uint64_t> contact_id;
   std::vector<double> mu, W, delta_free, f, J, contact_point_m, contact_normal, contact_tangent;
+  std::vector<std::int32_t> contact_instrument;   ///< per contact (0 with one instrument)
 
   int rows() const noexcept { return header.rows; }
   int contacts() const noexcept { return header.contacts; }

@@ -96,6 +96,10 @@ struct Contact {
   Eigen::Vector3d t1 = Eigen::Vector3d::UnitX();
   Eigen::Vector3d t2 = Eigen::Vector3d::UnitY();
   double gap_m = 0.0;
+  /// The instrument the tool feature belongs to (SceneSpec's order). Collision::detect leaves 0;
+  /// with several instruments the pipeline sets it and ors it into the id's bits 57-63 (the kind
+  /// takes bit 56), so contacts of different instruments never share an id.
+  int instrument = 0;
 };
 
 struct CollisionOptions {
@@ -165,5 +169,9 @@ struct ContactRows {
 /// tool rows: dir^T [I, -[r]x], r = tool point - tool origin (a tool twist along n opens it).
 void buildContactRows(std::span<const Contact> contacts, double mu,
                       const Eigen::Vector3d& tool_origin_m, ContactRows& out);
+/// The same for contacts of several instruments: contact c uses the friction mu[i] and the tool
+/// origin tool_origin_m[i] of its instrument i = contacts[c].instrument (each < mu.size()).
+void buildContactRows(std::span<const Contact> contacts, std::span<const double> mu,
+                      std::span<const Eigen::Vector3d> tool_origin_m, ContactRows& out);
 
 }  // namespace tactus::sim

@@ -65,7 +65,10 @@ struct StepReport {
   int distinct_tissue_nodes = 0;
   double total_normal_force_n = 0.0; ///< sum of the normal forces of the last solve [N]
   /// Contact wrench on the tool of the last solve [force_n; torque_nm about the tool origin]
+  /// (the first instrument's)
   Eigen::Matrix<double, 6, 1> tool_wrench = Eigen::Matrix<double, 6, 1>::Zero();
+  /// The same per instrument (empty without instrument)
+  std::vector<shared::Vector6d> tool_wrenches;
   bool finite = true;                ///< every state value finite
   /// Tetrahedra inverted (det F <= 0) at the start of the step, over all tissues
   /// (FemStepStats::inverted_elements)
@@ -84,7 +87,17 @@ struct DeviceTarget {
   double gripper_opening = 1.0;      ///< 0 closed .. 1 open
 };
 
-/// The last contact problem, in the form the haptic loop needs (docs/design.md, "The haptic local model").
+/// One instrument's part of the last contact problem.
+struct InstrumentProblemData {
+  shared::Pose device_pose;                    ///< x_h* of this instrument's device
+  double device_gripper = 1.0;                 ///< opening (0..1) used for this step
+  shared::Pose tool_pose;                      ///< its god object after the step
+};
+
+/// The last contact problem, in the form the haptic loop needs (docs/design.md, "The haptic
+/// local model"). With several instruments, J's row r is d delta_free_r / d x_h of the device
+/// of instrument contact_instrument[c] (c the row's contact): each row moves with its own
+/// device only, and the wrench on instrument i is the sum over its own contacts.
 struct ContactProblemData {
   int contacts = 0;
   int rows = 0;
@@ -102,9 +115,11 @@ struct ContactProblemData {
   std::vector<Eigen::Vector3d> normal;         ///< per contact (row n), tissue -> tool
   std::vector<Eigen::Vector3d> tangent1;       ///< per contact (row t1)
   std::vector<Eigen::Vector3d> tangent2;       ///< per contact (row t2)
-  shared::Pose device_pose;                    ///< x_h* used for this step
-  double device_gripper = 1.0;                 ///< opening (0..1) used for this step
-  shared::Pose tool_pose;                      ///< god object after the step
+  std::vector<int> contact_instrument;         ///< per contact: its instrument
+  std::vector<InstrumentProblemData> instruments;   ///< per instrument
+  shared::Pose device_pose;                    ///< x_h* used for this step (instrument 0)
+  double device_gripper = 1.0;                 ///< opening (0..1) used for this step (idem)
+  shared::Pose tool_pose;                      ///< god object after the step (idem)
   shared::NsgsResult solve;                    ///< the step's NSGS result (kEmpty: no solve)
   /// The solver's view of this problem (pointers into this object).
   shared::ContactProblemView view() const;
@@ -135,11 +150,17 @@ class Simulation {
   /// Human-readable list of the stages this scene runs (printed at start).
   std::vector<std::string> stages() const;
 
-  /// Sets the device target for the next steps (device sample or scripted trajectory).
+  /// Sets the device target of instrument 0 for the next steps (device sample or scripted
+  /// trajectory).
   void setDeviceTarget(const DeviceTarget& target);
-  /// The scripted target at time t (the scene's trajectory; the initial pose if none).
+  /// The same for instrument i (0 <= i < instrumentCount()).
+  void setDeviceTarget(int i, const DeviceTarget& target);
+  /// The scripted target at time t (the scene's trajectory; the initial pose if none) of
+  /// instrument 0, or of instrument i.
   DeviceTarget scriptedTarget(double t_s) const;
+  DeviceTarget scriptedTarget(int i, double t_s) const;
   bool hasInstrument() const;
+  int instrumentCount() const;
 
   /// Advances one time step.
   StepReport step();
@@ -150,7 +171,10 @@ class Simulation {
   FemBody& tissue(int i);
   const FemBody& tissue(int i) const;
   TissueCompliance* compliance(int i);
+  /// Instrument 0 (nullptr without one), or instrument i.
   Instrument* instrument();
+  Instrument& instrument(int i);
+  const Instrument& instrument(int i) const;
   const ContactProblemData& lastProblem() const;
   /// The contacts of tissue i found by the last collision query of the last step (empty
   /// without an instrument or before the first step).
@@ -164,8 +188,10 @@ class Simulation {
 
   /// Sum over tissues and the instrument of kinetic + elastic + gravity energy [J].
   double totalEnergy() const;
-  /// Force the god object's coupling applies to the hand (what a device renders) [N, N m].
+  /// Force the god object's coupling applies to the hand (what a device renders) [N, N m]: of
+  /// instrument 0, or of instrument i.
   Eigen::Matrix<double, 6, 1> renderedWrench() const;
+  Eigen::Matrix<double, 6, 1> renderedWrench(int i) const;
 
   /// Writes the VTK frame of the current state if output is enabled and due (and the .pvd).
   void writeOutputIfDue();

@@ -23,6 +23,7 @@ struct RunOptions {
   bool status = false;               ///< log a status line every second
   std::string stats_json;            ///< write per-stage statistics here at the end
   std::string export_trajectory;     ///< write the scripted trajectory (device CSV) and exit
+  int export_instrument = 0;         ///< whose trajectory export_trajectory writes
   bool overwrite = false;            ///< replace an existing stats_json / export_trajectory file,
                                      ///< or an earlier run's VTK series in the output folder
   /// Record every step's contact snapshot (shared/snapshot_file.h, stamped with the simulated
@@ -34,9 +35,10 @@ struct RunOptions {
 /// (`t_s,x,y,z,qw,qx,qy,qz,gripper`, gripper in radians of jaw opening), sampled every
 /// `dt_s`, so the simulated device can follow the same script as the simulation.
 /// Written through a temporary file and renamed into place; an existing file is only replaced
-/// when `overwrite`. Throws tactus::FileError on any write failure (the target is then untouched).
+/// when `overwrite`. Throws tactus::FileError on any write failure (the target is then untouched),
+/// SceneError when the scene has no instrument `instrument`.
 void exportTrajectory(const SceneSpec& spec, const std::filesystem::path& csv, double dt_s = 0.01,
-                      bool overwrite = false);
+                      bool overwrite = false, int instrument = 0);
 
 /// Percentile summary of one stage over a run [s].
 struct StageSummary {

@@ -83,9 +83,12 @@ struct TrajectoryKey {
   double gripper_opening = 1.0;   ///< 0 closed .. 1 fully open
 };
 
-/// The instrument (god object) and its coupling to the device.
+/// An instrument (god object) and its coupling to its device. A scene has none, one
+/// (`instrument:`) or several (`instruments:`, at most shared::kMaxInstruments): instrument i is
+/// driven by haptic device i (haptic_server's i-th `--device`) or by its own script.
 struct InstrumentSpec {
   bool present = false;
+  std::string name;                             ///< for messages and status ("" : by index)
   InstrumentKind kind = InstrumentKind::kProbe;
   double mass_kg = 0.05;
   double inertia_kgm2 = 1e-5;                   ///< isotropic rotational inertia
@@ -197,7 +200,11 @@ struct SceneSpec {
   double time_step_s = 0.01;
   std::optional<Eigen::Vector3d> gravity_mps2;  ///< absent: no gravity
   std::vector<TissueSpec> tissues;
+  /// The first instrument (`instrument:`, or `instruments[0]`); present == false: none.
   InstrumentSpec instrument;
+  /// `instruments[1..]`: the others, in order (empty with the single `instrument:` form). Every
+  /// instrument's contacts go into the one contact problem of the step (pipeline.h).
+  std::vector<InstrumentSpec> additional_instruments;
   SolverSpec solver;
   HapticsSpec haptics;
   OutputSpec output;
@@ -206,6 +213,16 @@ struct SceneSpec {
   /// `file:line:col: field: unusual value ...`; also logged as warnings by parseScene/loadScene.
   std::vector<std::string> warnings;
 };
+
+/// Instruments of the scene: 0 without one, else 1 + additional_instruments.size().
+int instrumentCount(const SceneSpec& spec);
+/// Instrument i (0 = spec.instrument), 0 <= i < instrumentCount(spec).
+const InstrumentSpec& instrumentSpec(const SceneSpec& spec, int i);
+InstrumentSpec& instrumentSpec(SceneSpec& spec, int i);
+/// Contacts the step's contact problem may hold: solver.max_contacts per instrument.
+int problemContactCapacity(const SceneSpec& spec);
+/// Whether some instrument has friction (3 rows per contact; else 1).
+bool anyFriction(const SceneSpec& spec);
 
 /// Reads and validates a scene file. Throws tactus::SceneError listing every problem found
 /// (unknown keys, wrong types, out-of-range values, missing mesh), each with file, line, column
