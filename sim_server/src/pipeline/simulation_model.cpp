@@ -8,6 +8,7 @@
 #include "tactus/shared/error.h"
 #include "tactus/sim/fem.h"
 #include "tactus/sim/instrument.h"
+#include "tactus/sim/node_regions.h"
 
 namespace tactus::sim {
 namespace {
@@ -25,8 +26,16 @@ TissueModel buildTissueModel(const SceneSpec& spec, const TissueSpec& ts) {
                                    spec.source.string(), ts.name, n, tissue.mesh.nodeCount()));
     }
   }
-  const std::vector<int> boxed = nodesInBoxes(tissue.mesh, ts.fixed_boxes);
-  fixed.insert(fixed.end(), boxed.begin(), boxed.end());
+  // a region that catches no node is a mistake in the scene (a box in the wrong units or frame)
+  const std::string scene_where = fmt::format("{}: tissues '{}'", spec.source.string(), ts.name);
+  std::vector<RegionSpec> regions;
+  for (const BoxSpec& box : ts.fixed_boxes) regions.push_back(boxRegion(box));
+  regions.insert(regions.end(), ts.fixed_regions.begin(), ts.fixed_regions.end());
+  for (const RegionSpec& region : regions) {
+    const std::vector<int> nodes =
+        requireRegionNodes(tissue.mesh, region, ts.name, "fixed", scene_where + ": fixed");
+    fixed.insert(fixed.end(), nodes.begin(), nodes.end());
+  }
   std::sort(fixed.begin(), fixed.end());
   fixed.erase(std::unique(fixed.begin(), fixed.end()), fixed.end());
   tissue.fixed_nodes = std::move(fixed);

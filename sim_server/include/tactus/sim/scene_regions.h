@@ -1,0 +1,59 @@
+#pragma once
+// Scene description, the parts of issue 20 (organs touch): node regions (selectors for fixed
+// nodes and loads) and static obstacles. Included by scene.h; parsed by scene_regions.cpp and
+// scene_obstacles.cpp; documented in scenes/README.md ("Regions", "Obstacles").
+
+#include <Eigen/Core>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+namespace tactus::sim {
+
+/// How a region chooses its nodes (positions after the tissue's transform, at rest).
+enum class RegionKind {
+  kBox,        ///< nodes inside the axis-aligned box [min_m, max_m]
+  kPlaneSide,  ///< nodes with (x - point_m) . normal >= -tolerance_m (the side the normal points to)
+  kLowest,     ///< nodes with x[axis] <= min over the mesh of x[axis] + tolerance_m
+  kHighest,    ///< nodes with x[axis] >= max over the mesh of x[axis] - tolerance_m
+};
+
+/// A set of nodes of one tissue chosen by a selector. A region that selects no node is an error
+/// naming it (`where`), raised when the scene's model is built (selectRegionNodes).
+struct RegionSpec {
+  RegionKind kind = RegionKind::kBox;
+  Eigen::Vector3d min_m = Eigen::Vector3d::Zero();      ///< kBox
+  Eigen::Vector3d max_m = Eigen::Vector3d::Zero();      ///< kBox
+  Eigen::Vector3d point_m = Eigen::Vector3d::Zero();    ///< kPlaneSide: a point of the plane
+  Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();    ///< kPlaneSide: unit normal
+  int axis = 2;                                         ///< kLowest/kHighest: 0 x, 1 y, 2 z
+  double tolerance_m = 0.0;                             ///< see RegionKind
+  /// Where the scene defines it ("file:line:col: path"), for messages; empty when built in code.
+  std::string where;
+};
+
+enum class ObstacleKind { kPlane, kBox, kMesh };
+
+/// A static, rigid obstacle the tissues' surface vertices collide with (obstacles.h).
+struct ObstacleSpec {
+  std::string name;
+  ObstacleKind kind = ObstacleKind::kPlane;
+  Eigen::Vector3d point_m = Eigen::Vector3d::Zero();    ///< kPlane: a point of the plane
+  Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();    ///< kPlane: unit, out of the solid side
+  Eigen::Vector3d min_m = Eigen::Vector3d::Zero();      ///< kBox: corners (axis-aligned)
+  Eigen::Vector3d max_m = Eigen::Vector3d::Zero();
+  std::filesystem::path mesh_path;                      ///< kMesh: OBJ or STL surface
+  double scale = 1.0;                                   ///< kMesh: applied first
+  Eigen::Vector3d rotation_deg = Eigen::Vector3d::Zero();   ///< kMesh: then XYZ Euler
+  Eigen::Vector3d translation_m = Eigen::Vector3d::Zero();  ///< kMesh: then translation
+  double friction_mu = 0.0;                             ///< Coulomb coefficient with tissue
+  std::string where;                                    ///< "file:line:col: obstacles[i]"
+};
+
+/// The obstacles' collision settings (obstacle_contact section of the scene).
+struct ObstacleContactSpec {
+  double alarm_distance_m = 0.002;   ///< vertices within this gap become contacts
+  int max_contacts = 300;            ///< per tissue (deepest kept)
+};
+
+}  // namespace tactus::sim
