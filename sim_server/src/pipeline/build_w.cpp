@@ -1,6 +1,7 @@
 // buildW: the contact problem of the detected contacts, W = H C H^T (paper eq. 11).
 #include <algorithm>
 
+#include "obstacle_stage.h"
 #include "step_stages.h"
 #include "tactus/shared/clock.h"
 
@@ -76,10 +77,12 @@ int countDistinctNodes(const SimulationState& state, StepScratch& scratch) {
   std::vector<std::int64_t>& keys = scratch.node_keys;
   keys.clear();
   for (std::size_t t = 0; t < state.tissues.size(); ++t) {
-    for (const Contact& k : *state.tissues[t].found) {
-      for (int j = 0; j < 3; ++j) {
-        if (k.nodes[j] >= 0 && k.weights[j] != 0.0) {
-          keys.push_back((static_cast<std::int64_t>(t) << 32) | k.nodes[j]);
+    for (const auto* list : {state.tissues[t].found, &state.tissues[t].obstacle_found}) {
+      for (const Contact& k : *list) {
+        for (int j = 0; j < 3; ++j) {
+          if (k.nodes[j] >= 0 && k.weights[j] != 0.0) {
+            keys.push_back((static_cast<std::int64_t>(t) << 32) | k.nodes[j]);
+          }
         }
       }
     }
@@ -98,7 +101,7 @@ void assembleProblem(const SimulationModel& model, SimulationState& state, StepS
   p.rows = rows;
   p.row_offset.assign(1, 0);
   p.contact_id.resize(contacts);
-  p.mu.assign(contacts, model.spec.instrument.friction_mu);
+  p.mu.resize(contacts);
   p.point_m.resize(contacts);
   p.normal.resize(contacts);
   p.tangent1.resize(contacts);
@@ -126,6 +129,7 @@ void assembleProblem(const SimulationModel& model, SimulationState& state, StepS
   }
   const std::vector<Contact>& all = scratch.all_contacts;
   for (int c = 0; c < contacts; ++c) {
+    p.mu[c] = contactFriction(state, all[c], model.spec.instrument.friction_mu);
     p.contact_id[c] = all[c].id;
     p.point_m[c] = all[c].tissue_point_m;
     p.normal[c] = all[c].n;
@@ -133,6 +137,10 @@ void assembleProblem(const SimulationModel& model, SimulationState& state, StepS
     p.tangent2[c] = all[c].t2;
   }
   if (rows == 0) return;
+  if (!state.instrument) {
+    p.J.setZero();
+    return;
+  }
   // + H_tool C6 H_tool^T = B B^T with B = H_tool L (C6 = L L^T), each pair (i, j) computed
   // once and written to both halves: W stays symmetric to the bit (the tissue blocks are), so
   // NSGS may use its symmetric sweep
@@ -153,8 +161,13 @@ void assembleProblem(const SimulationModel& model, SimulationState& state, StepS
     }
   }
   p.J.noalias() = scratch.h_tool * scratch.tool_free->freeMotionSensitivity(h);
-  // contact compliance (collision.h): W + c I, penetration c f_n per contact
-  p.W.diagonal().array() += model.spec.instrument.contact_compliance_mpn;
+  // contact compliance (collision.h): W + c I, penetration c f_n per instrument contact
+  for (int c = 0; c < contacts; ++c) {
+    if (all[c].kind == ContactKind::kObstacleVertex) continue;
+    for (int r = p.row_offset[c]; r < p.row_offset[c + 1]; ++r) {
+      p.W(r, r) += model.spec.instrument.contact_compliance_mpn;
+    }
+  }
 }
 
 }  // namespace
@@ -162,8 +175,8 @@ void assembleProblem(const SimulationModel& model, SimulationState& state, StepS
 void buildW(const SimulationModel& model, SimulationState& state, StepScratch& scratch,
             StepReport& report, PipelineCounters& counters, FoundAt found_at) {
   const double mu = model.spec.instrument.friction_mu;
-  const Instrument& detected =   // where the contacts were found
-      found_at == FoundAt::kStepStart ? *scratch.tool_start : *state.instrument;
+  const Instrument* detected =   // where the contacts were found (null without an instrument)
+      found_at == FoundAt::kStepStart ? scratch.tool_start.get() : state.instrument.get();
   const std::int64_t t0 = shared::monotonicNs();
   int rows = 0;
   int contacts = 0;
@@ -173,19 +186,25 @@ void buildW(const SimulationModel& model, SimulationState& state, StepScratch& s
     const TissueState& ts = state.tissues[t];
     TissueScratch& tx = scratch.tissues[t];
     const std::vector<Contact>& found = *ts.found;
-    report.contacts_dropped += ts.collision->stats().overflow;
-    buildContactRows(found, mu, detected.pose().pos_m, tx.rows);
-    gripColumn(found, detected, state.instrument->dynamicGrip(), tx);
-    freeGaps(model, scratch, ts, tx, detected, found_at);
+    if (ts.collision) report.contacts_dropped += ts.collision->stats().overflow;
+    buildContactRows(found, mu, detected ? detected->pose().pos_m : Eigen::Vector3d::Zero(),
+                     tx.rows);
+    tx.grip.assign(static_cast<std::size_t>(tx.rows.rows()), 0.0);
+    if (detected) {
+      gripColumn(found, *detected, state.instrument->dynamicGrip(), tx);
+      freeGaps(model, scratch, ts, tx, *detected, found_at);
+    }
+    scratch.all_contacts.insert(scratch.all_contacts.end(), found.begin(), found.end());
+    const int obstacle_contacts = appendObstacleRows(model, state, scratch, t, found_at);
+    report.contacts_dropped += ts.obstacle_overflow;
     tx.row_begin = rows;
     tx.contact_begin = contacts;
     rows += tx.rows.rows();
-    contacts += static_cast<int>(found.size());
-    scratch.all_contacts.insert(scratch.all_contacts.end(), found.begin(), found.end());
+    contacts += static_cast<int>(found.size()) + obstacle_contacts;
   }
   assembleProblem(model, state, scratch, counters, contacts, rows);
   report.distinct_tissue_nodes = countDistinctNodes(state, scratch);
-  if (mu > 0.0) counters.tangential_rows += rows - contacts;
+  counters.tangential_rows += rows - contacts;
   report.contacts = contacts;
   report.rows = rows;
   report.times.build_w_s += shared::secondsSinceNs(t0);

@@ -32,18 +32,18 @@ StepReport Simulation::step() {
 
   // step_start: contacts at the start-of-step state (buildW carries them to the free state, from
   // q_begin and tool_start)
-  if (s.instrument && detect_at_start) {
+  if (m.has_contacts && detect_at_start) {
     detectCollisions(m, s, x, report, counters);
-    if (!x.tool_start) {
+    if (s.instrument && !x.tool_start) {
       x.tool_start = std::make_unique<Instrument>(*s.instrument);
-    } else {
+    } else if (s.instrument) {
       *x.tool_start = *s.instrument;
     }
   }
 
   freeMotion(m, s, x, report);
 
-  if (s.instrument) {
+  if (m.has_contacts) {
     updateCompliance(s, report);
     keepFreeState(s, x);
     if (!detect_at_start) detectCollisions(m, s, x, report, counters);
@@ -58,7 +58,7 @@ StepReport Simulation::step() {
       report.contact_passes = pass + 1;
       if (!nextContactPass(m, s, x, report, counters, pass, previous_gap)) break;
     }
-    x.problem.tool_pose = s.instrument->pose();
+    if (s.instrument) x.problem.tool_pose = s.instrument->pose();
   }
 
   s.t_s += m.h_s;
@@ -131,7 +131,7 @@ const ContactProblemData& Simulation::lastProblem() const { return impl_->scratc
 const PipelineCounters& Simulation::counters() const { return impl_->counters; }
 
 double Simulation::geometricMinGap() {
-  if (!impl_->state.instrument) return std::numeric_limits<double>::infinity();
+  if (!impl_->model.has_contacts) return std::numeric_limits<double>::infinity();
   return queryContacts(impl_->model, impl_->state, impl_->scratch);
 }
 

@@ -9,6 +9,7 @@
 #include "tactus/sim/fem.h"
 #include "tactus/sim/instrument.h"
 #include "tactus/sim/node_regions.h"
+#include "obstacle_stage.h"
 
 namespace tactus::sim {
 namespace {
@@ -39,7 +40,7 @@ TissueModel buildTissueModel(const SceneSpec& spec, const TissueSpec& ts) {
   std::sort(fixed.begin(), fixed.end());
   fixed.erase(std::unique(fixed.begin(), fixed.end()), fixed.end());
   tissue.fixed_nodes = std::move(fixed);
-  if (spec.instrument.present) tissue.surface = extractSurface(tissue.mesh);
+  if (spec.instrument.present || !spec.obstacles.empty()) tissue.surface = extractSurface(tissue.mesh);
   return tissue;
 }
 
@@ -52,6 +53,14 @@ SimulationModel buildModel(const SceneSpec& spec) {
   model.h_s = spec.time_step_s;
   for (const TissueSpec& ts : spec.tissues) model.tissues.push_back(buildTissueModel(spec, ts));
   model.has_instrument = spec.instrument.present;
+  model.has_contacts = model.has_instrument || !spec.obstacles.empty();
+  if (!model.has_contacts) return model;
+  model.nsgs.tolerance = spec.solver.nsgs_tolerance;
+  model.nsgs.max_sweeps = spec.solver.nsgs_max_sweeps;
+  model.nsgs.sor = spec.solver.nsgs_sor;
+  model.nsgs.coupling = shared::NsgsCoupling::kSymmetricRowUpdate;   // buildW keeps W symmetric
+  // obstacle rows (3 per contact with friction) come after the instrument's, per tissue
+  model.max_rows = obstacleRowCapacity(spec);
   if (!model.has_instrument) return model;
   // the device target stays within a box around the scene at rest (instrument.h "Workspace")
   Eigen::AlignedBox3d bounds;
@@ -59,11 +68,7 @@ SimulationModel buildModel(const SceneSpec& spec) {
     for (Eigen::Index i = 0; i < tissue.mesh.nodes.cols(); ++i) bounds.extend(tissue.mesh.nodes.col(i));
   }
   model.instrument_workspace = instrumentWorkspace(spec.instrument, bounds);
-  model.max_rows = (spec.instrument.friction_mu > 0.0 ? 3 : 1) * spec.solver.max_contacts;
-  model.nsgs.tolerance = spec.solver.nsgs_tolerance;
-  model.nsgs.max_sweeps = spec.solver.nsgs_max_sweeps;
-  model.nsgs.sor = spec.solver.nsgs_sor;
-  model.nsgs.coupling = shared::NsgsCoupling::kSymmetricRowUpdate;   // buildW keeps W symmetric
+  model.max_rows += (spec.instrument.friction_mu > 0.0 ? 3 : 1) * spec.solver.max_contacts;
   return model;
 }
 

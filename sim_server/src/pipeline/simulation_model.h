@@ -30,7 +30,7 @@ namespace tactus::sim {
 struct TissueModel {
   std::string name;
   TetMesh mesh;                    ///< rest mesh, scaled, rotated and placed as the scene says
-  SurfaceMesh surface;             ///< its boundary (only with an instrument)
+  SurfaceMesh surface;             ///< its boundary (only with an instrument or obstacles)
   std::vector<int> fixed_nodes;    ///< Dirichlet nodes: the listed ones and those in the boxes
 };
 
@@ -39,6 +39,8 @@ struct SimulationModel {
   double h_s = 0.0;                      ///< time step
   std::vector<TissueModel> tissues;
   bool has_instrument = false;
+  /// A contact problem each step: an instrument or static obstacles (obstacles.h)
+  bool has_contacts = false;
   int max_rows = 0;                      ///< rows of the largest contact problem
   shared::NsgsSettings nsgs;             ///< the simulation's NSGS settings
   BoxSpec instrument_workspace;          ///< where the device target may go (instrument.h)

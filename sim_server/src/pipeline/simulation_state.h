@@ -14,6 +14,7 @@
 #include "tactus/sim/compliance.h"
 #include "tactus/sim/fem.h"
 #include "tactus/sim/instrument.h"
+#include "tactus/sim/obstacles.h"
 #include "tactus/sim/pipeline.h"
 
 namespace tactus::sim {
@@ -30,6 +31,9 @@ struct TissueState {
   /// feature-side memory of the pad and sphere queries carries to the next step (collision.h).
   std::unique_ptr<Collision> collision;
   const std::vector<Contact>* found = nullptr;   ///< contacts of the last detection
+  /// Contacts with the static obstacles of the last detection (obstacle_stage.h)
+  std::vector<Contact> obstacle_found;
+  int obstacle_overflow = 0;
 };
 
 struct SimulationState {
@@ -38,6 +42,8 @@ struct SimulationState {
   std::vector<TissueState> tissues;         ///< as SimulationModel::tissues
   /// The god object: pose, twist, jaw opening (its parameters inside); null without instrument.
   std::unique_ptr<Instrument> instrument;
+  /// The static obstacles (obstacles.h); null without any.
+  std::unique_ptr<Obstacles> obstacles;
   DeviceTarget target;                      ///< the device target the next step follows
   bool target_rejected = false;             ///< the last setDeviceTarget was non-finite
   /// The last solve's force per contact id (n, t1, t2): the next solve's warm start.

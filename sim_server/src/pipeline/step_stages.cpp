@@ -6,6 +6,7 @@
 #include <cmath>
 #include <limits>
 
+#include "obstacle_stage.h"
 #include "tactus/shared/clock.h"
 
 namespace tactus::sim {
@@ -16,7 +17,7 @@ void freeMotion(const SimulationModel& model, SimulationState& state, StepScratc
   const std::int64_t t0 = shared::monotonicNs();
   for (std::size_t t = 0; t < state.tissues.size(); ++t) {
     FemBody& body = *state.tissues[t].body;
-    if (state.instrument) scratch.tissues[t].q_begin = body.positions();
+    if (model.has_contacts) scratch.tissues[t].q_begin = body.positions();
     const FemStepStats st = body.freeMotion(h);
     if (!st.ok) report.finite = false;
     report.inverted_elements += st.inverted_elements;
@@ -40,7 +41,15 @@ double queryContacts(const SimulationModel& model, SimulationState& state, StepS
   double min_gap = std::numeric_limits<double>::infinity();
   scratch.min_excess_gap = min_gap;
   const double c = model.spec.instrument.contact_compliance_mpn;
+  static const std::vector<Contact> kNone;
+  // the obstacles' contacts (no contact compliance on them)
+  min_gap = std::min(min_gap, detectObstacleContacts(model, state));
+  scratch.min_excess_gap = min_gap;
   for (TissueState& ts : state.tissues) {
+    if (!state.instrument) {
+      ts.found = &kNone;
+      continue;
+    }
     ts.collision->refit(ts.body->positions());
     ts.found = &ts.collision->detect(*state.instrument);
     for (const Contact& k : *ts.found) {
@@ -76,6 +85,7 @@ void keepFreeState(SimulationState& state, StepScratch& scratch) {
     scratch.tissues[t].q_free = state.tissues[t].body->positions();
     scratch.tissues[t].v_free = state.tissues[t].body->velocities();
   }
+  if (!state.instrument) return;
   if (!scratch.tool_free) {
     scratch.tool_free = std::make_unique<Instrument>(*state.instrument);
   } else {
@@ -125,7 +135,7 @@ void restoreFreeState(SimulationState& state, const StepScratch& scratch) {
     state.tissues[t].body->positions() = scratch.tissues[t].q_free;
     state.tissues[t].body->velocities() = scratch.tissues[t].v_free;
   }
-  *state.instrument = *scratch.tool_free;
+  if (state.instrument) *state.instrument = *scratch.tool_free;
 }
 
 }  // namespace
@@ -140,7 +150,6 @@ void constrainedMotion(const SimulationModel& model, SimulationState& state, Ste
   if (restore_free) restoreFreeState(state, scratch);
   report.max_penetration_m = 0.0;
   report.complementarity = 0.0;
-  Instrument& tool = *state.instrument;
   if (rows > 0) {
     for (std::size_t t = 0; t < state.tissues.size(); ++t) {
       TissueState& ts = state.tissues[t];
@@ -150,12 +159,15 @@ void constrainedMotion(const SimulationModel& model, SimulationState& state, Ste
       ts.body->positions() += tx.dq;
       ts.body->velocities() += tx.dq / h;
     }
-    const shared::Vector6d wrench = scratch.h_tool.transpose() * p.f;
-    scratch.wrench = wrench;
-    report.tool_wrench = wrench;
-    tool.applyCorrection(wrench);
-    scratch.grip_torque = tool.dynamicGrip() ? p.grip.dot(p.f) : 0.0;
-    if (tool.dynamicGrip()) tool.applyGripCorrection(scratch.grip_torque);
+    if (state.instrument) {
+      Instrument& tool = *state.instrument;
+      const shared::Vector6d wrench = scratch.h_tool.transpose() * p.f;
+      scratch.wrench = wrench;
+      report.tool_wrench = wrench;
+      tool.applyCorrection(wrench);
+      scratch.grip_torque = tool.dynamicGrip() ? p.grip.dot(p.f) : 0.0;
+      if (tool.dynamicGrip()) tool.applyGripCorrection(scratch.grip_torque);
+    }
     // linearised gaps after the correction: delta = W f + delta_free, left by NSGS on exit
     // (not when it refused the problem as larger than its workspace: then computed here)
     Eigen::VectorXd unsolved_delta;
@@ -195,6 +207,7 @@ void blendWithPreviousPass(const SimulationModel& model, SimulationState& state,
     body.positions() = tx.q_free + dq;
     body.velocities() = tx.v_free + dq / h;
   }
+  if (!state.instrument) return;
   scratch.wrench = 0.5 * (scratch.wrench + scratch.previous_wrench);
   scratch.grip_torque = 0.5 * (scratch.grip_torque + scratch.previous_grip_torque);
   Instrument& tool = *state.instrument;

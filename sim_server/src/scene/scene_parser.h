@@ -169,7 +169,7 @@ class SceneParser {
   std::string where(const YAML::Node& at, const std::string& path) const;
   bool unitVector(const YAML::Node& map, const std::string& path, const char* key,
                   Eigen::Vector3d* out);
-  void readObstacles(const YAML::Node& list, SceneSpec* spec);              // scene_obstacles.cpp
+  void readObstacles(const YAML::Node& root, SceneSpec* spec);              // scene_obstacles.cpp
   void readInstrument(const YAML::Node& n, InstrumentSpec* in);             // scene_instrument.cpp
   void readTrajectory(const YAML::Node& list, const std::string& path, InstrumentSpec* in);
   void readSolver(const YAML::Node& n, SolverSpec* s);                           // scene_loader.cpp

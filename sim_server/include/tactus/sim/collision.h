@@ -80,7 +80,12 @@
 
 namespace tactus::sim {
 
-enum class ContactKind : std::uint8_t { kVertexCapsule = 0, kSphereTriangle = 1 };
+/// kObstacleVertex: a tissue surface vertex against a static obstacle (obstacles.h).
+enum class ContactKind : std::uint8_t {
+  kVertexCapsule = 0,
+  kSphereTriangle = 1,
+  kObstacleVertex = 2,
+};
 
 struct Contact {
   std::uint64_t id = 0;                   ///< stable identity, see above

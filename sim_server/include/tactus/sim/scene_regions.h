@@ -46,6 +46,9 @@ struct ObstacleSpec {
   double scale = 1.0;                                   ///< kMesh: applied first
   Eigen::Vector3d rotation_deg = Eigen::Vector3d::Zero();   ///< kMesh: then XYZ Euler
   Eigen::Vector3d translation_m = Eigen::Vector3d::Zero();  ///< kMesh: then translation
+  /// kMesh: how far behind a triangle (against its normal) a vertex still counts as touching it
+  /// and is pushed back out; deeper vertices are taken to be past a thin surface and ignored
+  double thickness_m = 0.005;
   double friction_mu = 0.0;                             ///< Coulomb coefficient with tissue
   std::string where;                                    ///< "file:line:col: obstacles[i]"
 };
