@@ -14,6 +14,19 @@ int obstacleRowCapacity(const SceneSpec& spec) {
          static_cast<int>(spec.tissues.size());
 }
 
+shared::SegmentCapacity problemCapacity(const SceneSpec& spec) {
+  const bool obstacle_friction =
+      std::any_of(spec.obstacles.begin(), spec.obstacles.end(),
+                  [](const ObstacleSpec& o) { return o.friction_mu > 0.0; });
+  const int obstacle_contacts =
+      spec.obstacles.empty()
+          ? 0
+          : spec.obstacle_contact.max_contacts * static_cast<int>(spec.tissues.size());
+  return shared::SegmentCapacity::forContacts(
+      spec.solver.max_contacts + obstacle_contacts,
+      spec.instrument.friction_mu > 0.0 || obstacle_friction);
+}
+
 double detectObstacleContacts(const SimulationModel& model, SimulationState& state) {
   double min_gap = std::numeric_limits<double>::infinity();
   if (!state.obstacles) return min_gap;

@@ -5,6 +5,7 @@
 // them (the obstacle does not move), W = H C H^T as usual, each with its obstacle's friction.
 
 #include "simulation_model.h"
+#include "tactus/shared/segment.h"
 #include "simulation_state.h"
 #include "step_scratch.h"
 #include "step_stages.h"
@@ -14,6 +15,10 @@ namespace tactus::sim {
 /// Rows the obstacles may add to the contact problem: max_contacts per tissue, 3 rows each when
 /// some obstacle has friction (0 without obstacles).
 int obstacleRowCapacity(const SceneSpec& spec);
+
+/// The capacity a published contact problem needs: the instrument's max_contacts plus the
+/// obstacles' per tissue, 3 rows per contact when the instrument or an obstacle has friction.
+shared::SegmentCapacity problemCapacity(const SceneSpec& spec);
 
 /// Contacts of every tissue's surface vertices (at its current positions) with the obstacles, into
 /// TissueState::obstacle_found; the smallest gap (+inf if none).

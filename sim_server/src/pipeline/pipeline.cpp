@@ -7,6 +7,7 @@
 #include <limits>
 
 #include "simulation_impl.h"
+#include "reactions_stage.h"
 #include "step_stages.h"
 #include "tactus/shared/clock.h"
 
@@ -135,6 +136,10 @@ double Simulation::geometricMinGap() {
   return queryContacts(impl_->model, impl_->state, impl_->scratch);
 }
 
+ReactionForces Simulation::reactions() {
+  return computeReactions(impl_->model, impl_->state, impl_->scratch);
+}
+
 double Simulation::totalEnergy() const {
   double e = 0.0;
   for (const TissueState& ts : impl_->state.tissues) {
@@ -150,7 +155,9 @@ Eigen::Matrix<double, 6, 1> Simulation::renderedWrench() const {
 }
 
 void Simulation::writeOutputIfDue() {
-  if (impl_->output.writeIfDue(impl_->model, impl_->state)) ++impl_->counters.vtk_frames;
+  if (impl_->output.writeIfDue(impl_->model, impl_->state, impl_->scratch)) {
+    ++impl_->counters.vtk_frames;
+  }
 }
 
 void Simulation::finishOutput() { impl_->output.finish(impl_->model); }

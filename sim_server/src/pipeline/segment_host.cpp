@@ -1,5 +1,6 @@
 // Segment publishing for the haptic process.
 #include "segment_host.h"
+#include "obstacle_stage.h"
 
 #include <spdlog/spdlog.h>
 
@@ -23,8 +24,7 @@ Eigen::Vector3d boundedNorm(Eigen::Vector3d v, double max_norm) {
 
 SegmentHost::SegmentHost(const std::string& name, const SceneSpec& spec, const BoxSpec& workspace)
     : segment_(shared::Segment::create(
-          name, shared::SegmentCapacity::forContacts(spec.solver.max_contacts,
-                                                     spec.instrument.friction_mu > 0.0))),
+          name, problemCapacity(spec))),   // the instrument's and the obstacles' contacts
       publisher_(segment_.snapshotPublisher()),
       device_(segment_.deviceReader()),
       watchdog_ns_(static_cast<std::int64_t>(spec.haptics.watchdog_ms * 1e6)),
