@@ -6,7 +6,7 @@
 namespace tactus::sim {
 
 Eigen::Vector3d ReactionForces::imbalance_n() const {
-  Eigen::Vector3d sum = weight_n + fixed_total_n + instrument_force_n;
+  Eigen::Vector3d sum = weight_n + applied_load_n + fixed_total_n + instrument_force_n;
   for (const Eigen::Vector3d& f : obstacle_force_n) sum += f;
   return sum;
 }
@@ -55,6 +55,11 @@ ReactionForces computeReactions(const SimulationModel& model, SimulationState& s
     }
     const Eigen::VectorXd& mass = body.lumpedMass();
     for (int i = 0; i < n; ++i) r.weight_n += mass[3 * i] * g;
+    const bool loaded = t < scratch.tissues.size() && scratch.tissues[t].has_load_force;
+    const Eigen::VectorXd* load = loaded ? &scratch.tissues[t].load_force : nullptr;
+    if (load) {
+      for (int i = 0; i < n; ++i) out.applied_load_n += load->segment<3>(3 * i);
+    }
     const std::vector<bool>& fixed = body.fixedMask();
     if (std::find(fixed.begin(), fixed.end(), true) != fixed.end()) {
       body.elasticForce(body.positions(), elastic);
@@ -62,6 +67,7 @@ ReactionForces computeReactions(const SimulationModel& model, SimulationState& s
         if (!fixed[static_cast<std::size_t>(i)]) continue;
         r.fixed_reaction_n.col(i) =
             -(elastic.segment<3>(3 * i) + mass[3 * i] * g + r.contact_force_n.col(i));
+        if (load) r.fixed_reaction_n.col(i) -= load->segment<3>(3 * i);
         r.fixed_total_n += r.fixed_reaction_n.col(i);
       }
     }

@@ -120,10 +120,10 @@ static std::string reactionsJson(const ReactionForces& r) {
     obstacles += fmt::format("{}\"{}\": {}", i ? ", " : "", jsonEscape(r.obstacle_names[i]),
                              vec(r.obstacle_force_n[i]));
   }
-  return fmt::format("{{\"weight_n\": {}, \"fixed_n\": {}, \"obstacles_n\": {{{}}}, "
-                     "\"instrument_n\": {}, \"imbalance_n\": {}}}",
-                     vec(r.weight_n), vec(r.fixed_total_n), obstacles, vec(r.instrument_force_n),
-                     vec(r.imbalance_n()));
+  return fmt::format("{{\"weight_n\": {}, \"loads_n\": {}, \"fixed_n\": {}, "
+                     "\"obstacles_n\": {{{}}}, \"instrument_n\": {}, \"imbalance_n\": {}}}",
+                     vec(r.weight_n), vec(r.applied_load_n), vec(r.fixed_total_n), obstacles,
+                     vec(r.instrument_force_n), vec(r.imbalance_n()));
 }
 
 std::string RunStatistics::json(const std::string& scene) const {

@@ -37,6 +37,9 @@ TissueModel buildTissueModel(const SceneSpec& spec, const TissueSpec& ts) {
         requireRegionNodes(tissue.mesh, region, ts.name, "fixed", scene_where + ": fixed");
     fixed.insert(fixed.end(), nodes.begin(), nodes.end());
   }
+  tissue.loads = buildTissueLoads(tissue.mesh, ts, scene_where);
+  const std::vector<int> prescribed = prescribedNodes(tissue.loads);
+  fixed.insert(fixed.end(), prescribed.begin(), prescribed.end());
   std::sort(fixed.begin(), fixed.end());
   fixed.erase(std::unique(fixed.begin(), fixed.end()), fixed.end());
   tissue.fixed_nodes = std::move(fixed);

@@ -23,6 +23,7 @@
 #include "tactus/shared/nsgs.h"
 #include "tactus/sim/mesh.h"
 #include "tactus/sim/scene.h"
+#include "loads.h"
 
 namespace tactus::sim {
 
@@ -32,6 +33,8 @@ struct TissueModel {
   TetMesh mesh;                    ///< rest mesh, scaled, rotated and placed as the scene says
   SurfaceMesh surface;             ///< its boundary (only with an instrument or obstacles)
   std::vector<int> fixed_nodes;    ///< Dirichlet nodes: the listed ones and those in the boxes
+                                   ///< and regions, and those a displacement load moves
+  std::vector<TissueLoad> loads;   ///< forces, pressures, displacements (loads.h)
 };
 
 struct SimulationModel {

@@ -17,8 +17,15 @@ void freeMotion(const SimulationModel& model, SimulationState& state, StepScratc
   const std::int64_t t0 = shared::monotonicNs();
   for (std::size_t t = 0; t < state.tissues.size(); ++t) {
     FemBody& body = *state.tissues[t].body;
-    if (model.has_contacts) scratch.tissues[t].q_begin = body.positions();
-    const FemStepStats st = body.freeMotion(h);
+    const std::vector<TissueLoad>& loads = model.tissues[t].loads;
+    TissueScratch& tx = scratch.tissues[t];
+    const Eigen::VectorXd* load_force =
+        loads.empty() ? nullptr
+                      : applyLoadsBeforeFreeMotion(loads, body, state.t_s + h, h, tx.load_force);
+    tx.has_load_force = load_force != nullptr;
+    if (model.has_contacts) tx.q_begin = body.positions();
+    const FemStepStats st = body.freeMotion(h, load_force);
+    if (!loads.empty()) applyLoadsAfterFreeMotion(loads, body, state.t_s + h);
     if (!st.ok) report.finite = false;
     report.inverted_elements += st.inverted_elements;
     report.fem_cg_iterations += st.cg_iterations;

@@ -166,6 +166,7 @@ class SceneParser {
   // scene_regions.cpp: node regions; "file:line:col: path" of a node; a non-zero vector, normalised
   void readRegions(const YAML::Node& list, const std::string& path, std::vector<RegionSpec>* out);
   void readRegion(const YAML::Node& r, const std::string& path, RegionSpec* region);
+  void readLoads(const YAML::Node& list, const std::string& path, std::vector<LoadSpec>* out);
   std::string where(const YAML::Node& at, const std::string& path) const;
   bool unitVector(const YAML::Node& map, const std::string& path, const char* key,
                   Eigen::Vector3d* out);

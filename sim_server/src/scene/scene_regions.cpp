@@ -86,4 +86,75 @@ void SceneParser::readRegions(const YAML::Node& list, const std::string& path,
   }
 }
 
+void SceneParser::readLoads(const YAML::Node& list, const std::string& path,
+                            std::vector<LoadSpec>* out) {
+  if (!list.IsSequence()) {
+    error(list, path, "must be a list of loads (got " + kindOf(list) + ")");
+    return;
+  }
+  for (std::size_t i = 0; i < list.size(); ++i) {
+    const YAML::Node l = list[i];
+    const std::string p = fmt::format("{}[{}]", path, i);
+    if (!l.IsMap()) {
+      error(l, p, "must be a map {region, force | pressure | displacement} (got " + kindOf(l) +
+                      ")");
+      continue;
+    }
+    checkKeys(l, p, {"region", "force", "pressure", "displacement", "ramp"});
+    LoadSpec load;
+    load.where = where(l, p);
+    int kinds = 0;
+    for (const char* k : {"force", "pressure", "displacement"}) kinds += l[k].IsDefined() ? 1 : 0;
+    if (kinds != 1) {
+      error(l, p, fmt::format("must have exactly one of force, pressure, displacement (got {})",
+                              kinds));
+      continue;
+    }
+    require(l, p, "region");
+    const YAML::Node r = l["region"];
+    if (r.IsDefined() && !r.IsMap()) {
+      error(r, join(p, "region"), "must be a map with one selector (got " + kindOf(r) + ")");
+    } else if (r.IsDefined()) {
+      readRegion(r, join(p, "region"), &load.region);
+    }
+    number(l, p, "ramp", &load.ramp_s, kNonNegative, kAtMost(1e7), kNonNegativeUpTo(3600.0));
+    if (l["force"].IsDefined()) {
+      load.kind = LoadKind::kForce;
+      vector<3>(l, p, "force", &load.force_n, kSymmetric(1e6), kSymmetric(1e3));
+    } else if (l["pressure"].IsDefined()) {
+      load.kind = LoadKind::kPressure;
+      number(l, p, "pressure", &load.pressure_pa, kAny, kSymmetric(1e9), kSymmetric(1e6));
+    } else {
+      load.kind = LoadKind::kDisplacement;
+      if (l["ramp"].IsDefined()) error(l["ramp"], join(p, "ramp"), "has no meaning for a displacement (its path sets the timing)");
+      const YAML::Node keys = l["displacement"];
+      const std::string dp = join(p, "displacement");
+      if (!keys.IsSequence() || keys.size() == 0) {
+        error(keys, dp, "must be a non-empty list of {t, offset} keys (got " + kindOf(keys) + ")");
+      } else {
+        for (std::size_t k = 0; k < keys.size(); ++k) {
+          const YAML::Node key = keys[k];
+          const std::string kp = fmt::format("{}[{}]", dp, k);
+          if (!key.IsMap()) {
+            error(key, kp, "must be a map {t, offset} (got " + kindOf(key) + ")");
+            continue;
+          }
+          checkKeys(key, kp, {"t", "offset"});
+          require(key, kp, "t");
+          require(key, kp, "offset");
+          DisplacementKey d;
+          number(key, kp, "t", &d.t_s, kNonNegative, kAtMost(1e7));
+          vector<3>(key, kp, "offset", &d.offset_m, kCoordinate, Range{-1.0, 1.0});
+          if (!load.path.empty() && !(d.t_s > load.path.back().t_s)) {
+            error(key["t"].IsDefined() ? key["t"] : key, join(kp, "t"),
+                  "must be greater than the previous key's t");
+          }
+          load.path.push_back(d);
+        }
+      }
+    }
+    out->push_back(load);
+  }
+}
+
 }  // namespace tactus::sim::scene_detail

@@ -44,7 +44,8 @@ void SceneParser::readTissues(const YAML::Node& root, SceneSpec* spec) {
 
 void SceneParser::readTissue(const YAML::Node& t, const std::string& path, TissueSpec* tissue) {
   checkKeys(t, path, {"name", "mesh", "transform", "material", "damping", "fixed",
-                      "compliance"});
+                      "compliance", "loads"});
+  if (t["loads"].IsDefined()) readLoads(t["loads"], join(path, "loads"), &tissue->loads);
   string(t, path, "name", &tissue->name);
   require(t, path, "mesh");
   std::string mesh;

@@ -64,6 +64,7 @@ struct TissueSpec {
   std::vector<int> fixed_nodes;                    ///< node indices (file order, 0-based)
   std::vector<BoxSpec> fixed_boxes;                ///< nodes inside any box are fixed too
   std::vector<RegionSpec> fixed_regions;           ///< and the nodes of every region
+  std::vector<LoadSpec> loads;                     ///< forces, pressures, displacements
   ComplianceKind compliance = ComplianceKind::kWarped;
   std::filesystem::path compliance_cache_dir;      ///< empty: no on-disk cache
   /// compliance.correction: exact -> ComplianceOptions::exact_correction

@@ -32,6 +32,30 @@ struct RegionSpec {
   std::string where;
 };
 
+enum class LoadKind {
+  kForce,          ///< a total force spread evenly over the region's nodes
+  kPressure,       ///< a pressure on the surface triangles whose three nodes are in the region
+  kDisplacement,   ///< the region's nodes moved along a path (they become Dirichlet nodes)
+};
+
+/// One key of a prescribed displacement path: the offset from the rest position at t_s
+/// (linear between keys; the first offset before the first key, the last after the last).
+struct DisplacementKey {
+  double t_s = 0.0;
+  Eigen::Vector3d offset_m = Eigen::Vector3d::Zero();
+};
+
+/// A load on one tissue (tissues[i].loads; loads.h has how each acts).
+struct LoadSpec {
+  LoadKind kind = LoadKind::kForce;
+  RegionSpec region;
+  Eigen::Vector3d force_n = Eigen::Vector3d::Zero();   ///< kForce: total [N]
+  double pressure_pa = 0.0;                            ///< kPressure: > 0 pushes inward [Pa]
+  double ramp_s = 0.0;     ///< kForce, kPressure: linear ramp from 0 over this time (0: at once)
+  std::vector<DisplacementKey> path;                   ///< kDisplacement: increasing t_s
+  std::string where;                                   ///< "file:line:col: tissues[i].loads[j]"
+};
+
 enum class ObstacleKind { kPlane, kBox, kMesh };
 
 /// A static, rigid obstacle the tissues' surface vertices collide with (obstacles.h).
