@@ -76,16 +76,13 @@ void HapticLoop::solveLocalModel(
   int* row_tool = link.row_instrument.data();
   const std::int32_t* ro = snap.rowOffset();
   const std::int32_t* ci = snap.contactInstrument();
-  if (tools == 1) {
-    std::fill_n(row_tool, m, 0);
-  } else {
-    std::fill_n(row_tool, m, kNoInstrument);
-    for (int c = 0; c < nc; ++c) {
-      const int r0 = std::clamp(ro[c], 0, m);
-      const int r1 = std::clamp(ro[c + 1], r0, m);
-      const int tool = ci[c] >= 0 && ci[c] < tools ? ci[c] : kNoInstrument;
-      for (int r = r0; r < r1; ++r) row_tool[r] = tool;
-    }
+  // (-1: a static obstacle's contact, which moves with no device and pushes no hand)
+  std::fill_n(row_tool, m, kNoInstrument);
+  for (int c = 0; c < nc; ++c) {
+    const int r0 = std::clamp(ro[c], 0, m);
+    const int r1 = std::clamp(ro[c + 1], r0, m);
+    const int tool = ci[c] >= 0 && ci[c] < tools ? ci[c] : kNoInstrument;
+    for (int r = r0; r < r1; ++r) row_tool[r] = tool;
   }
   // delta_free(t) = delta_free* + J (x_h [-] x_h*), each row with its own instrument's device
   const double* df = snap.deltaFree();

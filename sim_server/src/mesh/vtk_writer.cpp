@@ -60,7 +60,8 @@ std::string xmlEscape(const std::string& s) {
 
 void writeVtu(const std::filesystem::path& path, const TetMesh& mesh,
               const Eigen::Matrix3Xd& positions, const Eigen::Matrix3Xd& displacement,
-              const Eigen::VectorXd& von_mises, const Eigen::VectorXd& volume_ratio) {
+              const Eigen::VectorXd& von_mises, const Eigen::VectorXd& volume_ratio,
+              const std::vector<NamedPointVectors>& point_vectors) {
   const Eigen::Index n = mesh.nodes.cols();
   const auto m = static_cast<Eigen::Index>(mesh.tets.size());
   if (positions.cols() != n) {
@@ -103,16 +104,30 @@ void writeVtu(const std::filesystem::path& path, const TetMesh& mesh,
   s += "</DataArray>\n<DataArray type=\"UInt8\" Name=\"types\" format=\"ascii\">\n";
   for (Eigen::Index c = 0; c < m; ++c) s += "10\n";
   s += "</DataArray>\n</Cells>\n";
-  if (displacement.cols() == n && n > 0) {
-    s += "<PointData Vectors=\"displacement\">\n<DataArray type=\"Float64\" "
-         "Name=\"displacement\" NumberOfComponents=\"3\" format=\"ascii\">\n";
-    for (Eigen::Index i = 0; i < n; ++i) {
-      for (int k = 0; k < 3; ++k) {
-        appendDouble(&s, displacement(k, i));
-        s += k < 2 ? ' ' : '\n';
-      }
+  const bool with_displacement = displacement.cols() == n && n > 0;
+  for (const auto& [name, values] : point_vectors) {
+    if (values.cols() != n) {
+      throw Error(fmt::format("{}: writeVtu got {} values of '{}' for {} nodes", path.string(),
+                              values.cols(), name, n));
     }
-    s += "</DataArray>\n</PointData>\n";
+  }
+  if (n > 0 && (with_displacement || !point_vectors.empty())) {
+    s += fmt::format("<PointData Vectors=\"{}\">\n",
+                     with_displacement ? std::string("displacement") : point_vectors[0].first);
+    const auto array = [&](const std::string& name, const Eigen::Matrix3Xd& values) {
+      s += "<DataArray type=\"Float64\" Name=\"" + name +
+           "\" NumberOfComponents=\"3\" format=\"ascii\">\n";
+      for (Eigen::Index i = 0; i < n; ++i) {
+        for (int k = 0; k < 3; ++k) {
+          appendDouble(&s, values(k, i));
+          s += k < 2 ? ' ' : '\n';
+        }
+      }
+      s += "</DataArray>\n";
+    };
+    if (with_displacement) array("displacement", displacement);
+    for (const auto& [name, values] : point_vectors) array(name, values);
+    s += "</PointData>\n";
   }
   const bool with_vm = von_mises.size() == m && m > 0;
   const bool with_ratio = volume_ratio.size() == m && m > 0;

@@ -3,6 +3,7 @@
 #include <array>
 #include <span>
 
+#include "obstacle_stage.h"
 #include "step_stages.h"
 #include "tactus/shared/clock.h"
 
@@ -82,10 +83,12 @@ int countDistinctNodes(const SimulationState& state, StepScratch& scratch) {
   std::vector<std::int64_t>& keys = scratch.node_keys;
   keys.clear();
   for (std::size_t t = 0; t < state.tissues.size(); ++t) {
-    for (const Contact& k : *state.tissues[t].found) {
-      for (int j = 0; j < 3; ++j) {
-        if (k.nodes[j] >= 0 && k.weights[j] != 0.0) {
-          keys.push_back((static_cast<std::int64_t>(t) << 32) | k.nodes[j]);
+    for (const auto* list : {state.tissues[t].found, &state.tissues[t].obstacle_found}) {
+      for (const Contact& k : *list) {
+        for (int j = 0; j < 3; ++j) {
+          if (k.nodes[j] >= 0 && k.weights[j] != 0.0) {
+            keys.push_back((static_cast<std::int64_t>(t) << 32) | k.nodes[j]);
+          }
         }
       }
     }
@@ -96,14 +99,15 @@ int countDistinctNodes(const SimulationState& state, StepScratch& scratch) {
 
 // + H_i C6_i H_i^T (+ c_g g g^T) over instrument i's rows, J's rows of instrument i (= H_i G_i)
 // and its contact compliance on their diagonal. The rows of one instrument are found through
-// scratch.row_instrument (all rows when it is the only one).
+// scratch.row_instrument (-1 for an obstacle's rows, which belong to no instrument).
 void addToolCompliance(const SimulationModel& model, const SimulationState& state,
                        StepScratch& scratch, int instrument, int rows) {
   const double h = model.h_s;
   ContactProblemData& p = scratch.problem;
   const bool only = state.instruments.size() == 1;
+  // (an obstacle's rows, instrument -1, belong to none)
   const auto owns = [&](int r) {
-    return only || scratch.row_instrument[static_cast<std::size_t>(r)] == instrument;
+    return scratch.row_instrument[static_cast<std::size_t>(r)] == instrument;
   };
   const Instrument& tool = state.instruments[static_cast<std::size_t>(instrument)];
   const shared::Matrix6d c6 = tool.compliance6(h);
@@ -180,10 +184,13 @@ void assembleProblem(const SimulationModel& model, SimulationState& state, StepS
   const std::vector<Contact>& all = scratch.all_contacts;
   scratch.row_instrument.resize(static_cast<std::size_t>(rows));
   for (int c = 0; c < contacts; ++c) {
-    p.contact_instrument[c] = all[c].instrument;
-    p.mu[c] = instrumentSpec(model.spec, all[c].instrument).friction_mu;
+    // an obstacle's contact belongs to no instrument (-1): its rows have no tool part
+    const int tool = all[c].kind == ContactKind::kObstacleVertex ? -1 : all[c].instrument;
+    p.contact_instrument[c] = tool;
+    p.mu[c] = tool < 0 ? contactFriction(state, all[c], 0.0)
+                       : instrumentSpec(model.spec, tool).friction_mu;
     for (int r = p.row_offset[c]; r < p.row_offset[c + 1]; ++r) {
-      scratch.row_instrument[static_cast<std::size_t>(r)] = all[c].instrument;
+      scratch.row_instrument[static_cast<std::size_t>(r)] = tool;
     }
     p.contact_id[c] = all[c].id;
     p.point_m[c] = all[c].tissue_point_m;
@@ -192,6 +199,10 @@ void assembleProblem(const SimulationModel& model, SimulationState& state, StepS
     p.tangent2[c] = all[c].t2;
   }
   if (rows == 0) return;
+  if (state.instruments.empty()) {
+    p.J.setZero();
+    return;
+  }
   // + H_tool C6 H_tool^T = B B^T with B = H_tool L (C6 = L L^T), each pair (i, j) computed
   // once and written to both halves: W stays symmetric to the bit (the tissue blocks are), so
   // NSGS may use its symmetric sweep
@@ -231,11 +242,13 @@ void buildW(const SimulationModel& model, SimulationState& state, StepScratch& s
                      std::span<const Eigen::Vector3d>(origin.data(), tools), tx.rows);
     gripColumn(found, detected, tx);
     freeGaps(model, scratch, ts, tx, detected, found_at);
+    scratch.all_contacts.insert(scratch.all_contacts.end(), found.begin(), found.end());
+    const int obstacle_contacts = appendObstacleRows(model, state, scratch, t, found_at);
+    report.contacts_dropped += ts.obstacle_overflow;
     tx.row_begin = rows;
     tx.contact_begin = contacts;
     rows += tx.rows.rows();
-    contacts += static_cast<int>(found.size());
-    scratch.all_contacts.insert(scratch.all_contacts.end(), found.begin(), found.end());
+    contacts += static_cast<int>(found.size()) + obstacle_contacts;
   }
   assembleProblem(model, state, scratch, counters, contacts, rows);
   report.distinct_tissue_nodes = countDistinctNodes(state, scratch);

@@ -1,13 +1,15 @@
 #pragma once
 // The VTK output of a run (scene key output): one .vtu per tissue every output.every_n_steps
-// steps (positions, displacement, von Mises stress, volume ratio) and the series.pvd that lists
-// them by time. Outside the physics: it only reads the state.
+// steps (positions, displacement, von Mises stress, volume ratio; with fixed nodes or contacts
+// the per-node "reaction_force" and "contact_force" of reactions.h) and the series.pvd that lists
+// them by time. Outside the physics (the reactions refresh the element rotations only).
 
 #include <string>
 #include <vector>
 
 #include "simulation_model.h"
 #include "simulation_state.h"
+#include "step_scratch.h"
 
 namespace tactus::sim {
 
@@ -15,7 +17,7 @@ class OutputWriter {
  public:
   /// Writes the frame of the current state when output is enabled and the step is due; returns
   /// whether it wrote one.
-  bool writeIfDue(const SimulationModel& model, const SimulationState& state);
+  bool writeIfDue(const SimulationModel& model, SimulationState& state, const StepScratch& scratch);
   /// Rewrites the series file at the end of the run and logs where it is.
   void finish(const SimulationModel& model) const;
   long frames() const { return frame_; }

@@ -7,6 +7,7 @@
 #include <limits>
 
 #include "simulation_impl.h"
+#include "reactions_stage.h"
 #include "step_stages.h"
 #include "tactus/shared/clock.h"
 
@@ -32,15 +33,14 @@ StepReport Simulation::step() {
 
   // step_start: contacts at the start-of-step state (buildW carries them to the free state, from
   // q_begin and tool_start)
-  const bool tools = !s.instruments.empty();
-  if (tools && detect_at_start) {
+  if (m.has_contacts && detect_at_start) {
     detectCollisions(m, s, x, report, counters);
     x.tool_start = s.instruments;
   }
 
   freeMotion(m, s, x, report);
 
-  if (tools) {
+  if (m.has_contacts) {
     updateCompliance(s, report);
     keepFreeState(s, x);
     if (!detect_at_start) detectCollisions(m, s, x, report, counters);
@@ -58,7 +58,7 @@ StepReport Simulation::step() {
     for (std::size_t i = 0; i < s.instruments.size(); ++i) {
       x.problem.instruments[i].tool_pose = s.instruments[i].pose();
     }
-    x.problem.tool_pose = s.instruments[0].pose();
+    if (!s.instruments.empty()) x.problem.tool_pose = s.instruments[0].pose();
   }
 
   s.t_s += m.h_s;
@@ -147,8 +147,12 @@ const ContactProblemData& Simulation::lastProblem() const { return impl_->scratc
 const PipelineCounters& Simulation::counters() const { return impl_->counters; }
 
 double Simulation::geometricMinGap() {
-  if (impl_->state.instruments.empty()) return std::numeric_limits<double>::infinity();
+  if (!impl_->model.has_contacts) return std::numeric_limits<double>::infinity();
   return queryContacts(impl_->model, impl_->state, impl_->scratch);
+}
+
+ReactionForces Simulation::reactions() {
+  return computeReactions(impl_->model, impl_->state, impl_->scratch);
 }
 
 double Simulation::totalEnergy() const {
@@ -170,7 +174,9 @@ Eigen::Matrix<double, 6, 1> Simulation::renderedWrench(int i) const {
 }
 
 void Simulation::writeOutputIfDue() {
-  if (impl_->output.writeIfDue(impl_->model, impl_->state)) ++impl_->counters.vtk_frames;
+  if (impl_->output.writeIfDue(impl_->model, impl_->state, impl_->scratch)) {
+    ++impl_->counters.vtk_frames;
+  }
 }
 
 void Simulation::finishOutput() { impl_->output.finish(impl_->model); }

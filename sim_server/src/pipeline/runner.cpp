@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "display_publisher.h"
+#include "obstacle_stage.h"
 #include "segment_host.h"
 #include "tactus/sim/instrument.h"
 #include "tactus/shared/clock.h"
@@ -109,6 +110,22 @@ std::string RunStatistics::table() const {
   return out;
 }
 
+// The reactions at the end of the run [N] (reactions.h).
+static std::string reactionsJson(const ReactionForces& r) {
+  const auto vec = [](const Eigen::Vector3d& v) {
+    return fmt::format("[{:.9g}, {:.9g}, {:.9g}]", v.x(), v.y(), v.z());
+  };
+  std::string obstacles;
+  for (std::size_t i = 0; i < r.obstacle_names.size(); ++i) {
+    obstacles += fmt::format("{}\"{}\": {}", i ? ", " : "", jsonEscape(r.obstacle_names[i]),
+                             vec(r.obstacle_force_n[i]));
+  }
+  return fmt::format("{{\"weight_n\": {}, \"loads_n\": {}, \"fixed_n\": {}, "
+                     "\"obstacles_n\": {{{}}}, \"instrument_n\": {}, \"imbalance_n\": {}}}",
+                     vec(r.weight_n), vec(r.applied_load_n), vec(r.fixed_total_n), obstacles,
+                     vec(r.instrument_force_n), vec(r.imbalance_n()));
+}
+
 std::string RunStatistics::json(const std::string& scene) const {
   std::string out = fmt::format("{{\n  \"scene\": \"{}\",\n  \"steps\": {},\n  \"stages_ms\": {{\n",
                                 jsonEscape(scene), steps());
@@ -121,9 +138,11 @@ std::string RunStatistics::json(const std::string& scene) const {
   }
   out += fmt::format("  }},\n  \"contacts_median\": {:.1f},\n  \"contacts_max\": {},\n"
                      "  \"sweeps_median\": {:.1f},\n  \"max_penetration_mm\": {:.6f},\n"
-                     "  \"inverted_elements_max\": {},\n  \"inverted_elements_last\": {}\n}}\n",
+                     "  \"inverted_elements_max\": {},\n  \"inverted_elements_last\": {}",
                      medianContacts(), maxContacts(), medianSweeps(), 1e3 * max_penetration_m_,
                      max_inverted_, last_inverted_);
+  if (reactions_) out += ",\n  \"reactions\": " + reactionsJson(*reactions_);
+  out += "\n}\n";
   return out;
 }
 
@@ -223,8 +242,7 @@ int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
         options.record_snapshots,
         shared::OutputOptions{.overwrite = options.overwrite,
                               .overwrite_hint = "pass --overwrite to replace it"});
-    shared::SegmentCapacity cap =
-        shared::SegmentCapacity::forContacts(problemContactCapacity(spec), anyFriction(spec));
+    shared::SegmentCapacity cap = problemCapacity(spec);   // instruments' and obstacles' contacts
     cap.devices = std::max(1, instrumentCount(spec));
     record_layout = shared::SnapshotLayout::forCapacity(cap.max_rows, cap.max_contacts);
     record_slot.assign(record_layout.total_bytes / sizeof(double) + 1, 0.0);
@@ -317,6 +335,7 @@ int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
   spdlog::info("{} steps, simulated {:.3f} s in {:.3f} s wall", stats.steps(), sim.time(), wall_s);
   std::printf("%s", stats.table().c_str());
   if (stats_file) {
+    stats.setReactions(sim.reactions());
     stats_file->write(stats.json(spec.source.string()));
     stats_file->commit();
     spdlog::info("statistics written to {}", options.stats_json);

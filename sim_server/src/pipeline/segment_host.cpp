@@ -1,5 +1,6 @@
 // Segment publishing for the haptic process.
 #include "segment_host.h"
+#include "obstacle_stage.h"
 
 #include <spdlog/spdlog.h>
 
@@ -24,8 +25,7 @@ Eigen::Vector3d boundedNorm(Eigen::Vector3d v, double max_norm) {
 namespace {
 
 shared::SegmentCapacity capacityFor(const SceneSpec& spec, std::size_t devices) {
-  shared::SegmentCapacity c =
-      shared::SegmentCapacity::forContacts(problemContactCapacity(spec), anyFriction(spec));
+  shared::SegmentCapacity c = problemCapacity(spec);   // instruments' and obstacles' contacts
   c.devices = static_cast<std::int32_t>(std::max<std::size_t>(1, devices));
   return c;
 }

@@ -27,7 +27,7 @@ TissueState buildTissueState(const SimulationModel& model, const TissueSpec& ts,
                                          femSolverOptions(spec.solver));
   spdlog::info("tissue '{}': {} nodes, {} tets, {} fixed nodes", ts.name, tissue.mesh.nodeCount(),
                tissue.mesh.tetCount(), tissue.fixed_nodes.size());
-  if (!model.has_instrument) return state;
+  if (!model.has_contacts) return state;
   ComplianceOptions copt;
   copt.h_s = model.h_s;
   copt.cache_dir = ts.compliance_cache_dir;
@@ -58,6 +58,9 @@ SimulationState buildState(const SimulationModel& model) {
   for (std::size_t t = 0; t < model.tissues.size(); ++t) {
     state.tissues.push_back(buildTissueState(model, model.spec.tissues[t], model.tissues[t]));
   }
+  if (!model.spec.obstacles.empty()) {
+    state.obstacles = std::make_unique<Obstacles>(model.spec.obstacles, model.spec.obstacle_contact);
+  }
   for (int i = 0; i < model.instrument_count; ++i) {
     const InstrumentSpec& in = instrumentSpec(model.spec, i);
     Instrument& tool = state.instruments.emplace_back(in);
@@ -79,7 +82,12 @@ StepScratch buildScratch(const SimulationModel& model) {
   scratch.grip_torque.assign(n, 0.0);
   scratch.previous_grip_torque.assign(n, 0.0);
   scratch.problem.instruments.resize(n);
-  if (model.has_instrument) scratch.workspace.reserve(model.max_rows, model.spec.solver.max_contacts);
+  if (model.has_contacts) {
+    scratch.workspace.reserve(model.max_rows,
+                              problemContactCapacity(model.spec) +
+                                  model.spec.obstacle_contact.max_contacts *
+                                      static_cast<int>(model.tissues.size()));
+  }
   scratch.problem.row_offset.assign(1, 0);
   return scratch;
 }
@@ -106,8 +114,25 @@ std::vector<std::string> Simulation::stages() const {
     }
     out.push_back(fmt::format("free motion of tissue '{}' (implicit Euler; {})", ts.name, effects));
   }
-  if (!impl_->model.has_instrument) {
+  for (const ObstacleSpec& o : spec.obstacles) {
+    out.push_back(fmt::format("obstacle '{}' ({}, friction {}) against the tissues' surface "
+                              "vertices (alarm {} mm, at most {} contacts per tissue)",
+                              o.name,
+                              o.kind == ObstacleKind::kPlane ? "plane"
+                              : o.kind == ObstacleKind::kBox ? "box"
+                                                             : "triangle surface",
+                              o.friction_mu, 1e3 * spec.obstacle_contact.alarm_distance_m,
+                              spec.obstacle_contact.max_contacts));
+  }
+  if (!impl_->model.has_instrument && !impl_->model.has_contacts) {
     out.push_back("no instrument: no collision, no contact problem");
+  } else if (!impl_->model.has_instrument) {
+    for (const auto& ts : spec.tissues) {
+      out.push_back(fmt::format("W = H C H^T with {} compliance of '{}'", toString(ts.compliance),
+                                ts.name));
+    }
+    out.push_back("NSGS on the obstacles' contacts");
+    out.push_back("constrained motion (tissues)");
   } else {
     const auto& in = spec.instrument;
     for (int i = 0; i < impl_->model.instrument_count; ++i) {

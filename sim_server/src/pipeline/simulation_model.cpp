@@ -8,6 +8,8 @@
 #include "tactus/shared/error.h"
 #include "tactus/sim/fem.h"
 #include "tactus/sim/instrument.h"
+#include "tactus/sim/node_regions.h"
+#include "obstacle_stage.h"
 
 namespace tactus::sim {
 namespace {
@@ -25,12 +27,23 @@ TissueModel buildTissueModel(const SceneSpec& spec, const TissueSpec& ts) {
                                    spec.source.string(), ts.name, n, tissue.mesh.nodeCount()));
     }
   }
-  const std::vector<int> boxed = nodesInBoxes(tissue.mesh, ts.fixed_boxes);
-  fixed.insert(fixed.end(), boxed.begin(), boxed.end());
+  // a region that catches no node is a mistake in the scene (a box in the wrong units or frame)
+  const std::string scene_where = fmt::format("{}: tissues '{}'", spec.source.string(), ts.name);
+  std::vector<RegionSpec> regions;
+  for (const BoxSpec& box : ts.fixed_boxes) regions.push_back(boxRegion(box));
+  regions.insert(regions.end(), ts.fixed_regions.begin(), ts.fixed_regions.end());
+  for (const RegionSpec& region : regions) {
+    const std::vector<int> nodes =
+        requireRegionNodes(tissue.mesh, region, ts.name, "fixed", scene_where + ": fixed");
+    fixed.insert(fixed.end(), nodes.begin(), nodes.end());
+  }
+  tissue.loads = buildTissueLoads(tissue.mesh, ts, scene_where);
+  const std::vector<int> prescribed = prescribedNodes(tissue.loads);
+  fixed.insert(fixed.end(), prescribed.begin(), prescribed.end());
   std::sort(fixed.begin(), fixed.end());
   fixed.erase(std::unique(fixed.begin(), fixed.end()), fixed.end());
   tissue.fixed_nodes = std::move(fixed);
-  if (spec.instrument.present) tissue.surface = extractSurface(tissue.mesh);
+  if (spec.instrument.present || !spec.obstacles.empty()) tissue.surface = extractSurface(tissue.mesh);
   return tissue;
 }
 
@@ -44,22 +57,25 @@ SimulationModel buildModel(const SceneSpec& spec) {
   for (const TissueSpec& ts : spec.tissues) model.tissues.push_back(buildTissueModel(spec, ts));
   model.has_instrument = spec.instrument.present;
   model.instrument_count = instrumentCount(spec);
+  model.has_contacts = model.has_instrument || !spec.obstacles.empty();
+  if (!model.has_contacts) return model;
+  model.nsgs.tolerance = spec.solver.nsgs_tolerance;
+  model.nsgs.max_sweeps = spec.solver.nsgs_max_sweeps;
+  model.nsgs.sor = spec.solver.nsgs_sor;
+  model.nsgs.coupling = shared::NsgsCoupling::kSymmetricRowUpdate;   // buildW keeps W symmetric
+  // obstacle rows (3 per contact with friction) come after the instruments', per tissue
+  model.max_rows = obstacleRowCapacity(spec);
   if (!model.has_instrument) return model;
   // the device target stays within a box around the scene at rest (instrument.h "Workspace")
   Eigen::AlignedBox3d bounds;
   for (const TissueModel& tissue : model.tissues) {
     for (Eigen::Index i = 0; i < tissue.mesh.nodes.cols(); ++i) bounds.extend(tissue.mesh.nodes.col(i));
   }
-  model.max_rows = 0;
   for (int i = 0; i < model.instrument_count; ++i) {
     const InstrumentSpec& in = instrumentSpec(spec, i);
     model.instrument_workspaces.push_back(instrumentWorkspace(in, bounds));
     model.max_rows += (in.friction_mu > 0.0 ? 3 : 1) * spec.solver.max_contacts;
   }
-  model.nsgs.tolerance = spec.solver.nsgs_tolerance;
-  model.nsgs.max_sweeps = spec.solver.nsgs_max_sweeps;
-  model.nsgs.sor = spec.solver.nsgs_sor;
-  model.nsgs.coupling = shared::NsgsCoupling::kSymmetricRowUpdate;   // buildW keeps W symmetric
   return model;
 }
 

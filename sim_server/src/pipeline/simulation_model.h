@@ -23,6 +23,7 @@
 #include "tactus/shared/nsgs.h"
 #include "tactus/sim/mesh.h"
 #include "tactus/sim/scene.h"
+#include "loads.h"
 
 namespace tactus::sim {
 
@@ -30,8 +31,10 @@ namespace tactus::sim {
 struct TissueModel {
   std::string name;
   TetMesh mesh;                    ///< rest mesh, scaled, rotated and placed as the scene says
-  SurfaceMesh surface;             ///< its boundary (only with an instrument)
+  SurfaceMesh surface;             ///< its boundary (only with an instrument or obstacles)
   std::vector<int> fixed_nodes;    ///< Dirichlet nodes: the listed ones and those in the boxes
+                                   ///< and regions, and those a displacement load moves
+  std::vector<TissueLoad> loads;   ///< forces, pressures, displacements (loads.h)
 };
 
 struct SimulationModel {
@@ -40,6 +43,8 @@ struct SimulationModel {
   std::vector<TissueModel> tissues;
   bool has_instrument = false;
   int instrument_count = 0;              ///< instrumentCount(spec)
+  /// A contact problem each step: an instrument or static obstacles (obstacles.h)
+  bool has_contacts = false;
   int max_rows = 0;                      ///< rows of the largest contact problem
   shared::NsgsSettings nsgs;             ///< the simulation's NSGS settings
   /// Per instrument: where its device target may go (instrument.h)

@@ -14,6 +14,7 @@
 #include "tactus/sim/compliance.h"
 #include "tactus/sim/fem.h"
 #include "tactus/sim/instrument.h"
+#include "tactus/sim/obstacles.h"
 #include "tactus/sim/pipeline.h"
 
 namespace tactus::sim {
@@ -35,6 +36,9 @@ struct TissueState {
   /// one instrument, else `merged`.
   const std::vector<Contact>* found = nullptr;
   std::vector<Contact> merged;                   ///< several instruments' contacts, in order
+  /// Contacts with the static obstacles of the last detection (obstacle_stage.h)
+  std::vector<Contact> obstacle_found;
+  int obstacle_overflow = 0;
 };
 
 struct SimulationState {
@@ -46,6 +50,8 @@ struct SimulationState {
   std::vector<Instrument> instruments;
   std::vector<DeviceTarget> targets;        ///< the device targets the next step follows
   std::vector<char> target_rejected;        ///< the last setDeviceTarget(i) was non-finite
+  /// The static obstacles (obstacles.h); null without any.
+  std::unique_ptr<Obstacles> obstacles;
   /// The last solve's force per contact id (n, t1, t2): the next solve's warm start.
   std::unordered_map<std::uint64_t, std::array<double, 3>> warm_start_f;
 };

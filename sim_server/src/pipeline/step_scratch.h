@@ -27,6 +27,8 @@ struct TissueScratch {
   int contact_begin = 0;                 ///< first global contact
   Eigen::VectorXd dq;                    ///< this pass's correction
   Eigen::VectorXd dq_previous;           ///< the previous contact pass's correction
+  Eigen::VectorXd load_force;            ///< the loads' nodal forces of this step (loads.h)
+  bool has_load_force = false;           ///< load_force holds some force or pressure
 };
 
 using ToolRows = Eigen::Matrix<double, Eigen::Dynamic, 6, Eigen::RowMajor>;

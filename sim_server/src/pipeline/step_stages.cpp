@@ -6,6 +6,7 @@
 #include <cmath>
 #include <limits>
 
+#include "obstacle_stage.h"
 #include "tactus/shared/clock.h"
 
 namespace tactus::sim {
@@ -16,8 +17,15 @@ void freeMotion(const SimulationModel& model, SimulationState& state, StepScratc
   const std::int64_t t0 = shared::monotonicNs();
   for (std::size_t t = 0; t < state.tissues.size(); ++t) {
     FemBody& body = *state.tissues[t].body;
-    if (!state.instruments.empty()) scratch.tissues[t].q_begin = body.positions();
-    const FemStepStats st = body.freeMotion(h);
+    const std::vector<TissueLoad>& loads = model.tissues[t].loads;
+    TissueScratch& tx = scratch.tissues[t];
+    const Eigen::VectorXd* load_force =
+        loads.empty() ? nullptr
+                      : applyLoadsBeforeFreeMotion(loads, body, state.t_s + h, h, tx.load_force);
+    tx.has_load_force = load_force != nullptr;
+    if (model.has_contacts) tx.q_begin = body.positions();
+    const FemStepStats st = body.freeMotion(h, load_force);
+    if (!loads.empty()) applyLoadsAfterFreeMotion(loads, body, state.t_s + h);
     if (!st.ok) report.finite = false;
     report.inverted_elements += st.inverted_elements;
     report.fem_cg_iterations += st.cg_iterations;
@@ -55,7 +63,7 @@ void detectTissue(SimulationState& state, TissueState& ts) {
   for (std::size_t i = 0; i < n; ++i) {
     for (Contact k : ts.collisions[i]->detect(state.instruments[i])) {
       k.instrument = static_cast<int>(i);
-      k.id |= static_cast<std::uint64_t>(i) << 57;
+      k.id |= static_cast<std::uint64_t>(i) << 58;   // above the kind (bits 56-57)
       ts.merged.push_back(k);
     }
   }
@@ -67,7 +75,15 @@ void detectTissue(SimulationState& state, TissueState& ts) {
 double queryContacts(const SimulationModel& model, SimulationState& state, StepScratch& scratch) {
   double min_gap = std::numeric_limits<double>::infinity();
   scratch.min_excess_gap = min_gap;
+  static const std::vector<Contact> kNone;
+  // the obstacles' contacts (no contact compliance on them)
+  min_gap = std::min(min_gap, detectObstacleContacts(model, state));
+  scratch.min_excess_gap = min_gap;
   for (TissueState& ts : state.tissues) {
+    if (state.instruments.empty()) {
+      ts.found = &kNone;
+      continue;
+    }
     detectTissue(state, ts);
     for (const Contact& k : *ts.found) {
       min_gap = std::min(min_gap, k.gap_m);
@@ -183,7 +199,9 @@ void constrainedMotion(const SimulationModel& model, SimulationState& state, Ste
         scratch.grip_torque[i] = 0.0;
       }
       for (int r = 0; r < rows; ++r) {
-        const auto i = static_cast<std::size_t>(scratch.row_instrument[static_cast<std::size_t>(r)]);
+        const int tool = scratch.row_instrument[static_cast<std::size_t>(r)];
+        if (tool < 0) continue;   // an obstacle's row: no instrument
+        const auto i = static_cast<std::size_t>(tool);
         scratch.wrench[i] += scratch.h_tool.row(r).transpose() * p.f[r];
         if (state.instruments[i].dynamicGrip()) scratch.grip_torque[i] += p.grip[r] * p.f[r];
       }
@@ -193,7 +211,7 @@ void constrainedMotion(const SimulationModel& model, SimulationState& state, Ste
       tool.applyCorrection(scratch.wrench[i]);
       if (tool.dynamicGrip()) tool.applyGripCorrection(scratch.grip_torque[i]);
     }
-    report.tool_wrench = scratch.wrench[0];
+    if (tools > 0) report.tool_wrench = scratch.wrench[0];
     // linearised gaps after the correction: delta = W f + delta_free, left by NSGS on exit
     // (not when it refused the problem as larger than its workspace: then computed here)
     Eigen::VectorXd unsolved_delta;

@@ -27,7 +27,7 @@ constexpr std::size_t kMaxContactProblemBytes = std::size_t{2} << 30;
 
 void SceneParser::readRoot(const YAML::Node& root, SceneSpec* spec) {
   checkKeys(root, "", {"time_step", "duration", "gravity", "tissues", "instrument", "instruments",
-                       "solver", "haptics", "output"});
+                       "solver", "haptics", "output", "obstacles", "obstacle_contact"});
   require(root, "", "time_step");
   number(root, "", "time_step", &spec->time_step_s, kPositive, kAtMost(1.0), Range{1e-5, 0.05});
   number(root, "", "duration", &spec->duration_s, kNonNegative, kAtMost(1e7), Range{0.0, 86400.0});
@@ -36,6 +36,7 @@ void SceneParser::readRoot(const YAML::Node& root, SceneSpec* spec) {
     spec->gravity_mps2 = g;
   }
   readTissues(root, spec);
+  readObstacles(root, spec);   // scene_obstacles.cpp
   YAML::Node n;
   readInstruments(root, spec);
   if (section(root, "", "solver", &n)) readSolver(n, &spec->solver, instrumentCount(*spec));

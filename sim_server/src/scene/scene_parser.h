@@ -3,6 +3,8 @@
 //   scene_values.cpp      YAML node helpers: typed accessors with range checks, errors, warnings
 //   scene_tissue.cpp      the tissues section
 //   scene_instrument.cpp  the instrument section (tool, grasper, pose, trajectory, workspace)
+//   scene_regions.cpp     node regions (fixed.regions, loads)
+//   scene_obstacles.cpp   the obstacles and obstacle_contact sections
 //   scene_loader.cpp      the root, solver, haptics and output sections; parseScene, loadScene
 // Every problem is collected with file:line:col and field path and reported at once.
 
@@ -161,6 +163,14 @@ class SceneParser {
   void readTissues(const YAML::Node& root, SceneSpec* spec);                     // scene_tissue.cpp
   void readTissue(const YAML::Node& t, const std::string& path, TissueSpec* tissue);
   void readFixed(const YAML::Node& f, const std::string& path, TissueSpec* tissue);
+  // scene_regions.cpp: node regions; "file:line:col: path" of a node; a non-zero vector, normalised
+  void readRegions(const YAML::Node& list, const std::string& path, std::vector<RegionSpec>* out);
+  void readRegion(const YAML::Node& r, const std::string& path, RegionSpec* region);
+  void readLoads(const YAML::Node& list, const std::string& path, std::vector<LoadSpec>* out);
+  std::string where(const YAML::Node& at, const std::string& path) const;
+  bool unitVector(const YAML::Node& map, const std::string& path, const char* key,
+                  Eigen::Vector3d* out);
+  void readObstacles(const YAML::Node& root, SceneSpec* spec);              // scene_obstacles.cpp
   void readInstrument(const YAML::Node& n, const std::string& p,          // scene_instrument.cpp
                       InstrumentSpec* in);
   void readInstruments(const YAML::Node& root, SceneSpec* spec);

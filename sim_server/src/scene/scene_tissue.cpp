@@ -44,7 +44,8 @@ void SceneParser::readTissues(const YAML::Node& root, SceneSpec* spec) {
 
 void SceneParser::readTissue(const YAML::Node& t, const std::string& path, TissueSpec* tissue) {
   checkKeys(t, path, {"name", "mesh", "transform", "material", "damping", "fixed",
-                      "compliance"});
+                      "compliance", "loads"});
+  if (t["loads"].IsDefined()) readLoads(t["loads"], join(path, "loads"), &tissue->loads);
   string(t, path, "name", &tissue->name);
   require(t, path, "mesh");
   std::string mesh;
@@ -110,7 +111,8 @@ void SceneParser::readTissue(const YAML::Node& t, const std::string& path, Tissu
 }
 
 void SceneParser::readFixed(const YAML::Node& f, const std::string& path, TissueSpec* tissue) {
-  checkKeys(f, path, {"nodes", "boxes"});
+  checkKeys(f, path, {"nodes", "boxes", "regions"});
+  if (f["regions"].IsDefined()) readRegions(f["regions"], join(path, "regions"), &tissue->fixed_regions);
   const YAML::Node nodes = f["nodes"];
   if (nodes.IsDefined()) {
     if (!nodes.IsSequence()) {
@@ -149,6 +151,7 @@ void SceneParser::readFixed(const YAML::Node& f, const std::string& path, Tissue
       require(b, p, "min");
       require(b, p, "max");
       BoxSpec box;
+      box.where = where(b, p);
       const bool ok_min = vector<3>(b, p, "min", &box.min_m, kCoordinate);
       const bool ok_max = vector<3>(b, p, "max", &box.max_m, kCoordinate);
       if (ok_min && ok_max) {

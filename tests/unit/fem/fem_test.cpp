@@ -382,7 +382,7 @@ TEST(Transform, ScaleRotateTranslate) {
   transformMesh(mesh, 0.1, Eigen::Vector3d(0, 0, 90), Eigen::Vector3d(1, 0, 0));
   // node (1,0,0) scaled to (0.1,0,0), rotated 90 deg about z to (0,0.1,0), shifted by x+1
   EXPECT_TRUE(mesh.nodes.col(1).isApprox(Eigen::Vector3d(1.0, 0.1, 0.0), 1e-12));
-  BoxSpec box{Eigen::Vector3d(0.95, -1, -1), Eigen::Vector3d(1.05, 1, 1)};
+  BoxSpec box{Eigen::Vector3d(0.95, -1, -1), Eigen::Vector3d(1.05, 1, 1), {}};
   EXPECT_EQ(nodesInBoxes(mesh, {box}).size(), 4u);
 }
 

@@ -55,7 +55,8 @@ static_assert(std::is_trivially_copyable_v<SnapshotInstrument>);
 /// Fixed part of the contact snapshot (the haptic local model of
 /// ../../../../docs/design.md#the-haptic-local-model), at offset 0 of its triple-buffer slot.
 /// Several instruments (docs/design.md, "Several instruments and devices"): `instruments`
-/// blocks are valid, contact c belongs to instrument SnapshotView::contactInstrument()[c], and
+/// blocks are valid, contact c belongs to instrument SnapshotView::contactInstrument()[c] (-1: to
+/// none, a static obstacle's contact, whose J and tool rows are zero), and
 /// row r of J is d delta_free_r / d x_h of that instrument's device. device_seq, device_pose
 /// and tool_pose repeat instrument 0's block for readers of one instrument.
 struct ContactSnapshotHeader {
@@ -93,7 +94,7 @@ struct SnapshotLayout {
   std::size_t contact_point_m = 0;   ///< double[cap_c * 3] world contact points
   std::size_t contact_normal = 0;    ///< double[cap_c * 3] world normals (local frame row n)
   std::size_t contact_tangent = 0;   ///< double[cap_c * 6] world t1 then t2 per contact
-  std::size_t contact_instrument = 0;  ///< int32[cap_c] the instrument of each contact
+  std::size_t contact_instrument = 0;  ///< int32[cap_c] the instrument of each contact (-1: none)
   std::size_t total_bytes = 0;       ///< slot payload size
 
   /// Layout for a capacity (max_rows >= 0, max_contacts >= 0). Pure function: both processes

@@ -80,7 +80,12 @@
 
 namespace tactus::sim {
 
-enum class ContactKind : std::uint8_t { kVertexCapsule = 0, kSphereTriangle = 1 };
+/// kObstacleVertex: a tissue surface vertex against a static obstacle (obstacles.h).
+enum class ContactKind : std::uint8_t {
+  kVertexCapsule = 0,
+  kSphereTriangle = 1,
+  kObstacleVertex = 2,
+};
 
 struct Contact {
   std::uint64_t id = 0;                   ///< stable identity, see above
@@ -97,8 +102,9 @@ struct Contact {
   Eigen::Vector3d t2 = Eigen::Vector3d::UnitY();
   double gap_m = 0.0;
   /// The instrument the tool feature belongs to (SceneSpec's order). Collision::detect leaves 0;
-  /// with several instruments the pipeline sets it and ors it into the id's bits 57-63 (the kind
-  /// takes bit 56), so contacts of different instruments never share an id.
+  /// with several instruments the pipeline sets it and ors it into the id's bits 58-63 (the kind
+  /// takes bits 56-57), so contacts of different instruments, and obstacles' contacts, never
+  /// share an id. -1: an obstacle's contact (kObstacleVertex), which belongs to no instrument.
   int instrument = 0;
 };
 

@@ -228,7 +228,7 @@ class Instrument {
   //  * statistics: clamped_targets_.
   InstrumentSpec spec_;
   BoxSpec workspace_{Eigen::Vector3d::Constant(-kDefaultWorkspaceHalfM),
-                     Eigen::Vector3d::Constant(kDefaultWorkspaceHalfM)};
+                     Eigen::Vector3d::Constant(kDefaultWorkspaceHalfM), {}};
   long clamped_targets_ = 0;
   shared::Pose pose_;
   Vector6d twist_ = Vector6d::Zero();

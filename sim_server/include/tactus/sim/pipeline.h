@@ -22,6 +22,7 @@
 #include "tactus/shared/nsgs.h"
 #include "tactus/shared/pose.h"
 #include "tactus/sim/collision.h"
+#include "tactus/sim/reactions.h"
 #include "tactus/sim/scene.h"
 
 namespace tactus::sim {
@@ -185,6 +186,11 @@ class Simulation {
   /// by a fresh collision query (negative: penetration; +inf when nothing is within the alarm
   /// distance). For tests and diagnostics: costs a refit and a query per tissue.
   double geometricMinGap();
+
+  /// Reactions at the fixed nodes, contact force per obstacle and from the instrument, at the
+  /// current state with the last step's contact forces (reactions.h). Costs one elastic-force
+  /// evaluation per tissue with fixed nodes.
+  ReactionForces reactions();
 
   /// Sum over tissues and the instrument of kinetic + elastic + gravity energy [J].
   double totalEnergy() const;

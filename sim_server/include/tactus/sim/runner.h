@@ -5,6 +5,7 @@
 
 #include <atomic>
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -67,6 +68,8 @@ class RunStatistics {
   std::string table() const;
   /// JSON object (stages with percentiles, contacts, sweeps) for comparison between commits.
   std::string json(const std::string& scene) const;
+  /// The reactions at the end of the run (reactions.h), written into json() as "reactions".
+  void setReactions(const ReactionForces& reactions) { reactions_ = reactions; }
 
  private:
   std::vector<double> free_motion_, detect_collisions_, update_compliance_, build_w_,
@@ -75,6 +78,7 @@ class RunStatistics {
   double max_penetration_m_ = 0.0;
   int max_inverted_ = 0;
   int last_inverted_ = 0;
+  std::optional<ReactionForces> reactions_;
 };
 
 /// Runs a scene until `stop`, the step count or the duration. Returns the process exit code.

@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "tactus/shared/workspace_mapping.h"
+#include "tactus/sim/scene_regions.h"
 
 namespace tactus::sim {
 
@@ -38,6 +39,8 @@ enum class ContactDetection {
 struct BoxSpec {
   Eigen::Vector3d min_m = Eigen::Vector3d::Zero();
   Eigen::Vector3d max_m = Eigen::Vector3d::Zero();
+  /// Where the scene defines it ("file:line:col: path"), for messages; empty when built in code.
+  std::string where;
 };
 
 /// Rayleigh damping B = alpha M + beta K.
@@ -60,6 +63,8 @@ struct TissueSpec {
   std::optional<RayleighSpec> damping;             ///< absent: no damping terms at all
   std::vector<int> fixed_nodes;                    ///< node indices (file order, 0-based)
   std::vector<BoxSpec> fixed_boxes;                ///< nodes inside any box are fixed too
+  std::vector<RegionSpec> fixed_regions;           ///< and the nodes of every region
+  std::vector<LoadSpec> loads;                     ///< forces, pressures, displacements
   ComplianceKind compliance = ComplianceKind::kWarped;
   std::filesystem::path compliance_cache_dir;      ///< empty: no on-disk cache
   /// compliance.correction: exact -> ComplianceOptions::exact_correction
@@ -200,6 +205,8 @@ struct SceneSpec {
   double time_step_s = 0.01;
   std::optional<Eigen::Vector3d> gravity_mps2;  ///< absent: no gravity
   std::vector<TissueSpec> tissues;
+  std::vector<ObstacleSpec> obstacles;          ///< static obstacles (scene_regions.h)
+  ObstacleContactSpec obstacle_contact;
   /// The first instrument (`instrument:`, or `instruments[0]`); present == false: none.
   InstrumentSpec instrument;
   /// `instruments[1..]`: the others, in order (empty with the single `instrument:` form). Every

@@ -1,0 +1,101 @@
+// Scene parsing: the obstacles and obstacle_contact sections (static obstacles, issue 20).
+
+#include <spdlog/fmt/fmt.h>
+#include <yaml-cpp/yaml.h>
+
+#include <filesystem>
+#include <set>
+
+#include "scene_parser.h"
+
+namespace tactus::sim::scene_detail {
+
+namespace {
+constexpr Range kFriction{0.0, 100.0};
+}
+
+void SceneParser::readObstacles(const YAML::Node& root, SceneSpec* spec) {
+  YAML::Node c;
+  if (section(root, "", "obstacle_contact", &c)) {
+    const std::string p = "obstacle_contact";
+    checkKeys(c, p, {"alarm_distance", "max_contacts"});
+    number(c, p, "alarm_distance", &spec->obstacle_contact.alarm_distance_m, kNonNegative,
+           kAtMost(1.0), kNonNegativeUpTo(0.05));
+    integer(c, p, "max_contacts", &spec->obstacle_contact.max_contacts, 1, 1'000'000, 3000);
+  }
+  const YAML::Node list = root["obstacles"];
+  if (!list.IsDefined()) return;
+  if (!list.IsSequence()) {
+    error(list, "obstacles", "must be a list of obstacles (got " + kindOf(list) + ")");
+    return;
+  }
+  std::set<std::string> names;
+  for (std::size_t i = 0; i < list.size(); ++i) {
+    const YAML::Node o = list[i];
+    const std::string p = fmt::format("obstacles[{}]", i);
+    if (!o.IsMap()) {
+      error(o, p, "must be a map with one shape (plane, box, mesh) (got " + kindOf(o) + ")");
+      continue;
+    }
+    checkKeys(o, p, {"name", "plane", "box", "mesh", "friction"});
+    ObstacleSpec ob;
+    ob.name = fmt::format("obstacle{}", i);
+    ob.where = where(o, p);
+    string(o, p, "name", &ob.name);
+    if (!names.insert(ob.name).second) {
+      error(o["name"].IsDefined() ? o["name"] : o, join(p, "name"),
+            "duplicate obstacle name '" + ob.name + "'");
+    }
+    number(o, p, "friction", &ob.friction_mu, kFriction, kAny, Range{0.0, 2.0});
+    int shapes = 0;
+    for (const char* k : {"plane", "box", "mesh"}) shapes += o[k].IsDefined() ? 1 : 0;
+    if (shapes != 1) {
+      error(o, p, fmt::format("must have exactly one shape of plane, box, mesh (got {})", shapes));
+      continue;
+    }
+    YAML::Node n;
+    if (section(o, p, "plane", &n)) {
+      const std::string sp = join(p, "plane");
+      ob.kind = ObstacleKind::kPlane;
+      checkKeys(n, sp, {"point", "normal"});
+      require(n, sp, "point");
+      require(n, sp, "normal");
+      vector<3>(n, sp, "point", &ob.point_m, kCoordinate, kUsualCoordinate);
+      unitVector(n, sp, "normal", &ob.normal);
+    } else if (section(o, p, "box", &n)) {
+      const std::string sp = join(p, "box");
+      ob.kind = ObstacleKind::kBox;
+      checkKeys(n, sp, {"min", "max"});
+      require(n, sp, "min");
+      require(n, sp, "max");
+      const bool ok_min = vector<3>(n, sp, "min", &ob.min_m, kCoordinate, kUsualCoordinate);
+      const bool ok_max = vector<3>(n, sp, "max", &ob.max_m, kCoordinate, kUsualCoordinate);
+      if (ok_min && ok_max && !(ob.min_m.array() < ob.max_m.array()).all()) {
+        error(n["max"], join(sp, "max"), "must be > min in every coordinate");
+      }
+    } else if (section(o, p, "mesh", &n)) {
+      const std::string sp = join(p, "mesh");
+      ob.kind = ObstacleKind::kMesh;
+      checkKeys(n, sp, {"file", "scale", "rotation_deg", "translation", "thickness"});
+      require(n, sp, "file");
+      std::string file;
+      if (string(n, sp, "file", &file)) {
+        ob.mesh_path = resolve(file);
+        std::error_code ec;
+        if (!std::filesystem::is_regular_file(ob.mesh_path, ec)) {
+          error(n["file"], join(sp, "file"),
+                "surface file not found: " + shared::printable(ob.mesh_path.string(), 256) +
+                    " (relative paths are resolved against the scene file's folder)");
+        }
+      }
+      number(n, sp, "scale", &ob.scale, kPositive, Range{1e-9, 1e6}, Range{1e-4, 1e3});
+      vector<3>(n, sp, "rotation_deg", &ob.rotation_deg, kSymmetric(1e6), kSymmetric(360.0));
+      vector<3>(n, sp, "translation", &ob.translation_m, kCoordinate, kUsualCoordinate);
+      number(n, sp, "thickness", &ob.thickness_m, kNonNegative, kAtMost(kMaxCoordinateM),
+             kNonNegativeUpTo(0.1));
+    }
+    spec->obstacles.push_back(ob);
+  }
+}
+
+}  // namespace tactus::sim::scene_detail
