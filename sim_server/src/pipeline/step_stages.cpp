@@ -183,7 +183,8 @@ void constrainedMotion(const SimulationModel& model, SimulationState& state, Ste
         scratch.grip_torque[i] = 0.0;
       }
       for (int r = 0; r < rows; ++r) {
-        const auto i = static_cast<std::size_t>(scratch.row_instrument[static_cast<std::size_t>(r)]);
+        const auto row = static_cast<std::size_t>(r);
+        const auto i = static_cast<std::size_t>(scratch.row_instrument[row]);
         scratch.wrench[i] += scratch.h_tool.row(r).transpose() * p.f[r];
         if (state.instruments[i].dynamicGrip()) scratch.grip_torque[i] += p.grip[r] * p.f[r];
       }
