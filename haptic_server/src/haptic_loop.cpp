@@ -93,7 +93,9 @@ AttachedSegment::AttachedSegment(shared::Segment&& s)
       row_instrument(static_cast<std::size_t>(segment.capacity().max_rows), 0),
       blocks(segment.capacity().max_rows, segment.capacity().max_contacts) {
   sample_writers = std::clamp(segment.capacity().devices, 0, shared::kMaxInstruments);
-  for (int i = 0; i < sample_writers; ++i) samples[static_cast<std::size_t>(i)] = segment.deviceWriter(i);
+  for (int i = 0; i < sample_writers; ++i) {
+    samples[static_cast<std::size_t>(i)] = segment.deviceWriter(i);
+  }
 }
 
 HapticLoop::HapticLoop(device::Device& device, const HapticSettings& settings)

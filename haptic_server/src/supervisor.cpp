@@ -106,13 +106,15 @@ int Supervisor::drainEvents() {
         spdlog::info("contact snapshots fresh again (seq {}): forces back", e.arg0);
         break;
       case shared::kEventDeviceFault:
-        spdlog::warn("device read fault: force faded out until the device recovers");
+        spdlog::warn("device read fault: force faded out until the device recovers (device {})",
+                     e.arg0);
         break;
       case kEventNonFinite:
-        spdlog::warn("device returned NaN/Inf: sample ignored, force faded out");
+        spdlog::warn("device returned NaN/Inf: sample ignored, force faded out (device {})",
+                     e.arg1);
         break;
       case shared::kEventDeviceNoData:
-        spdlog::info("device returned no new data: holding the last pose");
+        spdlog::info("device returned no new data: holding the last pose (device {})", e.arg0);
         break;
       case shared::kEventForceClamped:
         spdlog::info("force clamped: {:.2f} N requested, {:.2f} N rendered", e.arg0, e.arg1);

@@ -163,7 +163,8 @@ int run(const Options& o) {
         "loop %.0f Hz on core %d, SCHED_FIFO %d, %d sweeps max, budget %.0f us; reader: %s\n",
         replay_rig->snapshotCount(), o.replay.c_str(), 1e-9 * static_cast<double>(replay_rig->passNs()),
         o.loop_replay ? ", looping" : "", replay_rig->maxRows(), replay_rig->maxContacts(),
-        replay_rig->devices(), o.rate_hz, core, o.priority, o.sweeps, 0.4 * 1e-3 * static_cast<double>(period_ns),
+        replay_rig->devices(),
+        o.rate_hz, core, o.priority, o.sweeps, 0.4 * 1e-3 * static_cast<double>(period_ns),
         o.reader.c_str());
     if (!o.loop_replay && shared::secondsToNs(o.duration_s) > replay_rig->passNs()) {
       std::printf(

@@ -27,7 +27,8 @@ std::int64_t firstStepNs(const std::vector<shared::RecordedSnapshot>& s) {
 
 // One device per instrument of the recording (its largest instrument count), each circling
 // about its own instrument's device pose of each snapshot.
-std::vector<std::unique_ptr<CircleDevice>> devicesFor(const std::vector<shared::RecordedSnapshot>& s) {
+std::vector<std::unique_ptr<CircleDevice>> devicesFor(
+    const std::vector<shared::RecordedSnapshot>& s) {
   int instruments = 1;
   for (const auto& r : s) instruments = std::max(instruments, r.header.instruments);
   std::vector<std::unique_ptr<CircleDevice>> devices;
@@ -38,8 +39,9 @@ std::vector<std::unique_ptr<CircleDevice>> devicesFor(const std::vector<shared::
       poses.push_back(i == 0 ? r.header.device_pose
                              : r.header.instrument[static_cast<std::size_t>(i)].device_pose);
     }
-    devices.push_back(std::make_unique<CircleDevice>(
-        std::move(poses), i == 0 ? "jitter replay device" : "jitter replay device " + std::to_string(i)));
+    const std::string model =
+        i == 0 ? std::string("jitter replay device") : "jitter replay device " + std::to_string(i);
+    devices.push_back(std::make_unique<CircleDevice>(std::move(poses), model));
   }
   return devices;
 }

@@ -194,7 +194,8 @@ Segment Segment::create(const std::string& name, SegmentCapacity capacity,
   }
   initTripleBuffer(base + layout.snapshot_offset, layout.snapshot.total_bytes);
   for (std::int32_t i = 0; i < capacity.devices; ++i) {
-    const std::size_t at = layout.device_offset + static_cast<std::size_t>(i) * layout.device_stride_bytes;
+    const std::size_t at =
+        layout.device_offset + static_cast<std::size_t>(i) * layout.device_stride_bytes;
     initTripleBuffer(base + at, sizeof(DeviceSample));
   }
   initSeqRing<StatsRecord>(base + layout.stats_offset, kStatsRingCapacity);

@@ -220,7 +220,8 @@ TEST(SnapshotFile, EveryTruncationIsRejected) {
   // length in the header and the records' fixed parts, every 16th byte in the arrays)
   const std::size_t fixed = 8 + sizeof(shared::ContactSnapshotHeader);
   const std::size_t end0 = 24 + fixed + 4;                                  // no contact
-  const std::size_t end1 = end0 + fixed + 2 * 4 + 8 + 8 * (1 + 9 + 3 + 3 + 18 + 3 + 3 + 6);
+  // (version 2: + int32 contact_instrument per contact)
+  const std::size_t end1 = end0 + fixed + 2 * 4 + 8 + 8 * (1 + 9 + 3 + 3 + 18 + 3 + 3 + 6) + 4;
   std::size_t tested = 0;
   for (std::size_t n = 0; n < bytes.size(); ++n) {
     const bool boundary = n == 24 || n == end0 || n == end1;

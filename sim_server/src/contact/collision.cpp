@@ -189,7 +189,9 @@ void buildContactRows(std::span<const Contact> contacts, std::span<const double>
                       std::span<const Eigen::Vector3d> tool_origin_m, ContactRows& out) {
   const int nc = static_cast<int>(contacts.size());
   int rows = 0;
-  for (const Contact& c : contacts) rows += mu[static_cast<std::size_t>(c.instrument)] > 0.0 ? 3 : 1;
+  for (const Contact& c : contacts) {
+    rows += mu[static_cast<std::size_t>(c.instrument)] > 0.0 ? 3 : 1;
+  }
   out.row_offset.resize(nc + 1);
   out.tissue.resize(rows);
   out.tool.resize(rows, 6);

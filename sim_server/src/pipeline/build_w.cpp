@@ -237,7 +237,9 @@ void buildW(const SimulationModel& model, SimulationState& state, StepScratch& s
     const TissueState& ts = state.tissues[t];
     TissueScratch& tx = scratch.tissues[t];
     const std::vector<Contact>& found = *ts.found;
-    for (const auto& collision : ts.collisions) report.contacts_dropped += collision->stats().overflow;
+    for (const auto& collision : ts.collisions) {
+      report.contacts_dropped += collision->stats().overflow;
+    }
     buildContactRows(found, std::span<const double>(mu.data(), tools),
                      std::span<const Eigen::Vector3d>(origin.data(), tools), tx.rows);
     gripColumn(found, detected, tx);

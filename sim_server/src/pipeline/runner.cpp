@@ -227,7 +227,9 @@ int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
   std::unique_ptr<SegmentHost> link;
   if (spec.haptics.enabled && sim.hasInstrument()) {
     std::vector<BoxSpec> workspaces;
-    for (int i = 0; i < sim.instrumentCount(); ++i) workspaces.push_back(sim.instrument(i).workspace());
+    for (int i = 0; i < sim.instrumentCount(); ++i) {
+      workspaces.push_back(sim.instrument(i).workspace());
+    }
     link = std::make_unique<SegmentHost>(options.segment, spec, std::move(workspaces));
   }
   auto display = link ? std::make_unique<DisplayLink>(options.segment, sim) : nullptr;

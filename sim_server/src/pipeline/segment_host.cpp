@@ -260,7 +260,8 @@ void SegmentHost::publish(const Simulation& sim) {
     ++truncated_;
   }
   auto& hdr = slot.header();
-  for (std::size_t i = 0; i < devices_.size() && i < static_cast<std::size_t>(hdr.instruments); ++i) {
+  const auto blocks = static_cast<std::size_t>(std::max(0, hdr.instruments));
+  for (std::size_t i = 0; i < devices_.size() && i < blocks; ++i) {
     hdr.instrument[i].device_seq = devices_[i].device_seq;
   }
   publisher_.publish();

@@ -158,10 +158,14 @@ std::vector<std::string> Simulation::stages() const {
       out.push_back(fmt::format("W = H C H^T with {} compliance of '{}'", toString(ts.compliance),
                                 ts.name));
     }
-    out.push_back(in.friction_mu > 0.0
-                      ? fmt::format("NSGS with Coulomb friction mu = {} (3 rows per contact)",
-                                    in.friction_mu)
-                      : std::string("NSGS frictionless (1 row per contact)"));
+    for (int i = 0; i < impl_->model.instrument_count; ++i) {
+      const double mu = instrumentSpec(spec, i).friction_mu;
+      const std::string who =
+          impl_->model.instrument_count > 1 ? fmt::format(" (instrument {})", i) : std::string();
+      out.push_back(mu > 0.0 ? fmt::format("NSGS with Coulomb friction mu = {} (3 rows per "
+                                           "contact){}", mu, who)
+                             : "NSGS frictionless (1 row per contact)" + who);
+    }
     out.push_back("constrained motion (tissue and instrument)");
   }
   if (spec.output.enabled) {

@@ -5,6 +5,7 @@
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>
+#include <cctype>
 
 #include "scene_parser.h"
 #include "tactus/shared/messages.h"
@@ -17,9 +18,11 @@ void SceneParser::readInstrument(const YAML::Node& n, const std::string& p, Inst
                    "contact_distance", "face_contacts", "contact_compliance", "probe",
                    "grasper", "initial_pose", "trajectory", "workspace"});
   if (string(n, p, "name", &in->name)) {
-    const bool ok = in->name.size() <= 32 && std::all_of(in->name.begin(), in->name.end(), [](char c) {
+    const auto allowed = [](char c) {
       return std::isalnum(static_cast<unsigned char>(c)) != 0 || c == '_' || c == '-';
-    });
+    };
+    const bool ok =
+        in->name.size() <= 32 && std::all_of(in->name.begin(), in->name.end(), allowed);
     if (!ok) error(n["name"], join(p, "name"), "must be 1 to 32 letters, digits, _ or -");
   }
   choice(n, p, "type", &in->kind,

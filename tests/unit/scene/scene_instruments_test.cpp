@@ -77,7 +77,8 @@ TEST(SceneInstruments, ErrorsNameTheInstrumentAndPosition) {
   EXPECT_THAT(error(five), HasSubstr("instruments: must be a list of 1 to 4 instrument maps "
                                      "(got 5 items)"));
   EXPECT_THAT(error("instruments: {type: probe}\n"), HasSubstr("(got a map)"));
-  EXPECT_THAT(error("instruments:\n  - 3\n"), StartsWith("s.yaml:5:5: instruments[0]: must be a map"));
+  EXPECT_THAT(error("instruments:\n  - 3\n"),
+              StartsWith("s.yaml:5:5: instruments[0]: must be a map"));
   // unknown keys, names
   EXPECT_THAT(error("instruments:\n  - {type: probe, colour: red}\n"),
               HasSubstr("instruments[0].colour"));

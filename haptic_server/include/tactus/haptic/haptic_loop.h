@@ -122,8 +122,10 @@ struct HapticCounters {
 /// tick; see eventName()).
 enum HapticEvent : std::uint32_t {
   kEventEngaged = shared::kEventUser + 1,         ///< forces engaged (arg0 = |F| N)
-  kEventDeviceRecovered = shared::kEventUser + 2,
-  kEventNonFinite = shared::kEventUser + 3,       ///< NaN/Inf from the device (arg0 = which)
+  kEventDeviceRecovered = shared::kEventUser + 2, ///< arg0 = device
+  /// NaN/Inf from the device (arg1 = device). shared::kEventDeviceFault and kEventDeviceNoData
+  /// carry the device in arg0.
+  kEventNonFinite = shared::kEventUser + 3,
   kEventSnapshotTooLarge = shared::kEventUser + 4,  ///< arg0 = rows
   kEventSimShuttingDown = shared::kEventUser + 5,
   /// the snapshot's W has a diagonal NSGS cannot use (arg0 = ill-posed contacts, arg1 = snapshot

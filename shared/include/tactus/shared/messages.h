@@ -210,7 +210,9 @@ class SnapshotWriter {
   double* contactPoint() noexcept { return at<double>(layout_.contact_point_m); }
   double* contactNormal() noexcept { return at<double>(layout_.contact_normal); }
   double* contactTangent() noexcept { return at<double>(layout_.contact_tangent); }
-  std::int32_t* contactInstrument() noexcept { return at<std::int32_t>(layout_.contact_instrument); }
+  std::int32_t* contactInstrument() noexcept {
+    return at<std::int32_t>(layout_.contact_instrument);
+  }
 
   /// Read-only view of the same slot.
   SnapshotView view() const noexcept { return SnapshotView(base_, layout_); }

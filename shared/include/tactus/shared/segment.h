@@ -5,7 +5,8 @@
 // Layout (fixed POD, offsets only, every part 64-byte aligned):
 //
 //   [ SegmentHeader | snapshot triple buffer (ContactSnapshot, runtime size)
-//                   | device triple buffers (DeviceSample, one per device) | stats ring (StatsRecord)
+//                   | device triple buffers (DeviceSample, one per device)
+//                   | stats ring (StatsRecord)
 //                   | display frame triple buffer | display topology ]   (display.h; the
 //                   display part is absent when its capacity is zero)
 //
