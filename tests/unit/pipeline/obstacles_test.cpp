@@ -16,6 +16,7 @@
 #include "tactus/sim/mesh_gen.h"
 #include "tactus/sim/obstacles.h"
 #include "tactus/sim/pipeline.h"
+#include "../../support/test_dir.h"
 #include "tactus/sim/surface_io.h"
 
 namespace tactus::sim {
@@ -24,18 +25,8 @@ namespace {
 constexpr double kPi = 3.14159265358979323846;
 
 // A temporary folder for the test's meshes, removed at the end.
-struct TempDir {
-  std::filesystem::path path;
-  TempDir() {
-    path = std::filesystem::temp_directory_path() /
-           ("tactus_obstacles_" + std::to_string(::getpid()) + "_" +
-            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    std::filesystem::create_directories(path);
-  }
-  ~TempDir() { std::filesystem::remove_all(path); }
-  void write(const std::string& name, const std::string& text) const {
-    std::ofstream(path / name, std::ios::binary) << text;
-  }
+struct TempDir : test_support::TestDir {
+  TempDir() : TestDir("tactus_obstacles") {}
 };
 
 std::string error(const std::function<void()>& f) {
