@@ -170,6 +170,13 @@ TEST(ObstacleSceneTest, TheSceneChecksEveryObstacle) {
   EXPECT_NE(sceneError(kTissueHead + "obstacles: [{mesh: {file: missing.obj}}]\n")
                 .find("s.yaml:5:27: obstacles[0].mesh.file: surface file not found"),
             std::string::npos);
+  EXPECT_EQ(sceneError(kTissueHead +
+                       "obstacles: [{plane: {point: [0, 0, 0], normal: [0, 0, 1]}, friction: 1}]\n"
+                       "obstacle_contact: {max_contacts: 5000}\n"),
+            "s.yaml:6:34: obstacle_contact.max_contacts: 5300 contacts in all (solver.max_contacts "
+            "300 + 5000 per tissue x 1 tissues) need more than the 2048 MiB the contact problem "
+            "may take (W is rows x rows doubles, 3 rows per frictional contact): lower them "
+            "(about 3000 in all)");
   EXPECT_NE(sceneError(kTissueHead + "obstacles: [{plane: {point: [0, 0, .inf], normal: [0, 0, 1]}}]\n")
                 .find("obstacles[0].plane.point[2]: must be"),
             std::string::npos);
