@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "collision_impl.h"
 #include "tactus/shared/error.h"

@@ -245,7 +245,7 @@ void buildW(const SimulationModel& model, SimulationState& state, StepScratch& s
     gripColumn(found, detected, tx);
     freeGaps(model, scratch, ts, tx, detected, found_at);
     scratch.all_contacts.insert(scratch.all_contacts.end(), found.begin(), found.end());
-    const int obstacle_contacts = appendObstacleRows(model, state, scratch, t, found_at);
+    const int obstacle_contacts = appendObstacleRows(state, scratch, t, found_at);
     report.contacts_dropped += ts.obstacle_overflow;
     tx.row_begin = rows;
     tx.contact_begin = contacts;

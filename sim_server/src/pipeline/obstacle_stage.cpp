@@ -44,9 +44,8 @@ double contactFriction(const SimulationState& state, const Contact& contact,
   return state.obstacles->spec(contact.feature).friction_mu;
 }
 
-int appendObstacleRows(const SimulationModel& model, const SimulationState& state,
-                       StepScratch& scratch, std::size_t t, FoundAt found_at) {
-  (void)model;
+int appendObstacleRows(const SimulationState& state, StepScratch& scratch, std::size_t t,
+                       FoundAt found_at) {
   const TissueState& ts = state.tissues[t];
   TissueScratch& tx = scratch.tissues[t];
   const std::vector<Contact>& found = ts.obstacle_found;

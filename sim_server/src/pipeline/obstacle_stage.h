@@ -29,8 +29,8 @@ double detectObstacleContacts(const SimulationModel& model, SimulationState& sta
 /// scratch.all_contacts: a vertex row -dir (n, and t1, t2 when the obstacle has friction), no
 /// tool part; delta_free the gap carried to the free state (gap + n . (x_detected - x_free)) and
 /// the tangential motion of the vertex over the free motion, negated. Returns the contacts added.
-int appendObstacleRows(const SimulationModel& model, const SimulationState& state,
-                       StepScratch& scratch, std::size_t t, FoundAt found_at);
+int appendObstacleRows(const SimulationState& state, StepScratch& scratch, std::size_t t,
+                       FoundAt found_at);
 
 /// Friction coefficient of a contact of the problem: its obstacle's, or the instrument's.
 double contactFriction(const SimulationState& state, const Contact& contact, double instrument_mu);

@@ -22,9 +22,6 @@
 namespace tactus::sim {
 namespace scene_detail {
 
-/// Largest shared-memory segment / contact problem sim_server sets up (W is rows x rows doubles).
-constexpr std::size_t kMaxContactProblemBytes = std::size_t{2} << 30;
-
 void SceneParser::readRoot(const YAML::Node& root, SceneSpec* spec) {
   checkKeys(root, "", {"time_step", "duration", "gravity", "tissues", "instrument", "instruments",
                        "solver", "haptics", "output", "obstacles", "obstacle_contact"});
@@ -42,6 +39,7 @@ void SceneParser::readRoot(const YAML::Node& root, SceneSpec* spec) {
   if (section(root, "", "solver", &n)) readSolver(n, &spec->solver, instrumentCount(*spec));
   if (section(root, "", "haptics", &n)) readHaptics(n, &spec->haptics);
   if (section(root, "", "output", &n)) readOutput(n, &spec->output);
+  checkObstacleCapacity(root, *spec);   // scene_obstacles.cpp
 }
 
 void SceneParser::readSolver(const YAML::Node& n, SolverSpec* s, int instruments) {

@@ -3,10 +3,13 @@
 #include <spdlog/fmt/fmt.h>
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
 #include <filesystem>
+#include <limits>
 #include <set>
 
 #include "scene_parser.h"
+#include "tactus/shared/segment.h"
 
 namespace tactus::sim::scene_detail {
 
@@ -96,6 +99,34 @@ void SceneParser::readObstacles(const YAML::Node& root, SceneSpec* spec) {
     }
     spec->obstacles.push_back(ob);
   }
+}
+
+void SceneParser::checkObstacleCapacity(const YAML::Node& root, const SceneSpec& spec) {
+  if (spec.obstacles.empty()) return;
+  // the instruments' contacts (max_contacts each) and the obstacles' (per tissue)
+  const long long total =
+      static_cast<long long>(problemContactCapacity(spec)) +
+      static_cast<long long>(spec.obstacle_contact.max_contacts) *
+          static_cast<long long>(spec.tissues.size());
+  const bool friction =
+      anyFriction(spec) ||
+      std::any_of(spec.obstacles.begin(), spec.obstacles.end(),
+                  [](const ObstacleSpec& o) { return o.friction_mu > 0.0; });
+  const std::size_t bytes =
+      total > 1'000'000 ? std::numeric_limits<std::size_t>::max()
+                        : shared::SegmentLayout::forCapacity(
+                              shared::SegmentCapacity::forContacts(static_cast<int>(total),
+                                                                   friction))
+                              .total_bytes;
+  if (bytes <= kMaxContactProblemBytes) return;
+  const YAML::Node c = root["obstacle_contact"];
+  const YAML::Node at = c.IsMap() && c["max_contacts"].IsDefined() ? c["max_contacts"] : root;
+  error(at, "obstacle_contact.max_contacts",
+        fmt::format("{} contacts in all (solver.max_contacts {} per instrument + {} per tissue x {} tissues) "
+                    "need more than the {} MiB the contact problem may take (W is rows x rows "
+                    "doubles, 3 rows per frictional contact): lower them (about 3000 in all)",
+                    total, spec.solver.max_contacts, spec.obstacle_contact.max_contacts,
+                    spec.tissues.size(), kMaxContactProblemBytes >> 20));
 }
 
 }  // namespace tactus::sim::scene_detail

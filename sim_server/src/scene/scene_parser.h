@@ -25,6 +25,8 @@
 namespace tactus::sim::scene_detail {
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
+/// Largest shared-memory segment / contact problem sim_server sets up (W is rows x rows doubles).
+constexpr std::size_t kMaxContactProblemBytes = std::size_t{2} << 30;
 constexpr double kDegToRad = 3.14159265358979323846 / 180.0;
 
 /// Allowed interval of a number; open ends are strict.
@@ -171,6 +173,8 @@ class SceneParser {
   bool unitVector(const YAML::Node& map, const std::string& path, const char* key,
                   Eigen::Vector3d* out);
   void readObstacles(const YAML::Node& root, SceneSpec* spec);              // scene_obstacles.cpp
+  // The instruments' and the obstacles' contacts together must fit the segment's 2 GiB.
+  void checkObstacleCapacity(const YAML::Node& root, const SceneSpec& spec);
   void readInstrument(const YAML::Node& n, const std::string& p,          // scene_instrument.cpp
                       InstrumentSpec* in);
   void readInstruments(const YAML::Node& root, SceneSpec* spec);

@@ -12,19 +12,13 @@
 #include "tactus/sim/fem.h"
 #include "tactus/sim/mesh_gen.h"
 #include "tactus/sim/pipeline.h"
+#include "../../support/test_dir.h"
 
 namespace tactus::sim {
 namespace {
 
-struct TempDir {
-  std::filesystem::path path;
-  TempDir() {
-    path = std::filesystem::temp_directory_path() /
-           ("tactus_loads_" + std::to_string(::getpid()) + "_" +
-            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    std::filesystem::create_directories(path);
-  }
-  ~TempDir() { std::filesystem::remove_all(path); }
+struct TempDir : test_support::TestDir {
+  TempDir() : TestDir("tactus_loads") {}
 };
 
 constexpr double kSide = 0.02;    // block edge [m]

@@ -11,20 +11,14 @@
 
 #include "tactus/sim/mesh_gen.h"
 #include "tactus/sim/pipeline.h"
+#include "../../support/test_dir.h"
 #include "tactus/sim/runner.h"
 
 namespace tactus::sim {
 namespace {
 
-struct TempDir {
-  std::filesystem::path path;
-  TempDir() {
-    path = std::filesystem::temp_directory_path() /
-           ("tactus_reactions_" + std::to_string(::getpid()) + "_" +
-            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    std::filesystem::create_directories(path);
-  }
-  ~TempDir() { std::filesystem::remove_all(path); }
+struct TempDir : test_support::TestDir {
+  TempDir() : TestDir("tactus_reactions") {}
 };
 
 // A 4 x 4 x 3 cm block (E = 30 kPa) under gravity, settled for `steps` steps with strong mass
