@@ -1,5 +1,5 @@
 #pragma once
-// Test support for the flat-pad grasp (scenes/liver_grasp.yaml, scenes/liver_grasp_23k.yaml):
+// Test support for the flat-pad grasp (scenes/liver_grasp.yaml, liver_grasp_20k.yaml, _23k.yaml):
 // runs the scripted grasp (approach, close, lift 2 cm, hold) with an optional perturbation of
 // the approach and measures what issue 15 asks of it.
 //  * held nodes: the tissue nodes with a non-zero weight in some contact when the jaws have
