@@ -121,11 +121,16 @@ void SceneParser::checkObstacleCapacity(const YAML::Node& root, const SceneSpec&
   if (bytes <= kMaxContactProblemBytes) return;
   const YAML::Node c = root["obstacle_contact"];
   const YAML::Node at = c.IsMap() && c["max_contacts"].IsDefined() ? c["max_contacts"] : root;
+  const int tools = instrumentCount(spec);
+  const std::string instruments =
+      tools > 1 ? fmt::format("solver.max_contacts {} x {} instruments", spec.solver.max_contacts,
+                              tools)
+                : fmt::format("solver.max_contacts {}", spec.solver.max_contacts);
   error(at, "obstacle_contact.max_contacts",
-        fmt::format("{} contacts in all (solver.max_contacts {} per instrument + {} per tissue x {} tissues) "
+        fmt::format("{} contacts in all ({} + {} per tissue x {} tissues) "
                     "need more than the {} MiB the contact problem may take (W is rows x rows "
                     "doubles, 3 rows per frictional contact): lower them (about 3000 in all)",
-                    total, spec.solver.max_contacts, spec.obstacle_contact.max_contacts,
+                    total, instruments, spec.obstacle_contact.max_contacts,
                     spec.tissues.size(), kMaxContactProblemBytes >> 20));
 }
 

@@ -182,6 +182,53 @@ TEST_F(HapticPhasesTest, LocalModelMovesDeltaFreeWithTheDevice) {
   }
 }
 
+// A static obstacle's contact (instrument -1, no J row) is in the problem the local model solves
+// but pushes no hand: with one instrument only the instrument's contact is rendered.
+TEST_F(HapticPhasesTest, AnObstaclesContactPushesNoHand) {
+  auto slot = publisher_.slot();
+  auto& h = slot.header();
+  ASSERT_TRUE(slot.setSize(2, 2));
+  h.seq = ++seq_;
+  h.t_ns = t_;
+  h.flags = shared::kSnapshotValid | shared::kSnapshotHasJacobian;
+  const int row_offset[3] = {0, 1, 2};
+  std::copy_n(row_offset, 3, slot.rowOffset());
+  slot.contactId()[0] = 7;
+  slot.contactId()[1] = 8;
+  slot.contactInstrument()[0] = 0;    // the instrument's contact: 2 mm deep, W = 1 mm/N
+  slot.contactInstrument()[1] = -1;   // an obstacle's: 3 mm deep under the same tissue
+  const int ld = slot.ld();   // W is row-major with the segment's leading dimension
+  slot.W()[0] = 1e-3;
+  slot.W()[1] = 0.0;
+  slot.W()[ld] = 0.0;
+  slot.W()[ld + 1] = 1e-3;
+  slot.deltaFree()[0] = -0.002;
+  slot.deltaFree()[1] = -0.003;
+  for (int k = 0; k < 2; ++k) {
+    slot.mu()[k] = 0.0;
+    slot.f()[k] = 0.0;
+  }
+  for (int k = 0; k < 12; ++k) slot.J()[k] = k == 2 ? 1.0 : 0.0;   // the obstacle's row: 0
+  for (int k = 0; k < 6; ++k) {
+    slot.contactPoint()[k] = 0.0;
+    slot.contactNormal()[k] = k % 3 == 2 ? 1.0 : 0.0;
+  }
+  publisher_.publish();
+  bool fresh = false;
+  const shared::SnapshotView snap = link_->snapshots.latest(&fresh);
+  ASSERT_EQ(snap.header().seq, 1u);
+  for (const double dz : {0.0, 0.001}) {
+    shared::Pose device_pose;
+    device_pose.pos_m = Eigen::Vector3d(0.0, 0.0, dz);
+    TickOutput out;
+    P::solveLocalModel(*loop_, *link_, snap, device_pose, out);
+    EXPECT_EQ(out.contacts, 2);
+    EXPECT_NEAR(link_->f[1], 3.0, 1e-9) << "the obstacle's contact is solved";
+    // the instrument's contact follows the device (2 N, then 1 N); the obstacle's 3 N is not felt
+    EXPECT_NEAR(out.force_n[2], (0.002 - dz) / 1e-3, 1e-9) << "dz " << dz;
+  }
+}
+
 TEST_F(HapticPhasesTest, SafetyChainEngagesFadesInClampsAndZeroesNonFiniteWrenches) {
   readValidPose();
   std::array<double, 3> force{}, torque{};
