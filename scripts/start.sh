@@ -134,6 +134,17 @@ if [[ $haptic -eq 1 ]]; then
     for o in "${scene_haptic_opts[@]}"; do [[ "$o" == --rate=* ]] || kept+=("$o"); done
     scene_haptic_opts=("${kept[@]}")
   fi
+  # haptics.workspaces entries past the devices started (one --device given for a scene of
+  # several instruments) have no device to map: drop them rather than have haptic_server refuse
+  devices=$(( ${#device_args[@]} / 2 ))
+  kept=()
+  for o in "${scene_haptic_opts[@]}"; do
+    if [[ "$o" =~ ^--workspace-option=([0-9]+): ]] && (( BASH_REMATCH[1] >= devices )); then
+      continue
+    fi
+    kept+=("$o")
+  done
+  scene_haptic_opts=("${kept[@]}")
   "$build/haptic_server/haptic_server" --segment "$segment" "${device_args[@]}" \
     "${device_opts[@]}" "${scene_haptic_opts[@]}" "${rate_opts[@]}" --core "$core" \
     >"$run_dir/haptic.log" 2>&1 &

@@ -17,6 +17,7 @@
 #include "tactus/haptic/device_options.h"
 #include "tactus/haptic/haptic_loop.h"
 #include "tactus/haptic/supervisor.h"
+#include "tactus/haptic/workspace_options.h"
 #include "tactus/shared/cli_checks.h"
 #include "tactus/shared/clock.h"
 #include "tactus/shared/file_io.h"
@@ -92,6 +93,11 @@ int main(int argc, char** argv) {
   app.add_option("--clutch-button", workspace.clutch_button,
                  "Device button (bit) that clutches; -1: none")
       ->check(CLI::Range(-1, shared::WorkspaceMappingLimits::kMaxButton))->capture_default_str();
+  std::vector<std::string> workspace_options;
+  app.add_option("--workspace-option", workspace_options,
+                 "Device I's own mapping field, I:key=value (repeatable; keys scale, "
+                 "offset=x,y,z, rotation=w,x,y,z, clutch_button; overrides --workspace-* for "
+                 "device I only)");
   app.add_flag("--clutch-key", clutch_key,
                "On a terminal, the space bar toggles the clutch (devices without a button)");
   app.add_option("--duration", duration_s,
@@ -107,8 +113,10 @@ int main(int argc, char** argv) {
   std::signal(SIGTERM, onSignal);
   std::signal(SIGHUP, onSignal);  // the terminal closed: stop cleanly, zero force
 
+  if (device_names.empty()) device_names.emplace_back(device::kDefaultDevice);
+  // the workspace mappings are usage: a bad one exits 2 before any device or segment exists
+  std::vector<shared::WorkspaceMappingParams> workspaces;
   try {
-    shared::Segment::validateName(segment);
     if (!workspace_offset.empty()) {
       workspace.offset_m = {workspace_offset[0], workspace_offset[1], workspace_offset[2]};
     }
@@ -117,7 +125,14 @@ int main(int argc, char** argv) {
                                  workspace_rotation[2], workspace_rotation[3]};
     }
     workspace.validate();
-    if (device_names.empty()) device_names.emplace_back(device::kDefaultDevice);
+    workspaces = haptic::deviceWorkspaces(workspace, workspace_options, device_names.size());
+  } catch (const std::exception& e) {
+    spdlog::error("{}", e.what());
+    return 2;
+  }
+
+  try {
+    shared::Segment::validateName(segment);
     const std::vector<device::DeviceConfig> configs =
         haptic::splitDeviceOptions(device_options, device_names.size());
     std::vector<std::unique_ptr<device::Device>> devs;
@@ -138,17 +153,14 @@ int main(int argc, char** argv) {
     // validates the settings and combines each clamp with its device's own limit (one loop for
     // every device: docs/design.md, "Several instruments and devices")
     haptic::HapticLoop loop(dev_ptrs, settings);
-    for (int i = 0; i < loop.deviceCount(); ++i) loop.workspaceMapping(i).configure(workspace);
+    for (int i = 0; i < loop.deviceCount(); ++i) {
+      const shared::WorkspaceMappingParams& w = workspaces[static_cast<std::size_t>(i)];
+      loop.workspaceMapping(i).configure(w);
+      spdlog::info("device {} workspace: {}", i, haptic::describeWorkspace(w));
+    }
     std::optional<haptic::ClutchKey> key;
     if (clutch_key) key.emplace(loop.workspaceMapping());
-    if (!workspace.isIdentity()) {
-      spdlog::info("workspace: scale {}, offset ({}, {}, {}) m, rotation ({}, {}, {}, {}), "
-                   "clutch button {}{}", workspace.scale, workspace.offset_m[0],
-                   workspace.offset_m[1], workspace.offset_m[2], workspace.rotation_wxyz[0],
-                   workspace.rotation_wxyz[1], workspace.rotation_wxyz[2],
-                   workspace.rotation_wxyz[3], workspace.clutch_button,
-                   key && key->active() ? ", space bar clutches" : "");
-    }
+    if (key && key->active()) spdlog::info("the space bar clutches device 0");
     if (loop.forceLimitN() < settings.max_force_n) {
       spdlog::info("clamping to the device's maximum force {} N", loop.forceLimitN());
     }

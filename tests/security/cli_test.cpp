@@ -68,6 +68,58 @@ TEST_F(CliTest, SimServerHelpStatesWhatZeroDurationMeans) {
   EXPECT_NE(r.out.find("0 (the default): run until SIGINT, SIGTERM"), std::string::npos) << r.out;
 }
 
+// --workspace-option I:key=value (device I's own mapping): every bad value is a usage error
+// (exit 2) naming the option or the range, before any device or segment exists; a good one is
+// logged per device.
+TEST_F(CliTest, HapticServerRejectsBadPerDeviceWorkspaceOptions) {
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"1:scale=0", "workspace scale = 0"},       {"1:scale=nan", "'nan' is not a finite"},
+      {"1:scale=inf", "'inf' is not a finite"},   {"1:scale=1e999", "not a finite number"},
+      {"1:scale=1e3", "must be a finite number in [0.01, 100]"},
+      {"1:scale=2x", "'2x' is not a finite"},     {"1:scale=", "'' is not a finite"},
+      {"1:offset=0,nan,0", "'nan' is not a finite"}, {"1:offset=0,1e9,0", "offset[1]"},
+      {"1:offset=0,0", "expects 3 comma-separated"}, {"0:rotation=1,0,0,0.5", "unit quaternion"},
+      {"1:rotation=0,0,0,0", "unit quaternion"},  {"1:rotation=1,0,0", "expects 4"},
+      {"1:clutch_button=40", "clutch button = 40"}, {"1:clutch_button=1.5", "an integer"},
+      {"1:clutch_button=-2", "clutch button = -2"}, {"2:scale=2", "no such device"},
+      {"99999999999999999999:scale=2", "no such device"}, {"scale=2", "expected I:key=value"},
+      {"1:scale", "expected I:key=value"},        {"-1:scale=2", "expected I:key=value"},
+      {"1:gain=2", "unknown key 'gain'"},
+  };
+  for (const auto& [option, message] : cases) {
+    const std::vector<std::string> argv = {kHaptic, "--device", "null", "--device", "null",
+                                           "--segment", segment_, "--duration", "0.1",
+                                           "--workspace-option", option};
+    const tactus::test::RunResult r = runProgram(argv, dir_, 20s);
+    EXPECT_FALSE(r.timed_out) << option;
+    EXPECT_EQ(r.exit_code, 2) << option << "\n" << r.err << r.out;
+    EXPECT_NE((r.err + r.out).find(message), std::string::npos)
+        << option << ": the message does not say " << message << ":\n" << r.err << r.out;
+    EXPECT_NE((r.err + r.out).find("--workspace-option"), std::string::npos) << option;
+    EXPECT_FALSE(fs::exists(shm())) << option << ": a segment was created";
+  }
+  // the plain options are usage errors too (exit 2)
+  const tactus::test::RunResult plain = runProgram(
+      {kHaptic, "--device", "null", "--segment", segment_, "--workspace-rotation", "1,0,0,0.5"},
+      dir_, 20s);
+  EXPECT_EQ(plain.exit_code, 2) << plain.err << plain.out;
+  // good: device 1 gets its own scale and rotation over the common scale, device 0 the common one
+  const tactus::test::RunResult good = runProgram(
+      {kHaptic, "--device", "null", "--device", "null", "--segment", segment_, "--duration",
+       "0.1", "--workspace-scale", "0.5", "--workspace-option", "1:scale=2",
+       "--workspace-option", "1:rotation=0.7071067811865476,0,0,0.7071067811865476",
+       "--workspace-option", "1:clutch_button=3"},
+      dir_, 20s);
+  EXPECT_EQ(good.exit_code, 0) << good.err << good.out;
+  const std::string log = good.err + good.out;
+  EXPECT_NE(log.find("device 0 workspace: scale 0.5, offset (0, 0, 0) m, rotation (1, 0, 0, 0), "
+                     "clutch button -1"),
+            std::string::npos) << log;
+  EXPECT_NE(log.find("device 1 workspace: scale 2, offset (0, 0, 0) m, rotation "
+                     "(0.7071067811865476, 0, 0, 0.7071067811865476), clutch button 3"),
+            std::string::npos) << log;
+}
+
 TEST_F(CliTest, HapticServerRejectsInvalidDurations) {
   for (const std::string& duration : std::vector<std::string>{"-1", "nan", "inf", "1e400"}) {
     expectRejected(

@@ -2,7 +2,7 @@
 # scripts/start.sh exit status and run dir: 0 after a clean --duration run, non-zero for a bad
 # scene and for a missing device plugin; an explicit --run-dir leaves the checkout's run/latest
 # alone; no segment is left behind; the scene's haptics clamp and rate reach haptic_server and
-# --rate overrides the rate. Uses the built binaries (--no-build), a temp run dir and
+# --rate overrides the rate; haptics.workspaces reaches each device. Uses the built binaries (--no-build), a temp run dir and
 # unique segment names; every run is bounded by `timeout`.
 #
 # Usage: start_script_test.sh SOURCE_DIR BUILD_DIR
@@ -60,6 +60,34 @@ run limits_rate "$limits_scene" --duration 2 --rate 800
 grep -q "max force 2.5 N, loop 800 Hz" "$tmp/limits_rate/haptic.log" ||
   { fail "--rate 800 did not win over the scene's rate"; tail -5 "$tmp/limits_rate/haptic.log" >&2; }
 rm -f "$limits_scene"
+
+# haptics.workspaces reaches each device (one simulated hand per instrument), and entries past the
+# devices started (one --device for two instruments) are dropped instead of refused
+ws_scene="$src/tests/data/scenes/.start_test_workspaces_$$.yaml"
+trap 'cleanup; rm -f "$ws_scene"' EXIT
+sed 's/^haptics: .*$/haptics: {watchdog_ms: 50, workspaces: [{}, {scale: 2, rotation_deg: [0, 0, 90]}]}/' \
+  "$src/tests/data/scenes/press_cube_bimanual.yaml" >"$ws_scene"
+grep -q 'workspaces:' "$ws_scene" || fail "could not write the workspaces scene"
+run workspaces "$ws_scene" --duration 2
+[[ $rc -eq 0 ]] || fail "workspaces scene: exit $rc"
+grep -q "device 1 workspace: scale 2, offset (0, 0, 0) m, rotation (0.707" \
+  "$tmp/workspaces/haptic.log" ||
+  { fail "haptics.workspaces did not reach device 1"; tail -5 "$tmp/workspaces/haptic.log" >&2; }
+run workspaces_one "$ws_scene" --duration 2 --device null
+[[ $rc -eq 0 ]] || { fail "workspaces scene, one device: exit $rc"; tail -5 "$tmp/workspaces_one/haptic.log" >&2; }
+grep -q "device 0 workspace: scale 1" "$tmp/workspaces_one/haptic.log" ||
+  fail "workspaces scene, one device: device 0's mapping not logged"
+# instrument 1's script is exported through its own entry's inverse: R^T p / 2 = (y, -x, z) / 2
+"$build/sim_server/sim_server" "$src/tests/data/scenes/press_cube_bimanual.yaml" \
+  --export-trajectory "$tmp/plain1.csv" --export-instrument 1 >/dev/null 2>&1
+"$build/sim_server/sim_server" "$ws_scene" --export-trajectory "$tmp/mapped1.csv" \
+  --export-instrument 1 >/dev/null 2>&1
+paste -d, <(sed -n 2p "$tmp/plain1.csv") <(sed -n 2p "$tmp/mapped1.csv") | awk -F, '
+  function off(a, b) { d = a - b; return d < 0 ? -d : d }
+  { if (NF != 18 || $2 == 0 || off($11, $3 / 2) > 1e-8 || off($12, -$2 / 2) > 1e-8 ||
+        off($13, $4 / 2) > 1e-8) exit 1 }' ||
+  fail "instrument 1's exported script is not mapped through haptics.workspaces[1]: $(sed -n 2p "$tmp/plain1.csv") / $(sed -n 2p "$tmp/mapped1.csv")"
+rm -f "$ws_scene"
 
 run bad_duration "$scene" --duration nan
 [[ $rc -eq 2 ]] || fail "--duration nan: exit $rc (want 2)"

@@ -179,6 +179,11 @@ void exportTrajectory(const SceneSpec& spec, const std::filesystem::path& csv, d
   shared::OutputFile out(csv, "trajectory CSV",
                          {.overwrite = overwrite, .overwrite_hint = "pass --overwrite"});
   out.write("t_s,x,y,z,qw,qx,qy,qz,gripper\n");
+  // this instrument's device mapping: its haptics.workspaces entry, else haptics.workspace
+  const shared::WorkspaceMappingParams& mapping =
+      static_cast<std::size_t>(instrument) < spec.haptics.workspaces.size()
+          ? spec.haptics.workspaces[static_cast<std::size_t>(instrument)]
+          : spec.haptics.workspace;
   const long n = static_cast<long>(std::ceil(end / dt_s));
   for (long k = 0; k <= n && out.ok(); ++k) {
     const double t = std::min(end, static_cast<double>(k) * dt_s);
@@ -186,7 +191,7 @@ void exportTrajectory(const SceneSpec& spec, const std::filesystem::path& csv, d
     // the hand replays it in the device frame: the workspace mapping takes it back to the scene
     std::array<double, 3> p{d.pose.pos_m.x(), d.pose.pos_m.y(), d.pose.pos_m.z()};
     std::array<double, 4> q{d.pose.rot.w(), d.pose.rot.x(), d.pose.rot.y(), d.pose.rot.z()};
-    if (!spec.haptics.workspace.isIdentity()) spec.haptics.workspace.sceneToDevice(p, q);
+    if (!mapping.isIdentity()) mapping.sceneToDevice(p, q);
     out.write(fmt::format("{:.6f},{:.9g},{:.9g},{:.9g},{:.9g},{:.9g},{:.9g},{:.9g},{:.9g}\n", t,
                           p[0], p[1], p[2], q[0], q[1], q[2], q[3],
                           d.gripper_opening * in.max_opening_rad));

@@ -16,6 +16,18 @@ std::vector<std::string> hapticServerOptions(const HapticsSpec& haptics) {
   options.push_back(fmt::format("--watchdog-ms={:.17g}", haptics.watchdog_ms));
   options.push_back(fmt::format("--max-sweeps={}", haptics.max_sweeps_per_tick));
   options.push_back(fmt::format("--tolerance={:.17g}", haptics.nsgs_tolerance));
+  // haptics.workspaces: every field of each device's own mapping (haptic_server's
+  // --workspace-option I:key=value; the scene parser refuses it together with `workspace`)
+  for (std::size_t i = 0; i < haptics.workspaces.size(); ++i) {
+    const shared::WorkspaceMappingParams& d = haptics.workspaces[i];
+    options.push_back(fmt::format("--workspace-option={}:scale={:.17g}", i, d.scale));
+    options.push_back(fmt::format("--workspace-option={}:offset={:.17g},{:.17g},{:.17g}", i,
+                                  d.offset_m[0], d.offset_m[1], d.offset_m[2]));
+    options.push_back(fmt::format("--workspace-option={}:rotation={:.17g},{:.17g},{:.17g},{:.17g}",
+                                  i, d.rotation_wxyz[0], d.rotation_wxyz[1], d.rotation_wxyz[2],
+                                  d.rotation_wxyz[3]));
+    options.push_back(fmt::format("--workspace-option={}:clutch_button={}", i, d.clutch_button));
+  }
   const shared::WorkspaceMappingParams& w = haptics.workspace;
   if (w.isIdentity()) return options;
   options.push_back(fmt::format("--workspace-scale={:.17g}", w.scale));

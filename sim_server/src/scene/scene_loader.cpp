@@ -37,7 +37,7 @@ void SceneParser::readRoot(const YAML::Node& root, SceneSpec* spec) {
   YAML::Node n;
   readInstruments(root, spec);
   if (section(root, "", "solver", &n)) readSolver(n, &spec->solver, instrumentCount(*spec));
-  if (section(root, "", "haptics", &n)) readHaptics(n, &spec->haptics);
+  if (section(root, "", "haptics", &n)) readHaptics(n, &spec->haptics, instrumentCount(*spec));
   if (section(root, "", "output", &n)) readOutput(n, &spec->output);
   checkObstacleCapacity(root, *spec);   // scene_obstacles.cpp
 }
@@ -94,12 +94,12 @@ void SceneParser::readSolver(const YAML::Node& n, SolverSpec* s, int instruments
           {"step_start", ContactDetection::kStepStart}});
 }
 
-void SceneParser::readHaptics(const YAML::Node& n, HapticsSpec* h) {
+void SceneParser::readHaptics(const YAML::Node& n, HapticsSpec* h, int instruments) {
   // the hard ranges are haptic_server's own (a scene value reaches it through start.sh)
   using L = shared::HapticLimits;
   const std::string p = "haptics";
   checkKeys(n, p, {"enabled", "rate", "device", "force_scale", "max_force", "watchdog_ms",
-                   "max_sweeps_per_tick", "nsgs_tolerance", "workspace"});
+                   "max_sweeps_per_tick", "nsgs_tolerance", "workspace", "workspaces"});
   h->enabled = true;  // a haptics section turns haptics on unless it says otherwise
   boolean(n, p, "enabled", &h->enabled);
   number(n, p, "rate", &h->rate_hz, kPositive, Range{L::kMinRateHz, L::kMaxRateHz},
@@ -115,6 +115,37 @@ void SceneParser::readHaptics(const YAML::Node& n, HapticsSpec* h) {
          kPositiveUpTo(1e-2));
   YAML::Node w;
   if (section(n, p, "workspace", &w)) readWorkspace(w, p + ".workspace", &h->workspace);
+  readWorkspaces(n, h, instruments);
+}
+
+// `haptics.workspaces:` one mapping per device (entry i for instrument/device i), instead of the
+// one `workspace:` every device shares.
+void SceneParser::readWorkspaces(const YAML::Node& n, HapticsSpec* h, int instruments) {
+  const YAML::Node list = n["workspaces"];
+  if (!list.IsDefined()) return;
+  if (n["workspace"].IsDefined()) {
+    error(list, "haptics.workspaces",
+          "give either `workspace:` (every device) or `workspaces:` (one per device), not both");
+    return;
+  }
+  const std::size_t most = static_cast<std::size_t>(std::max(1, instruments));
+  if (!list.IsSequence() || list.size() == 0 || list.size() > most) {
+    error(list, "haptics.workspaces",
+          fmt::format("must be a list of 1 to {} workspace maps, one per instrument (got {})",
+                      most, list.IsSequence() ? fmt::format("{} items", list.size())
+                                              : kindOf(list)));
+    return;
+  }
+  for (std::size_t i = 0; i < list.size(); ++i) {
+    const std::string p = fmt::format("haptics.workspaces[{}]", i);
+    shared::WorkspaceMappingParams& w = h->workspaces.emplace_back();
+    if (!list[i].IsMap()) {
+      error(list[i], p, "must be a map (scale, offset, rotation_deg or quaternion, "
+                        "clutch_button; got " + kindOf(list[i]) + ")");
+      continue;
+    }
+    readWorkspace(list[i], p, &w);
+  }
 }
 
 // The device -> scene mapping (shared::WorkspaceMappingLimits are the hard ranges).

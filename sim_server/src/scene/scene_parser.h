@@ -180,7 +180,8 @@ class SceneParser {
   void readInstruments(const YAML::Node& root, SceneSpec* spec);
   void readTrajectory(const YAML::Node& list, const std::string& path, InstrumentSpec* in);
   void readSolver(const YAML::Node& n, SolverSpec* s, int instruments);        // scene_loader.cpp
-  void readHaptics(const YAML::Node& n, HapticsSpec* h);
+  void readHaptics(const YAML::Node& n, HapticsSpec* h, int instruments);
+  void readWorkspaces(const YAML::Node& n, HapticsSpec* h, int instruments);
   void readWorkspace(const YAML::Node& n, const std::string& p,
                      shared::WorkspaceMappingParams* w);
   void readOutput(const YAML::Node& n, OutputSpec* o);

@@ -5,11 +5,13 @@
 //  * hand A pressing deeper changes hand B's force only through the tissue (W's coupling), with
 //    the sign and size of a full simulation step;
 //  * faulting or silencing one device fades only that device's force;
+//  * each device has its own workspace mapping (pose in, force back, clamp) (issue 19 item 3);
 //  * the two-device tick allocates nothing; the stats record carries each device's force;
 //  * sim_server's side reads each device's samples for its own instrument.
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <memory>
@@ -22,6 +24,7 @@
 #include "../../../sim_server/src/pipeline/segment_host.h"
 #include "tactus/haptic/haptic_loop.h"
 #include "tactus/shared/clock.h"
+#include "tactus/shared/workspace_mapping.h"
 #include "tactus/shared/segment.h"
 #include "tactus/sim/pipeline.h"
 #include "tactus/sim/scene.h"
@@ -55,6 +58,17 @@ std::vector<sim::DeviceTarget> settle(sim::Simulation& s) {
 }
 
 Eigen::Vector3d vec(const std::array<double, 3>& a) { return {a[0], a[1], a[2]}; }
+
+// The simulation's contact force on each instrument, from its own contacts (scene frame).
+std::array<Eigen::Vector3d, 2> instrumentForces(const sim::ContactProblemData& p) {
+  std::array<Eigen::Vector3d, 2> f = {Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero()};
+  for (int c = 0; c < p.contacts; ++c) {
+    const int r0 = p.row_offset[c];
+    f[static_cast<std::size_t>(p.contact_instrument[c])] +=
+        p.f[r0] * p.normal[c] + p.f[r0 + 1] * p.tangent1[c] + p.f[r0 + 2] * p.tangent2[c];
+  }
+  return f;
+}
 
 class BimanualHapticTest : public ::testing::Test {
  protected:
@@ -151,14 +165,7 @@ TEST_F(BimanualHapticTest, EachHandFeelsTheWrenchOnItsOwnInstrument) {
   const TickOutput out = tickFor(30);
   ASSERT_EQ(out.devices, 2);
   ASSERT_FALSE(out.stale);
-  const sim::ContactProblemData& p = sim_->lastProblem();
-  // the simulation's contact wrench on each instrument, from its own contacts
-  Eigen::Vector3d expected[2] = {Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero()};
-  for (int c = 0; c < p.contacts; ++c) {
-    const int r0 = p.row_offset[c];
-    expected[p.contact_instrument[c]] +=
-        p.f[r0] * p.normal[c] + p.f[r0 + 1] * p.tangent1[c] + p.f[r0 + 2] * p.tangent2[c];
-  }
+  const std::array<Eigen::Vector3d, 2> expected = instrumentForces(sim_->lastProblem());
   for (int i = 0; i < 2; ++i) {
     const Eigen::Vector3d felt = vec(out.device[static_cast<std::size_t>(i)].force_n);
     std::printf("hand %d feels (%.5f, %.5f, %.5f) N, the simulation's instrument %d (%.5f, %.5f, "
@@ -266,6 +273,74 @@ TEST_F(BimanualHapticTest, FaultingOrSilencingOneDeviceFadesOnlyItsForce) {
   EXPECT_EQ(vec(out.device[0].force_n).norm(), 0.0);
   EXPECT_DOUBLE_EQ(out.device[1].gain, 1.0);
   EXPECT_GT(vec(out.device[1].force_n).norm(), 0.5);
+}
+
+// Each device its own workspace mapping (issue 19 item 3): device 0 the identity, device 1 scale
+// 2, a quarter turn about z and an offset. Hand 1 is held where its mapping puts the instrument
+// at its settled pose: the simulation sees both instruments where they were (each device's pose
+// mapped with its own mapping), hand 0 feels the scene force, hand 1 the scene force turned back
+// by its own inverse rotation and divided by its own scale; a small scale that would amplify
+// hand 1's force past the clamp is clamped on device 1 only.
+TEST_F(BimanualHapticTest, EachDeviceHasItsOwnWorkspaceMapping) {
+  const double h = std::sqrt(0.5);
+  shared::WorkspaceMappingParams turned;
+  turned.scale = 2.0;
+  turned.offset_m = {0.01, -0.02, 0.005};
+  turned.rotation_wxyz = {h, 0.0, 0.0, h};   // device x -> scene y, device y -> scene -x
+  const Eigen::Matrix3d r = Eigen::Quaterniond(h, 0.0, 0.0, h).toRotationMatrix();
+  const auto hold = [&](const shared::WorkspaceMappingParams& w) {
+    loop_->workspaceMapping(1).configure(w);
+    const Eigen::Vector3d p = targets_[1].pose.pos_m;
+    std::array<double, 3> pos{p.x(), p.y(), p.z()};
+    std::array<double, 4> quat{1.0, 0.0, 0.0, 0.0};   // the scene orientation of the identity
+    w.sceneToDevice(pos, quat);
+    hands_[1].state.pos_m = pos;
+    hands_[1].state.quat_wxyz = quat;
+  };
+  hold(turned);
+  const Eigen::Vector3d device_pos(hands_[1].state.pos_m[0], hands_[1].state.pos_m[1],
+                                   hands_[1].state.pos_m[2]);
+  // the hand is not where the instrument is: the mapping, not the identity, brings it there
+  ASSERT_GT((device_pos - targets_[1].pose.pos_m).norm(), 0.01);
+  EXPECT_LT((vec(turned.offset_m) + 2.0 * r * device_pos - targets_[1].pose.pos_m).norm(), 1e-12);
+  TickOutput out = tickFor(30);
+  ASSERT_EQ(out.devices, 2);
+  ASSERT_FALSE(out.stale);
+  // the simulation's side sees each instrument where it settled
+  auto sample1 = segment_->deviceReader(1);
+  auto sample0 = segment_->deviceReader(0);
+  EXPECT_LT((vec(sample1.latest().pos_m) - targets_[1].pose.pos_m).norm(), 1e-12);
+  EXPECT_NEAR(std::abs(sample1.latest().quat_wxyz[0]), 1.0, 1e-12);
+  EXPECT_EQ(vec(sample0.latest().pos_m), targets_[0].pose.pos_m);
+  // the forces: device 0's the scene's, device 1's R^T f / scale
+  const std::array<Eigen::Vector3d, 2> scene = instrumentForces(sim_->lastProblem());
+  const Eigen::Vector3d expected1 = r.transpose() * scene[1] / 2.0;
+  const Eigen::Vector3d felt0 = vec(out.device[0].force_n);
+  const Eigen::Vector3d felt1 = vec(out.device[1].force_n);
+  std::printf("scene force on instrument 1 (%.5f, %.5f, %.5f) N; hand 1 feels (%.5f, %.5f, "
+              "%.5f) N\n", scene[1].x(), scene[1].y(), scene[1].z(), felt1.x(), felt1.y(),
+              felt1.z());
+  EXPECT_GT(scene[1].x(), 0.5);
+  EXPECT_LT((felt0 - scene[0]).norm(), 1e-6 * scene[0].norm());
+  EXPECT_LT((felt1 - expected1).norm(), 1e-6 * expected1.norm());
+  EXPECT_LT(felt1.y(), -0.25);   // scene +x is device -y for this rotation
+  EXPECT_EQ(hands_[1].last.force_n, out.device[1].force_n);   // what device 1 was told
+  EXPECT_LE(felt1.norm(), loop_->forceLimitN(1));
+
+  // scale 0.01: the hand would feel 100 times the scene force, past the 20 N clamp; device 1 is
+  // clamped along the same direction, device 0 keeps its force
+  shared::WorkspaceMappingParams small = turned;
+  small.scale = 0.01;
+  hold(small);
+  ASSERT_GT(scene[1].norm() / 0.01, 2.0 * loop_->forceLimitN(1));
+  out = tickFor(30);
+  const Eigen::Vector3d clamped = vec(out.device[1].force_n);
+  EXPECT_LT((vec(sample1.latest().pos_m) - targets_[1].pose.pos_m).norm(), 1e-12);
+  EXPECT_NEAR(clamped.norm(), loop_->forceLimitN(1), 1e-9);
+  EXPECT_GT(clamped.normalized().dot(expected1.normalized()), 1.0 - 1e-9);
+  EXPECT_TRUE(out.flags & shared::kStatsForceClamped);
+  EXPECT_EQ(hands_[1].last.force_n, out.device[1].force_n);
+  EXPECT_LT((vec(out.device[0].force_n) - scene[0]).norm(), 1e-6 * scene[0].norm());
 }
 
 TEST_F(BimanualHapticTest, TheTwoDeviceTickAllocatesNothing) {

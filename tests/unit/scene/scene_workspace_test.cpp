@@ -72,5 +72,70 @@ TEST(SceneWorkspace, OutOfRangeValuesAreErrorsWithTheirPosition) {
               HasSubstr("haptics.workspace: must be a map"));
 }
 
+// haptics.workspaces: one mapping per device, entry i for instrument/device i.
+const std::string kTwoProbes = "instruments:\n  - {type: probe}\n  - {type: probe}\n";
+
+TEST(SceneWorkspaces, EachDeviceGetsItsOwnMappingAndItsOwnOptions) {
+  const SceneSpec s = parseScene(
+      kHead + kTwoProbes +
+          "haptics:\n  workspaces:\n    - {}\n"
+          "    - {scale: 2, offset: [0, 0.5, 0], rotation_deg: [0, 0, 90], clutch_button: 3}\n",
+      "s.yaml", kScenes);
+  ASSERT_EQ(s.haptics.workspaces.size(), 2u);
+  EXPECT_TRUE(s.haptics.workspaces[0].isIdentity());
+  const shared::WorkspaceMappingParams& w = s.haptics.workspaces[1];
+  EXPECT_DOUBLE_EQ(w.scale, 2.0);
+  EXPECT_DOUBLE_EQ(w.offset_m[1], 0.5);
+  EXPECT_NEAR(w.rotation_wxyz[0], std::sqrt(0.5), 1e-15);   // a quarter turn about z
+  EXPECT_NEAR(w.rotation_wxyz[3], std::sqrt(0.5), 1e-15);
+  EXPECT_EQ(w.clutch_button, 3);
+  EXPECT_TRUE(s.haptics.workspace.isIdentity());
+  EXPECT_THAT(hapticServerOptions(s.haptics),
+              ElementsAre("--rate=1000", "--max-force=8", "--force-scale=1", "--watchdog-ms=50",
+                          "--max-sweeps=50", "--tolerance=9.9999999999999995e-07",
+                          "--workspace-option=0:scale=1", "--workspace-option=0:offset=0,0,0",
+                          "--workspace-option=0:rotation=1,0,0,0",
+                          "--workspace-option=0:clutch_button=-1",
+                          "--workspace-option=1:scale=2", "--workspace-option=1:offset=0,0.5,0",
+                          StartsWith("--workspace-option=1:rotation=0.707106781186547"),
+                          "--workspace-option=1:clutch_button=3"));
+  // one entry for two instruments: device 1 keeps haptic_server's plain (identity) mapping
+  const SceneSpec one = parseScene(
+      kHead + kTwoProbes + "haptics:\n  workspaces:\n    - {scale: 0.5}\n", "s.yaml", kScenes);
+  ASSERT_EQ(one.haptics.workspaces.size(), 1u);
+  EXPECT_DOUBLE_EQ(one.haptics.workspaces[0].scale, 0.5);
+}
+
+TEST(SceneWorkspaces, ErrorsCarryTheirPositionAndTheSameRanges) {
+  EXPECT_THAT(error(kTwoProbes + "haptics:\n  workspaces:\n    - {}\n    - {scale: 0}\n"),
+              StartsWith("s.yaml:10:15: haptics.workspaces[1].scale: must be > 0 (got 0)"));
+  EXPECT_THAT(error(kTwoProbes + "haptics:\n  workspaces:\n    - {offset: [0, 1e9, 0]}\n"),
+              StartsWith("s.yaml:9:20: haptics.workspaces[0].offset[1]: must be in [-100, 100]"));
+  EXPECT_THAT(error(kTwoProbes + "haptics:\n  workspaces:\n    - {quaternion: [1, 0, 0.5, 0]}\n"),
+              HasSubstr("haptics.workspaces[0].quaternion: must be a unit quaternion"));
+  EXPECT_THAT(error(kTwoProbes + "haptics:\n  workspaces:\n    - {clutch_button: 32}\n"),
+              HasSubstr("haptics.workspaces[0].clutch_button: must be in [-1, 31]"));
+  EXPECT_THAT(error(kTwoProbes + "haptics:\n  workspaces:\n    - {scale: .nan}\n"),
+              HasSubstr("haptics.workspaces[0].scale: must be a number"));
+  EXPECT_THAT(error(kTwoProbes + "haptics:\n  workspaces:\n    - {gain: 2}\n"),
+              HasSubstr("haptics.workspaces[0].gain: unknown key"));
+  EXPECT_THAT(error(kTwoProbes + "haptics:\n  workspaces:\n    - 3\n"),
+              StartsWith("s.yaml:9:7: haptics.workspaces[0]: must be a map"));
+  // more entries than instruments, an empty list, not a list
+  EXPECT_THAT(error(kTwoProbes + "haptics:\n  workspaces: [{}, {}, {}]\n"),
+              StartsWith("s.yaml:8:15: haptics.workspaces: must be a list of 1 to 2 workspace "
+                         "maps, one per instrument (got 3 items)"));
+  EXPECT_THAT(error("instrument: {type: probe}\nhaptics: {workspaces: [{}, {}]}\n"),
+              HasSubstr("haptics.workspaces: must be a list of 1 to 1 workspace maps"));
+  EXPECT_THAT(error(kTwoProbes + "haptics: {workspaces: []}\n"),
+              HasSubstr("haptics.workspaces: must be a list of 1 to 2"));
+  EXPECT_THAT(error(kTwoProbes + "haptics: {workspaces: {scale: 2}}\n"),
+              HasSubstr("haptics.workspaces: must be a list of 1 to 2"));
+  // both forms
+  EXPECT_THAT(error(kTwoProbes + "haptics: {workspace: {scale: 2}, workspaces: [{}]}\n"),
+              HasSubstr("haptics.workspaces: give either `workspace:` (every device) or "
+                        "`workspaces:` (one per device), not both"));
+}
+
 }  // namespace
 }  // namespace tactus::sim

@@ -185,11 +185,15 @@ struct HapticsSpec {
   double nsgs_tolerance = 1e-6;
   /// device -> scene mapping and clutch button (haptics.workspace; docs/design.md)
   shared::WorkspaceMappingParams workspace;
+  /// haptics.workspaces: device i's own mapping (entry i for instrument/device i; at most the
+  /// instrument count; empty: `workspace` for every device). Exclusive with `workspace`.
+  std::vector<shared::WorkspaceMappingParams> workspaces;
 };
 
 /// haptic_server's options for the scene's haptics section, one per item (`--rate=R`,
 /// `--max-force=F`, `--force-scale`, `--watchdog-ms`, `--max-sweeps`, `--tolerance`, then the
-/// workspace mapping `--workspace-scale=S`, ... when it is not the identity); none when haptics
+/// workspace mapping `--workspace-scale=S`, ... when it is not the identity, and each device's own
+/// `--workspace-option=I:key=value`, one per field, from haptics.workspaces); none when haptics
 /// is off. scripts/start.sh passes them on (sim_server --print-haptic-options), so the clamp a
 /// scene sets is the one the device gets.
 std::vector<std::string> hapticServerOptions(const HapticsSpec& haptics);
