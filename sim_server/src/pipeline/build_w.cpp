@@ -184,10 +184,10 @@ void assembleProblem(const SimulationModel& model, SimulationState& state, StepS
   const std::vector<Contact>& all = scratch.all_contacts;
   scratch.row_instrument.resize(static_cast<std::size_t>(rows));
   for (int c = 0; c < contacts; ++c) {
-    // an obstacle's contact belongs to no instrument (-1): its rows have no tool part
-    const int tool = all[c].kind == ContactKind::kObstacleVertex ? -1 : all[c].instrument;
+    // -1: an obstacle's contact (Obstacles::detect), whose rows have no tool part
+    const int tool = all[c].instrument;
     p.contact_instrument[c] = tool;
-    p.mu[c] = tool < 0 ? contactFriction(state, all[c], 0.0)
+    p.mu[c] = tool < 0 ? obstacleFriction(state, all[c])
                        : instrumentSpec(model.spec, tool).friction_mu;
     for (int r = p.row_offset[c]; r < p.row_offset[c + 1]; ++r) {
       scratch.row_instrument[static_cast<std::size_t>(r)] = tool;

@@ -38,9 +38,8 @@ double detectObstacleContacts(const SimulationModel& model, SimulationState& sta
   return min_gap;
 }
 
-double contactFriction(const SimulationState& state, const Contact& contact,
-                       double instrument_mu) {
-  if (contact.kind != ContactKind::kObstacleVertex || !state.obstacles) return instrument_mu;
+double obstacleFriction(const SimulationState& state, const Contact& contact) {
+  if (contact.kind != ContactKind::kObstacleVertex || !state.obstacles) return 0.0;
   return state.obstacles->spec(contact.feature).friction_mu;
 }
 
@@ -54,7 +53,7 @@ int appendObstacleRows(const SimulationState& state, StepScratch& scratch, std::
   const Eigen::VectorXd& q_detected =
       found_at == FoundAt::kStepStart ? tx.q_begin : ts.body->positions();
   int total = rows.rows();
-  for (const Contact& k : found) total += contactFriction(state, k, 0.0) > 0.0 ? 3 : 1;
+  for (const Contact& k : found) total += obstacleFriction(state, k) > 0.0 ? 3 : 1;
   const int first_new = rows.rows();
   rows.tissue.resize(static_cast<std::size_t>(total));
   rows.tool.conservativeResize(total, 6);
@@ -67,7 +66,7 @@ int appendObstacleRows(const SimulationState& state, StepScratch& scratch, std::
     const Eigen::Vector3d x_free = tx.q_free.segment<3>(3 * node);
     const Eigen::Vector3d x_detected = q_detected.segment<3>(3 * node);
     const Eigen::Vector3d x_begin = tx.q_begin.segment<3>(3 * node);
-    const int per = contactFriction(state, k, 0.0) > 0.0 ? 3 : 1;
+    const int per = obstacleFriction(state, k) > 0.0 ? 3 : 1;
     for (int d = 0; d < per; ++d) {
       const Eigen::Vector3d& dir = d == 0 ? k.n : (d == 1 ? k.t1 : k.t2);
       TissueRow& row = rows.tissue[static_cast<std::size_t>(r + d)];

@@ -32,7 +32,8 @@ double detectObstacleContacts(const SimulationModel& model, SimulationState& sta
 int appendObstacleRows(const SimulationState& state, StepScratch& scratch, std::size_t t,
                        FoundAt found_at);
 
-/// Friction coefficient of a contact of the problem: its obstacle's, or the instrument's.
-double contactFriction(const SimulationState& state, const Contact& contact, double instrument_mu);
+/// Friction coefficient of an obstacle's contact (kObstacleVertex): its obstacle's (0 for any
+/// other contact).
+double obstacleFriction(const SimulationState& state, const Contact& contact);
 
 }  // namespace tactus::sim

@@ -249,8 +249,7 @@ int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
         options.record_snapshots,
         shared::OutputOptions{.overwrite = options.overwrite,
                               .overwrite_hint = "pass --overwrite to replace it"});
-    shared::SegmentCapacity cap = problemCapacity(spec);   // instruments' and obstacles' contacts
-    cap.devices = std::max(1, instrumentCount(spec));
+    const shared::SegmentCapacity cap = problemCapacity(spec);   // instruments' and obstacles'
     record_layout = shared::SnapshotLayout::forCapacity(cap.max_rows, cap.max_contacts);
     record_slot.assign(record_layout.total_bytes / sizeof(double) + 1, 0.0);
   }
