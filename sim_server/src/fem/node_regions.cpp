@@ -25,6 +25,7 @@ std::string describe(const RegionSpec& r) {
       return fmt::format("the lowest nodes along {} (tolerance {:g} m)", axis, r.tolerance_m);
     case RegionKind::kHighest:
       return fmt::format("the highest nodes along {} (tolerance {:g} m)", axis, r.tolerance_m);
+    case RegionKind::kGroup: return fmt::format("the physical group '{}'", r.group);
   }
   return "the region";
 }
@@ -32,6 +33,7 @@ std::string describe(const RegionSpec& r) {
 }  // namespace
 
 std::vector<int> selectRegionNodes(const TetMesh& mesh, const RegionSpec& r) {
+  if (r.kind == RegionKind::kGroup) return groupRegionNodes(mesh, r, "", "region");
   std::vector<int> out;
   const int n = mesh.nodeCount();
   if (n == 0) return out;
@@ -52,6 +54,7 @@ std::vector<int> selectRegionNodes(const TetMesh& mesh, const RegionSpec& r) {
       case RegionKind::kPlaneSide: in = (p - r.point_m).dot(r.normal) >= -tol; break;
       case RegionKind::kLowest: in = p[r.axis] <= extreme + tol; break;
       case RegionKind::kHighest: in = p[r.axis] >= extreme - tol; break;
+      case RegionKind::kGroup: break;   // handled above
     }
     if (in) out.push_back(i);
   }
@@ -61,7 +64,9 @@ std::vector<int> selectRegionNodes(const TetMesh& mesh, const RegionSpec& r) {
 std::vector<int> requireRegionNodes(const TetMesh& mesh, const RegionSpec& region,
                                     const std::string& tissue_name, const std::string& use,
                                     const std::string& fallback_where) {
-  std::vector<int> nodes = selectRegionNodes(mesh, region);
+  std::vector<int> nodes = region.kind == RegionKind::kGroup
+                               ? groupRegionNodes(mesh, region, tissue_name, fallback_where)
+                               : selectRegionNodes(mesh, region);
   if (!nodes.empty()) return nodes;
   Eigen::AlignedBox3d bounds;
   for (Eigen::Index i = 0; i < mesh.nodes.cols(); ++i) bounds.extend(mesh.nodes.col(i));

@@ -1,4 +1,5 @@
-// The Gmsh reader (ASCII 1.0, 2.x and 4.1).
+// The Gmsh reader (ASCII 1.0, 2.x and 4.1), with the physical groups ($PhysicalNames, the
+// elements' physical tags, 4.1's $Entities); mesh_groups.cpp turns them into node sets.
 
 #include <spdlog/fmt/fmt.h>
 #include <spdlog/spdlog.h>
@@ -9,6 +10,7 @@
 #include <charconv>
 #include <cmath>
 #include <limits>
+#include <map>
 #include <unordered_map>
 
 #include "mesh_internal.h"
@@ -53,6 +55,10 @@ class GmshReader {
         } else {
           readNodes12(section == "$NOD" ? "$ENDNOD" : "$EndNodes");
         }
+      } else if (section == "$PhysicalNames") {
+        readPhysicalNames();
+      } else if (section == "$Entities" && version_ >= 4.0) {
+        readEntities4();
       } else if (section == "$ELM" || section == "$Elements") {
         if (section == "$Elements" && !have_format_) {
           fail(name_, cur_.line(), "$Elements section before $MeshFormat");
@@ -75,6 +81,7 @@ class GmshReader {
       fail(name_, raw_->last_line, "no element section ($Elements or $ELM) in the file");
     }
     raw_->format = version_ < 2.0 ? "gmsh1" : (version_ < 4.0 ? "gmsh2" : "gmsh4");
+    collectGroups();
   }
 
  private:
@@ -83,6 +90,7 @@ class GmshReader {
     std::string_view line;
     while (cur_.next(&line)) {
       splitTokens(line, &tok_);
+      line_ = line;
       if (!tok_.empty()) return;
     }
     fail(name_, std::max(1, cur_.line()),
@@ -108,6 +116,15 @@ class GmshReader {
                        i < tok_.size() ? excerpt(tok_[i]) : std::string("end of line")));
     }
     return v;
+  }
+
+  // A Gmsh tag (entity or physical group): an int.
+  int tagToken(std::size_t i, const char* what) {
+    const std::int64_t v = intToken(i, what);
+    if (v < std::numeric_limits<int>::min() || v > std::numeric_limits<int>::max()) {
+      fail(name_, cur_.line(), fmt::format("{} {} is out of range", what, v));
+    }
+    return static_cast<int>(v);
   }
 
   // A count on its own; bounded by what the input could possibly hold.
@@ -199,8 +216,10 @@ class GmshReader {
       const std::int64_t type = intToken(1, "element type");
       std::size_t first = 0;
       std::int64_t nodes = 0;
+      int physical = 0;   // 0: in no physical group
       if (v1) {
         // id type reg-phys reg-elem number-of-nodes nodes...
+        physical = tagToken(2, "physical tag");
         nodes = intToken(4, "number of nodes");
         first = 5;
       } else {
@@ -211,6 +230,7 @@ class GmshReader {
         }
         first = 3 + static_cast<std::size_t>(tags);
         nodes = static_cast<std::int64_t>(tok_.size() - first);
+        if (tags > 0) physical = tagToken(3, "physical tag");
       }
       const auto listed =
           static_cast<std::int64_t>(tok_.size()) - static_cast<std::int64_t>(first);
@@ -227,6 +247,14 @@ class GmshReader {
         addTet(id, first);
       } else {
         ++raw_->ignored_elements;
+      }
+      if (physical != 0) {
+        const int dim = gmshElementDimension(type);
+        if (dim < 0) {
+          ++unknown_type_grouped_;
+        } else {
+          addGroupNodes(&groupNodes(&groups_, dim, physical), first);
+        }
       }
     }
     expectEnd(end);
@@ -283,7 +311,19 @@ class GmshReader {
     std::int64_t seen = 0;
     for (std::int64_t b = 0; b < blocks; ++b) {
       nextTokens("an element block header");
+      const std::int64_t dim = intToken(0, "entity dimension");
+      const int entity = tagToken(1, "entity tag");
       const std::int64_t type = intToken(2, "element type");
+      if (dim < 0 || dim > 3) {
+        fail(name_, cur_.line(), "invalid element block header (entity dimension)");
+      }
+      // the entity's elements, kept while its physical groups are unknown or if it has some
+      RawGroup* entity_nodes = nullptr;
+      const auto physicals = entity_physicals_.find({static_cast<int>(dim), entity});
+      if (!have_entities_ ||
+          (physicals != entity_physicals_.end() && !physicals->second.empty())) {
+        entity_nodes = &groupNodes(&entity_nodes_, static_cast<int>(dim), entity);
+      }
       const std::int64_t m = count(intToken(3, "elements in block"), "element");
       if (m > total - seen) {
         fail(name_, cur_.line(),
@@ -302,6 +342,7 @@ class GmshReader {
         } else {
           ++raw_->ignored_elements;
         }
+        if (entity_nodes != nullptr) addGroupNodes(entity_nodes, 1);
       }
       seen += m;
     }
@@ -312,10 +353,124 @@ class GmshReader {
     expectEnd("$EndElements");
   }
 
+  // $PhysicalNames: count, then `dimension tag "name"` lines.
+  void readPhysicalNames() {
+    nextTokens("the number of physical names");
+    const std::int64_t n = count(intToken(0, "number of physical names"), "physical name");
+    for (std::int64_t i = 0; i < n; ++i) {
+      nextTokens("a physical name");
+      RawPhysicalName entry;
+      const std::int64_t dim = intToken(0, "physical dimension");
+      entry.tag = tagToken(1, "physical tag");
+      entry.line = cur_.line();
+      if (dim < 0 || dim > 3) {
+        fail(name_, cur_.line(), fmt::format("physical dimension must be 0 to 3, got {}", dim));
+      }
+      entry.dimension = static_cast<int>(dim);
+      // the name: the rest of the line, in double quotes (it may hold spaces)
+      const std::string_view rest =
+          tok_.size() < 3 ? std::string_view()
+                          : trim(line_.substr(static_cast<std::size_t>(tok_[2].data() -
+                                                                       line_.data())));
+      if (rest.size() < 2 || rest.front() != '"' || rest.back() != '"') {
+        fail(name_, cur_.line(),
+             fmt::format("a physical name line needs: dimension tag \"name\" (the name in double "
+                         "quotes), got '{}'",
+                         excerpt(trim(line_))));
+      }
+      entry.name = std::string(rest.substr(1, rest.size() - 2));
+      for (const RawPhysicalName& other : raw_->physical_names) {
+        if (other.dimension == entry.dimension && other.tag == entry.tag) {
+          fail(name_, cur_.line(),
+               fmt::format("physical group (dimension {}, tag {}) is named twice (first at line "
+                           "{})",
+                           entry.dimension, entry.tag, other.line));
+        }
+      }
+      raw_->physical_names.push_back(std::move(entry));
+    }
+    expectEnd("$EndPhysicalNames");
+  }
+
+  // 4.1 $Entities: the physical tags of every point, curve, surface and volume.
+  void readEntities4() {
+    if (have_entities_) fail(name_, cur_.line(), "second $Entities section");
+    have_entities_ = true;
+    nextTokens("the $Entities header");
+    std::array<std::int64_t, 4> counts{};
+    for (std::size_t d = 0; d < 4; ++d) {
+      counts[d] = count(intToken(d, "number of entities"), "entity");
+    }
+    for (std::size_t d = 0; d < 4; ++d) {
+      for (std::int64_t i = 0; i < counts[d]; ++i) {
+        nextTokens("an entity");
+        const int entity = tagToken(0, "entity tag");
+        // a point: tag x y z; others: tag and a bounding box; then the physical tags
+        const std::size_t at = d == 0 ? 4 : 7;
+        const std::int64_t m = intToken(at, "number of physical tags");
+        if (m < 0 || m > static_cast<std::int64_t>(tok_.size() - at - 1)) {
+          fail(name_, cur_.line(),
+               fmt::format("entity {} declares {} physical tags but its line holds {} values "
+                           "after the count",
+                           entity, m, tok_.size() - at - 1));
+        }
+        std::vector<int> physicals;
+        for (std::int64_t k = 0; k < m; ++k) {
+          physicals.push_back(tagToken(at + 1 + static_cast<std::size_t>(k), "physical tag"));
+        }
+        if (!entity_physicals_.emplace(std::pair(static_cast<int>(d), entity), physicals).second) {
+          fail(name_, cur_.line(),
+               fmt::format("entity (dimension {}, tag {}) is defined twice", d, entity));
+        }
+      }
+    }
+    expectEnd("$EndEntities");
+  }
+
+  static RawGroup& groupNodes(std::map<std::pair<int, int>, RawGroup>* groups, int dim, int tag) {
+    RawGroup& g = (*groups)[{dim, tag}];
+    g.dimension = dim;
+    g.tag = tag;
+    return g;
+  }
+
+  // The node ids of the current element line from token `first` on.
+  void addGroupNodes(RawGroup* group, std::size_t first) {
+    for (std::size_t k = first; k < tok_.size(); ++k) {
+      group->node_ids.push_back(intToken(k, "node id"));
+      group->node_lines.push_back(cur_.line());
+    }
+  }
+
+  // 4.1: each entity's elements go to the entity's physical groups; then all groups to raw_.
+  void collectGroups() {
+    for (auto& [entity, nodes] : entity_nodes_) {
+      const auto physicals = entity_physicals_.find(entity);
+      if (physicals == entity_physicals_.end()) continue;
+      for (const int tag : physicals->second) {
+        RawGroup& g = groupNodes(&groups_, entity.first, tag);
+        g.node_ids.insert(g.node_ids.end(), nodes.node_ids.begin(), nodes.node_ids.end());
+        g.node_lines.insert(g.node_lines.end(), nodes.node_lines.begin(), nodes.node_lines.end());
+      }
+    }
+    for (auto& [key, g] : groups_) raw_->groups.push_back(std::move(g));
+    if (unknown_type_grouped_ > 0) {
+      spdlog::warn("{}: {} elements of unknown type (hence dimension) left out of their physical "
+                   "groups",
+                   name_, unknown_type_grouped_);
+    }
+  }
+
   LineCursor cur_;
   const std::string& name_;
   RawMesh* raw_;
   std::vector<std::string_view> tok_;
+  std::string_view line_;   // the line tok_ comes from
+  std::map<std::pair<int, int>, RawGroup> groups_;         // (dimension, physical tag)
+  std::map<std::pair<int, int>, RawGroup> entity_nodes_;   // 4.1: (dimension, entity tag)
+  std::map<std::pair<int, int>, std::vector<int>> entity_physicals_;
+  bool have_entities_ = false;
+  int unknown_type_grouped_ = 0;
   std::string section_;
   int section_line_ = 0;
   double version_ = 0.0;

@@ -6,12 +6,29 @@
 #include <cstdint>
 #include <string>
 #include <string_view>
+#include <unordered_map>
 #include <vector>
 
 #include "tactus/shared/file_io.h"
 #include "tactus/sim/mesh.h"
 
 namespace tactus::sim::detail {
+
+/// The file node ids of the elements of one physical group (gmsh), before ids are resolved.
+struct RawGroup {
+  int dimension = 0;
+  int tag = 0;
+  std::vector<std::int64_t> node_ids;   ///< with repetitions, as the elements list them
+  std::vector<int> node_lines;          ///< line of the element each id comes from
+};
+
+/// A `$PhysicalNames` entry.
+struct RawPhysicalName {
+  int dimension = 0;
+  int tag = 0;
+  std::string name;
+  int line = 0;
+};
 
 /// What a reader collected, before ids are resolved and tets are checked.
 struct RawMesh {
@@ -24,6 +41,8 @@ struct RawMesh {
   std::vector<std::array<std::int64_t, 4>> tets;  ///< file node ids
   std::vector<std::int64_t> tet_ids;            ///< file element ids
   std::vector<int> tet_lines;                   ///< line of each tet
+  std::vector<RawGroup> groups;                 ///< gmsh physical groups, any order
+  std::vector<RawPhysicalName> physical_names;  ///< gmsh $PhysicalNames
   int ignored_elements = 0;
   int last_line = 1;                            ///< where "no tetrahedra" is reported
 };
@@ -33,6 +52,18 @@ struct RawMesh {
 
 /// Resolves ids, drops unreferenced nodes, rejects degenerate tets and flips inverted ones.
 TetMesh finalizeMesh(RawMesh&& raw, const std::string& name, MeshReport* report);
+
+/// The physical groups of `raw` with node ids resolved through `index_of` (file id -> position in
+/// file order) and `new_index` (position -> mesh index, -1 when dropped); fails on an element of a
+/// group that refers to an unknown node. `dropped` counts the group nodes no tetrahedron uses
+/// (left out). In mesh_groups.cpp.
+std::vector<NodeGroup> resolveGroups(const RawMesh& raw,
+                                     const std::unordered_map<std::int64_t, int>& index_of,
+                                     const std::vector<int>& new_index, const std::string& name,
+                                     int* dropped);
+
+/// The dimension (0 to 3) of a Gmsh element type (the MSH format's elm-type table), -1 when unknown.
+int gmshElementDimension(std::int64_t type);
 
 /// Parses a whole token as a number; false on any trailing garbage, overflow or empty input.
 bool parseDouble(std::string_view token, double* out);

@@ -27,13 +27,24 @@ bool SceneParser::unitVector(const YAML::Node& map, const std::string& path, con
 }
 
 void SceneParser::readRegion(const YAML::Node& r, const std::string& p, RegionSpec* region) {
-  checkKeys(r, p, {"box", "plane", "lowest", "highest", "tolerance"});
+  checkKeys(r, p, {"box", "plane", "lowest", "highest", "group", "tolerance"});
   region->where = where(r, p);
   int selectors = 0;
-  for (const char* k : {"box", "plane", "lowest", "highest"}) selectors += r[k].IsDefined() ? 1 : 0;
+  for (const char* k : {"box", "plane", "lowest", "highest", "group"}) {
+    selectors += r[k].IsDefined() ? 1 : 0;
+  }
   if (selectors != 1) {
-    error(r, p, fmt::format("must have exactly one selector of box, plane, lowest, highest (got "
-                            "{})", selectors));
+    error(r, p, fmt::format("must have exactly one selector of box, plane, lowest, highest, group "
+                            "(got {})", selectors));
+    return;
+  }
+  if (r["group"].IsDefined()) {
+    // resolved against the mesh's physical groups when the model is built (node_regions.cpp)
+    region->kind = RegionKind::kGroup;
+    string(r, p, "group", &region->group);
+    if (r["tolerance"].IsDefined()) {
+      error(r["tolerance"], join(p, "tolerance"), "has no meaning for a group region");
+    }
     return;
   }
   number(r, p, "tolerance", &region->tolerance_m, kNonNegative, kAtMost(kMaxCoordinateM),
@@ -69,14 +80,14 @@ void SceneParser::readRegions(const YAML::Node& list, const std::string& path,
                               std::vector<RegionSpec>* out) {
   if (!list.IsSequence()) {
     error(list, path, "must be a list of regions ({box: ...}, {plane: ...}, {lowest: z}, "
-                      "{highest: z}) (got " + kindOf(list) + ")");
+                      "{highest: z}, {group: name}) (got " + kindOf(list) + ")");
     return;
   }
   for (std::size_t i = 0; i < list.size(); ++i) {
     const YAML::Node r = list[i];
     const std::string p = fmt::format("{}[{}]", path, i);
     if (!r.IsMap()) {
-      error(r, p, "must be a map with one selector (box, plane, lowest, highest) (got " +
+      error(r, p, "must be a map with one selector (box, plane, lowest, highest, group) (got " +
                       kindOf(r) + ")");
       continue;
     }

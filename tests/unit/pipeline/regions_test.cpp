@@ -122,7 +122,7 @@ TEST(RegionsTest, BadRegionsAreSceneErrorsWithTheirPlace) {
   };
   EXPECT_EQ(error(kHead + "    fixed: {regions: [{lowest: z, highest: z}]}\n"),
             "s.yaml:5:23: tissues[0].fixed.regions[0]: must have exactly one selector of box, "
-            "plane, lowest, highest (got 2)");
+            "plane, lowest, highest, group (got 2)");
   EXPECT_EQ(error(kHead + "    fixed: {regions: [{lowest: w}]}\n"),
             "s.yaml:5:32: tissues[0].fixed.regions[0].lowest: must be one of x, y, z (got 'w')");
   EXPECT_EQ(error(kHead + "    fixed: {regions: [{plane: {point: [0, 0, 0], normal: [0, 0, 0]}}]}\n"),

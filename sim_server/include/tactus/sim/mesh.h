@@ -4,7 +4,8 @@
 //
 // Supported inputs (chosen by content, not only by extension):
 //  * Gmsh ASCII 1.0 (`$NOD`/`$ELM`), 2.2 and 4.1 (`$MeshFormat`): 4-node tetrahedra are kept
-//    (element type 4); other element types are ignored and counted.
+//    (element type 4); other element types are ignored and counted, but every element (of any
+//    dimension) still counts for the physical groups it belongs to (TetMesh::groups).
 //  * Legacy VTK unstructured grids (`# vtk DataFile`, ASCII, DATASET UNSTRUCTURED_GRID,
 //    cell type 10).
 //  * VTK XML `.vtu` (ASCII, base64 binary, zlib-compressed base64 where present).
@@ -20,11 +21,28 @@
 
 namespace tactus::sim {
 
+/// A Gmsh physical group as a set of nodes: the nodes of every element, of any dimension (points,
+/// lines, triangles, tetrahedra...), the file puts in it. Read from `$PhysicalNames` and the
+/// elements' physical tags (2.x and 1.0: an element's first tag / reg-phys; 4.1: the physical tags
+/// of the `$Entities` entity an element block belongs to). Scenes select them with a region's
+/// `group:` selector (scenes/README.md, "Regions").
+struct NodeGroup {
+  std::string name;        ///< its $PhysicalNames name; the tag as text ("7") when it has none
+  int dimension = 0;       ///< 0 point, 1 curve, 2 surface, 3 volume
+  int tag = 0;             ///< the physical tag (unique within a dimension)
+  /// sorted unique indices into TetMesh::nodes (after the reader's renumbering); nodes that no
+  /// tetrahedron uses are dropped from the mesh and so from its groups (may leave it empty)
+  std::vector<int> nodes;
+};
+
 /// A tetrahedral mesh. Positions in the file's units until a scene transforms them (SI inside).
 struct TetMesh {
   Eigen::Matrix3Xd nodes;                 ///< node positions, one column per node
   std::vector<std::array<int, 4>> tets;   ///< node indices; positive orientation after loading
   std::string source;                     ///< file it came from (for messages)
+  /// Gmsh physical groups ordered by (dimension, tag), including named groups with no element;
+  /// empty for other formats
+  std::vector<NodeGroup> groups;
 
   int nodeCount() const { return static_cast<int>(nodes.cols()); }
   int tetCount() const { return static_cast<int>(tets.size()); }

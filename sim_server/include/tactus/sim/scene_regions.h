@@ -16,6 +16,7 @@ enum class RegionKind {
   kPlaneSide,  ///< nodes with (x - point_m) . normal >= -tolerance_m (the side the normal points to)
   kLowest,     ///< nodes with x[axis] <= min over the mesh of x[axis] + tolerance_m
   kHighest,    ///< nodes with x[axis] >= max over the mesh of x[axis] - tolerance_m
+  kGroup,      ///< the nodes of a physical group of the mesh (TetMesh::groups), by name or tag
 };
 
 /// A set of nodes of one tissue chosen by a selector. A region that selects no node is an error
@@ -28,6 +29,8 @@ struct RegionSpec {
   Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();    ///< kPlaneSide: unit normal
   int axis = 2;                                         ///< kLowest/kHighest: 0 x, 1 y, 2 z
   double tolerance_m = 0.0;                             ///< see RegionKind
+  /// kGroup: a group's name; when no group has that name and it is an integer, a physical tag
+  std::string group;
   /// Where the scene defines it ("file:line:col: path"), for messages; empty when built in code.
   std::string where;
 };

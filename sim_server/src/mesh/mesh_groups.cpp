@@ -1,0 +1,75 @@
+// Gmsh physical groups: from the file's node ids to sorted node sets of the mesh (NodeGroup).
+
+#include <spdlog/fmt/fmt.h>
+
+#include <algorithm>
+#include <map>
+#include <utility>
+
+#include "mesh_internal.h"
+
+namespace tactus::sim::detail {
+
+int gmshElementDimension(std::int64_t type) {
+  switch (type) {
+    case 15: return 0;                                                    // point
+    case 1: case 8: case 26: case 27: case 28: return 1;                  // lines
+    case 2: case 3: case 9: case 10: case 16: case 20: case 21: case 22:  // triangles, quads
+    case 23: case 24: case 25: return 2;
+    case 4: case 5: case 6: case 7: case 11: case 12: case 13: case 14:   // tets, hexes, prisms,
+    case 17: case 18: case 19: case 29: case 30: case 31: case 92: case 93: return 3;  // pyramids
+    default: return -1;
+  }
+}
+
+std::vector<NodeGroup> resolveGroups(const RawMesh& raw,
+                                     const std::unordered_map<std::int64_t, int>& index_of,
+                                     const std::vector<int>& new_index, const std::string& name,
+                                     int* dropped) {
+  std::map<std::pair<int, int>, NodeGroup> by_key;   // ordered by (dimension, tag)
+  const auto group = [&by_key](int dimension, int tag) -> NodeGroup& {
+    auto [it, inserted] = by_key.try_emplace({dimension, tag});
+    if (inserted) {
+      it->second.dimension = dimension;
+      it->second.tag = tag;
+      it->second.name = std::to_string(tag);
+    }
+    return it->second;
+  };
+  for (const RawPhysicalName& n : raw.physical_names) {
+    if (!n.name.empty()) group(n.dimension, n.tag).name = n.name;
+  }
+  std::vector<int> dropped_positions;
+  for (const RawGroup& rg : raw.groups) {
+    NodeGroup& g = group(rg.dimension, rg.tag);
+    g.nodes.reserve(g.nodes.size() + rg.node_ids.size());
+    for (std::size_t k = 0; k < rg.node_ids.size(); ++k) {
+      const auto found = index_of.find(rg.node_ids[k]);
+      if (found == index_of.end()) {
+        fail(name, rg.node_lines[k],
+             fmt::format("an element of physical group '{}' (dimension {}, tag {}) refers to "
+                         "{} {} which is not defined",
+                         g.name, g.dimension, g.tag, raw.node_word, rg.node_ids[k]));
+      }
+      const int index = new_index[static_cast<std::size_t>(found->second)];
+      if (index < 0) {
+        dropped_positions.push_back(found->second);
+      } else {
+        g.nodes.push_back(index);
+      }
+    }
+  }
+  std::sort(dropped_positions.begin(), dropped_positions.end());
+  *dropped = static_cast<int>(std::unique(dropped_positions.begin(), dropped_positions.end()) -
+                              dropped_positions.begin());
+  std::vector<NodeGroup> out;
+  out.reserve(by_key.size());
+  for (auto& [key, g] : by_key) {
+    std::sort(g.nodes.begin(), g.nodes.end());
+    g.nodes.erase(std::unique(g.nodes.begin(), g.nodes.end()), g.nodes.end());
+    out.push_back(std::move(g));
+  }
+  return out;
+}
+
+}  // namespace tactus::sim::detail
