@@ -253,7 +253,7 @@ class GmshReader {
         if (dim < 0) {
           ++unknown_type_grouped_;
         } else {
-          addGroupNodes(&groupNodes(&groups_, dim, physical), first);
+          addGroupElement(&groupNodes(&groups_, dim, physical), type, first);
         }
       }
     }
@@ -342,7 +342,7 @@ class GmshReader {
         } else {
           ++raw_->ignored_elements;
         }
-        if (entity_nodes != nullptr) addGroupNodes(entity_nodes, 1);
+        if (entity_nodes != nullptr) addGroupElement(entity_nodes, type, 1);
       }
       seen += m;
     }
@@ -434,8 +434,13 @@ class GmshReader {
     return g;
   }
 
-  // The node ids of the current element line from token `first` on.
-  void addGroupNodes(RawGroup* group, std::size_t first) {
+  // The current element line (its nodes from token `first` on) into `group`: a tetrahedron,
+  // just read by addTet, by its index, another element by its node ids.
+  void addGroupElement(RawGroup* group, std::int64_t type, std::size_t first) {
+    if (type == 4) {
+      group->tets.push_back(static_cast<int>(raw_->tets.size() - 1));
+      return;
+    }
     for (std::size_t k = first; k < tok_.size(); ++k) {
       group->node_ids.push_back(intToken(k, "node id"));
       group->node_lines.push_back(cur_.line());
@@ -449,6 +454,7 @@ class GmshReader {
       if (physicals == entity_physicals_.end()) continue;
       for (const int tag : physicals->second) {
         RawGroup& g = groupNodes(&groups_, entity.first, tag);
+        g.tets.insert(g.tets.end(), nodes.tets.begin(), nodes.tets.end());
         g.node_ids.insert(g.node_ids.end(), nodes.node_ids.begin(), nodes.node_ids.end());
         g.node_lines.insert(g.node_lines.end(), nodes.node_lines.begin(), nodes.node_lines.end());
       }

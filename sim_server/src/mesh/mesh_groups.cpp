@@ -22,7 +22,7 @@ int gmshElementDimension(std::int64_t type) {
   }
 }
 
-std::vector<NodeGroup> resolveGroups(const RawMesh& raw,
+std::vector<NodeGroup> resolveGroups(const RawMesh& raw, const TetMesh& mesh,
                                      const std::unordered_map<std::int64_t, int>& index_of,
                                      const std::vector<int>& new_index, const std::string& name,
                                      int* dropped) {
@@ -40,9 +40,20 @@ std::vector<NodeGroup> resolveGroups(const RawMesh& raw,
     if (!n.name.empty()) group(n.dimension, n.tag).name = n.name;
   }
   std::vector<int> dropped_positions;
+  // nodes are marked as they join a group (each once), then sorted and the marks cleared
+  std::vector<char> in(static_cast<std::size_t>(mesh.nodeCount()), 0);
   for (const RawGroup& rg : raw.groups) {
     NodeGroup& g = group(rg.dimension, rg.tag);
-    g.nodes.reserve(g.nodes.size() + rg.node_ids.size());
+    for (int node : g.nodes) in[static_cast<std::size_t>(node)] = 1;
+    const auto mark = [&in, &g](int node) {
+      if (in[static_cast<std::size_t>(node)] == 0) {
+        in[static_cast<std::size_t>(node)] = 1;
+        g.nodes.push_back(node);
+      }
+    };
+    for (int t : rg.tets) {
+      for (int node : mesh.tets[static_cast<std::size_t>(t)]) mark(node);
+    }
     for (std::size_t k = 0; k < rg.node_ids.size(); ++k) {
       const auto found = index_of.find(rg.node_ids[k]);
       if (found == index_of.end()) {
@@ -55,20 +66,18 @@ std::vector<NodeGroup> resolveGroups(const RawMesh& raw,
       if (index < 0) {
         dropped_positions.push_back(found->second);
       } else {
-        g.nodes.push_back(index);
+        mark(index);
       }
     }
+    std::sort(g.nodes.begin(), g.nodes.end());
+    for (int node : g.nodes) in[static_cast<std::size_t>(node)] = 0;
   }
   std::sort(dropped_positions.begin(), dropped_positions.end());
   *dropped = static_cast<int>(std::unique(dropped_positions.begin(), dropped_positions.end()) -
                               dropped_positions.begin());
   std::vector<NodeGroup> out;
   out.reserve(by_key.size());
-  for (auto& [key, g] : by_key) {
-    std::sort(g.nodes.begin(), g.nodes.end());
-    g.nodes.erase(std::unique(g.nodes.begin(), g.nodes.end()), g.nodes.end());
-    out.push_back(std::move(g));
-  }
+  for (auto& [key, g] : by_key) out.push_back(std::move(g));
   return out;
 }
 

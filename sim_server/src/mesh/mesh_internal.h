@@ -18,7 +18,8 @@ namespace tactus::sim::detail {
 struct RawGroup {
   int dimension = 0;
   int tag = 0;
-  std::vector<std::int64_t> node_ids;   ///< with repetitions, as the elements list them
+  std::vector<int> tets;                ///< its tetrahedra: indices into RawMesh::tets
+  std::vector<std::int64_t> node_ids;   ///< its other elements' nodes, with repetitions
   std::vector<int> node_lines;          ///< line of the element each id comes from
 };
 
@@ -53,11 +54,12 @@ struct RawMesh {
 /// Resolves ids, drops unreferenced nodes, rejects degenerate tets and flips inverted ones.
 TetMesh finalizeMesh(RawMesh&& raw, const std::string& name, MeshReport* report);
 
-/// The physical groups of `raw` with node ids resolved through `index_of` (file id -> position in
-/// file order) and `new_index` (position -> mesh index, -1 when dropped); fails on an element of a
-/// group that refers to an unknown node. `dropped` counts the group nodes no tetrahedron uses
-/// (left out). In mesh_groups.cpp.
-std::vector<NodeGroup> resolveGroups(const RawMesh& raw,
+/// The physical groups of `raw` on `mesh` (whose tets are raw.tets resolved, in the same order),
+/// other elements' node ids resolved through `index_of` (file id -> position in file order) and
+/// `new_index` (position -> mesh index, -1 when dropped); fails on an element of a group that
+/// refers to an unknown node. `dropped` counts the group nodes no tetrahedron uses (left out). In
+/// mesh_groups.cpp.
+std::vector<NodeGroup> resolveGroups(const RawMesh& raw, const TetMesh& mesh,
                                      const std::unordered_map<std::int64_t, int>& index_of,
                                      const std::vector<int>& new_index, const std::string& name,
                                      int* dropped);

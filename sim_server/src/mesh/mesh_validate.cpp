@@ -193,7 +193,7 @@ TetMesh finalizeMesh(RawMesh&& raw, const std::string& name, MeshReport* report)
   }
   const int dropped = static_cast<int>(n) - kept;
   int dropped_group_nodes = 0;
-  mesh.groups = resolveGroups(raw, index_of, new_index, name, &dropped_group_nodes);
+  mesh.groups = resolveGroups(raw, mesh, index_of, new_index, name, &dropped_group_nodes);
   if (dropped_group_nodes > 0) {
     spdlog::warn("{}: {} nodes of physical groups are used by no tetrahedron and left out of their "
                  "groups", name, dropped_group_nodes);
