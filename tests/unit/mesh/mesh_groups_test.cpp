@@ -78,13 +78,6 @@ std::string meshError(const std::string& text) {
   return "(no error)";
 }
 
-const NodeGroup* find(const TetMesh& mesh, int dimension, int tag) {
-  for (const NodeGroup& g : mesh.groups) {
-    if (g.dimension == dimension && g.tag == tag) return &g;
-  }
-  return nullptr;
-}
-
 // The positions of a group's nodes, so the node indices are checked against the coordinates the
 // file gives the ids, independently of the reader's numbering.
 std::set<std::array<double, 3>> positions(const TetMesh& mesh, const NodeGroup& g) {
@@ -98,47 +91,32 @@ std::set<std::array<double, 3>> positions(const TetMesh& mesh, const NodeGroup& 
 void expectTwoTetGroups(const TetMesh& m, std::vector<int> volume_tags) {
   ASSERT_EQ(m.nodeCount(), 5);
   ASSERT_EQ(m.tetCount(), 2);
-  std::vector<std::pair<int, int>> keys;
-  for (const NodeGroup& g : m.groups) keys.emplace_back(g.dimension, g.tag);
-  std::vector<std::pair<int, int>> expected_keys = {{0, 4}, {1, 1}, {2, 1}, {2, 2}, {2, 9}};
-  for (int t : volume_tags) expected_keys.emplace_back(3, t);
-  EXPECT_EQ(keys, expected_keys);   // ordered by (dimension, tag), named empty groups included
-
-  const NodeGroup* orphan = find(m, 0, 4);
-  ASSERT_NE(orphan, nullptr);
-  EXPECT_EQ(orphan->name, "orphan");
-  EXPECT_TRUE(orphan->nodes.empty());   // its only node is used by no tetrahedron
-
-  const NodeGroup* line = find(m, 1, 1);
-  ASSERT_NE(line, nullptr);
-  EXPECT_EQ(line->name, "1");   // unnamed: its tag
-  EXPECT_EQ(line->nodes, (std::vector<int>{2, 3}));   // ids 7 3, after 99 was dropped
-  EXPECT_EQ(positions(m, *line), (std::set<std::array<double, 3>>{{0, 1, 0}, {0, 0, 1}}));
-
-  const NodeGroup* base = find(m, 2, 1);
-  ASSERT_NE(base, nullptr);
-  EXPECT_EQ(base->name, "base");
-  EXPECT_EQ(base->nodes, (std::vector<int>{0, 1, 2}));
-  EXPECT_EQ(positions(m, *base),
-            (std::set<std::array<double, 3>>{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}}));
-
-  const NodeGroup* unnamed = find(m, 2, 2);
-  ASSERT_NE(unnamed, nullptr);
-  EXPECT_EQ(unnamed->name, "2");
-  EXPECT_EQ(unnamed->nodes, (std::vector<int>{0, 1, 3}));
-  EXPECT_EQ(positions(m, *unnamed),
-            (std::set<std::array<double, 3>>{{0, 0, 0}, {1, 0, 0}, {0, 0, 1}}));
-
-  const NodeGroup* unused = find(m, 2, 9);
-  ASSERT_NE(unused, nullptr);
-  EXPECT_EQ(unused->name, "unused");
-  EXPECT_TRUE(unused->nodes.empty());
-
-  for (int t : volume_tags) {
-    const NodeGroup* volume = find(m, 3, t);
-    ASSERT_NE(volume, nullptr);
-    EXPECT_EQ(volume->name, t == 3 ? "liver volume" : std::to_string(t));  // names keep spaces
-    EXPECT_EQ(volume->nodes, (std::vector<int>{0, 1, 2, 3, 4}));
+  using Points = std::set<std::array<double, 3>>;
+  struct Expected {
+    int dimension, tag;
+    std::string name;
+    std::vector<int> nodes;
+    Points at;   // the positions the file gives those nodes' ids
+  };
+  const Points all = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}, {0, 0, -1}};
+  std::vector<Expected> expected = {
+      {0, 4, "orphan", {}, {}},   // its only node is used by no tetrahedron
+      {1, 1, "1", {2, 3}, {{0, 1, 0}, {0, 0, 1}}},   // unnamed: its tag; ids 7 3 after 99 dropped
+      {2, 1, "base", {0, 1, 2}, {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}}},
+      {2, 2, "2", {0, 1, 3}, {{0, 0, 0}, {1, 0, 0}, {0, 0, 1}}},
+      {2, 9, "unused", {}, {}}};   // named, no element
+  for (int t : volume_tags) {   // names keep their spaces
+    expected.push_back({3, t, t == 3 ? "liver volume" : std::to_string(t), {0, 1, 2, 3, 4}, all});
+  }
+  ASSERT_EQ(m.groups.size(), expected.size());   // ordered by (dimension, tag)
+  for (std::size_t i = 0; i < expected.size(); ++i) {
+    const NodeGroup& g = m.groups[i];
+    SCOPED_TRACE(expected[i].name);
+    EXPECT_EQ(g.dimension, expected[i].dimension);
+    EXPECT_EQ(g.tag, expected[i].tag);
+    EXPECT_EQ(g.name, expected[i].name);
+    EXPECT_EQ(g.nodes, expected[i].nodes);
+    EXPECT_EQ(positions(m, g), expected[i].at);
   }
 }
 

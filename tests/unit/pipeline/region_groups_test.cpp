@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -44,13 +45,18 @@ std::vector<int> nodesOn(int axis, double value) {
   return out;
 }
 
-std::string sceneError(const std::string& yaml) {
+// The SceneError `f` throws.
+std::string errorOf(const std::function<void()>& f) {
   try {
-    Simulation sim(parse(yaml));
+    f();
   } catch (const SceneError& e) {
     return e.what();
   }
   return "(no error)";
+}
+
+std::string sceneError(const std::string& yaml) {
+  return errorOf([&yaml] { Simulation sim(parse(yaml)); });
 }
 
 TEST(RegionGroupsTest, AFixedGroupPinsExactlyItsNodes) {
@@ -149,14 +155,7 @@ TEST(RegionGroupsTest, AnUnknownGroupNamesTheRegionTheGroupAndTheMeshsGroups) {
 }
 
 TEST(RegionGroupsTest, GroupRegionGrammar) {
-  const auto error = [](const std::string& yaml) {
-    try {
-      parse(yaml);
-    } catch (const SceneError& e) {
-      return std::string(e.what());
-    }
-    return std::string("(no error)");
-  };
+  const auto error = [](const std::string& yaml) { return errorOf([&yaml] { parse(yaml); }); };
   EXPECT_EQ(error(kHead + "    fixed: {regions: [{group: base, lowest: z}]}\n"),
             "g.yaml:6:23: tissues[0].fixed.regions[0]: must have exactly one selector of box, "
             "plane, lowest, highest, group (got 2)");
@@ -189,12 +188,7 @@ TEST(RegionGroupsTest, AnEmptyGroupSelectsNoNodeAndAnAmbiguousOneIsAnError) {
   r.group = "empty";
   r.where = "s.yaml:3:4: tissues[0].fixed.regions[0]";
   const auto error = [&mesh](const RegionSpec& region) {
-    try {
-      requireRegionNodes(mesh, region, "t", "fixed", "fallback");
-    } catch (const SceneError& e) {
-      return std::string(e.what());
-    }
-    return std::string("(no error)");
+    return errorOf([&] { requireRegionNodes(mesh, region, "t", "fixed", "fallback"); });
   };
   EXPECT_EQ(error(r),
             "s.yaml:3:4: tissues[0].fixed.regions[0]: the fixed region, the physical group "
