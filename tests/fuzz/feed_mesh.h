@@ -4,7 +4,8 @@
 //
 // Contract checked: parseTetMesh returns a mesh or throws tactus::Error. Anything else (another
 // exception type, a sanitizer report, a returned mesh that breaks the documented invariants:
-// finite nodes, tet indices in range, at least one tet) escapes as std::logic_error: a bug.
+// finite nodes, tet indices in range, at least one tet, group nodes sorted, unique and in range)
+// escapes as std::logic_error: a bug.
 
 #include <cmath>
 #include <stdexcept>
@@ -30,6 +31,14 @@ inline bool feedMesh(const std::string& bytes) {
   for (const auto& t : mesh.tets) {
     for (int v : t) {
       if (v < 0 || v >= mesh.nodeCount()) throw std::logic_error("tet index out of range");
+    }
+  }
+  for (const sim::NodeGroup& g : mesh.groups) {
+    for (std::size_t i = 0; i < g.nodes.size(); ++i) {
+      const bool in_range = g.nodes[i] >= 0 && g.nodes[i] < mesh.nodeCount();
+      if (!in_range || (i > 0 && g.nodes[i] <= g.nodes[i - 1])) {
+        throw std::logic_error("group nodes out of range, unsorted or repeated");
+      }
     }
   }
   const sim::SurfaceMesh surface = sim::extractSurface(mesh);

@@ -379,13 +379,12 @@ class GmshReader {
                          excerpt(trim(line_))));
       }
       entry.name = std::string(rest.substr(1, rest.size() - 2));
-      for (const RawPhysicalName& other : raw_->physical_names) {
-        if (other.dimension == entry.dimension && other.tag == entry.tag) {
-          fail(name_, cur_.line(),
-               fmt::format("physical group (dimension {}, tag {}) is named twice (first at line "
-                           "{})",
-                           entry.dimension, entry.tag, other.line));
-        }
+      const auto [first, inserted] =
+          name_lines_.emplace(std::pair(entry.dimension, entry.tag), entry.line);
+      if (!inserted) {
+        fail(name_, cur_.line(),
+             fmt::format("physical group (dimension {}, tag {}) is named twice (first at line {})",
+                         entry.dimension, entry.tag, first->second));
       }
       raw_->physical_names.push_back(std::move(entry));
     }
@@ -475,6 +474,7 @@ class GmshReader {
   std::map<std::pair<int, int>, RawGroup> groups_;         // (dimension, physical tag)
   std::map<std::pair<int, int>, RawGroup> entity_nodes_;   // 4.1: (dimension, entity tag)
   std::map<std::pair<int, int>, std::vector<int>> entity_physicals_;
+  std::map<std::pair<int, int>, int> name_lines_;            // $PhysicalNames: line of each
   bool have_entities_ = false;
   int unknown_type_grouped_ = 0;
   std::string section_;

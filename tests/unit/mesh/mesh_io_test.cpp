@@ -223,7 +223,8 @@ TEST(MeshIo, NeverCrashesOnTruncatedOrCorruptedInput) {
   for (const char* file : {"cube_low_res.msh", "msh4_cube.msh", "negative_orientation.msh",
                            "cube_low_res_legacy.vtk", "cube_low_res_legacy51.vtk",
                            "cube_low_res_ascii.vtu", "cube_low_res_base64.vtu",
-                           "cube_low_res_zlib.vtu", "cube_low_res_appended.vtu"}) {
+                           "cube_low_res_zlib.vtu", "cube_low_res_appended.vtu",
+                           "box_groups.msh", "box_groups_v22.msh"}) {
     SCOPED_TRACE(file);
     const std::string text = readFile(meshPath(file));
     const auto attempt = [&](const std::string& input) {
@@ -231,6 +232,9 @@ TEST(MeshIo, NeverCrashesOnTruncatedOrCorruptedInput) {
         const TetMesh m = parseTetMesh(input, file);
         for (const auto& t : m.tets) {
           for (int k : t) ASSERT_TRUE(k >= 0 && k < m.nodeCount());
+        }
+        for (const NodeGroup& g : m.groups) {
+          for (int k : g.nodes) ASSERT_TRUE(k >= 0 && k < m.nodeCount());
         }
         ++parsed;
       } catch (const MeshError&) {
