@@ -253,7 +253,7 @@ class GmshReader {
         if (dim < 0) {
           ++unknown_type_grouped_;
         } else {
-          addGroupElement(&groupNodes(&groups_, dim, physical), type, first);
+          addGroupElement(&rawGroup(&groups_, dim, physical), type, first);
         }
       }
     }
@@ -322,7 +322,7 @@ class GmshReader {
       const auto physicals = entity_physicals_.find({static_cast<int>(dim), entity});
       if (!have_entities_ ||
           (physicals != entity_physicals_.end() && !physicals->second.empty())) {
-        entity_nodes = &groupNodes(&entity_nodes_, static_cast<int>(dim), entity);
+        entity_nodes = &rawGroup(&entity_nodes_, static_cast<int>(dim), entity);
       }
       const std::int64_t m = count(intToken(3, "elements in block"), "element");
       if (m > total - seen) {
@@ -395,6 +395,7 @@ class GmshReader {
   void readEntities4() {
     if (have_entities_) fail(name_, cur_.line(), "second $Entities section");
     have_entities_ = true;
+    entities_line_ = section_line_;
     nextTokens("the $Entities header");
     std::array<std::int64_t, 4> counts{};
     for (std::size_t d = 0; d < 4; ++d) {
@@ -426,13 +427,6 @@ class GmshReader {
     expectEnd("$EndEntities");
   }
 
-  static RawGroup& groupNodes(std::map<std::pair<int, int>, RawGroup>* groups, int dim, int tag) {
-    RawGroup& g = (*groups)[{dim, tag}];
-    g.dimension = dim;
-    g.tag = tag;
-    return g;
-  }
-
   // The current element line (its nodes from token `first` on) into `group`: a tetrahedron,
   // just read by addTet, by its index, another element by its node ids.
   void addGroupElement(RawGroup* group, std::int64_t type, std::size_t first) {
@@ -448,16 +442,7 @@ class GmshReader {
 
   // 4.1: each entity's elements go to the entity's physical groups; then all groups to raw_.
   void collectGroups() {
-    for (auto& [entity, nodes] : entity_nodes_) {
-      const auto physicals = entity_physicals_.find(entity);
-      if (physicals == entity_physicals_.end()) continue;
-      for (const int tag : physicals->second) {
-        RawGroup& g = groupNodes(&groups_, entity.first, tag);
-        g.tets.insert(g.tets.end(), nodes.tets.begin(), nodes.tets.end());
-        g.node_ids.insert(g.node_ids.end(), nodes.node_ids.begin(), nodes.node_ids.end());
-        g.node_lines.insert(g.node_lines.end(), nodes.node_lines.begin(), nodes.node_lines.end());
-      }
-    }
+    addEntityGroups(entity_nodes_, entity_physicals_, &groups_, name_, entities_line_);
     for (auto& [key, g] : groups_) raw_->groups.push_back(std::move(g));
     if (unknown_type_grouped_ > 0) {
       spdlog::warn("{}: {} elements of unknown type (hence dimension) left out of their physical "
@@ -471,11 +456,12 @@ class GmshReader {
   RawMesh* raw_;
   std::vector<std::string_view> tok_;
   std::string_view line_;   // the line tok_ comes from
-  std::map<std::pair<int, int>, RawGroup> groups_;         // (dimension, physical tag)
-  std::map<std::pair<int, int>, RawGroup> entity_nodes_;   // 4.1: (dimension, entity tag)
+  RawGroupMap groups_;                                       // (dimension, physical tag)
+  RawGroupMap entity_nodes_;                                 // 4.1: (dimension, entity tag)
   std::map<std::pair<int, int>, std::vector<int>> entity_physicals_;
   std::map<std::pair<int, int>, int> name_lines_;            // $PhysicalNames: line of each
   bool have_entities_ = false;
+  int entities_line_ = 0;                                    // where $Entities starts
   int unknown_type_grouped_ = 0;
   std::string section_;
   int section_line_ = 0;

@@ -22,6 +22,44 @@ int gmshElementDimension(std::int64_t type) {
   }
 }
 
+RawGroup& rawGroup(RawGroupMap* groups, int dimension, int tag) {
+  RawGroup& g = (*groups)[{dimension, tag}];
+  g.dimension = dimension;
+  g.tag = tag;
+  return g;
+}
+
+void addEntityGroups(const RawGroupMap& entity_nodes,
+                     const std::map<std::pair<int, int>, std::vector<int>>& entity_physicals,
+                     RawGroupMap* groups, const std::string& name, int line) {
+  std::size_t listed = 0;
+  for (const auto& [entity, part] : entity_nodes) {
+    listed += 4 * part.tets.size() + part.node_ids.size();
+  }
+  const std::size_t bound = 16 * listed + (std::size_t{1} << 16);
+  std::size_t copied = 0;
+  for (const auto& [entity, part] : entity_nodes) {
+    const auto physicals = entity_physicals.find(entity);
+    if (physicals == entity_physicals.end()) continue;
+    std::vector<int> tags = physicals->second;   // a tag listed twice counts once
+    std::sort(tags.begin(), tags.end());
+    tags.erase(std::unique(tags.begin(), tags.end()), tags.end());
+    for (const int tag : tags) {
+      copied += 4 * part.tets.size() + part.node_ids.size();
+      if (copied > bound) {
+        fail(name, line,
+             fmt::format("the physical groups of $Entities would hold over {} element nodes, "
+                         "16 times those of the elements: too many groups per entity",
+                         bound));
+      }
+      RawGroup& g = rawGroup(groups, entity.first, tag);
+      g.tets.insert(g.tets.end(), part.tets.begin(), part.tets.end());
+      g.node_ids.insert(g.node_ids.end(), part.node_ids.begin(), part.node_ids.end());
+      g.node_lines.insert(g.node_lines.end(), part.node_lines.begin(), part.node_lines.end());
+    }
+  }
+}
+
 std::vector<NodeGroup> resolveGroups(const RawMesh& raw, const TetMesh& mesh,
                                      const std::unordered_map<std::int64_t, int>& index_of,
                                      const std::vector<int>& new_index, const std::string& name,

@@ -4,6 +4,7 @@
 
 #include <array>
 #include <cstdint>
+#include <map>
 #include <string>
 #include <string_view>
 #include <unordered_map>
@@ -22,6 +23,20 @@ struct RawGroup {
   std::vector<std::int64_t> node_ids;   ///< its other elements' nodes, with repetitions
   std::vector<int> node_lines;          ///< line of the element each id comes from
 };
+
+/// Raw groups by (dimension, tag).
+using RawGroupMap = std::map<std::pair<int, int>, RawGroup>;
+
+/// The entry of `groups` for (dimension, tag), created empty when missing. In mesh_groups.cpp.
+RawGroup& rawGroup(RawGroupMap* groups, int dimension, int tag);
+
+/// Gmsh 4.1: each entity's elements (`entity_nodes`, by (dimension, entity tag)) into every
+/// physical group `entity_physicals` lists for it, in `groups` (by (dimension, physical tag)). An
+/// entity is copied once per group: copies beyond 16 times the elements' nodes (a file asking for
+/// far more memory than its size) fail at `line`. In mesh_groups.cpp.
+void addEntityGroups(const RawGroupMap& entity_nodes,
+                     const std::map<std::pair<int, int>, std::vector<int>>& entity_physicals,
+                     RawGroupMap* groups, const std::string& name, int line);
 
 /// A `$PhysicalNames` entry.
 struct RawPhysicalName {

@@ -229,7 +229,18 @@ TEST(MeshGroups, MalformedGroupSectionsAreMeshErrorsWithTheLine) {
   EXPECT_EQ(meshError(kFormat41 + "$Entities\n2 0 0 0\n1 5 5 5 0\n1 5 5 5 0\n$EndEntities\n" +
                       kBody41),
             "mem.msh:7: entity (dimension 0, tag 1) is defined twice");
-  // an element of a group that refers to a node the file does not define (line 11: element 2)
+  // a volume in 20000 groups: 80000 node copies of its 2 tetrahedra (8 nodes), more than 16 times
+  // those plus 65536: refused rather than amplified (a large entity would ask for gigabytes)
+  std::string many = "$Entities\n0 0 0 1\n1 0 0 -1 1 1 1 20000";
+  for (int t = 1; t <= 20000; ++t) {
+    many += ' ';
+    many += std::to_string(t);
+  }
+  many += " 0\n$EndEntities\n";
+  EXPECT_EQ(meshError(kFormat41 + many + kBody41),
+            "mem.msh:4: the physical groups of $Entities would hold over 65664 element nodes, 16 "
+            "times those of the elements: too many groups per entity");
+  // an element of a group that refers to a node the file does not define (line 16: element 2)
   std::string dangling = kElements22;
   dangling.replace(dangling.find("2 2 2 1 1 10 5 7"), 16, "2 2 2 1 1 10 5 77");
   EXPECT_EQ(meshError(kFormat22 + kNodes22 + dangling),

@@ -25,7 +25,9 @@ namespace tactus::sim {
 /// lines, triangles, tetrahedra...), the file puts in it. Read from `$PhysicalNames` and the
 /// elements' physical tags (2.x and 1.0: an element's first tag / reg-phys; 4.1: the physical tags
 /// of the `$Entities` entity an element block belongs to). Scenes select them with a region's
-/// `group:` selector (scenes/README.md, "Regions").
+/// `group:` selector (scenes/README.md, "Regions"). Malformed group sections are MeshErrors with
+/// the line, as is a 4.1 file whose entities are in so many groups that their copies would exceed
+/// 16 times the elements' nodes (plus 65536): memory out of proportion to the file.
 struct NodeGroup {
   std::string name;        ///< its $PhysicalNames name; the tag as text ("7") when it has none
   int dimension = 0;       ///< 0 point, 1 curve, 2 surface, 3 volume
