@@ -5,6 +5,7 @@
 
 #include "obstacle_stage.h"
 #include "step_stages.h"
+#include "tissue_contact_stage.h"
 #include "tactus/shared/clock.h"
 
 namespace tactus::sim {
@@ -171,15 +172,35 @@ void assembleProblem(const SimulationModel& model, SimulationState& state, StepS
     const int m = tx.rows.rows();
     const int nc = static_cast<int>(tx.rows.row_offset.size()) - 1;
     for (int c = 1; c <= nc; ++c) p.row_offset.push_back(tx.row_begin + tx.rows.row_offset[c]);
+    if (!tx.pair_parts.empty()) {
+      // with its parts of the rows between tissues (tissue_contact_stage.h)
+      addCoupledTissueW(ts, scratch.tissues[t], p.W);
+      ++counters.w_builds;
+    }
     if (m == 0) continue;
-    // the tissue's block in place: W is symmetric, so the transposed view of the row-major block
-    // (column-major for the model) is the same matrix
-    auto block = p.W.block(tx.row_begin, tx.row_begin, m, m).transpose();
-    ts.compliance->addW(tx.rows.tissue, block);
+    if (tx.pair_parts.empty()) {
+      // the tissue's block in place: W is symmetric, so the transposed view of the row-major
+      // block (column-major for the model) is the same matrix
+      auto block = p.W.block(tx.row_begin, tx.row_begin, m, m).transpose();
+      ts.compliance->addW(tx.rows.tissue, block);
+      ++counters.w_builds;
+    }
     scratch.h_tool.middleRows(tx.row_begin, m) = tx.rows.tool;
     for (int r = 0; r < m; ++r) p.grip[tx.row_begin + r] = tx.grip[static_cast<std::size_t>(r)];
     for (int r = 0; r < m; ++r) p.delta_free[tx.row_begin + r] = tx.rows.delta_free[r];
-    ++counters.w_builds;
+  }
+  // the rows between tissues, last: no tool part, their pair's contact compliance on the diagonal
+  const PairRowsScratch& pairs = scratch.pair_rows;
+  if (pairs.rows() > 0) {
+    const int r0 = pairs.row_begin;
+    const int nc = static_cast<int>(pairs.row_offset.size()) - 1;
+    for (int c = 1; c <= nc; ++c) p.row_offset.push_back(r0 + pairs.row_offset[c]);
+    scratch.h_tool.middleRows(r0, pairs.rows()).setZero();
+    for (int r = 0; r < pairs.rows(); ++r) {
+      p.grip[r0 + r] = 0.0;
+      p.delta_free[r0 + r] = pairs.delta_free[static_cast<std::size_t>(r)];
+      p.W(r0 + r, r0 + r) += pairs.compliance_mpn[static_cast<std::size_t>(r)];
+    }
   }
   const std::vector<Contact>& all = scratch.all_contacts;
   scratch.row_instrument.resize(static_cast<std::size_t>(rows));
@@ -187,8 +208,9 @@ void assembleProblem(const SimulationModel& model, SimulationState& state, StepS
     // -1: an obstacle's contact (Obstacles::detect), whose rows have no tool part
     const int tool = all[c].instrument;
     p.contact_instrument[c] = tool;
-    p.mu[c] = tool < 0 ? obstacleFriction(state, all[c])
-                       : instrumentSpec(model.spec, tool).friction_mu;
+    p.mu[c] = tool >= 0 ? instrumentSpec(model.spec, tool).friction_mu
+              : all[c].kind == ContactKind::kTissueTissue ? tissueContactFriction(state, all[c])
+                                                          : obstacleFriction(state, all[c]);
     for (int r = p.row_offset[c]; r < p.row_offset[c + 1]; ++r) {
       scratch.row_instrument[static_cast<std::size_t>(r)] = tool;
     }
@@ -208,6 +230,9 @@ void assembleProblem(const SimulationModel& model, SimulationState& state, StepS
   // NSGS may use its symmetric sweep
   // (+ c_g g g^T for a dynamic grip, g the jaw angle's column). Several instruments: each
   // couples only its own rows (H_i C6_i H_i^T); the tissue blocks couple them all.
+  // several instruments: each writes its own rows of J; the others' (obstacles', between
+  // tissues) stay 0
+  if (state.instruments.size() > 1) p.J.setZero();
   for (std::size_t i = 0; i < state.instruments.size(); ++i) {
     addToolCompliance(model, state, scratch, static_cast<int>(i), rows);
   }
@@ -251,6 +276,14 @@ void buildW(const SimulationModel& model, SimulationState& state, StepScratch& s
     tx.contact_begin = contacts;
     rows += tx.rows.rows();
     contacts += static_cast<int>(found.size()) + obstacle_contacts;
+  }
+  // the contacts between tissues after every tissue's own (tissue_contact_stage.h)
+  contacts += appendTissueContactRows(model, state, scratch, found_at, rows, contacts);
+  rows += scratch.pair_rows.rows();
+  if (state.tissue_contacts) {
+    for (int k = 0; k < state.tissue_contacts->directionCount(); ++k) {
+      report.contacts_dropped += state.tissue_contacts->overflow(k);
+    }
   }
   assembleProblem(model, state, scratch, counters, contacts, rows);
   report.distinct_tissue_nodes = countDistinctNodes(state, scratch);

@@ -1,5 +1,6 @@
 // The static obstacles' part of a step: detection and rows (obstacle_stage.h).
 #include "obstacle_stage.h"
+#include "tissue_contact_stage.h"
 
 #include <algorithm>
 #include <limits>
@@ -22,8 +23,10 @@ shared::SegmentCapacity problemCapacity(const SceneSpec& spec) {
       spec.obstacles.empty()
           ? 0
           : spec.obstacle_contact.max_contacts * static_cast<int>(spec.tissues.size());
-  return shared::SegmentCapacity::forContacts(problemContactCapacity(spec) + obstacle_contacts,
-                                              anyFriction(spec) || obstacle_friction);
+  // and the contacts between tissues (tissue_contact_stage.h)
+  return shared::SegmentCapacity::forContacts(
+      problemContactCapacity(spec) + obstacle_contacts + tissueContactCapacity(spec),
+      anyFriction(spec) || obstacle_friction || tissueContactFriction(spec));
 }
 
 double detectObstacleContacts(const SimulationModel& model, SimulationState& state) {

@@ -53,6 +53,21 @@ ReactionForces computeReactions(const SimulationModel& model, SimulationState& s
         }
       }
     }
+    // its parts of the rows between tissues (tissue_contact_stage.h)
+    if (t < scratch.tissues.size() && model.has_contacts && p.rows > 0) {
+      const TissueScratch& tx = scratch.tissues[t];
+      for (std::size_t k = 0; k < tx.pair_parts.size(); ++k) {
+        const TissueRow& tr = tx.pair_parts[k];
+        const int row = tx.pair_part_row[k];
+        if (row >= p.rows) break;
+        for (int j = 0; j < 3; ++j) {
+          if (tr.node[j] < 0) continue;
+          const Eigen::Vector3d force = tr.weight[j] * p.f[row] * tr.dir;
+          r.contact_force_n.col(tr.node[j]) += force;
+          r.from_tissues_n += force;
+        }
+      }
+    }
     const Eigen::VectorXd& mass = body.lumpedMass();
     for (int i = 0; i < n; ++i) r.weight_n += mass[3 * i] * g;
     const bool loaded = t < scratch.tissues.size() && scratch.tissues[t].has_load_force;

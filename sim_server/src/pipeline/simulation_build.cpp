@@ -4,6 +4,7 @@
 #include <spdlog/spdlog.h>
 
 #include "simulation_impl.h"
+#include "tissue_contact_stage.h"
 
 namespace tactus::sim {
 namespace {
@@ -61,6 +62,7 @@ SimulationState buildState(const SimulationModel& model) {
   if (!model.spec.obstacles.empty()) {
     state.obstacles = std::make_unique<Obstacles>(model.spec.obstacles, model.spec.obstacle_contact);
   }
+  state.tissue_contacts = makeTissueContacts(model);   // null without tissue_contact pairs
   for (int i = 0; i < model.instrument_count; ++i) {
     const InstrumentSpec& in = instrumentSpec(model.spec, i);
     Instrument& tool = state.instruments.emplace_back(in);
@@ -86,7 +88,8 @@ StepScratch buildScratch(const SimulationModel& model) {
     scratch.workspace.reserve(model.max_rows,
                               problemContactCapacity(model.spec) +
                                   model.spec.obstacle_contact.max_contacts *
-                                      static_cast<int>(model.tissues.size()));
+                                      static_cast<int>(model.tissues.size()) +
+                                  tissueContactCapacity(model.spec));
   }
   scratch.problem.row_offset.assign(1, 0);
   return scratch;

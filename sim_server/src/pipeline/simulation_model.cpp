@@ -10,6 +10,7 @@
 #include "tactus/sim/instrument.h"
 #include "tactus/sim/node_regions.h"
 #include "obstacle_stage.h"
+#include "tissue_contact_stage.h"
 
 namespace tactus::sim {
 namespace {
@@ -43,7 +44,9 @@ TissueModel buildTissueModel(const SceneSpec& spec, const TissueSpec& ts) {
   std::sort(fixed.begin(), fixed.end());
   fixed.erase(std::unique(fixed.begin(), fixed.end()), fixed.end());
   tissue.fixed_nodes = std::move(fixed);
-  if (spec.instrument.present || !spec.obstacles.empty()) tissue.surface = extractSurface(tissue.mesh);
+  if (spec.instrument.present || !spec.obstacles.empty() || !spec.tissue_contacts.empty()) {
+    tissue.surface = extractSurface(tissue.mesh);
+  }
   return tissue;
 }
 
@@ -57,14 +60,15 @@ SimulationModel buildModel(const SceneSpec& spec) {
   for (const TissueSpec& ts : spec.tissues) model.tissues.push_back(buildTissueModel(spec, ts));
   model.has_instrument = spec.instrument.present;
   model.instrument_count = instrumentCount(spec);
-  model.has_contacts = model.has_instrument || !spec.obstacles.empty();
+  model.has_contacts =
+      model.has_instrument || !spec.obstacles.empty() || !spec.tissue_contacts.empty();
   if (!model.has_contacts) return model;
   model.nsgs.tolerance = spec.solver.nsgs_tolerance;
   model.nsgs.max_sweeps = spec.solver.nsgs_max_sweeps;
   model.nsgs.sor = spec.solver.nsgs_sor;
   model.nsgs.coupling = shared::NsgsCoupling::kSymmetricRowUpdate;   // buildW keeps W symmetric
   // obstacle rows (3 per contact with friction) come after the instruments', per tissue
-  model.max_rows = obstacleRowCapacity(spec);
+  model.max_rows = obstacleRowCapacity(spec) + tissueContactRowCapacity(spec);
   if (!model.has_instrument) return model;
   // the device target stays within a box around the scene at rest (instrument.h "Workspace")
   Eigen::AlignedBox3d bounds;

@@ -16,6 +16,7 @@
 #include "tactus/sim/instrument.h"
 #include "tactus/sim/obstacles.h"
 #include "tactus/sim/pipeline.h"
+#include "tactus/sim/tissue_contact.h"
 
 namespace tactus::sim {
 
@@ -52,6 +53,8 @@ struct SimulationState {
   std::vector<char> target_rejected;        ///< the last setDeviceTarget(i) was non-finite
   /// The static obstacles (obstacles.h); null without any.
   std::unique_ptr<Obstacles> obstacles;
+  /// Contact between tissues and self-contact (tissue_contact.h); null without any pair.
+  std::unique_ptr<TissueContacts> tissue_contacts;
   /// The last solve's force per contact id (n, t1, t2): the next solve's warm start.
   std::unordered_map<std::uint64_t, std::array<double, 3>> warm_start_f;
 };

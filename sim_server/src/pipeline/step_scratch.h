@@ -29,6 +29,24 @@ struct TissueScratch {
   Eigen::VectorXd dq_previous;           ///< the previous contact pass's correction
   Eigen::VectorXd load_force;            ///< the loads' nodal forces of this step (loads.h)
   bool has_load_force = false;           ///< load_force holds some force or pressure
+  // tissue against tissue (tissue_contact_stage.h): this tissue's parts of the pair rows
+  std::vector<TissueRow> pair_parts;     ///< one per part (a self-contact row has two)
+  std::vector<int> pair_part_row;        ///< the global row of each part
+  std::vector<TissueRow> coupled_rows;   ///< own rows, then the pair parts (addW, correction)
+  std::vector<int> coupled_global;       ///< the global row of each coupled row
+  Eigen::MatrixXd coupled_w;             ///< H C H^T over the coupled rows
+  std::vector<double> coupled_f;         ///< f on the coupled rows
+  std::vector<int> group_begin;          ///< coupled rows of one global row (addCoupledTissueW)
+};
+
+/// The rows of the contacts between tissues, after every tissue's own rows.
+struct PairRowsScratch {
+  int row_begin = 0;                     ///< first global row
+  int contact_begin = 0;                 ///< first global contact
+  std::vector<int> row_offset;           ///< per contact, relative to row_begin (contacts + 1)
+  std::vector<double> delta_free;        ///< per row
+  std::vector<double> compliance_mpn;    ///< per row: the pair's contact compliance
+  int rows() const { return static_cast<int>(delta_free.size()); }
 };
 
 using ToolRows = Eigen::Matrix<double, Eigen::Dynamic, 6, Eigen::RowMajor>;
@@ -40,6 +58,7 @@ struct StepScratch {
   ContactProblemData problem;
   shared::NsgsWorkspace workspace;
   std::vector<Contact> all_contacts;     ///< every tissue's contacts in row order
+  PairRowsScratch pair_rows;             ///< the contacts between tissues (last in row order)
   ToolRows h_tool;                       ///< H_tool, rows x 6 (each row: its own instrument's)
   ToolRows b_tool;                       ///< H_tool L, C6 = L L^T (the row's instrument's L)
   std::vector<int> row_instrument;       ///< per row: the instrument of its contact

@@ -8,6 +8,7 @@
 
 #include "obstacle_stage.h"
 #include "tactus/shared/clock.h"
+#include "tissue_contact_stage.h"
 
 namespace tactus::sim {
 
@@ -79,6 +80,8 @@ double queryContacts(const SimulationModel& model, SimulationState& state, StepS
   // the obstacles' contacts (no contact compliance on them)
   min_gap = std::min(min_gap, detectObstacleContacts(model, state));
   scratch.min_excess_gap = min_gap;
+  // between tissues (lowers min_excess_gap itself: their contact compliance)
+  min_gap = std::min(min_gap, detectTissueContacts(model, state, scratch));
   for (TissueState& ts : state.tissues) {
     if (state.instruments.empty()) {
       ts.found = &kNone;
@@ -184,8 +187,13 @@ void constrainedMotion(const SimulationModel& model, SimulationState& state, Ste
     for (std::size_t t = 0; t < state.tissues.size(); ++t) {
       TissueState& ts = state.tissues[t];
       TissueScratch& tx = scratch.tissues[t];
-      if (tx.rows.rows() == 0) continue;
-      ts.compliance->correction(*ts.body, tx.rows.tissue, p.f.data() + tx.row_begin, tx.dq);
+      if (!tx.pair_parts.empty()) {
+        coupledTissueCorrection(ts, tx, p.f);   // with its parts of the rows between tissues
+      } else if (tx.rows.rows() == 0) {
+        continue;
+      } else {
+        ts.compliance->correction(*ts.body, tx.rows.tissue, p.f.data() + tx.row_begin, tx.dq);
+      }
       ts.body->positions() += tx.dq;
       ts.body->velocities() += tx.dq / h;
     }

@@ -24,7 +24,8 @@ namespace scene_detail {
 
 void SceneParser::readRoot(const YAML::Node& root, SceneSpec* spec) {
   checkKeys(root, "", {"time_step", "duration", "gravity", "tissues", "instrument", "instruments",
-                       "solver", "haptics", "output", "obstacles", "obstacle_contact"});
+                       "solver", "haptics", "output", "obstacles", "obstacle_contact",
+                       "tissue_contact"});
   require(root, "", "time_step");
   number(root, "", "time_step", &spec->time_step_s, kPositive, kAtMost(1.0), Range{1e-5, 0.05});
   number(root, "", "duration", &spec->duration_s, kNonNegative, kAtMost(1e7), Range{0.0, 86400.0});
@@ -34,6 +35,7 @@ void SceneParser::readRoot(const YAML::Node& root, SceneSpec* spec) {
   }
   readTissues(root, spec);
   readObstacles(root, spec);   // scene_obstacles.cpp
+  readTissueContacts(root, spec);   // scene_tissue_contact.cpp
   YAML::Node n;
   readInstruments(root, spec);
   if (section(root, "", "solver", &n)) readSolver(n, &spec->solver, instrumentCount(*spec));

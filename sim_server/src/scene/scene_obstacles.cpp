@@ -102,16 +102,21 @@ void SceneParser::readObstacles(const YAML::Node& root, SceneSpec* spec) {
 }
 
 void SceneParser::checkObstacleCapacity(const YAML::Node& root, const SceneSpec& spec) {
-  if (spec.obstacles.empty()) return;
-  // the instruments' contacts (max_contacts each) and the obstacles' (per tissue)
-  const long long total =
-      static_cast<long long>(problemContactCapacity(spec)) +
-      static_cast<long long>(spec.obstacle_contact.max_contacts) *
-          static_cast<long long>(spec.tissues.size());
-  const bool friction =
-      anyFriction(spec) ||
-      std::any_of(spec.obstacles.begin(), spec.obstacles.end(),
-                  [](const ObstacleSpec& o) { return o.friction_mu > 0.0; });
+  if (spec.obstacles.empty() && spec.tissue_contacts.empty()) return;
+  // the instruments' contacts (max_contacts each), the obstacles' (per tissue) and those between
+  // tissues (per pair and direction)
+  long long between = 0;
+  bool friction = anyFriction(spec);
+  for (const TissueContactSpec& p : spec.tissue_contacts) {
+    between += static_cast<long long>(p.max_contacts) *
+               (p.tissue_a != p.tissue_b && p.two_way ? 2 : 1);
+    friction = friction || p.friction_mu > 0.0;
+  }
+  const long long per_tissue = spec.obstacles.empty() ? 0 : spec.obstacle_contact.max_contacts;
+  const long long total = static_cast<long long>(problemContactCapacity(spec)) +
+                          per_tissue * static_cast<long long>(spec.tissues.size()) + between;
+  friction = friction || std::any_of(spec.obstacles.begin(), spec.obstacles.end(),
+                                     [](const ObstacleSpec& o) { return o.friction_mu > 0.0; });
   const std::size_t bytes =
       total > 1'000'000 ? std::numeric_limits<std::size_t>::max()
                         : shared::SegmentLayout::forCapacity(
@@ -119,19 +124,28 @@ void SceneParser::checkObstacleCapacity(const YAML::Node& root, const SceneSpec&
                                                                    friction))
                               .total_bytes;
   if (bytes <= kMaxContactProblemBytes) return;
-  const YAML::Node c = root["obstacle_contact"];
-  const YAML::Node at = c.IsMap() && c["max_contacts"].IsDefined() ? c["max_contacts"] : root;
   const int tools = instrumentCount(spec);
   const std::string instruments =
       tools > 1 ? fmt::format("solver.max_contacts {} x {} instruments", spec.solver.max_contacts,
                               tools)
                 : fmt::format("solver.max_contacts {}", spec.solver.max_contacts);
+  const std::string limit = fmt::format(
+      "need more than the {} MiB the contact problem may take (W is rows x rows doubles, 3 rows "
+      "per frictional contact): lower them (about 3000 in all)", kMaxContactProblemBytes >> 20);
+  if (spec.obstacles.empty()) {
+    error(root["tissue_contact"], "tissue_contact",
+          fmt::format("{} contacts in all ({} + {} between tissues) {}", total, instruments,
+                      between, limit));
+    return;
+  }
+  const YAML::Node c = root["obstacle_contact"];
+  const YAML::Node at = c.IsMap() && c["max_contacts"].IsDefined() ? c["max_contacts"] : root;
+  const std::string pairs =
+      between > 0 ? fmt::format(" + {} between tissues", between) : std::string();
   error(at, "obstacle_contact.max_contacts",
-        fmt::format("{} contacts in all ({} + {} per tissue x {} tissues) "
-                    "need more than the {} MiB the contact problem may take (W is rows x rows "
-                    "doubles, 3 rows per frictional contact): lower them (about 3000 in all)",
-                    total, instruments, spec.obstacle_contact.max_contacts,
-                    spec.tissues.size(), kMaxContactProblemBytes >> 20));
+        fmt::format("{} contacts in all ({} + {} per tissue x {} tissues{}) {}", total,
+                    instruments, spec.obstacle_contact.max_contacts, spec.tissues.size(), pairs,
+                    limit));
 }
 
 }  // namespace tactus::sim::scene_detail

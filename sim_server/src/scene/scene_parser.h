@@ -173,6 +173,8 @@ class SceneParser {
   bool unitVector(const YAML::Node& map, const std::string& path, const char* key,
                   Eigen::Vector3d* out);
   void readObstacles(const YAML::Node& root, SceneSpec* spec);              // scene_obstacles.cpp
+  void readTissueContacts(const YAML::Node& root, SceneSpec* spec);    // scene_tissue_contact.cpp
+  bool tissueIndex(const YAML::Node& n, const std::string& p, const SceneSpec& spec, int* out);
   // The instruments' and the obstacles' contacts together must fit the segment's 2 GiB.
   void checkObstacleCapacity(const YAML::Node& root, const SceneSpec& spec);
   void readInstrument(const YAML::Node& n, const std::string& p,          // scene_instrument.cpp

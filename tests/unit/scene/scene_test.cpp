@@ -254,7 +254,8 @@ TEST(Scene, EachKindOfErrorHasItsExactMessage) {
             "s.yaml:2:10: tissues: must be a list with at least one tissue (got an empty list)");
   EXPECT_EQ(sceneError(kHead + "timestep: 0.01\n"),
             "s.yaml:4:1: timestep: unknown key (expected one of: time_step, duration, gravity, "
-            "tissues, instrument, instruments, solver, haptics, output, obstacles, obstacle_contact)");
+            "tissues, instrument, instruments, solver, haptics, output, obstacles, obstacle_contact, "
+            "tissue_contact)");
   EXPECT_EQ(sceneError(kHead + "duration: ten\n"),
             "s.yaml:4:11: duration: must be a number (got 'ten')");
   EXPECT_EQ(sceneError(kHead + "gravity: [0, -9.81]\n"),

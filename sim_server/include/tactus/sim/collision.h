@@ -80,11 +80,13 @@
 
 namespace tactus::sim {
 
-/// kObstacleVertex: a tissue surface vertex against a static obstacle (obstacles.h).
+/// kObstacleVertex: a tissue surface vertex against a static obstacle (obstacles.h);
+/// kTissueTissue: a tissue's surface vertex against a tissue's surface (tissue_contact.h).
 enum class ContactKind : std::uint8_t {
   kVertexCapsule = 0,
   kSphereTriangle = 1,
   kObstacleVertex = 2,
+  kTissueTissue = 3,
 };
 
 struct Contact {
@@ -104,7 +106,8 @@ struct Contact {
   /// The instrument the tool feature belongs to (SceneSpec's order). Collision::detect leaves 0;
   /// with several instruments the pipeline sets it and ors it into the id's bits 58-63 (the kind
   /// takes bits 56-57), so contacts of different instruments, and obstacles' contacts, never
-  /// share an id. -1: an obstacle's contact (kObstacleVertex), which belongs to no instrument.
+  /// share an id. -1: an obstacle's contact (kObstacleVertex) or a contact between tissues
+  /// (kTissueTissue), which belong to no instrument.
   int instrument = 0;
 };
 

@@ -9,7 +9,10 @@
 //    current positions (FemBody::elasticForce) and c_i the contact force H^T f on the node. It is
 //    the static reaction: the inertia and the damping force of the fixed nodes' neighbours are
 //    left out, so it is exact at rest (and what a load cell under a slow experiment reads);
-//  * contact force per node: H^T f of the last step's contact problem (instrument and obstacles);
+//  * contact force per node: H^T f of the last step's contact problem (instrument, obstacles and
+//    the other tissues);
+//  * per tissue, from the other tissues (tissue_contact.h): the sum of its parts of the rows
+//    between tissues; these are internal to the scene and cancel over all tissues;
 //  * per obstacle: the sum over its contacts of the force it applies, -(n f_n + t1 f_t1 + t2 f_t2);
 //  * on the tissues from the instrument: the same sum over the instrument's contacts.
 //  * the applied loads: the sum of the last step's force and pressure loads.
@@ -26,6 +29,8 @@ struct TissueReactions {
   Eigen::Matrix3Xd contact_force_n;    ///< per node: H^T f
   Eigen::Vector3d fixed_total_n = Eigen::Vector3d::Zero();   ///< sum of R_i
   Eigen::Vector3d weight_n = Eigen::Vector3d::Zero();        ///< sum of m_i g (all nodes)
+  /// From the other tissues (and itself, self-contact: 0 in sum) through tissue contacts
+  Eigen::Vector3d from_tissues_n = Eigen::Vector3d::Zero();
 };
 
 struct ReactionForces {

@@ -211,6 +211,8 @@ struct SceneSpec {
   std::vector<TissueSpec> tissues;
   std::vector<ObstacleSpec> obstacles;          ///< static obstacles (scene_regions.h)
   ObstacleContactSpec obstacle_contact;
+  /// Contact between tissues and self-contact (`tissue_contact:`, tissue_contact.h)
+  std::vector<TissueContactSpec> tissue_contacts;
   /// The first instrument (`instrument:`, or `instruments[0]`); present == false: none.
   InstrumentSpec instrument;
   /// `instruments[1..]`: the others, in order (empty with the single `instrument:` form). Every

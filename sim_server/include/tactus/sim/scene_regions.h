@@ -86,4 +86,21 @@ struct ObstacleContactSpec {
   int max_contacts = 300;            ///< per tissue (deepest kept)
 };
 
+/// Contact between two tissues, or of one tissue with itself (`tissue_contact:`, tissue_contact.h).
+struct TissueContactSpec {
+  int tissue_a = 0;                  ///< index into SceneSpec::tissues
+  int tissue_b = 0;                  ///< == tissue_a: self-contact
+  double friction_mu = 0.0;          ///< Coulomb coefficient between the two surfaces
+  double alarm_distance_m = 0.002;   ///< vertices within this gap of the other surface are contacts
+  /// How far behind the other surface a vertex still counts as touching it and is pushed back out
+  /// (deeper: taken to be past a thin part, ignored)
+  double depth_m = 0.005;
+  /// Added to W's diagonal on the pair's rows: a contact carrying f_n penetrates by c f_n
+  /// (collision.h "Contact compliance"); 0: rigid contact
+  double contact_compliance_mpn = 0.0;
+  int max_contacts = 300;            ///< per direction (smallest gaps kept)
+  bool two_way = true;               ///< two tissues: B's vertices against A's surface too
+  std::string where;                 ///< "file:line:col: tissue_contact[i]"
+};
+
 }  // namespace tactus::sim
