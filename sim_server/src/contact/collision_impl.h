@@ -12,6 +12,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <vector>
 
 #include "aabb_tree.h"
@@ -74,6 +75,47 @@ inline double closestOnSegment(const Eigen::Vector3d& p, const Eigen::Vector3d& 
   const double len2 = ab.squaredNorm();
   if (len2 <= 0.0) return 0.0;
   return std::clamp((p - a).dot(ab) / len2, 0.0, 1.0);
+}
+
+// The closest point of p over a triangle surface, among the triangles whose box is within `reach`
+// of p (through `tree`, built over the triangles) and that skip(t) keeps. Triangles at the same
+// distance (to 1e-12 relative: an edge or vertex they share) add their (p - c) . N_t to `side`,
+// an unweighted pseudo-normal whose sign says whether p is outside (> 0) or inside. vertex(i) is
+// vertex i's position, normals[t] triangle t's unit outward normal. Used by the mesh obstacles
+// and by the contact between tissues.
+struct SurfaceClosest {
+  double distance = std::numeric_limits<double>::infinity();
+  double side = 0.0;
+  int triangle = -1;                 // -1: none within reach
+  ClosestPoint point{};
+};
+
+template <class Vertex, class Skip>
+SurfaceClosest closestOnSurface(const detail::AabbTree& tree,
+                                const std::vector<std::array<int, 3>>& triangles,
+                                const std::vector<Eigen::Vector3d>& normals,
+                                const Eigen::Vector3d& p, double reach, Vertex&& vertex,
+                                Skip&& skip) {
+  SurfaceClosest best;
+  tree.query([&](const Box& box) { return box.exteriorDistance(p) <= reach; },
+             [&](int t) {
+               const auto& tri = triangles[static_cast<std::size_t>(t)];
+               if (skip(tri)) return;
+               const ClosestPoint c = closestOnTriangle(p, vertex(tri[0]), vertex(tri[1]),
+                                                        vertex(tri[2]));
+               const double d = (p - c.p).norm();
+               const double dot = (p - c.p).dot(normals[static_cast<std::size_t>(t)]);
+               const double same = 1e-12 * std::max(1.0, d);
+               if (d < best.distance - same) {
+                 best.distance = d;
+                 best.side = dot;
+                 best.triangle = t;
+                 best.point = c;
+               } else if (d <= best.distance + same) {
+                 best.side += dot;
+               }
+             });
+  return best;
 }
 
 // Segment a..b against a box grown by `radius` on every side (slab test): conservative for the

@@ -12,8 +12,6 @@
 
 namespace tactus::sim {
 
-using collision_detail::closestOnTriangle;
-
 struct Obstacles::Impl {
   struct Placed {
     ObstacleSpec spec;
@@ -89,32 +87,17 @@ bool Obstacles::Impl::queryMesh(const Placed& o, const Eigen::Vector3d& p, doubl
                                 double& gap, Eigen::Vector3d& closest,
                                 Eigen::Vector3d& outward) const {
   const double reach = std::max(max_gap, o.spec.thickness_m);
-  double best = std::numeric_limits<double>::infinity();
-  double side = 0.0;          // sum of (p - c) . N over the triangles at the closest distance
-  Eigen::Vector3d best_point = p;
-  Eigen::Vector3d best_normal = Eigen::Vector3d::UnitZ();
-  o.tree.query([&](const Eigen::AlignedBox3d& box) { return box.exteriorDistance(p) <= reach; },
-               [&](int t) {
-                 const auto& tri = o.surface.triangles[static_cast<std::size_t>(t)];
-                 const auto cp = closestOnTriangle(p, o.surface.vertices.col(tri[0]),
-                                                   o.surface.vertices.col(tri[1]),
-                                                   o.surface.vertices.col(tri[2]));
-                 const double d = (p - cp.p).norm();
-                 const double dot = (p - cp.p).dot(o.normals[static_cast<std::size_t>(t)]);
-                 const double same = 1e-12 * std::max(1.0, d);
-                 if (d < best - same) {
-                   best = d;
-                   side = dot;
-                   best_point = cp.p;
-                   best_normal = o.normals[static_cast<std::size_t>(t)];
-                 } else if (d <= best + same) {
-                   side += dot;
-                 }
-               });
+  const collision_detail::SurfaceClosest found = collision_detail::closestOnSurface(
+      o.tree, o.surface.triangles, o.normals, p, reach,
+      [&](int i) { return o.surface.vertices.col(i); },
+      [](const std::array<int, 3>&) { return false; });
+  const double best = found.distance;
   if (!(best <= reach)) return false;
-  const bool inside = side < 0.0;
+  const bool inside = found.side < 0.0;
   gap = inside ? -best : best;
   if (inside ? best > o.spec.thickness_m : best > max_gap) return false;
+  const Eigen::Vector3d best_point = found.point.p;
+  const Eigen::Vector3d& best_normal = o.normals[static_cast<std::size_t>(found.triangle)];
   closest = best_point;
   outward = best > collision_detail::kTinyDistance_m ? Eigen::Vector3d((inside ? -1.0 : 1.0) *
                                                                        (p - best_point) / best)

@@ -12,8 +12,6 @@
 
 namespace tactus::sim {
 
-using collision_detail::closestOnTriangle;
-
 namespace {
 
 // One tissue's surface at the positions of the last refit.
@@ -140,9 +138,9 @@ TissueContacts::TissueContacts(std::span<const TetMesh* const> meshes,
       s.used = true;
     }
     const int pair = static_cast<int>(p);
-    impl_->directions.push_back({pair, spec.tissue_a, spec.tissue_b});
+    impl_->directions.push_back({pair, spec.tissue_a, spec.tissue_b, 2 * pair});
     if (spec.tissue_a != spec.tissue_b && spec.two_way) {
-      impl_->directions.push_back({pair, spec.tissue_b, spec.tissue_a});
+      impl_->directions.push_back({pair, spec.tissue_b, spec.tissue_a, 2 * pair + 1});
     }
   }
   std::vector<bool> self(meshes.size(), false);
@@ -184,7 +182,9 @@ const TissueContactSpec& TissueContacts::spec(int pair) const {
 const std::vector<Contact>& TissueContacts::contacts(int k) const {
   return impl_->found.at(static_cast<std::size_t>(k));
 }
-int TissueContacts::overflow(int k) const { return impl_->overflow.at(static_cast<std::size_t>(k)); }
+int TissueContacts::overflow(int k) const {
+  return impl_->overflow.at(static_cast<std::size_t>(k));
+}
 
 void TissueContacts::detect(std::span<const Eigen::VectorXd* const> q) {
   for (std::size_t t = 0; t < impl_->tissues.size(); ++t) {
@@ -204,9 +204,7 @@ void TissueContacts::Impl::detectDirection(int k, const Eigen::VectorXd& qa,
   const SurfaceState& a = tissues[static_cast<std::size_t>(d.vertex_tissue)];
   const SurfaceState& b = tissues[static_cast<std::size_t>(d.surface_tissue)];
   const bool self = d.vertex_tissue == d.surface_tissue;
-  // slot: 2 pair + direction (the second direction of a two-way pair is the one after it)
-  const bool reverse = k > 0 && directions[static_cast<std::size_t>(k - 1)].pair == d.pair;
-  const std::uint64_t slot = 2 * static_cast<std::uint64_t>(d.pair) + (reverse ? 1 : 0);
+  const auto slot = static_cast<std::uint64_t>(d.slot);
   const double reach = std::max(spec.alarm_distance_m, spec.depth_m);
   std::vector<Contact>& out = found[static_cast<std::size_t>(k)];
   out.clear();
@@ -216,35 +214,18 @@ void TissueContacts::Impl::detectDirection(int k, const Eigen::VectorXd& qa,
     const Eigen::Vector3d p = qa.segment<3>(3 * v);
     const int* near_begin = self ? b.near_nodes.data() + b.near_offset[li] : nullptr;
     const int* near_end = self ? b.near_nodes.data() + b.near_offset[li + 1] : nullptr;
-    double best = std::numeric_limits<double>::infinity();
-    double side = 0.0;   // sum of (p - s) . N over the triangles at the closest distance
-    int best_tri = -1;
-    collision_detail::ClosestPoint best_cp{};
-    b.tree.query([&](const Eigen::AlignedBox3d& box) { return box.exteriorDistance(p) <= reach; },
-                 [&](int t) {
-                   const auto& tri = tris[static_cast<std::size_t>(t)];
-                   if (self) {
-                     for (int node : tri) {
-                       if (std::binary_search(near_begin, near_end, node)) return;
-                     }
-                   }
-                   const auto c = closestOnTriangle(p, qb.segment<3>(3 * tri[0]),
-                                                    qb.segment<3>(3 * tri[1]),
-                                                    qb.segment<3>(3 * tri[2]));
-                   const double dist = (p - c.p).norm();
-                   const double dot = (p - c.p).dot(b.face_normal[static_cast<std::size_t>(t)]);
-                   const double same = 1e-12 * std::max(1.0, dist);
-                   if (dist < best - same) {
-                     best = dist;
-                     side = dot;
-                     best_tri = t;
-                     best_cp = c;
-                   } else if (dist <= best + same) {
-                     side += dot;
-                   }
+    const collision_detail::SurfaceClosest found = collision_detail::closestOnSurface(
+        b.tree, tris, b.face_normal, p, reach, [&](int i) { return qb.segment<3>(3 * i); },
+        [&](const std::array<int, 3>& tri) {   // self-contact: v's own neighbourhood
+          return self && std::any_of(tri.begin(), tri.end(), [&](int node) {
+                   return std::binary_search(near_begin, near_end, node);
                  });
-    if (best_tri < 0) continue;
-    const bool inside = side < 0.0;
+        });
+    if (found.triangle < 0) continue;
+    const double best = found.distance;
+    const int best_tri = found.triangle;
+    const collision_detail::ClosestPoint& best_cp = found.point;
+    const bool inside = found.side < 0.0;
     if (inside ? best > spec.depth_m : best > spec.alarm_distance_m) continue;
     const Eigen::Vector3d outward =
         best > collision_detail::kTinyDistance_m

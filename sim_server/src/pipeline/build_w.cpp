@@ -278,7 +278,7 @@ void buildW(const SimulationModel& model, SimulationState& state, StepScratch& s
     contacts += static_cast<int>(found.size()) + obstacle_contacts;
   }
   // the contacts between tissues after every tissue's own (tissue_contact_stage.h)
-  contacts += appendTissueContactRows(model, state, scratch, found_at, rows, contacts);
+  contacts += appendTissueContactRows(state, scratch, found_at, rows, contacts);
   rows += scratch.pair_rows.rows();
   if (state.tissue_contacts) {
     for (int k = 0; k < state.tissue_contacts->directionCount(); ++k) {

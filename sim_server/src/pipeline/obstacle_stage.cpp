@@ -26,7 +26,7 @@ shared::SegmentCapacity problemCapacity(const SceneSpec& spec) {
   // and the contacts between tissues (tissue_contact_stage.h)
   return shared::SegmentCapacity::forContacts(
       problemContactCapacity(spec) + obstacle_contacts + tissueContactCapacity(spec),
-      anyFriction(spec) || obstacle_friction || tissueContactFriction(spec));
+      anyFriction(spec) || obstacle_friction || anyTissueContactFriction(spec));
 }
 
 double detectObstacleContacts(const SimulationModel& model, SimulationState& state) {

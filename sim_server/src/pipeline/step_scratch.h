@@ -59,6 +59,7 @@ struct StepScratch {
   shared::NsgsWorkspace workspace;
   std::vector<Contact> all_contacts;     ///< every tissue's contacts in row order
   PairRowsScratch pair_rows;             ///< the contacts between tissues (last in row order)
+  std::vector<const Eigen::VectorXd*> tissue_positions;   ///< per tissue (detectTissueContacts)
   ToolRows h_tool;                       ///< H_tool, rows x 6 (each row: its own instrument's)
   ToolRows b_tool;                       ///< H_tool L, C6 = L L^T (the row's instrument's L)
   std::vector<int> row_instrument;       ///< per row: the instrument of its contact

@@ -47,8 +47,14 @@ void freeMotion(const SimulationModel& model, SimulationState& state, StepScratc
   report.times.free_motion_s += shared::secondsSinceNs(t0);
 }
 
-// min_excess_gap: the smallest gap + c f_n, with f_n the normal force the contact (by id) had in
-// the last solve: the penetration beyond what the contact compliance c allows.
+double gapBeyondCompliance(const SimulationState& state, const Contact& contact,
+                           double compliance_mpn) {
+  if (!(compliance_mpn > 0.0)) return contact.gap_m;
+  const auto it = state.warm_start_f.find(contact.id);
+  return it == state.warm_start_f.end() ? contact.gap_m
+                                        : contact.gap_m + compliance_mpn * it->second[0];
+}
+
 namespace {
 
 // One tissue's contacts with every instrument: the one collision's list, or (several
@@ -81,7 +87,7 @@ double queryContacts(const SimulationModel& model, SimulationState& state, StepS
   min_gap = std::min(min_gap, detectObstacleContacts(model, state));
   scratch.min_excess_gap = min_gap;
   // between tissues (lowers min_excess_gap itself: their contact compliance)
-  min_gap = std::min(min_gap, detectTissueContacts(model, state, scratch));
+  min_gap = std::min(min_gap, detectTissueContacts(state, scratch));
   for (TissueState& ts : state.tissues) {
     if (state.instruments.empty()) {
       ts.found = &kNone;
@@ -91,12 +97,7 @@ double queryContacts(const SimulationModel& model, SimulationState& state, StepS
     for (const Contact& k : *ts.found) {
       min_gap = std::min(min_gap, k.gap_m);
       const double c = instrumentSpec(model.spec, k.instrument).contact_compliance_mpn;
-      double allowed = 0.0;
-      if (c > 0.0) {
-        const auto it = state.warm_start_f.find(k.id);
-        if (it != state.warm_start_f.end()) allowed = c * it->second[0];
-      }
-      scratch.min_excess_gap = std::min(scratch.min_excess_gap, k.gap_m + allowed);
+      scratch.min_excess_gap = std::min(scratch.min_excess_gap, gapBeyondCompliance(state, k, c));
     }
   }
   return min_gap;

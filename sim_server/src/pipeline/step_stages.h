@@ -26,6 +26,11 @@ void freeMotion(const SimulationModel& model, SimulationState& state, StepScratc
 double detectCollisions(const SimulationModel& model, SimulationState& state, StepScratch& scratch,
                         StepReport& report, PipelineCounters& counters);
 
+/// The contact's gap + c f_n, f_n its normal force (by id) in the last solve: its penetration
+/// beyond what the contact compliance c allows (the gap itself when c = 0 or the contact is new).
+double gapBeyondCompliance(const SimulationState& state, const Contact& contact,
+                           double compliance_mpn);
+
 /// detectCollisions without its timing and counter (Simulation::geometricMinGap).
 double queryContacts(const SimulationModel& model, SimulationState& state, StepScratch& scratch);
 

@@ -1,34 +1,10 @@
-// The tissue-against-tissue part of a step: detection, rows, W and correction (tissue_contact_stage.h).
+// The tissue-against-tissue part of a step (tissue_contact_stage.h).
 #include "tissue_contact_stage.h"
 
 #include <algorithm>
-#include <array>
 #include <limits>
 
 namespace tactus::sim {
-
-int tissueContactCapacity(const SceneSpec& spec) {
-  int total = 0;
-  for (const TissueContactSpec& p : spec.tissue_contacts) {
-    const int directions = p.tissue_a != p.tissue_b && p.two_way ? 2 : 1;
-    total += directions * p.max_contacts;
-  }
-  return total;
-}
-
-int tissueContactRowCapacity(const SceneSpec& spec) {
-  int total = 0;
-  for (const TissueContactSpec& p : spec.tissue_contacts) {
-    const int directions = p.tissue_a != p.tissue_b && p.two_way ? 2 : 1;
-    total += directions * p.max_contacts * (p.friction_mu > 0.0 ? 3 : 1);
-  }
-  return total;
-}
-
-bool tissueContactFriction(const SceneSpec& spec) {
-  return std::any_of(spec.tissue_contacts.begin(), spec.tissue_contacts.end(),
-                     [](const TissueContactSpec& p) { return p.friction_mu > 0.0; });
-}
 
 std::unique_ptr<TissueContacts> makeTissueContacts(const SimulationModel& model) {
   if (model.spec.tissue_contacts.empty()) return nullptr;
@@ -46,38 +22,28 @@ double tissueContactFriction(const SimulationState& state, const Contact& contac
   return state.tissue_contacts->spec(TissueContacts::pairOfId(contact.id)).friction_mu;
 }
 
-double detectTissueContacts(const SimulationModel& model, SimulationState& state,
-                            StepScratch& scratch) {
+double detectTissueContacts(SimulationState& state, StepScratch& scratch) {
   double min_gap = std::numeric_limits<double>::infinity();
   if (!state.tissue_contacts) return min_gap;
-  std::array<const Eigen::VectorXd*, 64> q{};
-  std::vector<const Eigen::VectorXd*> q_many;   // more tissues than the stack buffer holds
-  const std::size_t n = state.tissues.size();
-  if (n > q.size()) q_many.resize(n);
-  const Eigen::VectorXd** qs = n > q.size() ? q_many.data() : q.data();
-  for (std::size_t t = 0; t < n; ++t) qs[t] = &state.tissues[t].body->positions();
+  scratch.tissue_positions.clear();
+  for (const TissueState& ts : state.tissues) {
+    scratch.tissue_positions.push_back(&ts.body->positions());
+  }
   TissueContacts& pairs = *state.tissue_contacts;
-  pairs.detect(std::span<const Eigen::VectorXd* const>(qs, n));
-  (void)model;
+  pairs.detect(scratch.tissue_positions);
   for (int k = 0; k < pairs.directionCount(); ++k) {
     const double c = pairs.spec(pairs.direction(k).pair).contact_compliance_mpn;
     for (const Contact& contact : pairs.contacts(k)) {
       min_gap = std::min(min_gap, contact.gap_m);
-      double allowed = 0.0;
-      if (c > 0.0) {
-        const auto it = state.warm_start_f.find(contact.id);
-        if (it != state.warm_start_f.end()) allowed = c * it->second[0];
-      }
-      scratch.min_excess_gap = std::min(scratch.min_excess_gap, contact.gap_m + allowed);
+      scratch.min_excess_gap =
+          std::min(scratch.min_excess_gap, gapBeyondCompliance(state, contact, c));
     }
   }
   return min_gap;
 }
 
-int appendTissueContactRows(const SimulationModel& model, const SimulationState& state,
-                            StepScratch& scratch, FoundAt found_at, int row_begin,
-                            int contact_begin) {
-  (void)model;
+int appendTissueContactRows(const SimulationState& state, StepScratch& scratch, FoundAt found_at,
+                            int row_begin, int contact_begin) {
   PairRowsScratch& out = scratch.pair_rows;
   out.row_begin = row_begin;
   out.contact_begin = contact_begin;

@@ -18,29 +18,20 @@
 
 namespace tactus::sim {
 
-/// Contacts the tissue pairs may add: max_contacts per direction (two per two-way pair).
-int tissueContactCapacity(const SceneSpec& spec);
-/// Rows they may add: 3 per contact on a pair with friction, else 1.
-int tissueContactRowCapacity(const SceneSpec& spec);
-/// Whether some pair has friction.
-bool tissueContactFriction(const SceneSpec& spec);
-
 /// The detector of the scene's pairs (null without any).
 std::unique_ptr<TissueContacts> makeTissueContacts(const SimulationModel& model);
 
 /// Detects every pair at the tissues' current positions. Returns the smallest gap (+inf if none)
 /// and lowers scratch.min_excess_gap by the gaps beyond the pairs' contact compliance.
-double detectTissueContacts(const SimulationModel& model, SimulationState& state,
-                            StepScratch& scratch);
+double detectTissueContacts(SimulationState& state, StepScratch& scratch);
 
 /// Appends the pairs' rows after the tissues' (global rows from `row_begin`, contacts from
 /// `contact_begin`) into scratch.pair_rows, their parts into each tissue's scratch, and their
 /// contacts to scratch.all_contacts. delta_free: the n row the gap carried to the free state
 /// (gap - n . ((v_detected - v_free) - (s_detected - s_free))), the t rows the relative
 /// tangential motion (v - s) over the free motion. Returns the contacts added.
-int appendTissueContactRows(const SimulationModel& model, const SimulationState& state,
-                            StepScratch& scratch, FoundAt found_at, int row_begin,
-                            int contact_begin);
+int appendTissueContactRows(const SimulationState& state, StepScratch& scratch, FoundAt found_at,
+                            int row_begin, int contact_begin);
 
 /// W += H_t C_t H_t^T over tissue t's own rows and its parts of the pair rows, when it has such
 /// parts (else the caller adds its own block directly).

@@ -228,4 +228,31 @@ bool anyFriction(const SceneSpec& spec) {
   return false;
 }
 
+namespace {
+int tissueContactDirections(const TissueContactSpec& p) {
+  return p.tissue_a != p.tissue_b && p.two_way ? 2 : 1;
+}
+}  // namespace
+
+int tissueContactCapacity(const SceneSpec& spec) {
+  int total = 0;
+  for (const TissueContactSpec& p : spec.tissue_contacts) {
+    total += tissueContactDirections(p) * p.max_contacts;
+  }
+  return total;
+}
+
+int tissueContactRowCapacity(const SceneSpec& spec) {
+  int total = 0;
+  for (const TissueContactSpec& p : spec.tissue_contacts) {
+    total += tissueContactDirections(p) * p.max_contacts * (p.friction_mu > 0.0 ? 3 : 1);
+  }
+  return total;
+}
+
+bool anyTissueContactFriction(const SceneSpec& spec) {
+  return std::any_of(spec.tissue_contacts.begin(), spec.tissue_contacts.end(),
+                     [](const TissueContactSpec& p) { return p.friction_mu > 0.0; });
+}
+
 }  // namespace tactus::sim

@@ -105,13 +105,8 @@ void SceneParser::checkObstacleCapacity(const YAML::Node& root, const SceneSpec&
   if (spec.obstacles.empty() && spec.tissue_contacts.empty()) return;
   // the instruments' contacts (max_contacts each), the obstacles' (per tissue) and those between
   // tissues (per pair and direction)
-  long long between = 0;
-  bool friction = anyFriction(spec);
-  for (const TissueContactSpec& p : spec.tissue_contacts) {
-    between += static_cast<long long>(p.max_contacts) *
-               (p.tissue_a != p.tissue_b && p.two_way ? 2 : 1);
-    friction = friction || p.friction_mu > 0.0;
-  }
+  const long long between = tissueContactCapacity(spec);
+  bool friction = anyFriction(spec) || anyTissueContactFriction(spec);
   const long long per_tissue = spec.obstacles.empty() ? 0 : spec.obstacle_contact.max_contacts;
   const long long total = static_cast<long long>(problemContactCapacity(spec)) +
                           per_tissue * static_cast<long long>(spec.tissues.size()) + between;

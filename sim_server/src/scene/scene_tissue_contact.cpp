@@ -40,6 +40,11 @@ void SceneParser::readTissueContacts(const YAML::Node& root, SceneSpec* spec) {
           "must be a list of pairs ({between: [a, b]} or {self: a}) (got " + kindOf(list) + ")");
     return;
   }
+  if (list.size() > static_cast<std::size_t>(kMaxTissueContactPairs)) {
+    error(list, "tissue_contact",
+          fmt::format("at most {} pairs (got {})", kMaxTissueContactPairs, list.size()));
+    return;
+  }
   std::set<std::pair<int, int>> seen;
   for (std::size_t i = 0; i < list.size(); ++i) {
     const YAML::Node c = list[i];
@@ -92,10 +97,6 @@ void SceneParser::readTissueContacts(const YAML::Node& root, SceneSpec* spec) {
       continue;
     }
     spec->tissue_contacts.push_back(pair);
-  }
-  if (spec->tissue_contacts.size() > 32) {
-    error(list, "tissue_contact",
-          fmt::format("at most 32 pairs (got {})", spec->tissue_contacts.size()));
   }
 }
 

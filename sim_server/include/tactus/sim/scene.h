@@ -236,6 +236,12 @@ InstrumentSpec& instrumentSpec(SceneSpec& spec, int i);
 int problemContactCapacity(const SceneSpec& spec);
 /// Whether some instrument has friction (3 rows per contact; else 1).
 bool anyFriction(const SceneSpec& spec);
+/// Contacts the tissue_contact pairs may add: max_contacts per direction (two per two-way pair).
+int tissueContactCapacity(const SceneSpec& spec);
+/// Rows they may add: 3 per contact on a pair with friction, else 1.
+int tissueContactRowCapacity(const SceneSpec& spec);
+/// Whether some tissue_contact pair has friction.
+bool anyTissueContactFriction(const SceneSpec& spec);
 
 /// Reads and validates a scene file. Throws tactus::SceneError listing every problem found
 /// (unknown keys, wrong types, out-of-range values, missing mesh), each with file, line, column

@@ -86,6 +86,9 @@ struct ObstacleContactSpec {
   int max_contacts = 300;            ///< per tissue (deepest kept)
 };
 
+/// Pairs of a scene at most (tissue_contact.h: slot = 2 pair + direction fits the id's 6 bits).
+inline constexpr int kMaxTissueContactPairs = 32;
+
 /// Contact between two tissues, or of one tissue with itself (`tissue_contact:`, tissue_contact.h).
 struct TissueContactSpec {
   int tissue_a = 0;                  ///< index into SceneSpec::tissues

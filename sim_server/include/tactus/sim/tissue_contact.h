@@ -38,9 +38,6 @@
 
 namespace tactus::sim {
 
-/// Pairs of the scene at most (slot = 2 pair + direction must fit the id's 6 bits).
-inline constexpr int kMaxTissueContactPairs = 32;
-
 class TissueContacts {
  public:
   /// One directed pair: the vertices of `vertex_tissue` against the surface of `surface_tissue`.
@@ -48,6 +45,7 @@ class TissueContacts {
     int pair = 0;             ///< index into the specs
     int vertex_tissue = 0;    ///< A
     int surface_tissue = 0;   ///< B (== A: self-contact)
+    int slot = 0;             ///< 2 pair + 0 (A's vertices on B) or 1 (two-way: B's on A): the id's
   };
 
   /// `meshes[t]` and `surfaces[t]` of every tissue (rest positions; surfaces outward oriented),
