@@ -83,6 +83,7 @@ struct BenchOptions {
   double pad_width_mm = -1.0;          ///< >= 0: overrides instrument.grasper.pad_width
   std::string linear;                  ///< non-empty: overrides solver.linear
   int instruments = 0;                 ///< > 0: keep only the scene's first N instruments
+  std::string split_contact_groups;    ///< "true"/"false": overrides solver.split_contact_groups
 };
 
 int run(const BenchOptions& o) {
@@ -97,6 +98,9 @@ int run(const BenchOptions& o) {
   if (o.pad_width_mm >= 0.0) spec.instrument.pad_width_m = 1e-3 * o.pad_width_mm;
   if (o.instruments > 0 && o.instruments < sim::instrumentCount(spec)) {
     spec.additional_instruments.resize(static_cast<std::size_t>(o.instruments - 1));
+  }
+  if (!o.split_contact_groups.empty()) {
+    spec.solver.split_contact_groups = o.split_contact_groups == "true";
   }
   if (o.linear == "cholmod") spec.solver.linear = sim::LinearSolverKind::kCholmod;
   if (o.linear == "pcg") spec.solver.linear = sim::LinearSolverKind::kPcg;
@@ -136,10 +140,11 @@ int run(const BenchOptions& o) {
   std::vector<Series> busy = stages;   // the steps with at least o.min_contacts contacts
   std::vector<double> busy_contacts;
   std::vector<double> contacts, rows, sim_sweeps, tick_us, tick_cpu_us, tick_sweeps_v, tick_err, passes,
-      geometric_pen_mm, distinct_nodes, total_fn, fem_cg;
+      geometric_pen_mm, distinct_nodes, total_fn, fem_cg, groups;
   long fem_factorisations = 0;
   long tick_converged = 0;
   long sim_converged = 0;
+  long split_steps = 0;   // steps whose problem was split in more than one group
   int max_contacts_step = -1, max_contacts_nodes = 0;
   double load_at_max_fn = 0.0, max_load = 0.0, max_fn = -1.0;   // contact force on the tool against gravity [N]
   const Eigen::Vector3d up =
@@ -155,7 +160,7 @@ int run(const BenchOptions& o) {
   if (!o.trace.empty()) {
     trace = std::fopen(o.trace.c_str(), "w");
     if (trace == nullptr) throw Error("cannot write " + o.trace);
-    std::fprintf(trace, "step,t_s,contacts,rows,sim_sweeps,step_ms,tick_solve_us,tick_sweeps\n");
+    std::fprintf(trace, "step,t_s,contacts,rows,sim_sweeps,step_ms,tick_solve_us,tick_sweeps,groups,solve_ms\n");
   }
   const std::int64_t t0 = shared::monotonicNs();
   for (long k = 0; k < steps; ++k) {
@@ -188,6 +193,8 @@ int run(const BenchOptions& o) {
       contacts.push_back(r.contacts);
       rows.push_back(r.rows);
       sim_sweeps.push_back(r.nsgs.sweeps);
+      groups.push_back(r.contact_groups);
+      if (r.contact_groups > 1) ++split_steps;
       passes.push_back(r.contact_passes);
       geometric_pen_mm.push_back(1e3 * r.geometric_penetration_m);
       distinct_nodes.push_back(r.distinct_tissue_nodes);
@@ -205,7 +212,7 @@ int run(const BenchOptions& o) {
       }
     }
     if (trace != nullptr && r.contacts <= 0) {
-      std::fprintf(trace, "%ld,%.4f,0,0,0,%.4f,0,0\n", k, sim.time(), 1e3 * stages[7].v.back());
+      std::fprintf(trace, "%ld,%.4f,0,0,0,%.4f,0,0,0,0\n", k, sim.time(), 1e3 * stages[7].v.back());
     }
 
     // the haptic side's tick on this snapshot, read back from the slot
@@ -231,9 +238,10 @@ int run(const BenchOptions& o) {
     tick_err.push_back(res.error);
     if (res.status == shared::NsgsStatus::kConverged) ++tick_converged;
     if (trace != nullptr) {
-      std::fprintf(trace, "%ld,%.4f,%d,%d,%d,%.4f,%.3f,%d\n", k, sim.time(), r.contacts, r.rows,
-                   r.nsgs.sweeps, 1e3 * stages[7].v.back(),
-                   1e-3 * static_cast<double>(res.elapsed_ns), res.sweeps);
+      std::fprintf(trace, "%ld,%.4f,%d,%d,%d,%.4f,%.3f,%d,%d,%.4f\n", k, sim.time(),
+                   r.contacts, r.rows, r.nsgs.sweeps, 1e3 * stages[7].v.back(),
+                   1e-3 * static_cast<double>(res.elapsed_ns), res.sweeps, r.contact_groups,
+                   1e3 * r.times.solve_contacts_s);
     }
   }
   if (trace != nullptr) std::fclose(trace);
@@ -271,6 +279,10 @@ int run(const BenchOptions& o) {
       "median %.0f, max %.0f); sim NSGS sweeps median %.0f\n",
       contacts.size(), steps, pct(contacts, 0.5), pct(contacts, 1.0), pct(rows, 0.5),
       pct(rows, 1.0), pct(sim_sweeps, 0.5));
+  std::printf("groups of coupled bodies solved apart (solver.split_contact_groups %s): median "
+              "%.0f, max %.0f; steps split in more than one: %ld\n",
+              spec.solver.split_contact_groups ? "true" : "false", pct(groups, 0.5),
+              pct(groups, 1.0), split_steps);
   std::printf(
       "sim NSGS: converged %ld / %zu, sweeps p90 %.0f, max %.0f; distinct tissue nodes median "
       "%.0f, max %.0f (%d at the %d-contact step); total normal force median %.3f N, max %.3f N "
@@ -311,6 +323,7 @@ int run(const BenchOptions& o) {
     js += fmt::format(
         "  }},\n  \"steps_in_contact\": {},\n  \"contacts\": {{\"median\": {}, \"max\": {}}},\n"
         "  \"rows\": {{\"median\": {}, \"max\": {}}},\n  \"sim_sweeps_median\": {},\n"
+        "  \"contact_groups\": {{\"median\": {}, \"max\": {}, \"split_steps\": {}}},\n"
         "  \"contact_passes\": {{\"median\": {}, \"max\": {}}},\n"
         "  \"geometric_penetration_mm_max\": {:.4f},\n"
         "  \"haptic_tick\": {{\"displacement_mm\": {}, \"max_sweeps\": {}, \"budget_us\": {}, "
@@ -319,7 +332,8 @@ int run(const BenchOptions& o) {
         "\"sweeps_median\": {}, \"sweeps_p99\": {}, \"error_median\": {:.3e}, "
         "\"converged\": {}, \"solves\": {}}}\n}}\n",
         contacts.size(), pct(contacts, 0.5), pct(contacts, 1.0), pct(rows, 0.5), pct(rows, 1.0),
-        pct(sim_sweeps, 0.5), pct(passes, 0.5), pct(passes, 1.0), pct(geometric_pen_mm, 1.0),
+        pct(sim_sweeps, 0.5), pct(groups, 0.5), pct(groups, 1.0), split_steps, pct(passes, 0.5),
+        pct(passes, 1.0), pct(geometric_pen_mm, 1.0),
         o.displacement_mm, tick_sweeps, budget_us, pct(tick_us, 0.5),
         pct(tick_us, 0.99), pct(tick_us, 1.0), pct(tick_cpu_us, 0.5), pct(tick_cpu_us, 0.99),
         pct(tick_sweeps_v, 0.5), pct(tick_sweeps_v, 0.99), pct(tick_err, 0.5), tick_converged,
@@ -372,6 +386,10 @@ int main(int argc, char** argv) {
   app.add_option("--instruments", o.instruments,
                  "Keep only the scene's first N instruments (two hands against one)")
       ->check(CLI::Range(1, shared::kMaxInstruments));
+  app.add_option("--split-contact-groups", o.split_contact_groups,
+                 "Override the scene's solver.split_contact_groups (true: one NSGS per group of "
+                 "coupled bodies; false: one over the whole W)")
+      ->check(CLI::IsMember({"true", "false"}));
   app.add_option("--linear", o.linear, "Override the scene's solver.linear")
       ->check(CLI::IsMember({"cholmod", "pcg", "cholmod_reuse"}));
   app.add_option("--log-level", o.log_level, "spdlog level of the simulation library")

@@ -9,6 +9,7 @@
 #include <memory>
 #include <vector>
 
+#include "contact_groups.h"
 #include "tactus/shared/nsgs.h"
 #include "tactus/shared/pose.h"
 #include "tactus/sim/collision.h"
@@ -57,6 +58,7 @@ struct StepScratch {
   /// the one the haptic process re-solves.
   ContactProblemData problem;
   shared::NsgsWorkspace workspace;
+  ContactGroups groups;                  ///< the problem's groups of coupled bodies (solve)
   std::vector<Contact> all_contacts;     ///< every tissue's contacts in row order
   PairRowsScratch pair_rows;             ///< the contacts between tissues (last in row order)
   std::vector<const Eigen::VectorXd*> tissue_positions;   ///< per tissue (detectTissueContacts)

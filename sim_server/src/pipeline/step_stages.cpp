@@ -141,10 +141,18 @@ void solveContacts(const SimulationModel& model, SimulationState& state, StepScr
     for (int k = 0; k < nr; ++k) p.f[r0 + k] = it->second[k];
   }
   if (rows > 0) {
-    // zeroes f on NaN
-    report.nsgs = shared::solveNsgs(p.view(), model.nsgs, scratch.workspace, p.f.data());
+    // zeroes f on NaN; one NSGS per group of coupled bodies (contact_groups.h)
+    if (model.spec.solver.split_contact_groups) {
+      scratch.groups.find(state, scratch);
+      report.contact_groups = scratch.groups.count();
+      report.nsgs = scratch.groups.solve(p.view(), model.nsgs, scratch.workspace, p.f.data());
+    } else {
+      report.contact_groups = 1;
+      report.nsgs = shared::solveNsgs(p.view(), model.nsgs, scratch.workspace, p.f.data());
+    }
     ++counters.solves;
   } else {
+    report.contact_groups = 0;
     report.nsgs = shared::NsgsResult{};
   }
   p.solve = report.nsgs;

@@ -48,7 +48,7 @@ void SceneParser::readSolver(const YAML::Node& n, SolverSpec* s, int instruments
   const std::string p = "solver";
   checkKeys(n, p, {"linear", "cg_tolerance", "cg_max_iterations", "refactor_iterations",
                    "refactor_every_steps", "nsgs_tolerance",
-                   "nsgs_max_sweeps", "nsgs_sor", "max_contacts", "contact_iterations",
+                   "nsgs_max_sweeps", "nsgs_sor", "split_contact_groups", "max_contacts", "contact_iterations",
                    "penetration_tolerance", "contact_detection"});
   choice(n, p, "linear", &s->linear,
          {{"cholmod", LinearSolverKind::kCholmod},
@@ -63,6 +63,7 @@ void SceneParser::readSolver(const YAML::Node& n, SolverSpec* s, int instruments
          kPositiveUpTo(1e-2));
   integer(n, p, "nsgs_max_sweeps", &s->nsgs_max_sweeps, 1, 10'000'000, 100'000);
   number(n, p, "nsgs_sor", &s->nsgs_sor, Range{0.0, 2.0, true, true});
+  boolean(n, p, "split_contact_groups", &s->split_contact_groups);
   // the contact problem's W (rows x rows doubles, 3 rows per frictional contact) lives in
   // the shared segment's triple buffer: refuse what cannot be allocated, before trying
   if (integer(n, p, "max_contacts", &s->max_contacts, 1, std::numeric_limits<int>::max(),

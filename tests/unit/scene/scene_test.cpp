@@ -193,6 +193,15 @@ TEST(Scene, ContactDetectionAndFaceContacts) {
             "'later')");
 }
 
+TEST(Scene, SplitContactGroups) {
+  EXPECT_TRUE(parseScene(kHead, "s.yaml", kScenes).solver.split_contact_groups);
+  EXPECT_FALSE(parseScene(kHead + "solver: {split_contact_groups: false}\n", "s.yaml", kScenes)
+                   .solver.split_contact_groups);
+  EXPECT_NE(sceneError(kHead + "solver: {split_contact_groups: 3}\n")
+                .find("solver.split_contact_groups"),
+            std::string::npos);
+}
+
 TEST(Scene, LinearSolverStrategies) {
   const SceneSpec def = parseScene(kHead, "s.yaml", kScenes);
   EXPECT_EQ(def.solver.linear, LinearSolverKind::kCholmod);

@@ -154,6 +154,10 @@ struct SolverSpec {
   double nsgs_tolerance = 1e-6;
   int nsgs_max_sweeps = 500;
   double nsgs_sor = 1.0;                        ///< over-relaxation factor in (0, 2)
+  /// Solve each group of bodies that share no contact (no tissue, no instrument in common) as a
+  /// problem of its own (docs/design.md, "Bodies that do not couple"); false: one NSGS over the
+  /// whole W
+  bool split_contact_groups = true;
   int max_contacts = 300;
   /// Contact passes per step: after the constrained motion, contacts are detected again at the
   /// corrected state and, while some gap is below -penetration_tolerance_m, the contact problem
