@@ -8,21 +8,15 @@
 #include <limits>
 
 #include "collision_impl.h"
+#include "moving_surface.h"
 #include "tactus/shared/error.h"
 
 namespace tactus::sim {
 
 namespace {
 
-// One tissue's surface at the positions of the last refit.
-struct SurfaceState {
-  const TetMesh* mesh = nullptr;
-  const SurfaceMesh* surface = nullptr;
-  std::vector<Eigen::Vector3d> face_normal;      // unit, outward, per triangle
-  std::vector<Eigen::Vector3d> vertex_normal;    // angle-weighted, unit, per surface node (local)
-  std::vector<int> local;                        // TetMesh node -> index in surface->nodes, or -1
-  std::vector<Eigen::AlignedBox3d> boxes;        // per triangle
-  detail::AabbTree tree;
+// One tissue's surface at the positions of the last refit, with its self-contact neighbourhoods.
+struct SurfaceState : collision_detail::MovingSurface {
   bool used = false;
   // self-contact: per surface node, the sorted nodes within two edges (CSR)
   std::vector<int> near_offset;
@@ -58,39 +52,6 @@ void buildNeighbourhoods(SurfaceState& s) {
     s.near_nodes.insert(s.near_nodes.end(), ring.begin(), ring.end());
     s.near_offset.push_back(static_cast<int>(s.near_nodes.size()));
   }
-}
-
-void refitSurface(SurfaceState& s, const Eigen::VectorXd& q) {
-  const auto& tris = s.surface->triangles;
-  std::fill(s.vertex_normal.begin(), s.vertex_normal.end(), Eigen::Vector3d::Zero());
-  for (std::size_t t = 0; t < tris.size(); ++t) {
-    const auto& tri = tris[t];
-    const Eigen::Vector3d p[3] = {q.segment<3>(3 * tri[0]), q.segment<3>(3 * tri[1]),
-                                  q.segment<3>(3 * tri[2])};
-    const Eigen::Vector3d cross = (p[1] - p[0]).cross(p[2] - p[0]);
-    const double norm = cross.norm();
-    const Eigen::Vector3d normal =
-        norm > 0.0 ? Eigen::Vector3d(cross / norm) : Eigen::Vector3d::Zero();
-    s.face_normal[t] = normal;
-    Eigen::AlignedBox3d box(p[0]);
-    box.extend(p[1]);
-    box.extend(p[2]);
-    s.boxes[t] = box;
-    for (int k = 0; k < 3; ++k) {
-      const Eigen::Vector3d e1 = p[(k + 1) % 3] - p[k];
-      const Eigen::Vector3d e2 = p[(k + 2) % 3] - p[k];
-      const double denominator = e1.norm() * e2.norm();
-      if (!(denominator > 0.0)) continue;
-      const double angle = std::acos(std::clamp(e1.dot(e2) / denominator, -1.0, 1.0));
-      s.vertex_normal[static_cast<std::size_t>(s.local[static_cast<std::size_t>(tri[k])])] +=
-          angle * normal;
-    }
-  }
-  for (Eigen::Vector3d& n : s.vertex_normal) {
-    const double norm = n.norm();
-    if (norm > 0.0) n /= norm;
-  }
-  s.tree.refit(s.boxes);
 }
 
 }  // namespace
@@ -150,18 +111,7 @@ TissueContacts::TissueContacts(std::span<const TetMesh* const> meshes,
   for (std::size_t t = 0; t < impl_->tissues.size(); ++t) {
     SurfaceState& s = impl_->tissues[t];
     if (!s.used) continue;
-    const std::size_t nt = s.surface->triangles.size();
-    s.face_normal.resize(nt);
-    s.boxes.resize(nt);
-    s.vertex_normal.resize(s.surface->nodes.size());
-    s.local.assign(static_cast<std::size_t>(s.mesh->nodeCount()), -1);
-    for (std::size_t i = 0; i < s.surface->nodes.size(); ++i) {
-      s.local[static_cast<std::size_t>(s.surface->nodes[i])] = static_cast<int>(i);
-    }
-    Eigen::VectorXd q(3 * s.mesh->nodeCount());
-    for (int i = 0; i < s.mesh->nodeCount(); ++i) q.segment<3>(3 * i) = s.mesh->nodes.col(i);
-    refitSurface(s, q);
-    s.tree.build(s.boxes);
+    s.init(*s.mesh, *s.surface);
     if (self[t]) buildNeighbourhoods(s);
   }
   impl_->found.resize(impl_->directions.size());
@@ -188,7 +138,7 @@ int TissueContacts::overflow(int k) const {
 
 void TissueContacts::detect(std::span<const Eigen::VectorXd* const> q) {
   for (std::size_t t = 0; t < impl_->tissues.size(); ++t) {
-    if (impl_->tissues[t].used) refitSurface(impl_->tissues[t], *q[t]);
+    if (impl_->tissues[t].used) impl_->tissues[t].refit(*q[t]);
   }
   for (int k = 0; k < directionCount(); ++k) {
     const Direction& d = impl_->directions[static_cast<std::size_t>(k)];

@@ -36,6 +36,9 @@ double detectObstacleContacts(const SimulationModel& model, SimulationState& sta
     TissueState& ts = state.tissues[t];
     state.obstacles->detect(static_cast<int>(t), model.tissues[t].surface.nodes,
                             ts.body->positions(), ts.obstacle_found, ts.obstacle_overflow);
+    // (obstacle_contact.edges: the obstacles' corners and sharp edges against its faces)
+    state.obstacles->detectEdges(static_cast<int>(t), ts.body->positions(), ts.obstacle_found,
+                                 ts.obstacle_overflow);
     for (const Contact& k : ts.obstacle_found) min_gap = std::min(min_gap, k.gap_m);
   }
   return min_gap;
@@ -65,19 +68,26 @@ int appendObstacleRows(const SimulationState& state, StepScratch& scratch, std::
   tx.grip.resize(static_cast<std::size_t>(total), 0.0);
   int r = first_new;
   for (const Contact& k : found) {
-    const int node = k.nodes[0];
-    const Eigen::Vector3d x_free = tx.q_free.segment<3>(3 * node);
-    const Eigen::Vector3d x_detected = q_detected.segment<3>(3 * node);
-    const Eigen::Vector3d x_begin = tx.q_begin.segment<3>(3 * node);
+    // the tissue point: a vertex (weights 1, 0, 0) or, for an edge's contact, a face point
+    Eigen::Vector3d x_free = Eigen::Vector3d::Zero();
+    Eigen::Vector3d x_detected = Eigen::Vector3d::Zero();
+    Eigen::Vector3d x_begin = Eigen::Vector3d::Zero();
+    for (int j = 0; j < 3; ++j) {
+      const int node = k.nodes[j];
+      if (node < 0 || k.weights[j] == 0.0) continue;
+      x_free += k.weights[j] * tx.q_free.segment<3>(3 * node);
+      x_detected += k.weights[j] * q_detected.segment<3>(3 * node);
+      x_begin += k.weights[j] * tx.q_begin.segment<3>(3 * node);
+    }
     const int per = obstacleFriction(state, k) > 0.0 ? 3 : 1;
     for (int d = 0; d < per; ++d) {
       const Eigen::Vector3d& dir = d == 0 ? k.n : (d == 1 ? k.t1 : k.t2);
       TissueRow& row = rows.tissue[static_cast<std::size_t>(r + d)];
-      row.node = {node, -1, -1};
-      row.weight = {-1.0, 0.0, 0.0};
+      row.node = k.nodes;
+      row.weight = {-k.weights[0], -k.weights[1], -k.weights[2]};
       row.dir = dir;
     }
-    // the obstacle is still: the gap closes by the vertex's own motion along n
+    // the obstacle is still: the gap closes by the tissue point's own motion along n
     rows.delta_free[static_cast<std::size_t>(r)] = k.gap_m + k.n.dot(x_detected - x_free);
     if (per == 3) {
       const Eigen::Vector3d slip = -(x_free - x_begin);

@@ -61,6 +61,14 @@ SimulationState buildState(const SimulationModel& model) {
   }
   if (!model.spec.obstacles.empty()) {
     state.obstacles = std::make_unique<Obstacles>(model.spec.obstacles, model.spec.obstacle_contact);
+    // obstacle_contact.edges: the obstacles' edge points against the tissues' faces
+    std::vector<const TetMesh*> meshes;
+    std::vector<const SurfaceMesh*> surfaces;
+    for (const TissueModel& t : model.tissues) {
+      meshes.push_back(&t.mesh);
+      surfaces.push_back(&t.surface);
+    }
+    state.obstacles->attachTissues(meshes, surfaces);
   }
   state.tissue_contacts = makeTissueContacts(model);   // null without tissue_contact pairs
   for (int i = 0; i < model.instrument_count; ++i) {

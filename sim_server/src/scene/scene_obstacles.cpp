@@ -21,10 +21,16 @@ void SceneParser::readObstacles(const YAML::Node& root, SceneSpec* spec) {
   YAML::Node c;
   if (section(root, "", "obstacle_contact", &c)) {
     const std::string p = "obstacle_contact";
-    checkKeys(c, p, {"alarm_distance", "max_contacts"});
+    checkKeys(c, p, {"alarm_distance", "max_contacts", "edges", "edge_spacing", "edge_depth"});
     number(c, p, "alarm_distance", &spec->obstacle_contact.alarm_distance_m, kNonNegative,
            kAtMost(1.0), kNonNegativeUpTo(0.05));
     integer(c, p, "max_contacts", &spec->obstacle_contact.max_contacts, 1, 1'000'000, 3000);
+    boolean(c, p, "edges", &spec->obstacle_contact.edges);
+    // (below 0.1 mm the points of a long edge would exhaust memory: Obstacles caps their count)
+    number(c, p, "edge_spacing", &spec->obstacle_contact.edge_spacing_m, kPositive,
+           Range{1e-4, 1.0}, Range{2e-4, 0.05});
+    number(c, p, "edge_depth", &spec->obstacle_contact.edge_depth_m, kNonNegative, kAtMost(1.0),
+           kNonNegativeUpTo(0.05));
   }
   const YAML::Node list = root["obstacles"];
   if (!list.IsDefined()) return;

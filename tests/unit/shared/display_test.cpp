@@ -176,7 +176,10 @@ TEST(Display, CorruptedDisplayOffsetIsRefused) {
 }
 
 // A writer publishing as fast as it can against a read-only reader: every frame the reader
-// accepts is internally consistent (all values derive from one seq) and seqs never go back.
+// accepts is internally consistent (all values derive from one seq) and seqs never go back. The
+// writer publishes at least 20000 frames and goes on until the reader has accepted 50 (so the
+// count does not depend on how the two threads are scheduled); a check that fails stops both
+// threads before the test returns.
 TEST(Display, RacingWriterNeverYieldsATornFrame) {
   NameGuard g(uniqueName("race"));
   SegmentCapacity c = SegmentCapacity::forContacts(8);
@@ -186,10 +189,15 @@ TEST(Display, RacingWriterNeverYieldsATornFrame) {
   Segment viewer = Segment::open(g.name, Access::kReadOnly);
   DisplayPublisher pub = sim.displayPublisher();
   DisplaySubscriber sub = viewer.displaySubscriber();
-  std::atomic<bool> done{false};
+  constexpr long kWantedFrames = 50;
+  constexpr std::uint64_t kMinPublishes = 20000, kMaxPublishes = 5'000'000;
+  std::atomic<bool> done{false}, stop{false};
+  std::atomic<long> accepted{0};
+  std::atomic<std::uint64_t> published{0};
   std::thread writer([&] {
     FrameBuffer in(pub.layout());
-    for (std::uint64_t seq = 1; seq <= 20000; ++seq) {
+    for (std::uint64_t seq = 1; seq <= kMaxPublishes && !stop.load(); ++seq) {
+      if (seq > kMinPublishes && accepted.load() >= kWantedFrames) break;
       DisplayFrameHeader& h = in.ref.header();
       h.seq = seq;
       h.step = seq * 3;
@@ -200,31 +208,44 @@ TEST(Display, RacingWriterNeverYieldsATornFrame) {
       for (int i = 0; i < 2000; ++i) in.ref.stress()[i] = v;
       for (int i = 0; i < 24; ++i) in.ref.contactForce()[i] = v;
       pub.publish(in.ref);
+      published.store(seq);
     }
     done.store(true);
   });
   FrameBuffer out(sub.layout());
   std::uint64_t last = 0;
-  long ok = 0, busy = 0;
-  while (!done.load()) {
+  long busy = 0;
+  std::string failure;
+  while (!done.load() && failure.empty()) {
     const DisplayRead r = sub.readFrame(out.ref, last);
     if (r == DisplayRead::kBusy) ++busy;
     if (r != DisplayRead::kOk) continue;
     const DisplayFrameHeader& h = out.ref.header();
-    ASSERT_GT(h.seq, last);
-    ASSERT_EQ(h.step, h.seq * 3);
     const float v = static_cast<float>(h.seq % 100000);
-    for (int i = 0; i < 6000; ++i) ASSERT_EQ(out.ref.positions()[i], v) << "torn at " << i;
-    for (int i = 0; i < 2000; ++i) ASSERT_EQ(out.ref.stress()[i], v) << "torn at " << i;
-    for (int i = 0; i < 24; ++i) ASSERT_EQ(out.ref.contactForce()[i], v) << "torn at " << i;
+    if (h.seq <= last) failure = "seq went back";
+    if (h.step != h.seq * 3) failure = "step torn";
+    for (int i = 0; i < 6000 && failure.empty(); ++i) {
+      if (out.ref.positions()[i] != v) failure = "positions torn at " + std::to_string(i);
+    }
+    for (int i = 0; i < 2000 && failure.empty(); ++i) {
+      if (out.ref.stress()[i] != v) failure = "stress torn at " + std::to_string(i);
+    }
+    for (int i = 0; i < 24 && failure.empty(); ++i) {
+      if (out.ref.contactForce()[i] != v) failure = "contact force torn at " + std::to_string(i);
+    }
     last = h.seq;
-    ++ok;
+    accepted.fetch_add(1);
   }
+  stop.store(true);
   writer.join();
-  EXPECT_GT(ok, 10);
-  ASSERT_EQ(sub.readFrame(out.ref, last), last == 20000 ? DisplayRead::kUnchanged : DisplayRead::kOk);
-  EXPECT_EQ(out.ref.header().seq, 20000u);
-  std::printf("reader: %ld consistent frames, %ld busy retries\n", ok, busy);
+  ASSERT_TRUE(failure.empty()) << failure << " (frame " << last << ")";
+  EXPECT_GE(accepted.load(), kWantedFrames);
+  const std::uint64_t final_seq = published.load();
+  ASSERT_EQ(sub.readFrame(out.ref, last),
+            last == final_seq ? DisplayRead::kUnchanged : DisplayRead::kOk);
+  EXPECT_EQ(out.ref.header().seq, final_seq);
+  std::printf("reader: %ld consistent frames of %llu published, %ld busy retries\n",
+              accepted.load(), static_cast<unsigned long long>(final_seq), busy);
 }
 
 }  // namespace

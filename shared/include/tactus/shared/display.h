@@ -320,7 +320,7 @@ class DisplayPublisher {
 enum class DisplayRead : std::uint8_t {
   kOk,          ///< a complete, consistent copy
   kNothing,     ///< nothing published yet (or the topology is being written)
-  kUnchanged,   ///< the newest frame is the one already copied (frames only)
+  kUnchanged,   ///< the newest frame is not newer than the one already copied (frames only)
   kBusy,        ///< the writer overtook the copy each try: call again later
 };
 
@@ -372,7 +372,11 @@ class DisplaySubscriber {
   }
 
   /// Copies the newest published frame into `out` (process-local, layout().frame_bytes) unless
-  /// its seq equals `have_seq`.
+  /// its seq is at most `have_seq` (kUnchanged). Seqs never go back: a reader that found the
+  /// middle slot and was then preempted may copy that slot after the writer has rotated it to
+  /// the back and completed the next frame in it, not yet published; the middle it finds next is
+  /// then one frame older, and is not copied (measured: 2 in 450 racing runs of display_test
+  /// under load before this check).
   DisplayRead readFrame(const DisplayFrameRef& out, std::uint64_t have_seq = 0) const noexcept {
     if (!attached()) return DisplayRead::kNothing;
     using C = TripleBufferControl;
@@ -385,7 +389,7 @@ class DisplaySubscriber {
       // acquire: pairs with the writer's release of seq_end (payload complete)
       const std::uint64_t e = __atomic_load_n(words + end_at, __ATOMIC_ACQUIRE);
       if (e == 0) return DisplayRead::kNothing;
-      if (e == have_seq) return DisplayRead::kUnchanged;
+      if (e <= have_seq) return DisplayRead::kUnchanged;
       detail::loadWords(out.data() + 8, slot + 8, end_at * 8 - 8);
       DisplayFrameHeader& h = out.header();
       const bool sane = h.seq == e && h.vertex_count >= 0 && h.contact_count >= 0 &&

@@ -84,6 +84,13 @@ struct ObstacleSpec {
 struct ObstacleContactSpec {
   double alarm_distance_m = 0.002;   ///< vertices within this gap become contacts
   int max_contacts = 300;            ///< per tissue (deepest kept)
+  /// The obstacles' corners and sharp edges against the tissues' faces too (obstacles.h,
+  /// "Edges"): for boxes and mesh obstacles with features finer than the tissue's surface
+  bool edges = false;
+  double edge_spacing_m = 0.002;     ///< points along a sharp edge at most this far apart
+  /// How far inside a tissue an edge point still counts as touching its face (deeper: past a
+  /// thin part, ignored)
+  double edge_depth_m = 0.005;
 };
 
 /// Pairs of a scene at most (tissue_contact.h: slot = 2 pair + direction fits the id's 6 bits).
