@@ -18,9 +18,9 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
-#include <cstdlib>
 #include <limits>
 #include <numbers>
 #include <string>
@@ -50,7 +50,8 @@ double hertzRadiusForForceM(double force_n) {
 
 // Axial displacement at depth L of a half-space under the Hertz pressure p0 sqrt(1 - r^2/a^2) of
 // total force F (Boussinesq's point-load solution u_z = P (1 + nu) / (2 pi E) (z^2/rho^3 +
-// 2 (1 - nu)/rho) integrated over the disc; r = a sin(theta) removes the square root).
+// 2 (1 - nu)/rho) integrated over the disc; r = a sin(theta) removes the square root). Depth 0:
+// the surface, where r / rho = 1.
 double halfSpaceAxialDisplacementM(double force_n, double depth_m) {
   const double a = hertzRadiusForForceM(force_n);
   const double p0 = 3.0 * force_n / (2.0 * std::numbers::pi * a * a);
@@ -61,10 +62,14 @@ double halfSpaceAxialDisplacementM(double force_n, double depth_m) {
     const double theta = i * dtheta;
     const double r = a * std::sin(theta);
     const double rho = std::hypot(r, depth_m);
-    const double kernel = (1.0 + kPoisson) / (2.0 * std::numbers::pi * kYoungPa) *
-                          (depth_m * depth_m / (rho * rho * rho) + 2.0 * (1.0 - kPoisson) / rho);
-    const double integrand = p0 * std::cos(theta) * kernel * 2.0 * std::numbers::pi * a * a *
-                             std::sin(theta) * std::cos(theta);
+    // (z^2/rho^3 + 2 (1 - nu)/rho) r, finite as r and z go to 0
+    const double r_over_rho = depth_m > 0.0 ? r / rho : 1.0;
+    const double z2_over_rho2 = depth_m > 0.0 ? depth_m * depth_m / (rho * rho) : 0.0;
+    const double kernel_r = (1.0 + kPoisson) / (2.0 * std::numbers::pi * kYoungPa) *
+                            (z2_over_rho2 + 2.0 * (1.0 - kPoisson)) * r_over_rho;
+    // p(r) 2 pi r dr with p = p0 cos(theta), dr = a cos(theta) dtheta
+    const double integrand = p0 * std::cos(theta) * kernel_r * 2.0 * std::numbers::pi * a *
+                             std::cos(theta);
     sum += integrand * (i == 0 || i == n ? 1.0 : (i % 2 ? 4.0 : 2.0));
   }
   return sum * dtheta / 3.0;
@@ -128,7 +133,8 @@ std::string domesScene(const std::vector<double>& applied_m, Pair pair) {
   double t = 0.0;
   for (double d : applied_m) {
     char key[160];
-    std::snprintf(key, sizeof key, ", {t: %.2f, offset: [0, 0, %.9g]}, {t: %.2f, offset: [0, 0, %.9g]}",
+    std::snprintf(key, sizeof key,
+                  ", {t: %.2f, offset: [0, 0, %.9g]}, {t: %.2f, offset: [0, 0, %.9g]}",
                   t + 0.01 * kRampSteps, -d, t + 0.02 * kRampSteps, -d);
     path += key;
     t += 0.02 * kRampSteps;
@@ -239,7 +245,8 @@ DomesRun pressDomes(const std::vector<double>& applied_m, Pair pair) {
         level.min_gap_m[k] = std::min(level.min_gap_m[k], c.gap_m);
       }
     }
-    level.apex_gap_m = upper.positions()[3 * upper_apex + 2] - lower.positions()[3 * lower_apex + 2];
+    level.apex_gap_m =
+        upper.positions()[3 * upper_apex + 2] - lower.positions()[3 * lower_apex + 2];
     const double f = std::max(level.force_n, 1e-300);
     std::printf("[hertz] d %.2f mm: delta %.4f mm (L = 6 mm: %.4f), F %.4g N = %.4f Hertz, patch "
                 "%.3f mm = %.3f a, min gaps %.3g / %.3g m, apex gap %.3g m; imbalance lower "
@@ -315,11 +322,26 @@ void expectHertz(const DomesRun& run, Pair pair) {
   }
   const double force_exponent = logLogSlope(delta, force);
   const double patch_exponent = logLogSlope(delta, patch);
-  std::printf("[hertz] F ~ delta^%.4f, patch radius ~ delta^%.4f\n", force_exponent, patch_exponent);
+  std::printf("[hertz] F ~ delta^%.4f, patch radius ~ delta^%.4f\n", force_exponent,
+              patch_exponent);
   EXPECT_GT(force_exponent, 1.40);   // measured 1.469 (one way: 1.464)
   EXPECT_LT(force_exponent, 1.60);
   EXPECT_GT(patch_exponent, 0.40);   // measured 0.54 (one way: 0.56)
   EXPECT_LT(patch_exponent, 0.65);
+}
+
+// The measurement's half-space term: at the surface it is one body's Hertz indentation, delta / 2
+// with delta = a^2 / R*; far below the patch, Boussinesq's point load F (1 + nu) (3 - 2 nu) /
+// (2 pi E L).
+TEST(HertzContactTest, TheHalfSpaceTermIsHertzAtTheSurfaceAndBoussinesqFarBelow) {
+  const double force_n = 0.005;
+  const double a = hertzRadiusForForceM(force_n);
+  EXPECT_NEAR(halfSpaceAxialDisplacementM(force_n, 0.0), a * a / kEffectiveRadiusM / 2.0,
+              1e-6 * a * a / kEffectiveRadiusM);
+  const double far_m = 100.0 * a;
+  const double point_load = force_n * (1.0 + kPoisson) * (3.0 - 2.0 * kPoisson) /
+                            (2.0 * std::numbers::pi * kYoungPa * far_m);
+  EXPECT_NEAR(halfSpaceAxialDisplacementM(force_n, far_m), point_load, 1e-3 * point_load);
 }
 
 TEST(HertzContactTest, TwoSoftDomesFollowHertz) {
