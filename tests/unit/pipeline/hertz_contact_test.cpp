@@ -124,7 +124,7 @@ struct DomesRun {
 
 constexpr double kDepthsM[2] = {0.004, 0.006};   // the depths of the axis points for delta
 constexpr int kRampSteps = 10;                    // per level, then as many to hold it
-constexpr double kPenetrationToleranceM = 1e-6;
+constexpr double kPenetrationToleranceM = 1e-6;   // the scene's solver.penetration_tolerance
 
 enum class Pair { kNone, kTwoWay, kOneWay };
 
@@ -186,7 +186,7 @@ DomesRun pressDomes(const std::vector<double>& applied_m, Pair pair) {
   }
   const int lower_apex = nodeNearest(lower.mesh(), Eigen::Vector3d(0, 0, kRadiusM));
   const int upper_apex = nodeNearest(upper.mesh(), Eigen::Vector3d(0, 0, kRadiusM));
-  // an independent detection (the scene's pair, both ways) for the gaps at the end of each level
+  // an independent detection, both ways whatever the scene has, for the gaps after each level
   const TetMesh* meshes[2] = {&lower.mesh(), &upper.mesh()};
   const SurfaceMesh surface_store[2] = {extractSurface(lower.mesh()), extractSurface(upper.mesh())};
   const SurfaceMesh* surfaces[2] = {&surface_store[0], &surface_store[1]};
