@@ -47,16 +47,9 @@ void freeGaps(const SimulationModel& model, const StepScratch& scratch, const Ti
     const shared::Pose& free_pose = tool_free.pose();
     const shared::Pose& tool_begin = scratch.tool_begin[inst];
     const int r0 = tx.rows.row_offset[c];
-    Eigen::Vector3d tissue_free = Eigen::Vector3d::Zero();
-    Eigen::Vector3d tissue_detected = Eigen::Vector3d::Zero();
-    Eigen::Vector3d tissue_begin = Eigen::Vector3d::Zero();
-    for (int j = 0; j < 3; ++j) {
-      const int n = k.nodes[j];
-      if (n < 0) continue;
-      tissue_free += k.weights[j] * tx.q_free.segment<3>(3 * n);
-      tissue_detected += k.weights[j] * q.segment<3>(3 * n);
-      tissue_begin += k.weights[j] * tx.q_begin.segment<3>(3 * n);
-    }
+    const Eigen::Vector3d tissue_free = tissuePointAt(k, tx.q_free);
+    const Eigen::Vector3d tissue_detected = tissuePointAt(k, q);
+    const Eigen::Vector3d tissue_begin = tissuePointAt(k, tx.q_begin);
     Eigen::Vector3d tool_free_point = free_pose.pos_m + free_pose.rot * k.tool_local_m;
     if (relinearise && detected.dynamicGrip()) {
       // the jaw point at the free opening (first order in the opening change)

@@ -69,16 +69,9 @@ int appendObstacleRows(const SimulationState& state, StepScratch& scratch, std::
   int r = first_new;
   for (const Contact& k : found) {
     // the tissue point: a vertex (weights 1, 0, 0) or, for an edge's contact, a face point
-    Eigen::Vector3d x_free = Eigen::Vector3d::Zero();
-    Eigen::Vector3d x_detected = Eigen::Vector3d::Zero();
-    Eigen::Vector3d x_begin = Eigen::Vector3d::Zero();
-    for (int j = 0; j < 3; ++j) {
-      const int node = k.nodes[j];
-      if (node < 0 || k.weights[j] == 0.0) continue;
-      x_free += k.weights[j] * tx.q_free.segment<3>(3 * node);
-      x_detected += k.weights[j] * q_detected.segment<3>(3 * node);
-      x_begin += k.weights[j] * tx.q_begin.segment<3>(3 * node);
-    }
+    const Eigen::Vector3d x_free = tissuePointAt(k, tx.q_free);
+    const Eigen::Vector3d x_detected = tissuePointAt(k, q_detected);
+    const Eigen::Vector3d x_begin = tissuePointAt(k, tx.q_begin);
     const int per = obstacleFriction(state, k) > 0.0 ? 3 : 1;
     for (int d = 0; d < per; ++d) {
       const Eigen::Vector3d& dir = d == 0 ? k.n : (d == 1 ? k.t1 : k.t2);

@@ -71,16 +71,9 @@ int appendTissueContactRows(const SimulationState& state, StepScratch& scratch, 
     const int per = spec.friction_mu > 0.0 ? 3 : 1;
     for (const Contact& c : pairs.contacts(k)) {
       const int v = c.feature;
-      Eigen::Vector3d s_free = Eigen::Vector3d::Zero();
-      Eigen::Vector3d s_detected = Eigen::Vector3d::Zero();
-      Eigen::Vector3d s_begin = Eigen::Vector3d::Zero();
-      for (int j = 0; j < 3; ++j) {
-        const int node = c.nodes[j];
-        if (node < 0 || c.weights[j] == 0.0) continue;
-        s_free += c.weights[j] * tb.q_free.segment<3>(3 * node);
-        s_detected += c.weights[j] * qb_detected.segment<3>(3 * node);
-        s_begin += c.weights[j] * tb.q_begin.segment<3>(3 * node);
-      }
+      const Eigen::Vector3d s_free = tissuePointAt(c, tb.q_free);
+      const Eigen::Vector3d s_detected = tissuePointAt(c, qb_detected);
+      const Eigen::Vector3d s_begin = tissuePointAt(c, tb.q_begin);
       const Eigen::Vector3d v_free = ta.q_free.segment<3>(3 * v);
       const Eigen::Vector3d v_detected = qa_detected.segment<3>(3 * v);
       const Eigen::Vector3d v_begin = ta.q_begin.segment<3>(3 * v);

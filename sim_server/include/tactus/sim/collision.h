@@ -111,6 +111,17 @@ struct Contact {
   int instrument = 0;
 };
 
+/// The contact's tissue point at the positions q (3n, node-major): sum_k w_k q[node_k].
+inline Eigen::Vector3d tissuePointAt(const Contact& contact, const Eigen::VectorXd& q) {
+  Eigen::Vector3d x = Eigen::Vector3d::Zero();
+  for (int j = 0; j < 3; ++j) {
+    const int node = contact.nodes[static_cast<std::size_t>(j)];
+    if (node < 0 || contact.weights[static_cast<std::size_t>(j)] == 0.0) continue;
+    x += contact.weights[static_cast<std::size_t>(j)] * q.segment<3>(3 * node);
+  }
+  return x;
+}
+
 struct CollisionOptions {
   double alarm_distance_m = 0.004;     ///< contacts are reported while gap <= this
   double contact_distance_m = 0.0;     ///< subtracted from every gap
