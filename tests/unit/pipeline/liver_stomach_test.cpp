@@ -1,7 +1,8 @@
 // scenes/liver_on_stomach.yaml (issue 20, item 5): the paper's liver settles with its right lobe
-// on a second, soft organ (an ellipsoidal stomach fixed at its base) through tissue_contact; the
-// stomach carries part of the liver's weight and deforms under it; the grasper lifts the lobe's
-// tip off it. Both organs' contacts are in one contact problem, solved to its tolerance at every
+// on a second, soft organ (an ellipsoidal stomach, free, lying on a rigid support) through
+// tissue_contact; the stomach carries part of the liver's weight and deforms under it, the
+// support carries the stomach, that share and part of the liver directly; the grasper lifts the
+// lobe's tip off the stomach. Both organs' contacts are in one contact problem, solved to its tolerance at every
 // step; while the lobe rests, no contact penetrates beyond the penetration tolerance.
 #include <gtest/gtest.h>
 
@@ -25,7 +26,8 @@ TEST(LiverStomachTest, TheLobeRestsOnTheStomachAndIsLiftedOffIt) {
   const test_support::LiverLobe lobe(liver);
   const Eigen::VectorXd stomach_rest = stomach.positions();
   double lobe_resting = 0.0, lobe_held = 0.0, stomach_resting = 0.0, stomach_held = 0.0;
-  double stomach_sag_m = 0.0, worst_resting_penetration = 0.0;
+  double stomach_sag_m = 0.0, worst_resting_penetration = 0.0, support_resting = 0.0;
+  double stomach_weight = 0.0, support_total = 0.0;
   int pair_contacts_resting = 0, unconverged = 0;
   for (int k = 0; k < 560; ++k) {
     sim.setDeviceTarget(sim.scriptedTarget(sim.time()));
@@ -43,7 +45,12 @@ TEST(LiverStomachTest, TheLobeRestsOnTheStomachAndIsLiftedOffIt) {
     }
     if (k == 99) {   // t = 1 s: settled
       lobe_resting = lobe.meanZ();
-      stomach_resting = sim.reactions().tissues[1].from_tissues_n.z();
+      const ReactionForces reactions = sim.reactions();
+      stomach_resting = reactions.tissues[1].from_tissues_n.z();
+      // the support's force on the stomach: its contact force less the liver's
+      support_resting = reactions.tissues[1].contact_force_n.rowwise().sum().z() - stomach_resting;
+      support_total = reactions.obstacle_force_n.at(0).z();
+      stomach_weight = -reactions.tissues[1].weight_n.z();
       const ContactProblemData& p = sim.lastProblem();
       for (int c = 0; c < p.contacts; ++c) {
         if ((p.contact_id[c] >> 56 & 3) == 3 && p.f[p.row_offset[c]] > 0.0) ++pair_contacts_resting;
@@ -62,7 +69,15 @@ TEST(LiverStomachTest, TheLobeRestsOnTheStomachAndIsLiftedOffIt) {
               "%.2f mm; penetration at rest <= %.3g m; %d steps unconverged\n",
               lobe_resting, lobe_held, stomach_resting, stomach_held, pair_contacts_resting,
               1e3 * stomach_sag_m, worst_resting_penetration, unconverged);
+  std::printf("[stomach] at rest the support carries %.4f N of the stomach (its weight %.4f N and "
+              "the liver's push %.4f N) and %.4f N of the liver\n", support_resting,
+              stomach_weight, -stomach_resting, support_total - support_resting);
   EXPECT_LT(stomach_resting, -0.1) << "the lobe presses on the stomach";
+  // the support carries the stomach and the liver's push on it (measured 3.3 % more at t = 1 s:
+  // the soft stomach still rocks on the support (+-0.15 N over 0.1 s), and the warped
+  // correction does not conserve momentum (README, Known limits)); and part of the liver itself
+  EXPECT_NEAR(support_resting, stomach_weight - stomach_resting, 0.06 * stomach_weight);
+  EXPECT_GT(support_total - support_resting, 0.05) << "the liver rests on the support too";
   EXPECT_GT(pair_contacts_resting, 3);
   EXPECT_GT(stomach_sag_m, 1e-4) << "the stomach deforms under the liver";
   EXPECT_LT(worst_resting_penetration, spec.solver.penetration_tolerance_m);
