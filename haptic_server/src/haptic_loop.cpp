@@ -91,7 +91,8 @@ AttachedSegment::AttachedSegment(shared::Segment&& s)
       f(static_cast<std::size_t>(segment.capacity().max_rows), 0.0),
       last_delta_free(static_cast<std::size_t>(segment.capacity().max_rows), 0.0),
       row_instrument(static_cast<std::size_t>(segment.capacity().max_rows), 0),
-      blocks(segment.capacity().max_rows, segment.capacity().max_contacts) {
+      blocks(segment.capacity().max_rows, segment.capacity().max_contacts),
+      reach_offset(static_cast<std::size_t>(segment.capacity().max_contacts) + 1, 0) {
   sample_writers = std::clamp(segment.capacity().devices, 0, shared::kMaxInstruments);
   for (int i = 0; i < sample_writers; ++i) {
     samples[static_cast<std::size_t>(i)] = segment.deviceWriter(i);

@@ -31,6 +31,32 @@ const shared::PoseSample& toolPoseOf(const shared::ContactSnapshotHeader& h, int
   return i == 0 ? h.tool_pose : h.instrument[static_cast<std::size_t>(i)].tool_pose;
 }
 
+// The contacts a device can move: all but those the simulation marks kContactUnreachable (a
+// group of bodies without instrument). Sets reach_only when they are fewer than all and
+// contiguous; else the whole problem is solved. Allocation-free, O(contacts).
+void findReach(AttachedSegment& link, const shared::SnapshotView& snap) noexcept {
+  link.reach_only = false;
+  const auto& hdr = snap.header();
+  const int nc = hdr.contacts;
+  const std::int32_t* ci = snap.contactInstrument();
+  const std::int32_t* ro = snap.rowOffset();
+  int first = nc, last = -1, reached = 0;
+  for (int c = 0; c < nc; ++c) {
+    if (ci[c] == shared::kContactUnreachable) continue;
+    first = std::min(first, c);
+    last = std::max(last, c);
+    ++reached;
+  }
+  if (reached == 0 || reached == nc || last - first + 1 != reached) return;
+  if (ro[first] < 0 || ro[last + 1] > hdr.rows || ro[first] > ro[last + 1]) return;
+  link.reach_begin = first;
+  link.reach_end = last + 1;
+  for (int c = first; c <= last + 1; ++c) {
+    link.reach_offset[static_cast<std::size_t>(c - first)] = ro[c] - ro[first];
+  }
+  link.reach_only = true;
+}
+
 }  // namespace
 
 void HapticLoop::solveLocalModel(AttachedSegment& link, const shared::SnapshotView& snap,
@@ -105,21 +131,39 @@ void HapticLoop::solveLocalModel(
   ns.coupling = (hdr.flags & shared::kSnapshotSymmetricW) != 0
                     ? shared::NsgsCoupling::kSymmetricRowUpdate
                     : shared::NsgsCoupling::kColumnUpdate;
+  // the contacts the devices can move, found once per snapshot (AttachedSegment::reach_only)
+  if (link.reach_seq != hdr.seq) {
+    findReach(link, snap);
+    link.reach_seq = hdr.seq;
+  }
+  shared::ContactProblemView problem = snap.problem(delta_free.data());
+  int r_begin = 0, r_end = m;   // the rows solved
+  if (link.reach_only) {
+    r_begin = ro[link.reach_begin];
+    r_end = ro[link.reach_end];
+    problem.contacts = link.reach_end - link.reach_begin;
+    problem.rows = r_end - r_begin;
+    problem.row_offset = link.reach_offset.data();
+    problem.W += static_cast<std::ptrdiff_t>(r_begin) * problem.ld + r_begin;
+    problem.delta_free += r_begin;
+    problem.mu += link.reach_begin;
+  }
   // same snapshot as the last solve: W and f are unchanged, so W f + delta_free only shifts by
   // the change of delta_free (saves a pass over W)
   if (link.delta_seq == hdr.seq) {
     double* delta = workspace.delta.data();
-    for (int r = 0; r < m; ++r) delta[r] += delta_free[r] - link.last_delta_free[r];
+    for (int r = r_begin; r < r_end; ++r) {
+      delta[r - r_begin] += delta_free[r] - link.last_delta_free[r];
+    }
     ns.delta_is_current = true;
   }
   // W's storage, chosen once per snapshot: dense (one tissue) or blocks (several bodies)
-  shared::ContactProblemView problem = snap.problem(delta_free.data());
   if (link.blocks_seq != hdr.seq) {
     link.use_blocks = shared::chooseStorage(problem, link.blocks).blocks != nullptr;
     link.blocks_seq = hdr.seq;
   }
   if (link.use_blocks) problem.blocks = &link.blocks;
-  const shared::NsgsResult res = shared::solveNsgs(problem, ns, workspace, f.data());
+  const shared::NsgsResult res = shared::solveNsgs(problem, ns, workspace, f.data() + r_begin);
   link.delta_seq = res.status == shared::NsgsStatus::kEmpty ? 0 : hdr.seq;
   std::copy_n(delta_free.begin(), m, link.last_delta_free.begin());
   out.sweeps = res.sweeps;

@@ -215,8 +215,9 @@ std::vector<RecordedSnapshot> readSnapshotFile(const std::filesystem::path& path
     }
     const std::int32_t tools = std::max(1, h.instruments);
     if (std::any_of(s.contact_instrument.begin(), s.contact_instrument.end(),
-                    [tools](std::int32_t i) { return i < -1 || i >= tools; })) {
-      throw bad(cat("a contact's instrument is not in -1..", tools - 1, " (-1: none)"));
+                    [tools](std::int32_t i) { return i < kContactUnreachable || i >= tools; })) {
+      throw bad(cat("a contact's instrument is not in -2..", tools - 1,
+                    " (-1: none, -2: none and unreachable)"));
     }
     auto check_pose = [&bad](const PoseSample& p) {
       for (double x : p.pos_m) {

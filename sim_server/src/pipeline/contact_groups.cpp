@@ -96,6 +96,19 @@ void ContactGroups::assign(const std::vector<int>& label) {
   }
 }
 
+void ContactGroups::markUnreachable(const std::vector<int>& instrument,
+                                    std::vector<std::uint8_t>& out) {
+  const auto contacts = group_.size();
+  fill_.assign(static_cast<std::size_t>(count_), 0);   // per group: has an instrument contact
+  for (std::size_t c = 0; c < contacts && c < instrument.size(); ++c) {
+    if (instrument[c] >= 0) fill_[static_cast<std::size_t>(group_[c])] = 1;
+  }
+  out.resize(contacts);
+  for (std::size_t c = 0; c < contacts; ++c) {
+    out[c] = fill_[static_cast<std::size_t>(group_[c])] != 0 ? 0 : 1;
+  }
+}
+
 shared::NsgsResult ContactGroups::solveGathered(const shared::ContactProblemView& problem, int g,
                                                 const shared::NsgsSettings& settings,
                                                 shared::NsgsWorkspace& workspace, double* f) {

@@ -47,6 +47,9 @@ class ContactGroups {
   void assign(const std::vector<int>& label);
 
   int count() const { return count_; }
+  /// Marks the contacts (out[c] = 1) whose group has no contact with an instrument (instrument
+  /// c: contact c's, -1 for none); 0 for the others.
+  void markUnreachable(const std::vector<int>& instrument, std::vector<std::uint8_t>& out);
   /// Contacts of group g, in increasing order.
   const int* groupContacts(int g) const {
     return members_.data() + start_[static_cast<std::size_t>(g)];

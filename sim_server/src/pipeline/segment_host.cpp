@@ -224,6 +224,9 @@ bool writeSnapshot(const Simulation& sim, double max_opening_rad, std::uint64_t 
     slot.mu()[c] = p.mu[c];
     slot.contactInstrument()[c] =
         c < static_cast<int>(p.contact_instrument.size()) ? p.contact_instrument[c] : 0;
+    if (c < static_cast<int>(p.unreachable.size()) && p.unreachable[c] != 0) {
+      slot.contactInstrument()[c] = shared::kContactUnreachable;
+    }
     for (int k = 0; k < 3; ++k) {
       slot.contactPoint()[3 * c + k] = p.point_m[c][k];
       slot.contactNormal()[3 * c + k] = p.normal[c][k];

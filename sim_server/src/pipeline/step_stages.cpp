@@ -141,9 +141,11 @@ void solveContacts(const SimulationModel& model, SimulationState& state, StepScr
     for (int k = 0; k < nr; ++k) p.f[r0 + k] = it->second[k];
   }
   if (rows > 0) {
-    // zeroes f on NaN; one NSGS per group of coupled bodies (contact_groups.h)
+    // zeroes f on NaN; one NSGS per group of coupled bodies (contact_groups.h); the contacts
+    // of groups without instrument are marked for the haptic loop either way
+    scratch.groups.find(state, scratch);
+    scratch.groups.markUnreachable(p.contact_instrument, p.unreachable);
     if (model.spec.solver.split_contact_groups) {
-      scratch.groups.find(state, scratch);
       report.contact_groups = scratch.groups.count();
       report.nsgs = scratch.groups.solve(p.view(), model.nsgs, scratch.workspace, p.f.data());
     } else {
@@ -153,6 +155,7 @@ void solveContacts(const SimulationModel& model, SimulationState& state, StepScr
     ++counters.solves;
   } else {
     report.contact_groups = 0;
+    p.unreachable.clear();
     report.nsgs = shared::NsgsResult{};
   }
   p.solve = report.nsgs;

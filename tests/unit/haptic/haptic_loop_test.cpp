@@ -403,9 +403,12 @@ class LargeProblemRig {
   static constexpr int kContacts = 150;
   static constexpr int kRows = 3 * kContacts;
   using Coupling = double (*)(int i, int j);
+  /// Contact c's instrument (-1: an obstacle's or another body's contact, no instrument)
+  using Tool = int (*)(int c);
 
-  LargeProblemRig(const std::string& tag, Coupling coupling)
-      : name_("tactus_haptic_large_" + tag + std::to_string(::getpid())), coupling_(coupling) {
+  LargeProblemRig(const std::string& tag, Coupling coupling, Tool tool = nullptr)
+      : name_("tactus_haptic_large_" + tag + std::to_string(::getpid())), coupling_(coupling),
+        tool_(tool) {
     shared::Segment::remove(name_);
     sim_.emplace(
         shared::Segment::create(name_, shared::SegmentCapacity::forContacts(kContacts, true)));
@@ -435,6 +438,7 @@ class LargeProblemRig {
     for (int c = 0; c <= kContacts; ++c) slot.rowOffset()[c] = 3 * c;
     for (int c = 0; c < kContacts; ++c) {
       slot.contactId()[c] = static_cast<std::uint64_t>(c + 1);
+      slot.contactInstrument()[c] = tool_ != nullptr ? tool_(c) : 0;
       slot.mu()[c] = 0.5;
       for (int k = 0; k < 3; ++k) {
         slot.contactPoint()[3 * c + k] = k == 0 ? 1e-3 * c : 0.0;
@@ -464,6 +468,7 @@ class LargeProblemRig {
  private:
   std::string name_;
   Coupling coupling_;
+  Tool tool_;
   std::optional<shared::Segment> sim_;
   shared::SnapshotPublisher publisher_;
   ScriptedDevice device_;
@@ -558,6 +563,68 @@ TEST(HapticLoopLarge, ASeveralBodiesTickSolvesOnTheBlocksWithoutAllocating) {
   EXPECT_EQ(settled.flags & shared::kStatsSolverNotConverged, 0u);
   // the contact wrench before the safety chain's clamp (normals +z, tangents x and y)
   EXPECT_NEAR(settled.unlimited_force_norm_n, scale, 1e-4 * scale);
+}
+
+// Three bodies of 50 contacts; only the first body's contacts belong to the instrument (the others:
+// an organ on its support, which no device moves, marked so by the simulation).
+double threeBodies(int i, int j) { return i / 150 == j / 150 ? tissueCoupling(i, j) : 0.0; }
+// (the simulation marks the contacts of a group without instrument kContactUnreachable)
+int firstBodyTool(int c) { return c < 50 ? 0 : shared::kContactUnreachable; }
+int outerBodiesTool(int c) { return c < 50 || c >= 100 ? 0 : shared::kContactUnreachable; }
+
+// The tick re-solves only the contacts a device can move (the first body), in place on W's block,
+// without allocating; the force is the whole problem's.
+TEST(HapticLoopLarge, ContactsNoDeviceCanMoveAreNotReSolved) {
+  LargeProblemRig rig("reach", threeBodies, firstBodyTool);
+  const TickOutput out = tickWithoutAllocating(rig);
+  EXPECT_EQ(out.contacts, LargeProblemRig::kContacts);
+  EXPECT_TRUE(rig.link().reach_only);
+  EXPECT_EQ(rig.link().reach_begin, 0);
+  EXPECT_EQ(rig.link().reach_end, 50);
+  // at the snapshot's pose the force is the whole problem's (its first body's contacts)
+  rig.device().state.pos_m = {0.0, 0.0, 0.0};
+  TickOutput settled;
+  for (int i = 0; i < 400; ++i) {
+    if (i % 40 == 0) rig.publish(2e-4);
+    settled = rig.tick();
+  }
+  const int m = LargeProblemRig::kRows;
+  std::vector<double> W(static_cast<std::size_t>(m) * m), q(m);
+  std::vector<double> mu(LargeProblemRig::kContacts, 0.5);
+  std::vector<int> ro(LargeProblemRig::kContacts + 1);
+  for (int c = 0; c <= LargeProblemRig::kContacts; ++c) ro[c] = 3 * c;
+  for (int i = 0; i < m; ++i) {
+    for (int j = 0; j < m; ++j) W[static_cast<std::size_t>(i) * m + j] = threeBodies(i, j);
+    q[i] = i % 3 == 0 ? -2e-4 : 1e-5 * ((i % 5) - 2);
+  }
+  const shared::ContactProblemView v = shared::denseProblemView(
+      LargeProblemRig::kContacts, m, ro.data(), W.data(), m, q.data(), mu.data());
+  shared::NsgsWorkspace ws(m, v.contacts);
+  std::vector<double> f(m, 0.0);
+  shared::NsgsSettings s;
+  s.tolerance = 1e-10;
+  s.max_sweeps = 10000;
+  ASSERT_EQ(shared::solveNsgs(v, s, ws, f.data()).status, shared::NsgsStatus::kConverged);
+  double fx = 0.0, fy = 0.0, fz = 0.0;
+  for (int c = 0; c < 50; ++c) {   // the instrument's contacts
+    fz += f[3 * c];
+    fx += f[3 * c + 1];
+    fy += f[3 * c + 2];
+  }
+  const double scale = std::hypot(fx, fy, fz);
+  EXPECT_GT(scale, 0.0);
+  EXPECT_EQ(settled.flags & shared::kStatsSolverNotConverged, 0u);
+  EXPECT_NEAR(settled.unlimited_force_norm_n, scale, 1e-4 * scale);
+}
+
+// Contacts a device can move in the first and the last body: not contiguous, so the whole
+// problem is solved.
+TEST(HapticLoopLarge, ReachedContactsThatAreNotContiguousSolveTheWholeProblem) {
+  LargeProblemRig rig("reach_split", threeBodies, outerBodiesTool);
+  const TickOutput out = tickWithoutAllocating(rig);
+  EXPECT_EQ(out.contacts, LargeProblemRig::kContacts);
+  EXPECT_FALSE(rig.link().reach_only);
+  EXPECT_GT(out.sweeps, 0);
 }
 
 }  // namespace

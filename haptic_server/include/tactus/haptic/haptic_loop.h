@@ -158,6 +158,17 @@ struct AttachedSegment {
   shared::DelassusBlocks blocks;
   std::uint64_t blocks_seq = 0;         ///< snapshot whose W `blocks` was chosen for (0: none)
   bool use_blocks = false;              ///< blocks_seq's W is solved on `blocks`
+  /// The contacts the devices can move (docs/design.md, "Bodies that do not couple"): all but
+  /// those the simulation marks shared::kContactUnreachable (a group of coupled bodies without
+  /// instrument: an organ on its support once the grasped lobe has left it; W is zero between
+  /// them and every instrument contact, so no device changes their forces). Found once per
+  /// adopted snapshot (O(contacts)). When they are fewer than all and contiguous in the row
+  /// order (the simulation orders rows by tissue), the tick re-solves only them, in place on W's
+  /// diagonal block; the others keep the simulation's forces. Otherwise the whole problem.
+  std::uint64_t reach_seq = 0;          ///< snapshot the reach was found for (0: none)
+  bool reach_only = false;              ///< reach_seq's problem is solved on [reach_begin, end)
+  int reach_begin = 0, reach_end = 0;   ///< the reached contacts (when reach_only)
+  std::vector<int> reach_offset;        ///< their row offsets from the first (capacity + 1)
   explicit AttachedSegment(shared::Segment&& s);
 };
 

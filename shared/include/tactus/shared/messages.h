@@ -56,9 +56,15 @@ static_assert(std::is_trivially_copyable_v<SnapshotInstrument>);
 /// ../../../../docs/design.md#the-haptic-local-model), at offset 0 of its triple-buffer slot.
 /// Several instruments (docs/design.md, "Several instruments and devices"): `instruments`
 /// blocks are valid, contact c belongs to instrument SnapshotView::contactInstrument()[c] (-1: to
-/// none, a static obstacle's contact, whose J and tool rows are zero), and
+/// none, a static obstacle's contact, whose J and tool rows are zero; kContactUnreachable, -2: to
+/// none, and no instrument's contact reaches it through W either: W is zero between it and every
+/// contact of an instrument, so no device can change its force and the haptic loop need not
+/// re-solve it, docs/design.md "Bodies that do not couple"), and
 /// row r of J is d delta_free_r / d x_h of that instrument's device. device_seq, device_pose
 /// and tool_pose repeat instrument 0's block for readers of one instrument.
+/// contactInstrument() of a contact in a group of bodies without instrument (see below).
+inline constexpr std::int32_t kContactUnreachable = -2;
+
 struct ContactSnapshotHeader {
   std::uint64_t seq = 0;             ///< publish counter, 0 = nothing published yet
   std::int64_t t_ns = 0;             ///< monotonic time of publication

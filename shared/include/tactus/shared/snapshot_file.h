@@ -44,7 +44,7 @@ struct RecordedSnapshot {
   std::vector<std::int32_t> row_offset;
   std::vector<std::uint64_t> contact_id;
   std::vector<double> mu, W, delta_free, f, J, contact_point_m, contact_normal, contact_tangent;
-  std::vector<std::int32_t> contact_instrument;   ///< per contact (0 with one instrument; -1: an obstacle's)
+  std::vector<std::int32_t> contact_instrument;   ///< per contact (0 with one instrument; -1: an obstacle's; -2: unreachable, messages.h)
 
   int rows() const noexcept { return header.rows; }
   int contacts() const noexcept { return header.contacts; }

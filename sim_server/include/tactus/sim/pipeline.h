@@ -119,7 +119,10 @@ struct ContactProblemData {
   std::vector<Eigen::Vector3d> normal;         ///< per contact (row n), tissue -> tool
   std::vector<Eigen::Vector3d> tangent1;       ///< per contact (row t1)
   std::vector<Eigen::Vector3d> tangent2;       ///< per contact (row t2)
-  std::vector<int> contact_instrument;         ///< per contact: its instrument
+  std::vector<int> contact_instrument;         ///< per contact: its instrument (-1: none)
+  /// per contact: 1 when its group of coupled bodies has no instrument contact (no device can
+  /// change its force; published as shared::kContactUnreachable); filled by the solve
+  std::vector<std::uint8_t> unreachable;
   std::vector<InstrumentProblemData> instruments;   ///< per instrument
   shared::Pose device_pose;                    ///< x_h* used for this step (instrument 0)
   double device_gripper = 1.0;                 ///< opening (0..1) used for this step (idem)
