@@ -209,7 +209,8 @@ TEST(ContactGroupsTest, TwoBlocksApartAreTwoGroupsAndMoveAsOneSolveMovesThem) {
 TEST(ContactGroupsTest, AProbeOnBothBlocksOrAContactPairJoinsThem) {
   TempDir dir;
   writeBlocks(dir);
-  // a 4 mm probe tip pressed into the 2 mm gap between the blocks' top edges
+  // a 4 mm probe tip pressed into the 2 mm gap between the blocks' top edges, 1.5 mm toward the
+  // right block (it touches that one first)
   const std::string probe =
       "instrument:\n"
       "  type: probe\n"
@@ -217,12 +218,12 @@ TEST(ContactGroupsTest, AProbeOnBothBlocksOrAContactPairJoinsThem) {
       "  probe: {tip_radius: 0.004, shaft_length: 0.03}\n"
       "  coupling: {stiffness: 300, damping: 3, rotational_stiffness: 0.5, "
       "rotational_damping: 0.005}\n"
-      "  initial_pose: {position: [0, 0, 0.03]}\n"
+      "  initial_pose: {position: [0.0015, 0, 0.03]}\n"
       "  trajectory:\n"
-      "    - {t: 0.0, position: [0, 0, 0.03]}\n"
-      "    - {t: 1.0, position: [0, 0, 0.018]}\n";
+      "    - {t: 0.0, position: [0.0015, 0, 0.03]}\n"
+      "    - {t: 1.0, position: [0.0015, 0, 0.018]}\n";
   Simulation pressed(parseScene(blocksScene(true, probe, "1.0e-6"), "probe.yaml", dir.path));
-  int joined = 0;
+  int joined = 0, one_side = 0;
   for (int k = 0; k < 120; ++k) {
     pressed.setDeviceTarget(pressed.scriptedTarget(pressed.time()));
     const StepReport r = pressed.step();
@@ -233,14 +234,24 @@ TEST(ContactGroupsTest, AProbeOnBothBlocksOrAContactPairJoinsThem) {
       if (p.contact_instrument[c] != 0) continue;
       (p.point_m[c].x() < 0.0 ? on_left : on_right) = true;
     }
+    // the contacts no device can move, for the haptic loop: a group without the probe's
+    int unreachable = 0;
+    for (int c = 0; c < p.contacts; ++c) unreachable += p.unreachable.at(c);
     if (on_left && on_right) {
       EXPECT_EQ(r.contact_groups, 1) << "step " << k;
+      EXPECT_EQ(unreachable, 0) << "step " << k;
       ++joined;
     } else if (r.contacts > 0 && !on_left && !on_right) {
       EXPECT_EQ(r.contact_groups, 2) << "step " << k;
+      EXPECT_EQ(unreachable, p.contacts) << "step " << k;
+    } else if (r.contacts > 0) {   // the probe on one block: the other block's contacts
+      EXPECT_GT(unreachable, 0) << "step " << k;
+      EXPECT_LT(unreachable, p.contacts) << "step " << k;
+      ++one_side;
     }
   }
   EXPECT_GT(joined, 10) << "the probe never touched both blocks";
+  std::printf("[groups] probe: %d steps on both blocks, %d on one\n", joined, one_side);
 
   // side by side, touching through a tissue_contact pair: one group
   const TetMesh left = makeBoxTetMesh(2, 2, 2, Eigen::Vector3d(0.02, 0.02, 0.02),
