@@ -496,6 +496,49 @@ TickOutput tickWithoutAllocating(LargeProblemRig& rig) {
   return out;
 }
 
+// Many warm-started ticks at the snapshot's pose on one problem (republished within the 50 ms
+// watchdog at 0.2 mm), and the norm of the contact force of the instrument's contacts [0,
+// tool_contacts) in the whole problem solved densely to 1e-10: the tick's unlimited force must
+// match it.
+struct SettledAndReference {
+  TickOutput settled;
+  double reference_n = 0.0;
+};
+SettledAndReference settleAndSolveDense(LargeProblemRig& rig, LargeProblemRig::Coupling coupling,
+                                        int tool_contacts) {
+  SettledAndReference out;
+  rig.device().state.pos_m = {0.0, 0.0, 0.0};
+  for (int i = 0; i < 400; ++i) {
+    if (i % 40 == 0) rig.publish(2e-4);
+    out.settled = rig.tick();
+  }
+  const int m = LargeProblemRig::kRows;
+  std::vector<double> W(static_cast<std::size_t>(m) * m), q(m);
+  std::vector<double> mu(LargeProblemRig::kContacts, 0.5);
+  std::vector<int> ro(LargeProblemRig::kContacts + 1);
+  for (int c = 0; c <= LargeProblemRig::kContacts; ++c) ro[c] = 3 * c;
+  for (int i = 0; i < m; ++i) {
+    for (int j = 0; j < m; ++j) W[static_cast<std::size_t>(i) * m + j] = coupling(i, j);
+    q[i] = i % 3 == 0 ? -2e-4 : 1e-5 * ((i % 5) - 2);
+  }
+  const shared::ContactProblemView v = shared::denseProblemView(
+      LargeProblemRig::kContacts, m, ro.data(), W.data(), m, q.data(), mu.data());
+  shared::NsgsWorkspace ws(m, v.contacts);
+  std::vector<double> f(m, 0.0);
+  shared::NsgsSettings s;
+  s.tolerance = 1e-10;
+  s.max_sweeps = 10000;
+  EXPECT_EQ(shared::solveNsgs(v, s, ws, f.data()).status, shared::NsgsStatus::kConverged);
+  double fx = 0.0, fy = 0.0, fz = 0.0;
+  for (int c = 0; c < tool_contacts; ++c) {
+    fz += f[3 * c];
+    fx += f[3 * c + 1];
+    fy += f[3 * c + 2];
+  }
+  out.reference_n = std::hypot(fx, fy, fz);
+  return out;
+}
+
 // One tissue: every row coupled with every other (dense W, the dense storage).
 double tissueCoupling(int i, int j) {
   return i == j ? 1e-3 : 0.5e-3 * std::exp(-std::abs(i - j));
@@ -527,42 +570,13 @@ TEST(HapticLoopLarge, ASeveralBodiesTickSolvesOnTheBlocksWithoutAllocating) {
   EXPECT_GT(out.sweeps, 0);
   EXPECT_TRUE(rig.link().use_blocks);
   EXPECT_EQ(rig.link().blocks.blocks(), 10 * 15 * 15);
-  // at the snapshot's pose, many warm-started ticks on one problem (republished within the
-  // 50 ms watchdog): the force is the dense solve's
-  rig.device().state.pos_m = {0.0, 0.0, 0.0};
-  TickOutput settled;
-  for (int i = 0; i < 400; ++i) {
-    if (i % 40 == 0) rig.publish(2e-4);
-    settled = rig.tick();
-  }
-  const int m = LargeProblemRig::kRows;
-  std::vector<double> W(static_cast<std::size_t>(m) * m), q(m);
-  std::vector<double> mu(LargeProblemRig::kContacts, 0.5);
-  std::vector<int> ro(LargeProblemRig::kContacts + 1);
-  for (int c = 0; c <= LargeProblemRig::kContacts; ++c) ro[c] = 3 * c;
-  for (int i = 0; i < m; ++i) {
-    for (int j = 0; j < m; ++j) W[static_cast<std::size_t>(i) * m + j] = bodiesCoupling(i, j);
-    q[i] = i % 3 == 0 ? -2e-4 : 1e-5 * ((i % 5) - 2);
-  }
-  const shared::ContactProblemView v = shared::denseProblemView(
-      LargeProblemRig::kContacts, m, ro.data(), W.data(), m, q.data(), mu.data());
-  shared::NsgsWorkspace ws(m, v.contacts);
-  std::vector<double> f(m, 0.0);
-  shared::NsgsSettings s;
-  s.tolerance = 1e-10;
-  s.max_sweeps = 10000;
-  ASSERT_EQ(shared::solveNsgs(v, s, ws, f.data()).status, shared::NsgsStatus::kConverged);
-  double fx = 0.0, fy = 0.0, fz = 0.0;
-  for (int c = 0; c < v.contacts; ++c) {
-    fz += f[3 * c];
-    fx += f[3 * c + 1];
-    fy += f[3 * c + 2];
-  }
-  const double scale = std::hypot(fx, fy, fz);
-  EXPECT_GT(scale, 0.0);
-  EXPECT_EQ(settled.flags & shared::kStatsSolverNotConverged, 0u);
+  // at the snapshot's pose the force is the dense solve's
+  const SettledAndReference r =
+      settleAndSolveDense(rig, bodiesCoupling, LargeProblemRig::kContacts);
+  EXPECT_GT(r.reference_n, 0.0);
+  EXPECT_EQ(r.settled.flags & shared::kStatsSolverNotConverged, 0u);
   // the contact wrench before the safety chain's clamp (normals +z, tangents x and y)
-  EXPECT_NEAR(settled.unlimited_force_norm_n, scale, 1e-4 * scale);
+  EXPECT_NEAR(r.settled.unlimited_force_norm_n, r.reference_n, 1e-4 * r.reference_n);
 }
 
 // Three bodies of 50 contacts; only the first body's contacts belong to the instrument (the others:
@@ -582,39 +596,10 @@ TEST(HapticLoopLarge, ContactsNoDeviceCanMoveAreNotReSolved) {
   EXPECT_EQ(rig.link().reach_begin, 0);
   EXPECT_EQ(rig.link().reach_end, 50);
   // at the snapshot's pose the force is the whole problem's (its first body's contacts)
-  rig.device().state.pos_m = {0.0, 0.0, 0.0};
-  TickOutput settled;
-  for (int i = 0; i < 400; ++i) {
-    if (i % 40 == 0) rig.publish(2e-4);
-    settled = rig.tick();
-  }
-  const int m = LargeProblemRig::kRows;
-  std::vector<double> W(static_cast<std::size_t>(m) * m), q(m);
-  std::vector<double> mu(LargeProblemRig::kContacts, 0.5);
-  std::vector<int> ro(LargeProblemRig::kContacts + 1);
-  for (int c = 0; c <= LargeProblemRig::kContacts; ++c) ro[c] = 3 * c;
-  for (int i = 0; i < m; ++i) {
-    for (int j = 0; j < m; ++j) W[static_cast<std::size_t>(i) * m + j] = threeBodies(i, j);
-    q[i] = i % 3 == 0 ? -2e-4 : 1e-5 * ((i % 5) - 2);
-  }
-  const shared::ContactProblemView v = shared::denseProblemView(
-      LargeProblemRig::kContacts, m, ro.data(), W.data(), m, q.data(), mu.data());
-  shared::NsgsWorkspace ws(m, v.contacts);
-  std::vector<double> f(m, 0.0);
-  shared::NsgsSettings s;
-  s.tolerance = 1e-10;
-  s.max_sweeps = 10000;
-  ASSERT_EQ(shared::solveNsgs(v, s, ws, f.data()).status, shared::NsgsStatus::kConverged);
-  double fx = 0.0, fy = 0.0, fz = 0.0;
-  for (int c = 0; c < 50; ++c) {   // the instrument's contacts
-    fz += f[3 * c];
-    fx += f[3 * c + 1];
-    fy += f[3 * c + 2];
-  }
-  const double scale = std::hypot(fx, fy, fz);
-  EXPECT_GT(scale, 0.0);
-  EXPECT_EQ(settled.flags & shared::kStatsSolverNotConverged, 0u);
-  EXPECT_NEAR(settled.unlimited_force_norm_n, scale, 1e-4 * scale);
+  const SettledAndReference r = settleAndSolveDense(rig, threeBodies, 50);
+  EXPECT_GT(r.reference_n, 0.0);
+  EXPECT_EQ(r.settled.flags & shared::kStatsSolverNotConverged, 0u);
+  EXPECT_NEAR(r.settled.unlimited_force_norm_n, r.reference_n, 1e-4 * r.reference_n);
 }
 
 // Contacts a device can move in the first and the last body: not contiguous, so the whole
