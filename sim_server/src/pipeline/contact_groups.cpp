@@ -137,9 +137,24 @@ shared::NsgsResult ContactGroups::solveGathered(const shared::ContactProblemView
   const shared::ContactProblemView sub =
       shared::denseProblemView(size, m, sub_row_offset_.data(), sub_w_.data(), m,
                                sub_delta_free_.data(), sub_mu_.data());
-  const shared::NsgsResult res = shared::solveNsgs(sub, settings, workspace, sub_f_.data());
+  const shared::NsgsResult res = solveChosen(sub, settings, workspace, sub_f_.data());
   for (int i = 0; i < m; ++i) f[sub_rows_[static_cast<std::size_t>(i)]] = sub_f_[static_cast<std::size_t>(i)];
   return res;
+}
+
+shared::NsgsResult ContactGroups::solveChosen(shared::ContactProblemView view,
+                                              const shared::NsgsSettings& settings,
+                                              shared::NsgsWorkspace& workspace, double* f) {
+  if (view.blocks == nullptr && view.W != nullptr && view.contacts > 1) {
+    if (view.rows > blocks_rows_ || view.contacts > blocks_contacts_) {
+      blocks_rows_ = std::max(view.rows, blocks_rows_);
+      blocks_contacts_ = std::max(view.contacts, blocks_contacts_);
+      blocks_.reserve(blocks_rows_, blocks_contacts_);
+    }
+    view = shared::chooseStorage(view, blocks_);
+    if (view.blocks != nullptr) ++solved_on_blocks_;
+  }
+  return shared::solveNsgs(view, settings, workspace, f);
 }
 
 shared::NsgsResult ContactGroups::solveGroup(const shared::ContactProblemView& problem, int g,
@@ -162,7 +177,7 @@ shared::NsgsResult ContactGroups::solveGroup(const shared::ContactProblemView& p
         size, static_cast<int>(sub_rows_.size()), sub_row_offset_.data(),
         problem.W + static_cast<std::ptrdiff_t>(r0) * problem.ld + r0, problem.ld,
         problem.delta_free + r0, problem.mu + c0);
-    res = shared::solveNsgs(sub, settings, workspace, f + r0);
+    res = solveChosen(sub, settings, workspace, f + r0);
   } else {
     res = solveGathered(problem, g, settings, workspace, f);
   }
@@ -186,8 +201,9 @@ shared::NsgsResult ContactGroups::solveGroup(const shared::ContactProblemView& p
 shared::NsgsResult ContactGroups::solve(const shared::ContactProblemView& problem,
                                         const shared::NsgsSettings& settings,
                                         shared::NsgsWorkspace& workspace, double* f) {
+  solved_on_blocks_ = 0;
   if (count_ <= 1 || problem.W == nullptr || problem.blocks != nullptr) {
-    return shared::solveNsgs(problem, settings, workspace, f);
+    return solveChosen(problem, settings, workspace, f);
   }
   const std::int64_t t0 = shared::monotonicNs();
   norms_.assign(static_cast<std::size_t>(count_), GroupNorms{});

@@ -12,9 +12,15 @@
 // a resting organ sweep with it), and a sweep costs its own rows^2, not all rows^2.
 //
 // The dense W stays assembled as before (the shared segment carries it; the haptic loop
-// re-solves it whole, see haptic_loop.h), so a group whose contacts are contiguous is solved in
-// place on W's diagonal block (leading dimension = all rows); another is gathered into a compact
-// copy first and its forces scattered back.
+// re-solves what a device can move, see haptic_loop.h), so a group whose contacts are contiguous
+// is solved in place on W's diagonal block (leading dimension = all rows); another is gathered
+// into a compact copy first and its forces scattered back.
+//
+// Inside a group W can still be sparse by blocks (a chain of organs, each touching the next:
+// the first's own contacts and the last's do not couple). Each problem solved (the whole, or a
+// group) goes through shared::chooseStorage, as in the haptic loop: when at most
+// kBlockSparseMaxFill of its contact blocks are non-zero NSGS sweeps the blocks
+// (delassus_blocks.h), else the dense W.
 //
 // Tolerance: the result must meet the whole problem's tolerance on the whole problem's
 // normalised error, sqrt(sum_k r_k^2) / max(|q|, |f|, |delta|) (nsgs.h naturalMapError; r_k
@@ -29,6 +35,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "tactus/shared/delassus_blocks.h"
 #include "tactus/shared/nsgs.h"
 
 namespace tactus::sim {
@@ -47,6 +54,8 @@ class ContactGroups {
   void assign(const std::vector<int>& label);
 
   int count() const { return count_; }
+  /// Problems of the last solve() NSGS swept on W's blocks (chooseStorage's rule).
+  int solvedOnBlocks() const { return solved_on_blocks_; }
   /// Marks the contacts (out[c] = 1) whose group has no contact with an instrument (instrument
   /// c: contact c's, -1 for none); 0 for the others.
   void markUnreachable(const std::vector<int>& instrument, std::vector<std::uint8_t>& out);
@@ -85,7 +94,15 @@ class ContactGroups {
     int sweeps = 0;          // over the passes
   };
 
+  /// solveNsgs on `view`, on W's blocks when chooseStorage picks them.
+  shared::NsgsResult solveChosen(shared::ContactProblemView view,
+                                 const shared::NsgsSettings& settings,
+                                 shared::NsgsWorkspace& workspace, double* f);
+
   int count_ = 0;
+  int solved_on_blocks_ = 0;
+  shared::DelassusBlocks blocks_;
+  int blocks_rows_ = 0, blocks_contacts_ = 0;   // what blocks_ is reserved for
   std::vector<GroupNorms> norms_;
   std::vector<int> parent_;        // union-find over bodies: tissues, then instruments
   std::vector<int> label_;         // per contact: the root of one of its bodies

@@ -148,13 +148,16 @@ void solveContacts(const SimulationModel& model, SimulationState& state, StepScr
     if (model.spec.solver.split_contact_groups) {
       report.contact_groups = scratch.groups.count();
       report.nsgs = scratch.groups.solve(p.view(), model.nsgs, scratch.workspace, p.f.data());
+      report.solved_on_blocks = scratch.groups.solvedOnBlocks();
     } else {
       report.contact_groups = 1;
+      report.solved_on_blocks = 0;
       report.nsgs = shared::solveNsgs(p.view(), model.nsgs, scratch.workspace, p.f.data());
     }
     ++counters.solves;
   } else {
     report.contact_groups = 0;
+    report.solved_on_blocks = 0;
     p.unreachable.clear();
     report.nsgs = shared::NsgsResult{};
   }

@@ -140,6 +140,33 @@ TEST(ContactGroupsTest, OneGroupIsTheWholeSolve) {
   EXPECT_EQ(whole, split);
 }
 
+// One group whose W is sparse by blocks (ten sub-bodies of four contacts that the grouping does
+// not separate, as in a chain of organs): NSGS sweeps the blocks (chooseStorage's rule, fill 0.1)
+// and gives the dense solve's forces.
+TEST(ContactGroupsTest, AGroupSparseByBlocksIsSweptOnItsBlocks) {
+  std::vector<int> body;
+  for (int c = 0; c < 40; ++c) body.push_back(c / 4);
+  const GroupedProblem p = makeProblem(body, 11);   // W zero between the sub-bodies
+  shared::NsgsSettings settings;
+  settings.tolerance = 1e-10;
+  settings.max_sweeps = 20000;
+  shared::NsgsWorkspace workspace(p.rows, 40);
+  std::vector<double> dense(static_cast<std::size_t>(p.rows), 0.0), chosen = dense;
+  ASSERT_EQ(shared::solveNsgs(p.view(), settings, workspace, dense.data()).status,
+            shared::NsgsStatus::kConverged);
+  ContactGroups groups;
+  groups.assign(std::vector<int>(40, 0));   // one group
+  ASSERT_EQ(groups.solve(p.view(), settings, workspace, chosen.data()).status,
+            shared::NsgsStatus::kConverged);
+  EXPECT_EQ(groups.solvedOnBlocks(), 1);
+  EXPECT_LT(relativeDifference(chosen, dense), 1e-7);
+  // a dense group (one body) stays on the dense W
+  const GroupedProblem full = makeProblem(std::vector<int>(40, 0), 11);
+  std::fill(chosen.begin(), chosen.end(), 0.0);
+  groups.solve(full.view(), settings, workspace, chosen.data());
+  EXPECT_EQ(groups.solvedOnBlocks(), 0);
+}
+
 struct TempDir : test_support::TestDir {
   TempDir() : TestDir("tactus_contact_groups") {}
 };

@@ -58,6 +58,9 @@ struct StepReport {
   /// Groups of coupled bodies the last solve split the problem into (solver.split_contact_groups;
   /// 1: solved whole, 0: no contact); nsgs then holds the largest sweep count over the groups
   int contact_groups = 0;
+  /// Of those problems, how many NSGS swept on W's blocks (shared::chooseStorage's rule: at most
+  /// kBlockSparseMaxFill of their contact blocks non-zero; with solver.split_contact_groups)
+  int solved_on_blocks = 0;
   double max_penetration_m = 0.0;    ///< max(-gap) after the constrained motion, >= 0
   double complementarity = 0.0;      ///< max_i |f_n,i * delta_n,i| after the correction [N m]
   int contact_passes = 0;            ///< contact passes run (solver.contact_iterations caps it)
