@@ -118,6 +118,14 @@ SurfaceClosest closestOnSurface(const detail::AabbTree& tree,
   return best;
 }
 
+// The surface's outward unit normal at found's closest point, seen from p: along p - c, turned by
+// the side (p inside: from p toward c), or the triangle's normal when p lies on the surface.
+inline Eigen::Vector3d surfaceOutward(const SurfaceClosest& found, const Eigen::Vector3d& p,
+                                      const std::vector<Eigen::Vector3d>& normals) {
+  if (!(found.distance > kTinyDistance_m)) return normals[static_cast<std::size_t>(found.triangle)];
+  return (found.side < 0.0 ? -1.0 : 1.0) * (p - found.point.p) / found.distance;
+}
+
 // Segment a..b against a box grown by `radius` on every side (slab test): conservative for the
 // capsule of that radius.
 inline bool segmentHitsGrownBox(const Eigen::Vector3d& a, const Eigen::Vector3d& b,

@@ -14,10 +14,7 @@
 namespace tactus::sim {
 
 // An obstacle's edge points: its corners and the points along its sharp edges.
-struct EdgePoints {
-  std::vector<Eigen::Vector3d> p;
-  void add(const Eigen::Vector3d& x) { p.push_back(x); }
-};
+using EdgePoints = std::vector<Eigen::Vector3d>;
 
 struct EdgeCandidate {
   int point = 0;                           // index into the obstacle's EdgePoints
@@ -123,8 +120,8 @@ void sampleEdge(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1, double spa
   const double length = (p1 - p0).norm();
   // (a length that is a whole number of spacings up to rounding is cut in that many pieces)
   const auto pieces = static_cast<long>(std::ceil(length / spacing - 1e-9));
-  for (long j = 1; j < pieces && out.p.size() <= kMaxEdgePoints; ++j) {
-    out.add(p0 + (p1 - p0) * (static_cast<double>(j) / static_cast<double>(pieces)));
+  for (long j = 1; j < pieces && out.size() <= kMaxEdgePoints; ++j) {
+    out.push_back(p0 + (p1 - p0) * (static_cast<double>(j) / static_cast<double>(pieces)));
   }
 }
 
@@ -135,7 +132,7 @@ EdgePoints boxEdgePoints(const ObstacleSpec& box, double spacing) {
                            (bits & 2) ? box.max_m.y() : box.min_m.y(),
                            (bits & 4) ? box.max_m.z() : box.min_m.z());
   };
-  for (int c = 0; c < 8; ++c) out.add(corner(c));
+  for (int c = 0; c < 8; ++c) out.push_back(corner(c));
   for (int c = 0; c < 8; ++c) {
     for (int axis = 0; axis < 3; ++axis) {
       if (!(c & (1 << axis))) sampleEdge(corner(c), corner(c | (1 << axis)), spacing, out);
@@ -187,7 +184,7 @@ EdgePoints meshEdgePoints(const TriangleSurface& s,
     i = j;
   }
   for (std::size_t v = 0; v < corner.size(); ++v) {
-    if (corner[v]) out.add(s.vertices.col(static_cast<Eigen::Index>(v)));
+    if (corner[v]) out.push_back(s.vertices.col(static_cast<Eigen::Index>(v)));
   }
   return out;
 }
@@ -229,7 +226,7 @@ Obstacles::Obstacles(const std::vector<ObstacleSpec>& specs, const ObstacleConta
       } else if (spec.kind == ObstacleKind::kMesh) {
         o.edges = meshEdgePoints(o.surface, o.normals, options.edge_spacing_m);
       }
-      if (o.edges.p.size() > kMaxEdgePoints) {
+      if (o.edges.size() > kMaxEdgePoints) {
         throw SceneError(fmt::format(
             "{}: obstacle '{}': more than {} edge points at obstacle_contact.edge_spacing {} m; "
             "raise edge_spacing or turn obstacle_contact.edges off",
@@ -264,12 +261,8 @@ bool Obstacles::Impl::queryMesh(const Placed& o, const Eigen::Vector3d& p, doubl
   const bool inside = found.side < 0.0;
   gap = inside ? -best : best;
   if (inside ? best > o.spec.thickness_m : best > max_gap) return false;
-  const Eigen::Vector3d best_point = found.point.p;
-  const Eigen::Vector3d& best_normal = o.normals[static_cast<std::size_t>(found.triangle)];
-  closest = best_point;
-  outward = best > collision_detail::kTinyDistance_m ? Eigen::Vector3d((inside ? -1.0 : 1.0) *
-                                                                       (p - best_point) / best)
-                                                     : best_normal;
+  closest = found.point.p;
+  outward = collision_detail::surfaceOutward(found, p, o.normals);
   return true;
 }
 
@@ -349,7 +342,7 @@ void Obstacles::detect(int tissue, std::span<const int> nodes, const Eigen::Vect
 }
 
 const std::vector<Eigen::Vector3d>& Obstacles::edgePoints(int i) const {
-  return impl_->obstacles.at(static_cast<std::size_t>(i)).edges.p;
+  return impl_->obstacles.at(static_cast<std::size_t>(i)).edges;
 }
 
 void Obstacles::attachTissues(std::span<const TetMesh* const> meshes,
@@ -380,15 +373,15 @@ void Obstacles::detectEdges(int tissue, const Eigen::VectorXd& q, std::vector<Co
   std::vector<EdgeCandidate>& found_points = m.candidates;
   for (int i = 0; i < count(); ++i) {
     const EdgePoints& points = m.obstacles[static_cast<std::size_t>(i)].edges;
-    if (points.p.empty()) continue;
+    if (points.empty()) continue;
     // the tissue vertices this obstacle already holds (detect()'s contacts)
     std::fill(touching.begin(), touching.end(), -1);
     for (std::size_t k = 0; k < vertex_contacts; ++k) {
       if (out[k].feature == i) touching[static_cast<std::size_t>(out[k].nodes[0])] = i;
     }
     found_points.clear();
-    for (std::size_t e = 0; e < points.p.size(); ++e) {
-      const Eigen::Vector3d& p = points.p[e];
+    for (std::size_t e = 0; e < points.size(); ++e) {
+      const Eigen::Vector3d& p = points[e];
       const collision_detail::SurfaceClosest found = collision_detail::closestOnSurface(
           s.tree, tris, s.face_normal, p, reach, [&](int n) { return q.segment<3>(3 * n); },
           [](const std::array<int, 3>&) { return false; });
@@ -434,12 +427,7 @@ void Obstacles::detectEdges(int tissue, const Eigen::VectorXd& q, std::vector<Co
     for (std::size_t k : m.keep) {
       const EdgeCandidate& cand = found_points[k];
       const collision_detail::SurfaceClosest& found = cand.closest;
-      const Eigen::Vector3d& p = points.p[static_cast<std::size_t>(cand.point)];
-      const bool inside = found.side < 0.0;
-      const Eigen::Vector3d outward =
-          found.distance > collision_detail::kTinyDistance_m
-              ? Eigen::Vector3d((inside ? -1.0 : 1.0) * (p - found.point.p) / found.distance)
-              : s.face_normal[static_cast<std::size_t>(found.triangle)];
+      const Eigen::Vector3d& p = points[static_cast<std::size_t>(cand.point)];
       Contact c;
       c.id = (std::uint64_t{static_cast<std::uint8_t>(ContactKind::kObstacleVertex)} << 56) |
              (std::uint64_t{1} << 58) | (static_cast<std::uint64_t>(tissue & 0xff) << 48) |
@@ -453,9 +441,10 @@ void Obstacles::detectEdges(int tissue, const Eigen::VectorXd& q, std::vector<Co
       c.tissue_point_m = found.point.p;
       c.tool_point_m = p;
       c.tool_local_m = p;
-      c.n = outward;   // the tissue's outward normal: from the tissue toward the obstacle
+      // the tissue's outward normal: from the tissue toward the obstacle
+      c.n = collision_detail::surfaceOutward(found, p, s.face_normal);
       contactTangents(c.n, c.t1, c.t2);
-      c.gap_m = inside ? -found.distance : found.distance;
+      c.gap_m = found.side < 0.0 ? -found.distance : found.distance;
       out.push_back(c);
     }
   }

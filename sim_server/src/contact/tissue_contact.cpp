@@ -177,10 +177,7 @@ void TissueContacts::Impl::detectDirection(int k, const Eigen::VectorXd& qa,
     const collision_detail::ClosestPoint& best_cp = found.point;
     const bool inside = found.side < 0.0;
     if (inside ? best > spec.depth_m : best > spec.alarm_distance_m) continue;
-    const Eigen::Vector3d outward =
-        best > collision_detail::kTinyDistance_m
-            ? Eigen::Vector3d((inside ? -1.0 : 1.0) * (p - best_cp.p) / best)
-            : b.face_normal[static_cast<std::size_t>(best_tri)];
+    const Eigen::Vector3d outward = collision_detail::surfaceOutward(found, p, b.face_normal);
     // A's vertex must face B (its normal against B's outward normal)
     if (!(a.vertex_normal[li].dot(outward) < 0.0)) continue;
     Contact c;

@@ -212,9 +212,13 @@ shared::NsgsResult ContactGroups::solve(const shared::ContactProblemView& proble
   shared::NsgsResult all;
   all.status = shared::NsgsStatus::kConverged;
   all.sor = settings.sor;
-  // the whole problem's error from the groups' parts (W is zero between groups, so the whole
-  // delta is the groups' deltas side by side)
-  const auto wholeError = [&] {
+  // the whole problem's residual and scale (naturalMapError's max(|q|, |f|, |delta|)) from the
+  // groups' parts: W is zero between groups, so the whole delta is the groups' side by side
+  struct Whole {
+    double residual = 0.0, scale = 0.0;
+    double error() const { return residual / (scale > 0.0 ? scale : 1.0); }
+  };
+  const auto whole = [&] {
     double r2 = 0.0, q2 = 0.0, f2 = 0.0, d2 = 0.0;
     for (const GroupNorms& n : norms_) {
       r2 += n.residual2;
@@ -222,22 +226,15 @@ shared::NsgsResult ContactGroups::solve(const shared::ContactProblemView& proble
       f2 += n.f2;
       d2 += n.delta2;
     }
-    const double scale = std::sqrt(std::max({q2, f2, d2}));
-    return std::sqrt(r2) / (scale > 0.0 ? scale : 1.0);
+    return Whole{std::sqrt(r2), std::sqrt(std::max({q2, f2, d2}))};
   };
   // pass 0: every group to the tolerance on its own scale; later passes (rare: several groups
   // just under it): the groups above an equal share of the whole residual budget, to that share
   for (int pass = 0; pass < kMaxPasses; ++pass) {
-    double budget = 0.0;   // raw residual allowed per group
-    if (pass > 0) {
-      double q2 = 0.0, f2 = 0.0, d2 = 0.0;
-      for (const GroupNorms& n : norms_) {
-        q2 += n.q2;
-        f2 += n.f2;
-        d2 += n.delta2;
-      }
-      budget = settings.tolerance * std::sqrt(std::max({q2, f2, d2}) / count_);
-    }
+    // raw residual allowed per group
+    const double budget =
+        pass > 0 ? settings.tolerance * whole().scale / std::sqrt(static_cast<double>(count_))
+                 : 0.0;
     for (int g = 0; g < count_; ++g) {
       const GroupNorms& n = norms_[static_cast<std::size_t>(g)];
       if (pass > 0) {
@@ -255,14 +252,16 @@ shared::NsgsResult ContactGroups::solve(const shared::ContactProblemView& proble
       all.relaxations += res.relaxations;
       if (pass == 0) all.ill_posed_contacts += res.ill_posed_contacts;
     }
-    if (all.status != shared::NsgsStatus::kConverged || wholeError() <= settings.tolerance) break;
+    if (all.status != shared::NsgsStatus::kConverged || whole().error() <= settings.tolerance) {
+      break;
+    }
   }
   for (const GroupNorms& n : norms_) all.sweeps = std::max(all.sweeps, n.sweeps);
   if (all.status == shared::NsgsStatus::kNonFinite) {
     std::fill(f, f + problem.rows, 0.0);   // as solveNsgs does on the whole problem
     all.error = std::numeric_limits<double>::infinity();
   } else {
-    all.error = wholeError();
+    all.error = whole().error();
     if (all.status == shared::NsgsStatus::kConverged && !(all.error <= settings.tolerance)) {
       all.status = shared::NsgsStatus::kMaxSweeps;
     }

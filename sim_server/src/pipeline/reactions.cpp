@@ -27,6 +27,15 @@ ReactionForces computeReactions(const SimulationModel& model, SimulationState& s
     TissueReactions r;
     r.fixed_reaction_n.setZero(3, n);
     r.contact_force_n.setZero(3, n);
+    // one row's H^T f on its nodes, also added to `sum`
+    const auto addRowForce = [&r](const TissueRow& tr, double f, Eigen::Vector3d& sum) {
+      for (int j = 0; j < 3; ++j) {
+        if (tr.node[j] < 0) continue;
+        const Eigen::Vector3d force = tr.weight[j] * f * tr.dir;
+        r.contact_force_n.col(tr.node[j]) += force;
+        sum += force;
+      }
+    };
     // H^T f of this tissue's rows, and the sums per obstacle and for the instrument
     if (t < scratch.tissues.size() && model.has_contacts && p.rows > 0) {
       const TissueScratch& tx = scratch.tissues[t];
@@ -37,14 +46,8 @@ ReactionForces computeReactions(const SimulationModel& model, SimulationState& s
         const Contact& k = scratch.all_contacts[static_cast<std::size_t>(global)];
         Eigen::Vector3d on_tissue = Eigen::Vector3d::Zero();
         for (int row = tx.rows.row_offset[c]; row < tx.rows.row_offset[c + 1]; ++row) {
-          const TissueRow& tr = tx.rows.tissue[static_cast<std::size_t>(row)];
-          const double f = p.f[tx.row_begin + row];
-          for (int j = 0; j < 3; ++j) {
-            if (tr.node[j] < 0) continue;
-            const Eigen::Vector3d force = tr.weight[j] * f * tr.dir;
-            r.contact_force_n.col(tr.node[j]) += force;
-            on_tissue += force;
-          }
+          addRowForce(tx.rows.tissue[static_cast<std::size_t>(row)], p.f[tx.row_begin + row],
+                      on_tissue);
         }
         if (k.kind == ContactKind::kObstacleVertex) {
           out.obstacle_force_n[static_cast<std::size_t>(k.feature)] += on_tissue;
@@ -52,20 +55,11 @@ ReactionForces computeReactions(const SimulationModel& model, SimulationState& s
           out.instrument_force_n += on_tissue;
         }
       }
-    }
-    // its parts of the rows between tissues (tissue_contact_stage.h)
-    if (t < scratch.tissues.size() && model.has_contacts && p.rows > 0) {
-      const TissueScratch& tx = scratch.tissues[t];
+      // its parts of the rows between tissues (tissue_contact_stage.h)
       for (std::size_t k = 0; k < tx.pair_parts.size(); ++k) {
-        const TissueRow& tr = tx.pair_parts[k];
         const int row = tx.pair_part_row[k];
         if (row >= p.rows) break;
-        for (int j = 0; j < 3; ++j) {
-          if (tr.node[j] < 0) continue;
-          const Eigen::Vector3d force = tr.weight[j] * p.f[row] * tr.dir;
-          r.contact_force_n.col(tr.node[j]) += force;
-          r.from_tissues_n += force;
-        }
+        addRowForce(tx.pair_parts[k], p.f[row], r.from_tissues_n);
       }
     }
     const Eigen::VectorXd& mass = body.lumpedMass();
