@@ -64,6 +64,7 @@ void HapticSettings::validate() const {
   checkSetting("fade_ms", fade_ms, 0.0, false, L::kMaxFadeMs, "ms");
   checkSetting("max_sweeps", max_sweeps, 1.0, false, L::kMaxSweeps, "");
   checkSetting("tolerance", tolerance, 0.0, true, L::kMaxTolerance, "");
+  checkSetting("anderson_depth", anderson_depth, 0.0, false, shared::kMaxAndersonDepth, "");
   checkSetting("solve_budget_ns", static_cast<double>(solve_budget_ns), 0.0, false,
                static_cast<double>(L::kMaxPeriodNs), "ns");
   checkSetting("period_ns", static_cast<double>(period_ns), 0.0, true,

@@ -126,6 +126,7 @@ void HapticLoop::solveLocalModel(
   shared::NsgsSettings ns;
   ns.tolerance = settings_.tolerance;
   ns.max_sweeps = settings_.max_sweeps;
+  ns.anderson_depth = settings_.anderson_depth;
   ns.time_budget_ns = settings_.solve_budget_ns;
   // the row-update sweep needs an exactly symmetric W: only when the snapshot says so
   ns.coupling = (hdr.flags & shared::kSnapshotSymmetricW) != 0

@@ -75,6 +75,9 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1, Limits::kMaxSweeps))->capture_default_str();
   app.add_option("--tolerance", settings.tolerance, "NSGS tolerance")
       ->check(shared::finiteAbove(0.0, Limits::kMaxTolerance))->capture_default_str();
+  app.add_option("--nsgs-anderson-depth", settings.anderson_depth,
+                 "NSGS Anderson acceleration over this many past sweeps (0: off)")
+      ->check(CLI::Range(0, shared::kMaxAndersonDepth))->capture_default_str();
   app.add_flag("--render-torque", settings.render_torque, "Render torques too");
   // the device -> scene workspace mapping (docs/design.md, "Workspace mapping")
   shared::WorkspaceMappingParams workspace;

@@ -32,6 +32,7 @@
 #include "jitter_core.h"
 #include "jitter_replay.h"
 #include "jitter_synthetic.h"
+#include "tactus/shared/nsgs.h"
 #include "tactus/shared/clock.h"
 #include "tactus/shared/error.h"
 #include "tactus/shared/rt.h"
@@ -64,6 +65,7 @@ struct Options {
   int core = -1;
   int priority = 80;
   int sweeps = 50;
+  int anderson_depth = 0;
   double period_us = 0.0;
   std::string reader = "live";
   double wait_s = 10.0;
@@ -155,6 +157,7 @@ int run(const Options& o) {
     ro.core = core;
     ro.priority = o.priority;
     ro.max_sweeps = o.sweeps;
+    ro.anderson_depth = o.anderson_depth;
     replay_rig = std::make_unique<ReplayRig>(std::move(snaps), ro);
     period_ns = replay_rig->periodNs();
     std::printf(
@@ -180,6 +183,7 @@ int run(const Options& o) {
     so.core = core;
     so.priority = o.priority;
     so.max_sweeps = o.sweeps;
+    so.anderson_depth = o.anderson_depth;
     rig = std::make_unique<SyntheticRig>(so);
     period_ns = rig->periodNs();
     const auto& p = rig->problem();
@@ -386,6 +390,9 @@ int main(int argc, char** argv) {
   app.add_option("--priority", o.priority, "SCHED_FIFO priority (0: do not ask)")
       ->check(CLI::Range(0, 99))
       ->capture_default_str();
+  app.add_option("--anderson-depth", o.anderson_depth,
+                 "Synthetic/replay: NSGS Anderson acceleration depth per tick (0: off)")
+      ->check(CLI::Range(0, shared::kMaxAndersonDepth));
   app.add_option("--sweeps", o.sweeps, "Synthetic/replay: NSGS sweeps per tick")
       ->check(CLI::Range(1, 10000))
       ->capture_default_str();

@@ -87,6 +87,7 @@ LoopRig::LoopRig(const std::string& segment_name, shared::SegmentCapacity capaci
   settings_.solve_budget_ns = static_cast<std::int64_t>(options.solve_budget_fraction *
                                                         static_cast<double>(settings_.period_ns));
   settings_.max_sweeps = options.max_sweeps;
+  settings_.anderson_depth = options.anderson_depth;
   settings_.engage_threshold_n = 1e9;
   settings_.watchdog_ms = options.watchdog_ms;
   std::vector<device::Device*> ptrs;

@@ -55,6 +55,7 @@ struct LoopRunOptions {
   int core = -1;                       ///< -1: the last CPU
   int priority = 80;                   ///< SCHED_FIFO priority (0: none)
   int max_sweeps = 50;                 ///< NSGS sweeps per tick
+  int anderson_depth = 0;              ///< NSGS Anderson acceleration (HapticSettings)
   double solve_budget_fraction = 0.4;  ///< NSGS time budget as a fraction of the period
 };
 

@@ -5,6 +5,7 @@
 #include <ctime>
 #include <limits>
 
+#include "nsgs_anderson.h"
 #include "nsgs_local.h"
 #include "nsgs_storage.h"
 
@@ -152,6 +153,7 @@ void NsgsWorkspace::reserve(int max_rows, int max_contacts) {
   max_contacts = std::max(max_contacts, 0);
   delta.assign(static_cast<std::size_t>(max_rows), 0.0);
   scratch.assign(static_cast<std::size_t>(max_rows), 0.0);
+  anderson.assign(static_cast<std::size_t>(max_rows) * (3 * kMaxAndersonDepth + 6), 0.0);
   max_rows_ = max_rows;
   max_contacts_ = max_contacts;
 }
@@ -297,7 +299,12 @@ NsgsResult solveWith(const ContactProblemView& p, const Storage& w, const NsgsSe
   int peaks = 0;                      // counted peaks since progress_best was set
   result.sor = sor;
   double block[9];   // a contact's diagonal block (dense storage)
+  // Anderson acceleration (NsgsSettings::anderson_depth; not with kRowGather, which keeps no
+  // running delta)
+  detail::Anderson anderson(row_gather ? 0 : settings.anderson_depth, m,
+                            workspace.anderson.data());
   for (int sweep = 1; sweep <= max_sweeps; ++sweep) {
+    anderson.keepInput(f);
     for (int i = 0; i < nc; ++i) {
       const int r = p.row_offset[i];
       const int k = p.row_offset[i + 1] - r;
@@ -345,6 +352,20 @@ NsgsResult solveWith(const ContactProblemView& p, const Storage& w, const NsgsSe
     if (last) {
       result.status = over_budget ? NsgsStatus::kTimeBudget : NsgsStatus::kMaxSweeps;
       break;
+    }
+    if (anderson.on()) {
+      best_error = std::min(best_error, result.error);
+      const auto step = anderson.step(p, w, symmetric, ill, result.error, f, delta);
+      if (step != detail::Anderson::Step::kOff) continue;   // the rule watches plain sweeps
+      // plain NSGS from here: the relaxation rule starts afresh
+      progress_best = window_best = std::numeric_limits<double>::infinity();
+      window_start = sweep;
+      window_repeats = 0;
+      peaks = 0;
+      rising = true;
+      swing_high = 0.0;
+      swing_low = trough = progress_best;
+      continue;
     }
     best_error = std::min(best_error, result.error);
     bool repeats = false;   // at a lag of 2..kCyclePeriods checks but not at a lag of 1

@@ -78,6 +78,7 @@ struct BenchOptions {
   int jaw_rows = 0;                    ///< > 0: overrides instrument.grasper.width_samples
   double jaw_width_mm = -1.0;          ///< >= 0: overrides instrument.grasper.width
   double grip_stiffness = -1.0;        ///< >= 0: overrides instrument.grasper.grip_stiffness
+  int anderson_depth = -1;             ///< >= 0: overrides solver.nsgs_anderson_depth
   int min_contacts = 0;                ///< > 0: a second table over the steps with this many
   double contact_compliance = -1.0;    ///< >= 0: overrides instrument.contact_compliance [m/N]
   double pad_width_mm = -1.0;          ///< >= 0: overrides instrument.grasper.pad_width
@@ -94,6 +95,7 @@ int run(const BenchOptions& o) {
   if (o.jaw_rows > 0) spec.instrument.jaw_rows = o.jaw_rows;
   if (o.jaw_width_mm >= 0.0) spec.instrument.jaw_width_m = 1e-3 * o.jaw_width_mm;
   if (o.grip_stiffness >= 0.0) spec.instrument.grip_k_nmprad = o.grip_stiffness;
+  if (o.anderson_depth >= 0) spec.solver.nsgs_anderson_depth = o.anderson_depth;
   if (o.contact_compliance >= 0.0) spec.instrument.contact_compliance_mpn = o.contact_compliance;
   if (o.pad_width_mm >= 0.0) spec.instrument.pad_width_m = 1e-3 * o.pad_width_mm;
   if (o.instruments > 0 && o.instruments < sim::instrumentCount(spec)) {
@@ -229,6 +231,7 @@ int run(const BenchOptions& o) {
     shared::NsgsSettings ns;
     ns.tolerance = spec.haptics.nsgs_tolerance;
     ns.max_sweeps = tick_sweeps;
+    ns.anderson_depth = spec.haptics.nsgs_anderson_depth;
     ns.time_budget_ns = static_cast<std::int64_t>(budget_us * 1e3);
     const std::int64_t cpu0 = threadCpuNs();
     const shared::NsgsResult res = shared::solveNsgs(snap.problem(df.data()), ns, ws, f.data());
@@ -375,6 +378,9 @@ int main(int argc, char** argv) {
                  "Override the grasper's rows of samples across each jaw pad");
   app.add_option("--jaw-width-mm", o.jaw_width_mm,
                  "Override the grasper's pad width (span of the sample rows) [mm]");
+  app.add_option("--anderson-depth", o.anderson_depth,
+                 "Override solver.nsgs_anderson_depth (NSGS Anderson acceleration, 0: off)")
+      ->check(CLI::Range(0, tactus::shared::kMaxAndersonDepth));
   app.add_option("--grip-stiffness", o.grip_stiffness,
                  "Override the grasper's grip stiffness [N m/rad] (0: kinematic jaws)");
   app.add_option("--contact-compliance", o.contact_compliance,

@@ -66,6 +66,7 @@ SimulationModel buildModel(const SceneSpec& spec) {
   model.nsgs.tolerance = spec.solver.nsgs_tolerance;
   model.nsgs.max_sweeps = spec.solver.nsgs_max_sweeps;
   model.nsgs.sor = spec.solver.nsgs_sor;
+  model.nsgs.anderson_depth = spec.solver.nsgs_anderson_depth;
   model.nsgs.coupling = shared::NsgsCoupling::kSymmetricRowUpdate;   // buildW keeps W symmetric
   // obstacle rows (3 per contact with friction) come after the instruments', per tissue
   model.max_rows = obstacleRowCapacity(spec) + tissueContactRowCapacity(spec);

@@ -16,6 +16,9 @@ std::vector<std::string> hapticServerOptions(const HapticsSpec& haptics) {
   options.push_back(fmt::format("--watchdog-ms={:.17g}", haptics.watchdog_ms));
   options.push_back(fmt::format("--max-sweeps={}", haptics.max_sweeps_per_tick));
   options.push_back(fmt::format("--tolerance={:.17g}", haptics.nsgs_tolerance));
+  if (haptics.nsgs_anderson_depth > 0) {
+    options.push_back(fmt::format("--nsgs-anderson-depth={}", haptics.nsgs_anderson_depth));
+  }
   // haptics.workspaces: every field of each device's own mapping (haptic_server's
   // --workspace-option I:key=value; the scene parser refuses it together with `workspace`)
   for (std::size_t i = 0; i < haptics.workspaces.size(); ++i) {

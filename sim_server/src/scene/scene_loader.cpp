@@ -13,6 +13,7 @@
 
 #include "scene_parser.h"
 #include "tactus/shared/haptic_limits.h"
+#include "tactus/shared/nsgs.h"
 #include "tactus/shared/error.h"
 #include "tactus/shared/file_io.h"
 #include "tactus/sim/scene.h"
@@ -48,7 +49,7 @@ void SceneParser::readSolver(const YAML::Node& n, SolverSpec* s, int instruments
   const std::string p = "solver";
   checkKeys(n, p, {"linear", "cg_tolerance", "cg_max_iterations", "refactor_iterations",
                    "refactor_every_steps", "nsgs_tolerance",
-                   "nsgs_max_sweeps", "nsgs_sor", "split_contact_groups", "max_contacts", "contact_iterations",
+                   "nsgs_max_sweeps", "nsgs_sor", "nsgs_anderson_depth", "split_contact_groups", "max_contacts", "contact_iterations",
                    "penetration_tolerance", "contact_detection"});
   choice(n, p, "linear", &s->linear,
          {{"cholmod", LinearSolverKind::kCholmod},
@@ -63,6 +64,8 @@ void SceneParser::readSolver(const YAML::Node& n, SolverSpec* s, int instruments
          kPositiveUpTo(1e-2));
   integer(n, p, "nsgs_max_sweeps", &s->nsgs_max_sweeps, 1, 10'000'000, 100'000);
   number(n, p, "nsgs_sor", &s->nsgs_sor, Range{0.0, 2.0, true, true});
+  integer(n, p, "nsgs_anderson_depth", &s->nsgs_anderson_depth, 0, shared::kMaxAndersonDepth,
+          shared::kMaxAndersonDepth);
   boolean(n, p, "split_contact_groups", &s->split_contact_groups);
   // the contact problem's W (rows x rows doubles, 3 rows per frictional contact) lives in
   // the shared segment's triple buffer: refuse what cannot be allocated, before trying
@@ -102,7 +105,8 @@ void SceneParser::readHaptics(const YAML::Node& n, HapticsSpec* h, int instrumen
   using L = shared::HapticLimits;
   const std::string p = "haptics";
   checkKeys(n, p, {"enabled", "rate", "device", "force_scale", "max_force", "watchdog_ms",
-                   "max_sweeps_per_tick", "nsgs_tolerance", "workspace", "workspaces"});
+                   "max_sweeps_per_tick", "nsgs_tolerance", "nsgs_anderson_depth", "workspace",
+                   "workspaces"});
   h->enabled = true;  // a haptics section turns haptics on unless it says otherwise
   boolean(n, p, "enabled", &h->enabled);
   number(n, p, "rate", &h->rate_hz, kPositive, Range{L::kMinRateHz, L::kMaxRateHz},
@@ -116,6 +120,8 @@ void SceneParser::readHaptics(const YAML::Node& n, HapticsSpec* h, int instrumen
   integer(n, p, "max_sweeps_per_tick", &h->max_sweeps_per_tick, 1, L::kMaxSweeps, 10'000);
   number(n, p, "nsgs_tolerance", &h->nsgs_tolerance, kPositive, Range{-kInf, 1.0, false, true},
          kPositiveUpTo(1e-2));
+  integer(n, p, "nsgs_anderson_depth", &h->nsgs_anderson_depth, 0, shared::kMaxAndersonDepth,
+          shared::kMaxAndersonDepth);
   YAML::Node w;
   if (section(n, p, "workspace", &w)) readWorkspace(w, p + ".workspace", &h->workspace);
   readWorkspaces(n, h, instruments);

@@ -111,6 +111,7 @@ TEST(Scene, FullSceneParsesToTheExpectedValues) {
   EXPECT_DOUBLE_EQ(s.solver.nsgs_tolerance, 1e-7);
   EXPECT_EQ(s.solver.nsgs_max_sweeps, 300);
   EXPECT_DOUBLE_EQ(s.solver.nsgs_sor, 1.2);
+  EXPECT_EQ(s.solver.nsgs_anderson_depth, 3);
   EXPECT_EQ(s.solver.max_contacts, 200);
 
   EXPECT_TRUE(s.haptics.enabled);
@@ -156,6 +157,7 @@ TEST(Scene, MinimalSceneTakesDefaultsAndLeavesEffectsAbsent) {
   EXPECT_EQ(s.solver.linear, def.solver.linear);
   EXPECT_EQ(s.solver.max_contacts, def.solver.max_contacts);
   EXPECT_DOUBLE_EQ(s.solver.nsgs_sor, def.solver.nsgs_sor);
+  EXPECT_EQ(s.solver.nsgs_anderson_depth, 0);
 }
 
 TEST(Scene, SectionsPresentWithDefaults) {
@@ -317,6 +319,10 @@ TEST(Scene, EachKindOfErrorHasItsExactMessage) {
             "s.yaml:6:7: instrument.trajectory[0].t: is required");
   EXPECT_EQ(sceneError(kHead + "solver: {nsgs_sor: 2}\n"),
             "s.yaml:4:20: solver.nsgs_sor: must be in (0, 2) (got 2)");
+  EXPECT_EQ(sceneError(kHead + "solver: {nsgs_anderson_depth: 9}\n"),
+            "s.yaml:4:31: solver.nsgs_anderson_depth: must be in [0, 8] (got 9)");
+  EXPECT_EQ(sceneError(kHead + "haptics: {nsgs_anderson_depth: -1}\n"),
+            "s.yaml:4:32: haptics.nsgs_anderson_depth: must be >= 0 (got -1)");
   EXPECT_EQ(sceneError(kHead + "solver: {max_contacts: 0}\n"),
             "s.yaml:4:24: solver.max_contacts: must be >= 1 (got 0)");
   EXPECT_EQ(sceneError(kHead + "haptics: {enabled: maybe}\n"),

@@ -49,6 +49,13 @@ TEST(SceneWorkspace, ParsesScaleOffsetRotationAndClutchButton) {
   EXPECT_THAT(hapticServerOptions(plain.haptics),
               ElementsAre("--rate=2000", "--max-force=4", "--force-scale=1", "--watchdog-ms=50",
                           "--max-sweeps=50", "--tolerance=9.9999999999999995e-07"));
+  // the tick's Anderson acceleration reaches haptic_server when the scene asks for it
+  EXPECT_THAT(hapticServerOptions(
+                  parseScene(kHead + "haptics: {nsgs_anderson_depth: 3}\n", "s.yaml", kScenes)
+                      .haptics),
+              ElementsAre("--rate=1000", "--max-force=8", "--force-scale=1", "--watchdog-ms=50",
+                          "--max-sweeps=50", "--tolerance=9.9999999999999995e-07",
+                          "--nsgs-anderson-depth=3"));
   // haptics off: haptic_server keeps its own defaults
   EXPECT_TRUE(hapticServerOptions(parseScene(kHead, "s.yaml", kScenes).haptics).empty());
 }

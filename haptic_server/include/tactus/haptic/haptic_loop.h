@@ -35,6 +35,7 @@
 #include "tactus/device/device.h"
 #include "tactus/haptic/workspace_mapping.h"
 #include "tactus/shared/delassus_blocks.h"
+#include "tactus/shared/nsgs.h"
 #include "tactus/shared/event_ring.h"
 #include "tactus/shared/haptic_limits.h"
 #include "tactus/shared/stats_ring.h"
@@ -78,6 +79,10 @@ struct HapticSettings {
   double fade_ms = 100.0;               ///< fade-out and fade-in ramp
   int max_sweeps = 50;                  ///< NSGS sweep budget per tick
   double tolerance = 1e-6;              ///< NSGS tolerance
+  /// Anderson acceleration of the tick's NSGS over this many past sweeps (0: off; at most
+  /// shared::kMaxAndersonDepth; shared/nsgs.h). Mostly helps the first ticks on a new snapshot
+  /// (README.md, "Anderson acceleration")
+  int anderson_depth = 0;
   std::int64_t solve_budget_ns = 400'000;  ///< NSGS time budget per tick (0: sweeps only)
   std::int64_t period_ns = 1'000'000;   ///< tick period (a tick ending later is an overrun)
   bool render_torque = false;           ///< devices without rotational feedback: false

@@ -154,6 +154,9 @@ struct SolverSpec {
   double nsgs_tolerance = 1e-6;
   int nsgs_max_sweeps = 500;
   double nsgs_sor = 1.0;                        ///< over-relaxation factor in (0, 2)
+  /// Anderson acceleration of the NSGS sweeps: how many past sweeps it combines (0: off; at most
+  /// shared::kMaxAndersonDepth; shared/nsgs.h, NsgsSettings::anderson_depth)
+  int nsgs_anderson_depth = 0;
   /// Solve each group of bodies that share no contact (no tissue, no instrument in common) as a
   /// problem of its own (docs/design.md, "Bodies that do not couple"); false: one NSGS over the
   /// whole W
@@ -187,6 +190,8 @@ struct HapticsSpec {
   double watchdog_ms = 50.0;
   int max_sweeps_per_tick = 50;
   double nsgs_tolerance = 1e-6;
+  /// haptic_server --nsgs-anderson-depth: Anderson acceleration of the tick's NSGS (0: off)
+  int nsgs_anderson_depth = 0;
   /// device -> scene mapping and clutch button (haptics.workspace; docs/design.md)
   shared::WorkspaceMappingParams workspace;
   /// haptics.workspaces: device i's own mapping (entry i for instrument/device i; at most the
