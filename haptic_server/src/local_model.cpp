@@ -51,9 +51,6 @@ void findReach(AttachedSegment& link, const shared::SnapshotView& snap) noexcept
   if (ro[first] < 0 || ro[last + 1] > hdr.rows || ro[first] > ro[last + 1]) return;
   link.reach_begin = first;
   link.reach_end = last + 1;
-  for (int c = first; c <= last + 1; ++c) {
-    link.reach_offset[static_cast<std::size_t>(c - first)] = ro[c] - ro[first];
-  }
   link.reach_only = true;
 }
 
@@ -129,9 +126,7 @@ void HapticLoop::solveLocalModel(
   ns.anderson_depth = settings_.anderson_depth;
   ns.time_budget_ns = settings_.solve_budget_ns;
   // the row-update sweep needs an exactly symmetric W: only when the snapshot says so
-  ns.coupling = (hdr.flags & shared::kSnapshotSymmetricW) != 0
-                    ? shared::NsgsCoupling::kSymmetricRowUpdate
-                    : shared::NsgsCoupling::kColumnUpdate;
+  ns.coupling = snap.coupling();
   // the contacts the devices can move, found once per snapshot (AttachedSegment::reach_only)
   if (link.reach_seq != hdr.seq) {
     findReach(link, snap);
@@ -142,12 +137,8 @@ void HapticLoop::solveLocalModel(
   if (link.reach_only) {
     r_begin = ro[link.reach_begin];
     r_end = ro[link.reach_end];
-    problem.contacts = link.reach_end - link.reach_begin;
-    problem.rows = r_end - r_begin;
-    problem.row_offset = link.reach_offset.data();
-    problem.W += static_cast<std::ptrdiff_t>(r_begin) * problem.ld + r_begin;
-    problem.delta_free += r_begin;
-    problem.mu += link.reach_begin;
+    problem = shared::contiguousSubproblem(problem, link.reach_begin, link.reach_end,
+                                           link.reach_offset.data());
   }
   // same snapshot as the last solve: W and f are unchanged, so W f + delta_free only shifts by
   // the change of delta_free (saves a pass over W)

@@ -282,21 +282,33 @@ NsgsResult solveWith(const ContactProblemView& p, const Storage& w, const NsgsSe
   }
 
   // relaxation rule (see NsgsSettings::stall_sweeps and kPeaksToRelax)
-  double best_error = std::numeric_limits<double>::infinity();
-  double window_best = best_error;   // best error when the current window opened
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  double best_error = kInf;
+  double window_best;                // best error when the current window opened
   // errors of the last kCyclePeriods checks (ring, newest at recent[(checks_done - 1) % K])
   double recent[kCyclePeriods];
-  for (double& e : recent) e = best_error;
-  int checks_done = 0;
-  int window_start = 0;
-  int window_repeats = 0;            // checks in the window whose error repeats a recent one
-  double progress_best = best_error;  // best error when it last fell below stall_ratio x this
-  bool rising = true;                 // looking for a peak (else for a trough)
-  double swing_high = 0.0;            // highest error since the last trough
-  double swing_low = best_error;      // lowest error since the last peak
-  double trough = best_error;         // the trough the current rise started from
-  int peak_sweep[kPeaksToRelax];      // sweeps of the last counted peaks (ring)
-  int peaks = 0;                      // counted peaks since progress_best was set
+  int checks_done;
+  int window_start;
+  int window_repeats;                // checks in the window whose error repeats a recent one
+  double progress_best;              // best error when it last fell below stall_ratio x this
+  bool rising;                       // looking for a peak (else for a trough)
+  double swing_high;                 // highest error since the last trough
+  double swing_low;                  // lowest error since the last peak
+  double trough;                     // the trough the current rise started from
+  int peak_sweep[kPeaksToRelax];     // sweeps of the last counted peaks (ring)
+  int peaks;                         // counted peaks since progress_best was set
+  // the rule's state with nothing observed yet, from `sweep` on (best_error is kept)
+  auto restartRule = [&](int sweep) {
+    window_best = progress_best = swing_low = trough = kInf;
+    for (double& e : recent) e = kInf;
+    checks_done = 0;
+    window_start = sweep;
+    window_repeats = 0;
+    rising = true;
+    swing_high = 0.0;
+    peaks = 0;
+  };
+  restartRule(0);
   result.sor = sor;
   double block[9];   // a contact's diagonal block (dense storage)
   // Anderson acceleration (NsgsSettings::anderson_depth; not with kRowGather, which keeps no
@@ -353,21 +365,12 @@ NsgsResult solveWith(const ContactProblemView& p, const Storage& w, const NsgsSe
       result.status = over_budget ? NsgsStatus::kTimeBudget : NsgsStatus::kMaxSweeps;
       break;
     }
+    best_error = std::min(best_error, result.error);
     if (anderson.on()) {
-      best_error = std::min(best_error, result.error);
-      const auto step = anderson.step(p, w, symmetric, ill, result.error, f, delta);
-      if (step != detail::Anderson::Step::kOff) continue;   // the rule watches plain sweeps
-      // plain NSGS from here: the relaxation rule starts afresh
-      progress_best = window_best = std::numeric_limits<double>::infinity();
-      window_start = sweep;
-      window_repeats = 0;
-      peaks = 0;
-      rising = true;
-      swing_high = 0.0;
-      swing_low = trough = progress_best;
+      // the rule watches plain sweeps only; once the acceleration turns off it starts afresh
+      if (!anderson.step(result.error, f, delta)) restartRule(sweep);
       continue;
     }
-    best_error = std::min(best_error, result.error);
     bool repeats = false;   // at a lag of 2..kCyclePeriods checks but not at a lag of 1
     for (int back = 1; back <= kCyclePeriods; ++back) {
       const double e = recent[(checks_done - back + kCyclePeriods) % kCyclePeriods];

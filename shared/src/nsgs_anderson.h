@@ -7,23 +7,22 @@
 // With the differences of the last n + 1 <= depth + 1 of them (dR_u = r_{u+1} - r_u, dG_u
 // likewise), gamma = argmin || r_k - dR gamma || (normal equations on dR's Gram matrix, kept up
 // to date one row per sweep; Gaussian elimination on the stack) and x_{k+1} = g_k - dG gamma,
-// left unprojected (the next sweep projects each contact as it visits it). delta = W x + q
-// follows by the same combination of the stored delta differences: O(depth m) per sweep.
-// Safeguard: see NsgsSettings::anderson_depth.
+// left unprojected (the next sweep's local solves put every contact back on its cone, whatever
+// its force was; projecting here cost W's rows for every moved contact, about a sweep). delta =
+// W x + q follows by the same combination of the stored delta differences: O(depth m) per
+// sweep. Ill-posed contacts stay at zero: they are zero in every sweep output, so in every
+// difference. Safeguard: see NsgsSettings::anderson_depth.
 
 #include <algorithm>
 #include <cstddef>
 #include <limits>
 
-#include "nsgs_storage.h"
 #include "tactus/shared/nsgs.h"
 
 namespace tactus::shared::detail {
 
 class Anderson {
  public:
-  enum class Step { kMixed, kBackToBest, kOff };
-
   /// `storage`: NsgsWorkspace::anderson ((3 kMaxAndersonDepth + 6) m doubles).
   Anderson(int depth, int m, double* storage) noexcept
       : depth_(std::clamp(depth, 0, kMaxAndersonDepth)), m_(m), on_(depth_ > 0) {
@@ -46,13 +45,11 @@ class Anderson {
     if (on_) std::copy(f, f + m_, x_);
   }
 
-  /// After a checked sweep that did not converge, with its error, output f and delta = W f + q.
-  /// Either mixes (f and delta become the next sweep's input), or returns to the best iterate
-  /// (the extrapolation went astray), or reports that the acceleration has just turned off.
-  /// `symmetric`: W = W^T, so the projection's delta update may read W's rows.
-  template <class Storage>
-  Step step(const ContactProblemView& p, const Storage& w, bool symmetric, const double* ill,
-            double error, double* f, double* delta) noexcept {
+  /// After a checked sweep that did not converge, with its error, output f and delta = W f + q:
+  /// f and delta become the next sweep's input, either mixed or, when the extrapolation went
+  /// astray, the best iterate. Returns false when the acceleration has just turned off (f and
+  /// delta are then the best iterate, for plain sweeps).
+  bool step(double error, double* f, double* delta) noexcept {
     if (error < kAndersonProgress * best_) {
       best_ = error;
       since_progress_ = 0;
@@ -60,25 +57,27 @@ class Anderson {
       std::copy(delta, delta + m_, best_delta_);
     } else if (++since_progress_ > kAndersonStallSweeps) {
       // no progress for a while: plain sweeps from the best iterate
-      std::copy(best_f_, best_f_ + m_, f);
-      std::copy(best_delta_, best_delta_ + m_, delta);
+      backToBest(f, delta);
       on_ = false;
-      return Step::kOff;
+      return false;
     } else if (error > kAndersonRise * best_) {
-      std::copy(best_f_, best_f_ + m_, f);
-      std::copy(best_delta_, best_delta_ + m_, delta);
+      backToBest(f, delta);
       have_newest_ = false;
       differences_ = 0;
-      if (++strikes_ < kAndersonStrikes) return Step::kBackToBest;
-      on_ = false;
-      return Step::kOff;
+      on_ = ++strikes_ < kAndersonStrikes;
+      return on_;
     }
     store(f, delta);
-    mix(p, w, symmetric, ill, f, delta);
-    return Step::kMixed;
+    mix(f, delta);
+    return true;
   }
 
  private:
+  void backToBest(double* f, double* delta) const noexcept {
+    std::copy(best_f_, best_f_ + m_, f);
+    std::copy(best_delta_, best_delta_ + m_, delta);
+  }
+
   double* row(double* base, int slot) const noexcept {
     return base + static_cast<std::ptrdiff_t>(slot) * m_;
   }
@@ -114,10 +113,8 @@ class Anderson {
     have_newest_ = true;
   }
 
-  // gamma = argmin || r - dR gamma ||, then f = g - dG gamma (delta likewise), on the cones.
-  template <class Storage>
-  void mix(const ContactProblemView& p, const Storage& w, bool symmetric, const double* ill,
-           double* f, double* delta) const noexcept {
+  // gamma = argmin || r - dR gamma ||, then f = g - dG gamma (delta likewise).
+  void mix(double* f, double* delta) const noexcept {
     const int n = differences_;
     if (n < 1) return;
     double a[kMaxAndersonDepth * kMaxAndersonDepth];
@@ -151,28 +148,6 @@ class Anderson {
       for (int j = 0; j < m_; ++j) {
         f[j] -= gamma[u] * dg[j];
         delta[j] -= gamma[u] * dd[j];
-      }
-    }
-    // No projection: the next sweep's local solves put every contact back on its cone (each
-    // replaces f_i by its projected update whatever f_i was), so the mixed iterate may leave the
-    // cones; projecting here cost W's rows for every moved contact, about a sweep. Contacts the
-    // sweep skips (ill-posed, held at zero) are reset.
-    for (int i = 0; i < p.contacts; ++i) {
-      const int r = p.row_offset[i];
-      if (ill[r] == 0.0) continue;
-      const int k = p.row_offset[i + 1] - r;
-      double df[3] = {0.0, 0.0, 0.0};
-      bool changed = false;
-      for (int c = 0; c < k; ++c) {
-        df[c] = -f[r + c];
-        changed = changed || df[c] != 0.0;
-        f[r + c] = 0.0;
-      }
-      if (!changed) continue;
-      if (symmetric) {
-        w.addRowsTransposed(i, r, k, df, delta);   // contiguous rows, equal when W = W^T
-      } else {
-        w.addColumns(i, r, k, df, delta);
       }
     }
   }

@@ -233,9 +233,7 @@ int run(const BenchOptions& o) {
     ns.max_sweeps = tick_sweeps;
     ns.anderson_depth = spec.haptics.nsgs_anderson_depth;
     // the sweep the haptic tick uses (local_model.cpp): row-wise when W is exactly symmetric
-    ns.coupling = (snap.header().flags & shared::kSnapshotSymmetricW) != 0
-                      ? shared::NsgsCoupling::kSymmetricRowUpdate
-                      : shared::NsgsCoupling::kColumnUpdate;
+    ns.coupling = snap.coupling();
     ns.time_budget_ns = static_cast<std::int64_t>(budget_us * 1e3);
     const std::int64_t cpu0 = threadCpuNs();
     const shared::NsgsResult res = shared::solveNsgs(snap.problem(df.data()), ns, ws, f.data());

@@ -168,15 +168,10 @@ shared::NsgsResult ContactGroups::solveGroup(const shared::ContactProblemView& p
     const int c0 = members[0];
     const int r0 = problem.row_offset[c0];
     sub_row_offset_.resize(static_cast<std::size_t>(size) + 1);
-    for (int k = 0; k <= size; ++k) {
-      sub_row_offset_[static_cast<std::size_t>(k)] = problem.row_offset[c0 + k] - r0;
-    }
-    sub_rows_.resize(static_cast<std::size_t>(sub_row_offset_[static_cast<std::size_t>(size)]));
+    const shared::ContactProblemView sub =
+        shared::contiguousSubproblem(problem, c0, c0 + size, sub_row_offset_.data());
+    sub_rows_.resize(static_cast<std::size_t>(sub.rows));
     std::iota(sub_rows_.begin(), sub_rows_.end(), r0);
-    const shared::ContactProblemView sub = shared::denseProblemView(
-        size, static_cast<int>(sub_rows_.size()), sub_row_offset_.data(),
-        problem.W + static_cast<std::ptrdiff_t>(r0) * problem.ld + r0, problem.ld,
-        problem.delta_free + r0, problem.mu + c0);
     res = solveChosen(sub, settings, workspace, f + r0);
   } else {
     res = solveGathered(problem, g, settings, workspace, f);

@@ -173,7 +173,9 @@ struct AttachedSegment {
   std::uint64_t reach_seq = 0;          ///< snapshot the reach was found for (0: none)
   bool reach_only = false;              ///< reach_seq's problem is solved on [reach_begin, end)
   int reach_begin = 0, reach_end = 0;   ///< the reached contacts (when reach_only)
-  std::vector<int> reach_offset;        ///< their row offsets from the first (capacity + 1)
+  /// their row offsets from the first (capacity + 1; shared::contiguousSubproblem fills them
+  /// with each tick's view, O(reached contacts))
+  std::vector<int> reach_offset;
   explicit AttachedSegment(shared::Segment&& s);
 };
 

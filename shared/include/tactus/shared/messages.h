@@ -165,6 +165,13 @@ class SnapshotView {
     return at<std::int32_t>(layout_.contact_instrument);
   }
 
+  /// The NSGS sweep this snapshot allows: the row-wise update only when the simulation marked W
+  /// exactly symmetric (kSnapshotSymmetricW).
+  NsgsCoupling coupling() const noexcept {
+    return (header().flags & kSnapshotSymmetricW) != 0 ? NsgsCoupling::kSymmetricRowUpdate
+                                                       : NsgsCoupling::kColumnUpdate;
+  }
+
   /// The contact problem delta = W f + delta_free, pointing into the slot. Pass another
   /// delta_free (e.g. moved with the device) to solve the same problem from a local copy.
   ContactProblemView problem(const double* delta_free_override = nullptr) const noexcept {

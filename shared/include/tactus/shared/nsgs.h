@@ -32,6 +32,7 @@
 // A 3-row contact with mu = 0 and a 1-row contact use the scalar projection
 // f_n = max(0, -b_n / W_nn), f_t = 0. Over-relaxation: f_i <- P_K(f_i + sor (f_local - f_i)).
 
+#include <cstddef>
 #include <cstdint>
 #include <string_view>
 #include <vector>
@@ -66,6 +67,21 @@ inline ContactProblemView denseProblemView(int contacts, int rows, const int* ro
   v.delta_free = delta_free;
   v.mu = mu;
   return v;
+}
+
+/// Contacts [c_begin, c_end) of a dense problem as a problem of their own, in place on W's
+/// diagonal block (their rows are contiguous): `row_offset_out` (c_end - c_begin + 1 entries)
+/// receives their row offsets from the first row. The caller checks the range; the view keeps
+/// `problem`'s ld and has no blocks. For a group of contacts W couples to nothing else (a group of
+/// coupled bodies, the contacts the devices can reach), solving it is solving its part of the
+/// whole problem. No allocation.
+inline ContactProblemView contiguousSubproblem(const ContactProblemView& problem, int c_begin,
+                                               int c_end, int* row_offset_out) noexcept {
+  const int r0 = problem.row_offset[c_begin];
+  for (int c = c_begin; c <= c_end; ++c) row_offset_out[c - c_begin] = problem.row_offset[c] - r0;
+  return denseProblemView(c_end - c_begin, problem.row_offset[c_end] - r0, row_offset_out,
+                          problem.W + static_cast<std::ptrdiff_t>(r0) * problem.ld + r0,
+                          problem.ld, problem.delta_free + r0, problem.mu + c_begin);
 }
 
 /// How the solver keeps the coupling between contacts (all give the same iterates up to
