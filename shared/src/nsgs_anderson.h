@@ -64,6 +64,7 @@ class Anderson {
       backToBest(f, delta);
       have_newest_ = false;
       differences_ = 0;
+      next_slot_ = 0;   // the valid slots are 0 .. differences_ - 1 until the ring is full
       on_ = ++strikes_ < kAndersonStrikes;
       return on_;
     }

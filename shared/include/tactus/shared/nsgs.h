@@ -165,8 +165,8 @@ struct NsgsSettings {
   /// act while the acceleration does).
   /// Measured (README, "Anderson acceleration"): on the liver grasps (dense W from the FEM
   /// compliance, friction-dominated) depth 8 needs 2-3x fewer sweeps (liver_grasp_23k median
-  /// 134 -> 44); on the relaxation rule's problem sets fewer sweeps in 93 of 176 runs (FCLIB
-  /// 1.2-2x, capsule piles 5-10x), more in 12 (rigid sphere piles, up to 1.8x) and no
+  /// 134 -> 44); on the relaxation rule's problem sets fewer sweeps in 101 of 176 runs (FCLIB
+  /// 1.2-2x, capsule piles 5-10x), more than 1.1x in 13 (rigid sphere piles, up to 2.7x) and no
   /// convergence in 2 (a 60-sphere pile): off by default.
   int anderson_depth = 0;
   /// kSymmetricRowUpdate only when W is exactly symmetric (see NsgsCoupling)
