@@ -90,6 +90,7 @@ AttachedSegment::AttachedSegment(shared::Segment&& s)
       workspace(segment.capacity().max_rows, segment.capacity().max_contacts),
       delta_free(static_cast<std::size_t>(segment.capacity().max_rows), 0.0),
       f(static_cast<std::size_t>(segment.capacity().max_rows), 0.0),
+      warm_start(segment.capacity().max_contacts, segment.capacity().max_rows),
       last_delta_free(static_cast<std::size_t>(segment.capacity().max_rows), 0.0),
       row_instrument(static_cast<std::size_t>(segment.capacity().max_rows), 0),
       blocks(segment.capacity().max_rows, segment.capacity().max_contacts),
@@ -278,11 +279,13 @@ void HapticLoop::takeSnapshot(std::int64_t now, TickOutput& out) noexcept {
       stale = watchdog_ns_ == 0 || age > watchdog_ns_ || shutting ||
               (hdr.flags & shared::kSnapshotValid) == 0;
       if (hdr.seq != snapshot_seq_) {
-        // a new problem: warm start from the simulation's own solution
+        // a new problem: warm start from the simulation's own solution plus the correction
+        // the last converged solve made to the previous one (shared/warm_start.h)
         snapshot_seq_ = hdr.seq;
         counters_.snapshots_taken.fetch_add(1, std::memory_order_relaxed);
-        const int m = std::clamp(hdr.rows, 0, static_cast<int>(link_->f.size()));
-        std::copy_n(snap.f(), m, link_->f.begin());
+        link_->warm_start.adopt(snap, link_->solve_converged ? link_->f.data() : nullptr,
+                                link_->f.data());
+        link_->solve_converged = false;
         if (shutting) pushEvent(kEventSimShuttingDown);
       }
       // each device at its last pose (held while it faults); solved while some device has a

@@ -156,6 +156,7 @@ void HapticLoop::solveLocalModel(
   }
   if (link.use_blocks) problem.blocks = &link.blocks;
   const shared::NsgsResult res = shared::solveNsgs(problem, ns, workspace, f.data() + r_begin);
+  link.solve_converged = res.status == shared::NsgsStatus::kConverged;
   link.delta_seq = res.status == shared::NsgsStatus::kEmpty ? 0 : hdr.seq;
   std::copy_n(delta_free.begin(), m, link.last_delta_free.begin());
   out.sweeps = res.sweeps;

@@ -4,8 +4,9 @@
 // the functions of Simulation::step(); then publish), contacts, sweeps, and the haptic
 // tick's solve for the same snapshots: each step's problem, published into a private segment's
 // snapshot slot exactly as sim_server does, is re-solved from the slot as the haptic loop would
-// (delta_free moved by J times a small device displacement, warm-started NSGS from the
-// simulation's f, the loop's sweep and time budget). --json writes everything for comparison
+// (delta_free moved by J times a small device displacement, NSGS warm-started as the loop's first
+// tick on a snapshot: the simulation's f plus the correction carried from the previous snapshot,
+// shared/warm_start.h; the loop's sweep and time budget). --json writes everything for comparison
 // between commits. --record-snapshots FILE writes every published snapshot, stamped with the
 // simulated time, for tactus-jitter --replay FILE.
 #include <fmt/format.h>
@@ -27,6 +28,7 @@
 #include "tactus/shared/pose.h"
 #include "tactus/shared/segment.h"
 #include "tactus/shared/snapshot_file.h"
+#include "tactus/shared/warm_start.h"
 #include "tactus/sim/pipeline.h"
 #include "tactus/sim/scene.h"
 
@@ -129,6 +131,9 @@ int run(const BenchOptions& o) {
   shared::NsgsWorkspace ws(seg.capacity().max_rows, seg.capacity().max_contacts);
   std::vector<double> df(static_cast<std::size_t>(seg.capacity().max_rows));
   std::vector<double> f(df.size());
+  // each snapshot's warm start as the haptic loop's: f* plus the last converged solve's correction
+  shared::SnapshotWarmStart warm_start(seg.capacity().max_contacts, seg.capacity().max_rows);
+  bool tick_converged_last = false;
   // the device displacement: a fixed small translation (mm) along (1, -1, -1) / sqrt(3)
   shared::Vector6d dx = shared::Vector6d::Zero();
   const double d_m = 1e-3 * o.displacement_mm / std::sqrt(3.0);
@@ -220,14 +225,17 @@ int run(const BenchOptions& o) {
     // the haptic side's tick on this snapshot, read back from the slot
     const shared::SnapshotView snap = sub.latest();
     const int m = snap.rows();
-    if (snap.contacts() <= 0) continue;
+    if (snap.contacts() <= 0) {
+      warm_start.reset();
+      continue;
+    }
     const double* J = snap.J();
     for (int i = 0; i < m; ++i) {
       double d = snap.deltaFree()[i];
       for (int c = 0; c < 6; ++c) d += J[6 * i + c] * dx[c];
       df[i] = d;
     }
-    std::copy_n(snap.f(), m, f.begin());
+    warm_start.adopt(snap, tick_converged_last ? f.data() : nullptr, f.data());
     shared::NsgsSettings ns;
     ns.tolerance = spec.haptics.nsgs_tolerance;
     ns.max_sweeps = tick_sweeps;
@@ -241,7 +249,8 @@ int run(const BenchOptions& o) {
     tick_us.push_back(1e-3 * static_cast<double>(res.elapsed_ns));
     tick_sweeps_v.push_back(res.sweeps);
     tick_err.push_back(res.error);
-    if (res.status == shared::NsgsStatus::kConverged) ++tick_converged;
+    tick_converged_last = res.status == shared::NsgsStatus::kConverged;
+    if (tick_converged_last) ++tick_converged;
     if (trace != nullptr) {
       std::fprintf(trace, "%ld,%.4f,%d,%d,%d,%.4f,%.3f,%d,%d,%.4f\n", k, sim.time(),
                    r.contacts, r.rows, r.nsgs.sweeps, 1e3 * stages[7].v.back(),

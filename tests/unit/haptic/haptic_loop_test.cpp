@@ -544,6 +544,12 @@ double tissueCoupling(int i, int j) {
   return i == j ? 1e-3 : 0.5e-3 * std::exp(-std::abs(i - j));
 }
 
+// One tissue whose rows couple over a long range (a smooth compliance: W = 1e-3 exp(-|i - j| / 10)
+// plus 5e-5 on the diagonal, positive definite), slow for Gauss-Seidel like the grasp's W.
+double smoothTissueCoupling(int i, int j) {
+  return 1e-3 * std::exp(-std::abs(i - j) / 10.0) + (i == j ? 5e-5 : 0.0);
+}
+
 // Ten bodies of 15 contacts: rows coupled only within a body (10 % of the blocks: the blocks).
 double bodiesCoupling(int i, int j) {
   return i / 45 == j / 45 ? tissueCoupling(i, j) : 0.0;
@@ -600,6 +606,31 @@ TEST(HapticLoopLarge, ContactsNoDeviceCanMoveAreNotReSolved) {
   EXPECT_GT(r.reference_n, 0.0);
   EXPECT_EQ(r.settled.flags & shared::kStatsSolverNotConverged, 0u);
   EXPECT_NEAR(r.settled.unlimited_force_norm_n, r.reference_n, 1e-4 * r.reference_n);
+}
+
+// A new snapshot of the same problem, the device still off the snapshot's pose: its first tick
+// starts from the simulation's f* (zero here) plus the correction the last converged tick made,
+// so it is converged at once, where the first tick on the first snapshot (from f* alone) was not
+// (shared/warm_start.h).
+TEST(HapticLoopLarge, ANewSnapshotStartsFromTheLastTicksCorrection) {
+  LargeProblemRig rig("carry", smoothTissueCoupling);
+  rig.device().state.pos_m = {0.0, 0.0, -5e-5};
+  rig.publish(2e-4);
+  const TickOutput first = rig.tick();
+  EXPECT_NE(first.flags & shared::kStatsSolverNotConverged, 0u);   // 20 sweeps from f* = 0
+  TickOutput settled = first;
+  for (int i = 0; i < 200 && (settled.flags & shared::kStatsSolverNotConverged) != 0; ++i) {
+    settled = rig.tick();
+  }
+  ASSERT_EQ(settled.flags & shared::kStatsSolverNotConverged, 0u);
+  rig.publish(2e-4);
+  const TickOutput next = rig.tick();
+  EXPECT_EQ(next.snapshot_seq, settled.snapshot_seq + 1);
+  EXPECT_EQ(next.flags & shared::kStatsSolverNotConverged, 0u);
+  EXPECT_LE(next.sweeps, 2);
+  EXPECT_NEAR(next.unlimited_force_norm_n, settled.unlimited_force_norm_n,
+              1e-4 * settled.unlimited_force_norm_n);
+  EXPECT_GT(rig.link().f[0], 0.0);
 }
 
 // Contacts a device can move in the first and the last body: not contiguous, so the whole

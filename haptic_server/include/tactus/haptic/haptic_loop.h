@@ -35,7 +35,6 @@
 #include "tactus/device/device.h"
 #include "tactus/haptic/workspace_mapping.h"
 #include "tactus/shared/delassus_blocks.h"
-#include "tactus/shared/nsgs.h"
 #include "tactus/shared/event_ring.h"
 #include "tactus/shared/haptic_limits.h"
 #include "tactus/shared/stats_ring.h"
@@ -43,6 +42,7 @@
 #include "tactus/shared/nsgs.h"
 #include "tactus/shared/pose.h"
 #include "tactus/shared/segment.h"
+#include "tactus/shared/warm_start.h"
 
 namespace tactus::haptic {
 
@@ -153,6 +153,10 @@ struct AttachedSegment {
   shared::NsgsWorkspace workspace;
   std::vector<double> delta_free;       ///< moved delta_free (capacity rows)
   std::vector<double> f;                ///< forces, warm start across ticks
+  /// a new snapshot's warm start: its f* plus the last converged solve's correction to the
+  /// previous f*, by contact id (shared/warm_start.h)
+  shared::SnapshotWarmStart warm_start;
+  bool solve_converged = false;         ///< the last solve on the adopted snapshot converged
   std::vector<double> last_delta_free;  ///< delta_free of the last solve (capacity rows)
   std::vector<int> row_instrument;      ///< per row of the adopted snapshot: its instrument
   std::uint64_t delta_seq = 0;          ///< snapshot whose W f + delta_free workspace.delta holds
