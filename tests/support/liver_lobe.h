@@ -31,6 +31,9 @@ class LiverLobe {
 
 /// liver_grasp's grasper and approach as they were before the flat pads (issue 15): the tests
 /// of the contact passes, the grip DOF and the display were written for it.
-inline void useRoundKinematicJaws(sim::SceneSpec& spec) { sim::useFormerRoundJaws(spec); }
+inline void useRoundKinematicJaws(sim::SceneSpec& spec) {
+  sim::useFormerLiverGraspScript(spec);
+  sim::useFormerRoundJaws(spec);
+}
 
 }  // namespace tactus::test_support

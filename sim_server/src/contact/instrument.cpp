@@ -77,6 +77,20 @@ void setJawFeature(ToolFeature& f, int id, FeatureShape shape, int part, const E
 
 }  // namespace
 
+void useFormerLiverGraspScript(SceneSpec& spec) {
+  InstrumentSpec& in = spec.instrument;
+  // jaws along world -x, opening along world z
+  const Eigen::Quaterniond along_x(0.5, 0.5, 0.5, 0.5);
+  auto key = [&](double t, double x, double z, double gripper) {
+    return TrajectoryKey{t, PoseSpec{Eigen::Vector3d(x, 0.010, z), along_x}, gripper};
+  };
+  in.initial_pose = PoseSpec{Eigen::Vector3d(0.135, 0.010, -0.004), along_x};
+  in.trajectory = {key(0.0, 0.135, -0.004, 1.0), key(1.0, 0.135, -0.004, 1.0),
+                   key(2.0, 0.100, -0.004, 1.0), key(3.0, 0.100, -0.004, 0.0),
+                   key(4.5, 0.100, 0.016, 0.0),  key(6.0, 0.100, 0.016, 0.0),
+                   key(6.5, 0.100, 0.016, 1.0),  key(7.5, 0.140, 0.016, 1.0)};
+}
+
 void useFormerRoundJaws(SceneSpec& spec) {
   InstrumentSpec& in = spec.instrument;
   in.pad_width_m = 0.0;

@@ -132,6 +132,13 @@ BoxSpec instrumentWorkspace(const InstrumentSpec& spec, const Eigen::AlignedBox3
 /// grasp point) moved back to the former 0.107 m.
 void useFormerRoundJaws(SceneSpec& spec);
 
+/// scenes/liver_grasp.yaml's script before its approach turned 60 deg toward the lobe's mass
+/// (issue 15; README.md "Flat jaw pads"): the tool's jaws along world -x at y = 10 mm, z = -4 mm,
+/// the hinge from x = 135 mm to 100 mm, closing, a 2 cm lift, the hold, the release. For the
+/// tests and the accuracy study written for it (useFormerRoundJaws then moves its grasp to the
+/// round jaws' 107 mm).
+void useFormerLiverGraspScript(SceneSpec& spec);
+
 /// PoseSpec (scene file) -> Pose.
 inline shared::Pose toPose(const PoseSpec& spec) {
   shared::Pose p;
