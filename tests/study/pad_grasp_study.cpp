@@ -49,13 +49,9 @@ int main(int argc, char** argv) {
     if (grip >= 0.0) spec.instrument.grip_k_nmprad = grip;
     // the jaws point along the tool's -z: deeper is along it, added to the test's offsets
     const Eigen::Vector3d deeper = (yaw * r0) * Eigen::Vector3d(0, 0, -1e-3 * deeper_mm);
-    const std::vector<ApproachPerturbation> approaches = {
-        {Eigen::Vector3d::Zero(), 0.0},
-        {Eigen::Vector3d(0.0, 0.003, 0.0), 0.0},
-        {Eigen::Vector3d(0.0, -0.003, 0.0), 15.0},
-        {Eigen::Vector3d(0.0, 0.0, 0.003), -15.0},
-        {Eigen::Vector3d(0.003, 0.0, -0.003), 0.0},
-        {Eigen::Vector3d(-0.003, 0.002, 0.0), 10.0}};   // pad_grasp_test's five after the nominal
+    // the nominal approach, then pad_grasp_test's five
+    std::vector<ApproachPerturbation> approaches = tactus::test_support::testApproaches();
+    approaches.insert(approaches.begin(), ApproachPerturbation{});
     for (ApproachPerturbation a : approaches) {
       const Eigen::Vector3d offset_mm = 1e3 * a.offset_m;
       a.offset_m += deeper;

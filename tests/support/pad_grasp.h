@@ -67,6 +67,16 @@ inline double tetVolumeRatio(const sim::FemBody& body, const std::array<int, 4>&
   return tetVolume6(body.positions(), t) / tetVolume6(body.restPositions(), t);
 }
 
+/// The five perturbed approaches pad_grasp_test asserts (grasp point moved by up to 3 mm, jaw
+/// roll by up to 15 deg); tests/study/pad_grasp_study runs them after the nominal one.
+inline std::vector<ApproachPerturbation> testApproaches() {
+  return {{Eigen::Vector3d(0.0, 0.003, 0.0), 0.0},
+          {Eigen::Vector3d(0.0, -0.003, 0.0), 15.0},
+          {Eigen::Vector3d(0.0, 0.0, 0.003), -15.0},
+          {Eigen::Vector3d(0.003, 0.0, -0.003), 0.0},
+          {Eigen::Vector3d(-0.003, 0.002, 0.0), 10.0}};
+}
+
 inline sim::SceneSpec perturbedScene(sim::SceneSpec spec, const ApproachPerturbation& p) {
   const Eigen::Quaterniond roll(
       Eigen::AngleAxisd(p.roll_deg * M_PI / 180.0, Eigen::Vector3d::UnitZ()));

@@ -99,11 +99,7 @@ TEST_P(PerturbedPadGraspTest, HoldsTheLobe) {
 
 INSTANTIATE_TEST_SUITE_P(
     Approaches, PerturbedPadGraspTest,
-    ::testing::Values(ApproachPerturbation{Eigen::Vector3d(0.0, 0.003, 0.0), 0.0},
-                      ApproachPerturbation{Eigen::Vector3d(0.0, -0.003, 0.0), 15.0},
-                      ApproachPerturbation{Eigen::Vector3d(0.0, 0.0, 0.003), -15.0},
-                      ApproachPerturbation{Eigen::Vector3d(0.003, 0.0, -0.003), 0.0},
-                      ApproachPerturbation{Eigen::Vector3d(-0.003, 0.002, 0.0), 10.0}),
+    ::testing::ValuesIn(test_support::testApproaches()),
     [](const ::testing::TestParamInfo<ApproachPerturbation>& info) {
       // e.g. x0_yp3_z0_roll0: the offset in mm and the roll in deg, p/m for the sign
       auto part = [](const char* axis, double v) {
