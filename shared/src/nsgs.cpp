@@ -42,7 +42,7 @@ ErrorParts errorParts(const ContactProblemView& p, const double* f, const double
     const double mu = p.mu[i];
     const double* fi = f + r;
     const double* di = delta + r;
-    const double dhat_n = di[0] + mu * std::hypot(di[1], di[2]);
+    const double dhat_n = di[0] + mu * detail::planeNorm(di[1], di[2]);
     double z[3] = {fi[0] - dhat_n, fi[1] - di[1], fi[2] - di[2]};
     projectOnCone(mu, z);
     for (int k = 0; k < 3; ++k) {
@@ -133,7 +133,7 @@ std::string_view toString(NsgsStatus status) noexcept {
 }
 
 void projectOnCone(double mu, double* z) noexcept {
-  const double zt = std::hypot(z[1], z[2]);
+  const double zt = detail::planeNorm(z[1], z[2]);
   if (zt <= mu * z[0]) return;
   if (mu * zt <= -z[0]) {
     z[0] = z[1] = z[2] = 0.0;
@@ -240,6 +240,10 @@ NsgsResult solveWith(const ContactProblemView& p, const Storage& w, const NsgsSe
   const bool row_gather = settings.coupling == NsgsCoupling::kRowGather;
   const bool symmetric = settings.coupling == NsgsCoupling::kSymmetricRowUpdate;
 
+  // delta = W f + q afresh; by rows when W is symmetric (see computeDeltaSymmetric)
+  auto formDelta = [&]() {
+    return symmetric ? detail::computeDeltaSymmetric(p, w, f, delta) : w.computeDelta(f, delta);
+  };
   auto fail = [&](NsgsStatus status) {
     for (int j = 0; j < m; ++j) f[j] = 0.0;
     for (int j = 0; j < m; ++j) delta[j] = p.delta_free[j];
@@ -249,7 +253,8 @@ NsgsResult solveWith(const ContactProblemView& p, const Storage& w, const NsgsSe
     return result;
   };
 
-  // inputs: mu finite, delta = W f + q finite (NaN/Inf anywhere in W, q or f shows up here)
+  // inputs: mu finite, delta = W f + q finite (NaN/Inf anywhere in W, q or f shows up here;
+  // with the symmetric sweep, see NsgsCoupling)
   double q2 = 0.0;
   for (int j = 0; j < m; ++j) q2 += p.delta_free[j] * p.delta_free[j];
   for (int i = 0; i < nc; ++i) {
@@ -275,7 +280,7 @@ NsgsResult solveWith(const ContactProblemView& p, const Storage& w, const NsgsSe
   if (delta_current) {
     for (int j = 0; j < m; ++j) delta2 += delta[j] * delta[j];
   } else {
-    delta2 = w.computeDelta(f, delta);
+    delta2 = formDelta();
   }
   if (!std::isfinite(delta2) || !std::isfinite(q2)) {
     return fail(NsgsStatus::kNonFinite);
@@ -353,7 +358,7 @@ NsgsResult solveWith(const ContactProblemView& p, const Storage& w, const NsgsSe
     if (result.error <= settings.tolerance && !row_gather) {
       // claim checked against delta = W f + q formed afresh (the running delta accumulates
       // rounding, worst when f is large)
-      w.computeDelta(f, delta);
+      formDelta();
       result.error = normalisedError(errorParts(p, f, delta), q2);
       if (!std::isfinite(result.error)) return fail(NsgsStatus::kNonFinite);
     }

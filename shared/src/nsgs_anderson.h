@@ -17,6 +17,7 @@
 #include <cstddef>
 #include <limits>
 
+#include "nsgs_storage.h"   // detail::dot
 #include "tactus/shared/nsgs.h"
 
 namespace tactus::shared::detail {
@@ -101,8 +102,7 @@ class Anderson {
       differences_ = std::min(differences_ + 1, depth_);
       for (int t = 0; t < differences_; ++t) {
         const double* dt = row(d_r_, t);
-        double sum = 0.0;
-        for (int j = 0; j < m_; ++j) sum += dr[j] * dt[j];
+        const double sum = dot(dr, dt, m_);
         gram_[s * kMaxAndersonDepth + t] = gram_[t * kMaxAndersonDepth + s] = sum;
       }
     }
@@ -123,9 +123,7 @@ class Anderson {
     double trace = 0.0;
     for (int u = 0; u < n; ++u) {
       const double* du = row(d_r_, u);
-      double b = 0.0;
-      for (int j = 0; j < m_; ++j) b += du[j] * r_[j];
-      gamma[u] = b;
+      gamma[u] = dot(du, r_, m_);
       for (int v = 0; v < n; ++v) a[u * n + v] = gram_[u * kMaxAndersonDepth + v];
       trace += a[u * n + u];
     }

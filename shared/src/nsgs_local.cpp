@@ -84,7 +84,7 @@ void slipFallback(const Local3& p, const double* f_old, double* f) noexcept {
   for (int it = 0; it < 100; ++it) {
     double d[3];
     for (int k = 0; k < 3; ++k) d[k] = a[k][0] * z[0] + a[k][1] * z[1] + a[k][2] * z[2] + p.b[k];
-    d[0] += mu * std::hypot(d[1], d[2]);
+    d[0] += mu * planeNorm(d[1], d[2]);
     for (int k = 0; k < 3; ++k) z[k] -= rho * d[k];
     projectOnCone(mu, z);
   }
@@ -119,7 +119,8 @@ void solveLocal3(const Local3& p, const double* f_old, double* f) noexcept {
   for (const auto& row : a) {
     for (double v : row) amax = std::max(amax, std::abs(v));
   }
-  double theta0 = std::atan2(-p.b[2], -p.b[1]);
+  double theta0 = 0.0;
+  bool theta_set = false;   // atan2 only once the stick trial has failed
   if (std::abs(det) > 1e-13 * amax * amax * amax) {
     const double inv = -1.0 / det;
     const double x0 = inv * (c00 * p.b[0] + (a[0][2] * a[2][1] - a[0][1] * a[2][2]) * p.b[1] +
@@ -128,17 +129,22 @@ void solveLocal3(const Local3& p, const double* f_old, double* f) noexcept {
                              (a[0][2] * a[1][0] - a[0][0] * a[1][2]) * p.b[2]);
     const double x2 = inv * (c02 * p.b[0] + (a[0][1] * a[2][0] - a[0][0] * a[2][1]) * p.b[1] +
                              (a[0][0] * a[1][1] - a[0][1] * a[1][0]) * p.b[2]);
-    const double xt = std::hypot(x1, x2);
+    const double xt = planeNorm(x1, x2);
     if (x0 > 0.0 && xt <= mu * x0 * (1.0 + 1e-12)) {
       f[0] = x0;
       f[1] = x1;
       f[2] = x2;
       return;
     }
-    if (xt > 0.0) theta0 = std::atan2(x2, x1);
-  } else if (std::hypot(f_old[1], f_old[2]) > 0.0) {
+    if (xt > 0.0) {
+      theta0 = std::atan2(x2, x1);
+      theta_set = true;
+    }
+  } else if (planeNorm(f_old[1], f_old[2]) > 0.0) {
     theta0 = std::atan2(f_old[2], f_old[1]);
+    theta_set = true;
   }
+  if (!theta_set) theta0 = std::atan2(-p.b[2], -p.b[1]);
   // slip: Newton on theta
   const double g_tol = 1e-14 * (scale_b + 1e-300);
   const double h_tol = 1e-10 * scale_b;
@@ -160,7 +166,7 @@ void solveLocal3(const Local3& p, const double* f_old, double* f) noexcept {
   // theta0. den(theta) = a_nn + mu r cos(theta - alpha) > 0 is the whole circle or one arc; on
   // an arc, samples cluster near its ends, where f_n -> inf and roots can hide.
   constexpr int kScan = 72;
-  const double r_nt = mu * std::hypot(a[0][1], a[0][2]);
+  const double r_nt = mu * planeNorm(a[0][1], a[0][2]);
   double lo = theta0 - std::numbers::pi;
   double span = 2.0 * std::numbers::pi;
   bool arc = false;

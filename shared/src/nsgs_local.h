@@ -2,7 +2,18 @@
 // NSGS internals shared by the storages of W (dense rows, 3x3 blocks): the per-contact
 // Gauss-Seidel step (see nsgs.h, "Algorithm"). Not installed: only shared/src includes it.
 
+#include <cmath>
+
 namespace tactus::shared::detail {
+
+/// sqrt(x^2 + y^2) without std::hypot's cost where the squares cannot overflow or underflow
+/// (hypot was a tenth of a haptic tick's time); NaN stays NaN. Differs from hypot by at most
+/// one rounding.
+inline double planeNorm(double x, double y) noexcept {
+  const double s = x * x + y * y;
+  if (s > 1e-300 && s < 1e300) return std::sqrt(s);
+  return s == 0.0 ? 0.0 : std::hypot(x, y);
+}
 
 /// Local 3x3 block (row-major) and free term of one contact.
 struct Local3 {

@@ -6,6 +6,7 @@
 //   addColumns(i, r, k, df, delta)      delta += W(:, rows_i) df
 //   addRowsTransposed(i, r, k, df, delta)  delta += W(rows_i, :)^T df (= the columns when W = W^T)
 //   computeDelta(f, delta)              delta = W f + q, returns ||delta||^2
+// and computeDeltaSymmetric(p, w, f, delta) below forms the same delta from rows when W = W^T.
 // Not installed: only shared/src includes it.
 
 #include <cstddef>
@@ -127,7 +128,17 @@ class DenseW {
 
   double computeDelta(const double* f, double* delta) const noexcept {
     double nrm2 = 0.0;
-    for (int j = 0; j < m_; ++j) {
+    int j = 0;
+    // three rows per pass over f (one load of f feeds three rows)
+    for (; j + 3 <= m_; j += 3) {
+      const double* w = w_ + j * ld_;
+      dot3(w, w + ld_, w + 2 * ld_, f, m_, delta + j);
+      for (int a = j; a < j + 3; ++a) {
+        delta[a] += q_[a];
+        nrm2 += delta[a] * delta[a];
+      }
+    }
+    for (; j < m_; ++j) {
       delta[j] = dot(w_ + j * ld_, f, m_) + q_[j];
       nrm2 += delta[j] * delta[j];
     }
@@ -204,5 +215,25 @@ class BlockW {
   const double* v_;
   const double* q_;
 };
+
+// delta = W f + q for an exactly symmetric W, as q plus the rows of the contacts with a
+// nonzero force (W f = sum_i W(rows_i, :)^T f_i): contiguous rows, and contacts at zero force
+// (often most of them) cost nothing. Returns ||delta||^2.
+template <class Storage>
+double computeDeltaSymmetric(const ContactProblemView& p, const Storage& w, const double* f,
+                             double* delta) noexcept {
+  const int m = p.rows;
+  for (int j = 0; j < m; ++j) delta[j] = p.delta_free[j];
+  for (int i = 0; i < p.contacts; ++i) {
+    const int r = p.row_offset[i];
+    const int k = p.row_offset[i + 1] - r;
+    bool any = false;
+    for (int a = 0; a < k; ++a) any = any || f[r + a] != 0.0;
+    if (any) w.addRowsTransposed(i, r, k, f + r, delta);
+  }
+  double nrm2 = 0.0;
+  for (int j = 0; j < m; ++j) nrm2 += delta[j] * delta[j];
+  return nrm2;
+}
 
 }  // namespace tactus::shared::detail

@@ -203,7 +203,9 @@ std::string figures(const Rig& rig) {
 }
 
 // `max_budget_stops`: the simulation's NSGS solves stopped at the sweep budget, measured per case
-// (2026-11-24: press through 67 with residual <= 9.22e-6, the other cases 0) plus a small margin.
+// plus a margin (the other cases 0). Press through stalls near the tolerance in many steps, so
+// its count follows rounding: 47, 54 and 77 (residual <= 7.96e-6) on 2026-11-25 with the same
+// arithmetic summed in three orders (W f by rows or by contacts, two or four partial sums).
 void expectSafe(const Rig& rig, const std::string& name, long max_budget_stops) {
   EXPECT_EQ(rig.nonfiniteForces(), 0) << name;
   EXPECT_LE(rig.maxForce(), rig.settings().max_force_n + 1e-12) << name;
@@ -383,7 +385,7 @@ TEST(HapticHardCases, DevicePressedThroughTheOrganStaysClampedAndPassive) {
   printCase("press_through_haptic",
             figures(rig) + " F_held=" + std::to_string(f_held) + " N tool_z=" +
                 std::to_string(tool_z) + " m clamped_ticks=" + std::to_string(clamped));
-  expectSafe(rig, "press through", 74);
+  expectSafe(rig, "press through", 90);
   EXPECT_GT(rig.watch().min_geometric_gap_m, -5e-4);
   EXPECT_LT(tool_z - tip_r, disc_bottom_z) << "the tip was not pressed through the rest thickness";
   EXPECT_GT(tool_z - through.z(), 0.005) << "the god object followed the device through";

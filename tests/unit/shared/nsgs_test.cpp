@@ -90,6 +90,16 @@ Solved solve(const Problem& p, NsgsSettings s = {}, std::vector<double> warm = {
   return out;
 }
 
+// B B^T + I / 2 with B's entries standard normal: symmetric positive definite.
+Eigen::MatrixXd randomSpd(int m, std::mt19937& rng) {
+  std::normal_distribution<double> g(0.0, 1.0);
+  Eigen::MatrixXd b(m, m);
+  for (int r = 0; r < m; ++r) {
+    for (int c = 0; c < m; ++c) b(r, c) = g(rng);
+  }
+  return b * b.transpose() + 0.5 * Eigen::MatrixXd::Identity(m, m);
+}
+
 double norm(const std::vector<double>& v) {
   double s = 0.0;
   for (double x : v) s += x * x;
@@ -590,11 +600,7 @@ TEST(NsgsSettingsTest, MixedOneAndThreeRowContacts) {
   Problem p;
   p.row_offset = {0, 3, 4, 7, 8, 11};
   const int m = p.rows();
-  Eigen::MatrixXd b(m, m);
-  for (int r = 0; r < m; ++r) {
-    for (int c = 0; c < m; ++c) b(r, c) = g(rng);
-  }
-  const Eigen::MatrixXd a = b * b.transpose() + 0.5 * Eigen::MatrixXd::Identity(m, m);
+  const Eigen::MatrixXd a = randomSpd(m, rng);
   p.W.assign(a.data(), a.data() + m * m);
   for (int j = 0; j < m; ++j) p.q.push_back(g(rng) - 0.5);
   p.mu = {0.3, 0.0, 0.8, 0.0, 0.5};
@@ -617,6 +623,43 @@ TEST(NsgsSettingsTest, MixedOneAndThreeRowContacts) {
   std::vector<double> bad = s.f;
   bad[0] += 0.1;
   EXPECT_GT(naturalMapError(p.view(), bad.data()), 1e-4);
+}
+
+// The symmetric sweep forms delta = W f + q from the rows of the contacts with a nonzero force
+// only: warm-started with some contacts at zero, it must still give the column sweep's delta
+// (the exact one, checked here) and converge to the same forces.
+TEST(NsgsSettingsTest, SymmetricSweepFormsDeltaFromTheLoadedContactsRows) {
+  std::mt19937 rng(23);
+  std::normal_distribution<double> g(0.0, 1.0);
+  Problem p;
+  p.row_offset = {0, 3, 6, 9, 12, 15, 18};
+  const int m = p.rows();
+  const Eigen::MatrixXd a = randomSpd(m, rng);
+  p.W.assign(a.data(), a.data() + m * m);
+  for (int j = 0; j < m; ++j) p.q.push_back(g(rng) - 1.0);
+  p.mu = {0.3, 0.8, 0.5, 0.6, 0.2, 0.9};
+  // a warm start with contacts 1 and 4 at zero and the others loaded
+  std::vector<double> warm(m, 0.0);
+  for (int c : {0, 2, 3, 5}) warm[3 * c] = 0.5 + 0.1 * c;
+  NsgsSettings one = tight();
+  one.max_sweeps = 1;   // stops after one sweep: delta is the start's W f + q plus its updates
+  NsgsSettings col = one;
+  NsgsSettings sym = one;
+  sym.coupling = NsgsCoupling::kSymmetricRowUpdate;
+  const Solved c1 = solve(p, col, warm);
+  const Solved s1 = solve(p, sym, warm);
+  EXPECT_LE(diffNorm(c1.f, s1.f), 1e-12 * norm(c1.f));
+  EXPECT_LE(diffNorm(c1.u, s1.u), 1e-12 * norm(c1.u));
+  Eigen::VectorXd f1 = Eigen::Map<const Eigen::VectorXd>(s1.f.data(), m);
+  const Eigen::VectorXd u1 = a * f1 + Eigen::Map<const Eigen::VectorXd>(p.q.data(), m);
+  for (int j = 0; j < m; ++j) EXPECT_NEAR(s1.u[j], u1[j], 1e-12 * u1.norm()) << j;
+  const Solved cs = solve(p, tight(), warm);
+  NsgsSettings sym_tight = tight();
+  sym_tight.coupling = NsgsCoupling::kSymmetricRowUpdate;
+  const Solved ss = solve(p, sym_tight, warm);
+  ASSERT_EQ(cs.result.status, NsgsStatus::kConverged);
+  ASSERT_EQ(ss.result.status, NsgsStatus::kConverged);
+  EXPECT_LE(diffNorm(cs.f, ss.f), 1e-10 * norm(cs.f));
 }
 
 // ---------------------------------------------------------------- faults

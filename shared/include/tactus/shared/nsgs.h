@@ -92,8 +92,12 @@ inline ContactProblemView contiguousSubproblem(const ContactProblemView& problem
 /// - kRowGather (any W): recomputes b_i from the contiguous rows W(rows_i, :) f. Every contact
 ///   costs 3m multiply-adds, and every error check one more W pass.
 /// - kSymmetricRowUpdate: the caller promises W = W^T (the simulation's H C H^T is); as
-///   kColumnUpdate but reads the contiguous rows W(rows_i, :) instead of the columns. Wrong
-///   results if W is not symmetric.
+///   kColumnUpdate but reads the contiguous rows W(rows_i, :) instead of the columns. It also
+///   forms delta = W f + q (at the start and to confirm convergence) from the rows of the
+///   contacts with a nonzero force only: an entry W(a, b) in the rows of a contact at zero force
+///   is read through its twin W(b, a), and a NaN/Inf there gives kNonFinite once either contact's
+///   force moves (a NaN cannot pass the simulation's bit-for-bit symmetry check, so a published
+///   snapshot never asks for this sweep with one). Wrong results if W is not symmetric.
 /// Measured (tests/bench/nsgs_bench.cpp, 150 contacts / 450 rows, 84 in contact, thread CPU time
 /// on the loaded 2-core dev VM, streaming W once = 36-40 us): one sweep costs 66-78 us (1.8-2.2
 /// W streams) with kColumnUpdate, 87-93 us (2.4-2.5) with kRowGather and 36-41 us (1.0-1.15)
