@@ -62,6 +62,7 @@ void HapticSettings::validate() const {
                std::numeric_limits<double>::max(), "N");
   checkSetting("watchdog_ms", watchdog_ms, 0.0, true, L::kMaxWatchdogMs, "ms");
   checkSetting("fade_ms", fade_ms, 0.0, false, L::kMaxFadeMs, "ms");
+  checkSetting("snapshot_blend_ms", snapshot_blend_ms, 0.0, false, L::kMaxSnapshotBlendMs, "ms");
   checkSetting("max_sweeps", max_sweeps, 1.0, false, L::kMaxSweeps, "");
   checkSetting("tolerance", tolerance, 0.0, true, L::kMaxTolerance, "");
   checkSetting("anderson_depth", anderson_depth, 0.0, false, shared::kMaxAndersonDepth, "");
@@ -136,6 +137,12 @@ void HapticLoop::initLimits(DeviceChannel& ch) {
   const double watchdog_ns = settings_.watchdog_ms * 1e6;
   watchdog_ns_ = std::isfinite(watchdog_ns) && watchdog_ns > 0.0 && watchdog_ns < 1e18
                      ? static_cast<std::int64_t>(watchdog_ns)
+                     : 0;
+  // whole ticks; unchecked settings (tests) that are not finite or out of range blend nothing
+  const double blend_ticks = settings_.snapshot_blend_ms * 1e6 /
+                             static_cast<double>(std::max<std::int64_t>(settings_.period_ns, 1));
+  blend_ticks_ = std::isfinite(blend_ticks) && blend_ticks >= 0.5 && blend_ticks <= 1e5
+                     ? static_cast<int>(std::lround(blend_ticks))
                      : 0;
   const device::DeviceInfo info = ch.device->info();
   const double device_max = info.max_force_n;
@@ -267,6 +274,8 @@ void HapticLoop::publishSample(DeviceChannel& ch, int i, std::int64_t now,
 // The newest snapshot, its age, and the local model.
 void HapticLoop::takeSnapshot(std::int64_t now, TickOutput& out) noexcept {
   bool stale = true;
+  bool switched = false;
+  bool solved = false;
   if (link_ != nullptr) {
     bool fresh = false;
     const shared::SnapshotView snap = link_->snapshots.latest(&fresh);
@@ -279,6 +288,7 @@ void HapticLoop::takeSnapshot(std::int64_t now, TickOutput& out) noexcept {
       stale = watchdog_ns_ == 0 || age > watchdog_ns_ || shutting ||
               (hdr.flags & shared::kSnapshotValid) == 0;
       if (hdr.seq != snapshot_seq_) {
+        switched = true;
         // a new problem: warm start from the simulation's own solution plus the correction
         // the last converged solve made to the previous one (shared/warm_start.h)
         snapshot_seq_ = hdr.seq;
@@ -297,7 +307,10 @@ void HapticLoop::takeSnapshot(std::int64_t now, TickOutput& out) noexcept {
         if (ch.have_pose) poses[static_cast<std::size_t>(i)] = &ch.last_pose;
         live = live || (ch.have_pose && !ch.device_fault);
       }
-      if (!stale && live) solveLocalModel(*link_, snap, poses, out);
+      if (!stale && live) {
+        solveLocalModel(*link_, snap, poses, out);
+        solved = true;
+      }
       if (stale != stale_) {
         pushEvent(stale ? shared::kEventSnapshotStale : shared::kEventSnapshotFresh,
                   stale ? static_cast<double>(age) : static_cast<double>(hdr.seq));
@@ -311,7 +324,38 @@ void HapticLoop::takeSnapshot(std::int64_t now, TickOutput& out) noexcept {
   }
   out.stale = stale;
   out.snapshot_seq = snapshot_seq_;
+  blendSnapshot(switched, solved, out);
+}
 
+void HapticLoop::blendSnapshot(bool switched, bool solved, TickOutput& out) noexcept {
+  for (int i = 0; i < device_count_; ++i) {
+    DeviceChannel& ch = channels_[static_cast<std::size_t>(i)];
+    DeviceTickOutput& dev = out.device[static_cast<std::size_t>(i)];
+    if (!solved || !ch.have_pose) {   // nothing rendered from a model: nothing to blend from
+      ch.have_model_wrench = false;
+      ch.blend_ticks_left = 0;
+      continue;
+    }
+    if (switched && blend_ticks_ > 0 && ch.have_model_wrench) {
+      for (int k = 0; k < 3; ++k) {
+        ch.blend_force_n[k] = ch.model_force_n[k] - dev.force_n[k];
+        ch.blend_torque_nm[k] = ch.model_torque_nm[k] - dev.torque_nm[k];
+      }
+      const bool usable = finite(ch.blend_force_n) && finite(ch.blend_torque_nm);
+      ch.blend_ticks_left = usable ? blend_ticks_ : 0;
+    }
+    if (ch.blend_ticks_left > 0) {
+      --ch.blend_ticks_left;   // the last tick of the blend renders the new model alone
+      const double w = static_cast<double>(ch.blend_ticks_left) / blend_ticks_;
+      for (int k = 0; k < 3; ++k) {
+        dev.force_n[k] += w * ch.blend_force_n[k];
+        dev.torque_nm[k] += w * ch.blend_torque_nm[k];
+      }
+    }
+    ch.model_force_n = dev.force_n;
+    ch.model_torque_nm = dev.torque_nm;
+    ch.have_model_wrench = true;
+  }
 }
 
 void HapticLoop::writeDevice(DeviceChannel& ch, const std::array<double, 3>& force,

@@ -69,6 +69,9 @@ int main(int argc, char** argv) {
       ->check(shared::finiteAbove(0.0, Limits::kMaxWatchdogMs, "ms"))->capture_default_str();
   app.add_option("--fade-ms", settings.fade_ms, "Fade ramp [ms]")
       ->check(shared::finiteRange(0.0, Limits::kMaxFadeMs, "ms"))->capture_default_str();
+  app.add_option("--snapshot-blend-ms", settings.snapshot_blend_ms,
+                 "Blend each new snapshot's force in over this time [ms] (0: off)")
+      ->check(shared::finiteRange(0.0, Limits::kMaxSnapshotBlendMs, "ms"))->capture_default_str();
   app.add_option("--slew", settings.slew_n_per_s, "Force slew-rate limit [N/s]")
       ->check(shared::finiteAbove(0.0, Limits::kMaxSlewNPerS, "N/s"))->capture_default_str();
   app.add_option("--max-sweeps", settings.max_sweeps, "NSGS sweeps per tick")

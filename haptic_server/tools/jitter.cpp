@@ -32,6 +32,8 @@
 #include "jitter_core.h"
 #include "jitter_replay.h"
 #include "jitter_synthetic.h"
+#include "tactus/shared/cli_checks.h"
+#include "tactus/shared/haptic_limits.h"
 #include "tactus/shared/nsgs.h"
 #include "tactus/shared/clock.h"
 #include "tactus/shared/error.h"
@@ -66,6 +68,7 @@ struct Options {
   int priority = 80;
   int sweeps = 50;
   int anderson_depth = 0;
+  double snapshot_blend_ms = 0.0;
   double period_us = 0.0;
   std::string reader = "live";
   double wait_s = 10.0;
@@ -158,6 +161,7 @@ int run(const Options& o) {
     ro.priority = o.priority;
     ro.max_sweeps = o.sweeps;
     ro.anderson_depth = o.anderson_depth;
+    ro.snapshot_blend_ms = o.snapshot_blend_ms;
     replay_rig = std::make_unique<ReplayRig>(std::move(snaps), ro);
     period_ns = replay_rig->periodNs();
     std::printf(
@@ -184,6 +188,7 @@ int run(const Options& o) {
     so.priority = o.priority;
     so.max_sweeps = o.sweeps;
     so.anderson_depth = o.anderson_depth;
+    so.snapshot_blend_ms = o.snapshot_blend_ms;
     rig = std::make_unique<SyntheticRig>(so);
     period_ns = rig->periodNs();
     const auto& p = rig->problem();
@@ -393,6 +398,10 @@ int main(int argc, char** argv) {
   app.add_option("--anderson-depth", o.anderson_depth,
                  "Synthetic/replay: NSGS Anderson acceleration depth per tick (0: off)")
       ->check(CLI::Range(0, shared::kMaxAndersonDepth));
+  app.add_option("--snapshot-blend-ms", o.snapshot_blend_ms,
+                 "Synthetic/replay: blend each new snapshot's force in over this time [ms] "
+                 "(haptic_server --snapshot-blend-ms; 0: off)")
+      ->check(shared::finiteRange(0.0, shared::HapticLimits::kMaxSnapshotBlendMs, "ms"));
   app.add_option("--sweeps", o.sweeps, "Synthetic/replay: NSGS sweeps per tick")
       ->check(CLI::Range(1, 10000))
       ->capture_default_str();

@@ -88,6 +88,7 @@ LoopRig::LoopRig(const std::string& segment_name, shared::SegmentCapacity capaci
                                                         static_cast<double>(settings_.period_ns));
   settings_.max_sweeps = options.max_sweeps;
   settings_.anderson_depth = options.anderson_depth;
+  settings_.snapshot_blend_ms = options.snapshot_blend_ms;
   settings_.engage_threshold_n = 1e9;
   settings_.watchdog_ms = options.watchdog_ms;
   std::vector<device::Device*> ptrs;

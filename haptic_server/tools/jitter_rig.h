@@ -56,6 +56,7 @@ struct LoopRunOptions {
   int priority = 80;                   ///< SCHED_FIFO priority (0: none)
   int max_sweeps = 50;                 ///< NSGS sweeps per tick
   int anderson_depth = 0;              ///< NSGS Anderson acceleration (HapticSettings)
+  double snapshot_blend_ms = 0.0;      ///< HapticSettings::snapshot_blend_ms
   double solve_budget_fraction = 0.4;  ///< NSGS time budget as a fraction of the period
 };
 

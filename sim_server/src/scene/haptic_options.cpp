@@ -19,6 +19,9 @@ std::vector<std::string> hapticServerOptions(const HapticsSpec& haptics) {
   if (haptics.nsgs_anderson_depth > 0) {
     options.push_back(fmt::format("--nsgs-anderson-depth={}", haptics.nsgs_anderson_depth));
   }
+  if (haptics.snapshot_blend_ms > 0.0) {
+    options.push_back(fmt::format("--snapshot-blend-ms={:.17g}", haptics.snapshot_blend_ms));
+  }
   // haptics.workspaces: every field of each device's own mapping (haptic_server's
   // --workspace-option I:key=value; the scene parser refuses it together with `workspace`)
   for (std::size_t i = 0; i < haptics.workspaces.size(); ++i) {

@@ -105,8 +105,8 @@ void SceneParser::readHaptics(const YAML::Node& n, HapticsSpec* h, int instrumen
   using L = shared::HapticLimits;
   const std::string p = "haptics";
   checkKeys(n, p, {"enabled", "rate", "device", "force_scale", "max_force", "watchdog_ms",
-                   "max_sweeps_per_tick", "nsgs_tolerance", "nsgs_anderson_depth", "workspace",
-                   "workspaces"});
+                   "max_sweeps_per_tick", "nsgs_tolerance", "nsgs_anderson_depth",
+                   "snapshot_blend_ms", "workspace", "workspaces"});
   h->enabled = true;  // a haptics section turns haptics on unless it says otherwise
   boolean(n, p, "enabled", &h->enabled);
   number(n, p, "rate", &h->rate_hz, kPositive, Range{L::kMinRateHz, L::kMaxRateHz},
@@ -122,6 +122,8 @@ void SceneParser::readHaptics(const YAML::Node& n, HapticsSpec* h, int instrumen
          kPositiveUpTo(1e-2));
   integer(n, p, "nsgs_anderson_depth", &h->nsgs_anderson_depth, 0, shared::kMaxAndersonDepth,
           shared::kMaxAndersonDepth);
+  number(n, p, "snapshot_blend_ms", &h->snapshot_blend_ms, kNonNegative,
+         kAtMost(L::kMaxSnapshotBlendMs), kNonNegativeUpTo(L::kMaxSnapshotBlendMs));
   YAML::Node w;
   if (section(n, p, "workspace", &w)) readWorkspace(w, p + ".workspace", &h->workspace);
   readWorkspaces(n, h, instruments);

@@ -59,6 +59,15 @@ class HapticLoopTest : public test::HapticSegmentTest {
     publisher_.publish();
   }
 
+  // A new loop with settings_ on the same segment (the old one lets go of the link first).
+  void restartLoop() {
+    loop_->offerLink(nullptr);
+    t_ += 1'000'000;
+    loop_->tick(t_, t_);
+    loop_.emplace(device_, settings_);
+    loop_->offerLink(link_.get());
+  }
+
   TickOutput tickFor(int n) {
     TickOutput out;
     for (int i = 0; i < n; ++i) {
@@ -212,6 +221,37 @@ TEST_F(HapticLoopTest, TheSimulationSeesTheDeviceAndEveryTickWritesAStatsRecord)
   EXPECT_EQ(stats.poll(recs.data(), recs.size()), 10u);
   EXPECT_EQ(recs[9].tick, 9u);
   EXPECT_EQ(recs[9].contacts, 1);
+}
+
+// HapticSettings::snapshot_blend_ms: the step between two snapshots' wrenches is rendered as a
+// linear ramp over the blend's ticks (5 here), ending on the new model's wrench; allocation-free.
+TEST_F(HapticLoopTest, ANewSnapshotsForceIsBlendedInOverTheBlendTime) {
+  settings_.snapshot_blend_ms = 5.0;
+  restartLoop();
+  device_.state.pos_m = {0.0, 0.0, 0.01};
+  publish(0.0, 1e-3, 0.01);            // touching: engages at zero force
+  tickFor(20);
+  test::AllocScope scope;
+  publish(-0.002, 1e-3, 0.01);         // the new model renders 2 N
+  for (int k = 1; k <= 5; ++k) EXPECT_NEAR(tickFor(1).force_n[2], 0.4 * k, 1e-9) << k;
+  EXPECT_NEAR(tickFor(3).force_n[2], 2.0, 1e-9);
+  publish(-0.001, 1e-3, 0.01);         // 1 N: blended down from 2 N
+  for (int k = 1; k <= 5; ++k) EXPECT_NEAR(tickFor(1).force_n[2], 2.0 - 0.2 * k, 1e-9) << k;
+  // a switch in the middle of a blend starts from what was rendered last
+  publish(-0.003, 1e-3, 0.01);         // 3 N
+  EXPECT_NEAR(tickFor(1).force_n[2], 1.0 + 2.0 * 0.2, 1e-9);
+  EXPECT_NEAR(tickFor(1).force_n[2], 1.0 + 2.0 * 0.4, 1e-9);
+  publish(-0.0005, 1e-3, 0.01);        // 0.5 N, from 1.8 N
+  EXPECT_NEAR(tickFor(1).force_n[2], 0.5 + 1.3 * 0.8, 1e-9);
+  EXPECT_NEAR(tickFor(10).force_n[2], 0.5, 1e-9);
+  EXPECT_EQ(scope.allocations(), 0);
+  // without blending the new snapshot's force is rendered at once
+  settings_.snapshot_blend_ms = 0.0;
+  restartLoop();
+  publish(0.0, 1e-3, 0.01);
+  tickFor(20);
+  publish(-0.002, 1e-3, 0.01);
+  EXPECT_NEAR(tickFor(1).force_n[2], 2.0, 1e-9);
 }
 
 TEST_F(HapticLoopTest, ATickAllocatesNothing) {

@@ -49,13 +49,19 @@ TEST(SceneWorkspace, ParsesScaleOffsetRotationAndClutchButton) {
   EXPECT_THAT(hapticServerOptions(plain.haptics),
               ElementsAre("--rate=2000", "--max-force=4", "--force-scale=1", "--watchdog-ms=50",
                           "--max-sweeps=50", "--tolerance=9.9999999999999995e-07"));
-  // the tick's Anderson acceleration reaches haptic_server when the scene asks for it
-  EXPECT_THAT(hapticServerOptions(
-                  parseScene(kHead + "haptics: {nsgs_anderson_depth: 3}\n", "s.yaml", kScenes)
-                      .haptics),
-              ElementsAre("--rate=1000", "--max-force=8", "--force-scale=1", "--watchdog-ms=50",
-                          "--max-sweeps=50", "--tolerance=9.9999999999999995e-07",
-                          "--nsgs-anderson-depth=3"));
+  // the tick's Anderson acceleration and the snapshot blend reach haptic_server when the scene
+  // asks for them, after the defaults
+  const auto withDefaults = [](const std::string& extra) {
+    return std::vector<std::string>{"--rate=1000", "--max-force=8", "--force-scale=1",
+                                    "--watchdog-ms=50", "--max-sweeps=50",
+                                    "--tolerance=9.9999999999999995e-07", extra};
+  };
+  const auto optionsOf = [](const std::string& haptics) {
+    return hapticServerOptions(
+        parseScene(kHead + "haptics: " + haptics + "\n", "s.yaml", kScenes).haptics);
+  };
+  EXPECT_EQ(optionsOf("{nsgs_anderson_depth: 3}"), withDefaults("--nsgs-anderson-depth=3"));
+  EXPECT_EQ(optionsOf("{snapshot_blend_ms: 10}"), withDefaults("--snapshot-blend-ms=10"));
   // haptics off: haptic_server keeps its own defaults
   EXPECT_TRUE(hapticServerOptions(parseScene(kHead, "s.yaml", kScenes).haptics).empty());
 }

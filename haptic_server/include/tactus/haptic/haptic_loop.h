@@ -58,6 +58,8 @@ struct HapticSettingsLimits {
   /// watchdog_ms in (0, this] ms
   static constexpr double kMaxWatchdogMs = shared::HapticLimits::kMaxWatchdogMs;
   static constexpr double kMaxFadeMs = 10'000.0;          ///< fade_ms in [0, this] ms
+  /// snapshot_blend_ms in [0, this] ms
+  static constexpr double kMaxSnapshotBlendMs = shared::HapticLimits::kMaxSnapshotBlendMs;
   /// max_sweeps in [1, this]
   static constexpr int kMaxSweeps = shared::HapticLimits::kMaxSweeps;
   /// tolerance in (0, this]
@@ -77,6 +79,12 @@ struct HapticSettings {
   double engage_threshold_n = 0.5;      ///< forces engage only once the command is below this
   double watchdog_ms = 50.0;            ///< snapshot older than this: fade out
   double fade_ms = 100.0;               ///< fade-out and fade-in ramp
+  /// Blends each new snapshot in over this time (0: off). The wrench the new local model gives
+  /// differs from the last one rendered by the step between the simulation's two solutions; the
+  /// loop renders the new model plus that step, shrunk linearly to zero over the blend, so the
+  /// hand feels a ramp instead of a 50-100 Hz staircase. One simulation period is the natural
+  /// value (docs/design.md, "Snapshot blending").
+  double snapshot_blend_ms = 0.0;
   int max_sweeps = 50;                  ///< NSGS sweep budget per tick
   double tolerance = 1e-6;              ///< NSGS tolerance
   /// Anderson acceleration of the tick's NSGS over this many past sweeps (0: off; at most
@@ -226,6 +234,13 @@ struct DeviceChannel {
   double gain = 0.0;
   std::array<double, 3> last_force_n{};
   std::array<double, 3> last_torque_nm{};
+  // snapshot blending (HapticSettings::snapshot_blend_ms), in the scene frame
+  bool have_model_wrench = false;            ///< the last tick solved this device's model
+  std::array<double, 3> model_force_n{};     ///< the last tick's blended model wrench
+  std::array<double, 3> model_torque_nm{};
+  std::array<double, 3> blend_force_n{};     ///< old minus new wrench at the last switch
+  std::array<double, 3> blend_torque_nm{};
+  int blend_ticks_left = 0;
 };
 
 class HapticLoop {
@@ -316,6 +331,8 @@ class HapticLoop {
     publishSample(channels_[0], 0, now, io);
   }
   void takeSnapshot(std::int64_t now, TickOutput& out) noexcept;   // and the local model
+  /// After takeSnapshot: blends a new snapshot's wrench in (HapticSettings::snapshot_blend_ms).
+  void blendSnapshot(bool switched, bool solved, TickOutput& out) noexcept;
   void writeDevice(DeviceChannel& ch, const std::array<double, 3>& force,
                    const std::array<double, 3>& torque) noexcept;
   void writeDevice(const std::array<double, 3>& force,
@@ -345,6 +362,7 @@ class HapticLoop {
   void (*adoption_hook_)(void*) = nullptr;
   void* adoption_context_ = nullptr;
   std::int64_t watchdog_ns_ = 0;   ///< settings' watchdog (0 when not usable: always stale)
+  int blend_ticks_ = 0;            ///< snapshot_blend_ms in ticks (0: no blending)
 
   std::uint64_t snapshot_seq_ = 0;
   std::uint64_t tick_index_ = 0;

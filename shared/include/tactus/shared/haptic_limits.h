@@ -14,6 +14,7 @@ struct HapticLimits {
   static constexpr double kMaxWatchdogMs = 10'000.0;  ///< watchdog in (0, this] ms
   static constexpr int kMaxSweeps = 100'000;        ///< NSGS sweeps per tick in [1, this]
   static constexpr double kMaxTolerance = 1.0;      ///< NSGS tolerance in (0, this]
+  static constexpr double kMaxSnapshotBlendMs = 100.0;  ///< snapshot blend in [0, this] ms
 };
 
 }  // namespace tactus::shared

@@ -192,6 +192,9 @@ struct HapticsSpec {
   double nsgs_tolerance = 1e-6;
   /// haptic_server --nsgs-anderson-depth: Anderson acceleration of the tick's NSGS (0: off)
   int nsgs_anderson_depth = 0;
+  /// haptic_server --snapshot-blend-ms: each new snapshot's force blended in over this time
+  /// [ms] (0: off)
+  double snapshot_blend_ms = 0.0;
   /// device -> scene mapping and clutch button (haptics.workspace; docs/design.md)
   shared::WorkspaceMappingParams workspace;
   /// haptics.workspaces: device i's own mapping (entry i for instrument/device i; at most the
