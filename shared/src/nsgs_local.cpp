@@ -119,8 +119,10 @@ void solveLocal3(const Local3& p, const double* f_old, double* f) noexcept {
   for (const auto& row : a) {
     for (double v : row) amax = std::max(amax, std::abs(v));
   }
-  double theta0 = 0.0;
-  bool theta_set = false;   // atan2 only once the stick trial has failed
+  // the slip search's start angle, computed only once the stick trial has failed: the stick
+  // trial's direction, else the old force's, else opposite the free tangential velocity
+  const auto awayFromSliding = [&] { return std::atan2(-p.b[2], -p.b[1]); };
+  double theta0;
   if (std::abs(det) > 1e-13 * amax * amax * amax) {
     const double inv = -1.0 / det;
     const double x0 = inv * (c00 * p.b[0] + (a[0][2] * a[2][1] - a[0][1] * a[2][2]) * p.b[1] +
@@ -136,15 +138,11 @@ void solveLocal3(const Local3& p, const double* f_old, double* f) noexcept {
       f[2] = x2;
       return;
     }
-    if (xt > 0.0) {
-      theta0 = std::atan2(x2, x1);
-      theta_set = true;
-    }
-  } else if (planeNorm(f_old[1], f_old[2]) > 0.0) {
-    theta0 = std::atan2(f_old[2], f_old[1]);
-    theta_set = true;
+    theta0 = xt > 0.0 ? std::atan2(x2, x1) : awayFromSliding();
+  } else {
+    theta0 = planeNorm(f_old[1], f_old[2]) > 0.0 ? std::atan2(f_old[2], f_old[1])
+                                                 : awayFromSliding();
   }
-  if (!theta_set) theta0 = std::atan2(-p.b[2], -p.b[1]);
   // slip: Newton on theta
   const double g_tol = 1e-14 * (scale_b + 1e-300);
   const double h_tol = 1e-10 * scale_b;
