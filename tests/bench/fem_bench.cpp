@@ -288,6 +288,22 @@ BENCHMARK(BM_W450_Liver2_Warped)->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_W450_Liver2_Uncoupled)->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_W450_Liver2_Exact)->Unit(benchmark::kMicrosecond);
 
+// The warped model's per-step rotations (FemBody::nodeRotations) without and with the rotation
+// smoothing (ComplianceOptions::rotation_smoothing_passes), after a few steps under gravity.
+void nodeRotations(benchmark::State& state, const char* name) {
+  const int passes = static_cast<int>(state.range(0));
+  auto body = makeBody(loadLiver(name), LinearSolverKind::kCholmod, PcgPreconditioner::kJacobi, 20);
+  for (int s = 0; s < 3; ++s) body->freeMotion(kH);
+  std::vector<Eigen::Matrix3d> r;
+  for (auto _ : state) {
+    body->nodeRotations(r, nullptr, passes);
+    benchmark::DoNotOptimize(r.data());
+  }
+  state.counters["tets"] = body->mesh().tetCount();
+}
+void BM_NodeRotations_Liver23k(benchmark::State& s) { nodeRotations(s, "liver_23k.msh"); }
+BENCHMARK(BM_NodeRotations_Liver23k)->Arg(0)->Arg(2)->Unit(benchmark::kMillisecond);
+
 }  // namespace
 }  // namespace tactus::sim
 

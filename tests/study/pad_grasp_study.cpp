@@ -22,6 +22,7 @@ int main(int argc, char** argv) {
   CLI::App app{"pad_grasp_study: the pad grasp over the nominal and five perturbed approaches"};
   std::string scene = std::string(TACTUS_SOURCE_DIR) + "/scenes/liver_grasp.yaml";
   double yaw_deg = 0.0, deeper_mm = 0.0, grip = -1.0;
+  bool nominal_only = false;
   app.add_option("--scene", scene, "Scene file")->check(CLI::ExistingFile);
   app.add_option("--yaw-deg", yaw_deg, "Turn the script about the world's vertical [deg]")
       ->check(CLI::Range(-180.0, 180.0));
@@ -29,6 +30,7 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(-20.0, 20.0));
   app.add_option("--grip", grip, "Grip stiffness [N m/rad] (default: the scene's)")
       ->check(CLI::Range(0.0, 1.0));
+  app.add_flag("--nominal-only", nominal_only, "Run the nominal approach only");
   CLI11_PARSE(app, argc, argv);
   try {
     tactus::sim::SceneSpec spec = tactus::sim::loadScene(scene);
@@ -50,7 +52,8 @@ int main(int argc, char** argv) {
     // the jaws point along the tool's -z: deeper is along it, added to the test's offsets
     const Eigen::Vector3d deeper = (yaw * r0) * Eigen::Vector3d(0, 0, -1e-3 * deeper_mm);
     // the nominal approach, then pad_grasp_test's five
-    std::vector<ApproachPerturbation> approaches = tactus::test_support::testApproaches();
+    std::vector<ApproachPerturbation> approaches;
+    if (!nominal_only) approaches = tactus::test_support::testApproaches();
     approaches.insert(approaches.begin(), ApproachPerturbation{});
     for (ApproachPerturbation a : approaches) {
       const Eigen::Vector3d offset_mm = 1e3 * a.offset_m;
@@ -60,10 +63,11 @@ int main(int argc, char** argv) {
       std::sort(sweeps.begin(), sweeps.end());
       std::printf(
           "offset (%+.0f %+.0f %+.0f) mm roll %+3.0f deg: rise %6.1f %% (%d held nodes), smallest "
-          "tet %.3f, contacts max %d, unconverged %d, sweeps median %.0f, normal force max %.2f N, "
+          "tet %.3f (tet %d at t = %.2f s), contacts max %d (%d distinct nodes held), unconverged %d, sweeps median %.0f, normal force max %.2f N, "
           "load max %.2f N\n",
           offset_mm.x(), offset_mm.y(), offset_mm.z(), a.roll_deg,
-          100.0 * r.held_rise_m / r.tool_rise_m, r.held_nodes, r.min_volume_ratio, r.max_contacts,
+          100.0 * r.held_rise_m / r.tool_rise_m, r.held_nodes, r.min_volume_ratio,
+          r.min_volume_tet, r.min_volume_ratio_t_s, r.max_contacts, r.max_distinct_nodes_held,
           r.unconverged_steps, sweeps.empty() ? 0.0 : sweeps[sweeps.size() / 2],
           r.max_total_normal_n, r.max_load_n);
       std::fflush(stdout);

@@ -36,6 +36,8 @@ struct PadGraspResult {
   double held_rise_m = 0.0;
   int held_nodes = 0;
   double min_volume_ratio = 1.0;   ///< over the tets touching a node in contact
+  double min_volume_ratio_t_s = 0.0;   ///< when min_volume_ratio was reached
+  int min_volume_tet = -1;             ///< which tet (index in the mesh)
   /// over the nodes in contact: the volume of the node's tets (its one-ring patch), deformed /
   /// rest. Unlike the per-tet ratio it does not follow a sliver (liver_23k has tets of quality
   /// 0.004 in the lobe, 0.015 mm^3, that invert under gravity alone), only crushing
@@ -170,7 +172,12 @@ inline PadGraspResult runPadGrasp(const sim::SceneSpec& scene, const ApproachPer
         double patch = 0.0, patch_rest = 0.0;
         for (int i = node_tet_offset[static_cast<std::size_t>(v)]; i < node_tet_offset[static_cast<std::size_t>(v) + 1]; ++i) {
           const auto& tet = tets[static_cast<std::size_t>(node_tet[static_cast<std::size_t>(i)])];
-          out.min_volume_ratio = std::min(out.min_volume_ratio, tetVolumeRatio(body, tet));
+          const double ratio = tetVolumeRatio(body, tet);
+          if (ratio < out.min_volume_ratio) {
+            out.min_volume_ratio = ratio;
+            out.min_volume_ratio_t_s = t;
+            out.min_volume_tet = node_tet[static_cast<std::size_t>(i)];
+          }
           patch += tetVolume6(body.positions(), tet);
           patch_rest += tetVolume6(body.restPositions(), tet);
         }

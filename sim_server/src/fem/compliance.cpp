@@ -37,6 +37,10 @@ public:
       : kind_(kind), opt_(opt), body_(&body) {
     if (!(opt.h_s > 0.0))
       throw Error("makeCompliance: h_s must be > 0");
+    if (opt.rotation_smoothing_passes < 0 ||
+        opt.rotation_smoothing_passes > kMaxRotationSmoothingPasses)
+      throw Error("makeCompliance: rotation_smoothing_passes must be in [0, " +
+                  std::to_string(kMaxRotationSmoothingPasses) + "]");
     const int n = body.nodeCount();
     rot_.assign(n, Eigen::Matrix3d::Identity());
     local_.assign(n, -1);
@@ -50,7 +54,8 @@ public:
     body_ = &body;
     active_ = kind_;
     if (kind_ == ComplianceKind::kWarped)
-      body.nodeRotations(rot_, opt_.exact_below_coherence > 0.0 ? &coherence_ : nullptr);
+      body.nodeRotations(rot_, opt_.exact_below_coherence > 0.0 ? &coherence_ : nullptr,
+                         opt_.rotation_smoothing_passes);
   }
 
   void addW(std::span<const TissueRow> rows,

@@ -181,15 +181,65 @@ void FemBody::Impl::buildRotationGroups() {
 
 void FemBody::Impl::averageRotations(const std::vector<Eigen::Matrix3d>& element_rot,
                                      std::vector<Eigen::Matrix3d>& acc,
-                                     std::vector<Eigen::Matrix3d>& out) {
+                                     std::vector<Eigen::Matrix3d>& out, int smoothing_passes,
+                                     std::vector<double>* weight) {
   acc.assign(n, Eigen::Matrix3d::Zero());
-  for (int e = 0; e < mesh.tetCount(); ++e)
-    for (int k = 0; k < 4; ++k) acc[mesh.tets[e][k]] += volume[e] * element_rot[e];
+  std::vector<double> local_weight;
+  std::vector<double>& w = weight != nullptr ? *weight : local_weight;
+  const bool weighted = weight != nullptr || smoothing_passes > 0;
+  if (weighted) w.assign(static_cast<std::size_t>(n), 0.0);
+  for (int e = 0; e < mesh.tetCount(); ++e) {
+    for (int k = 0; k < 4; ++k) {
+      acc[mesh.tets[e][k]] += volume[e] * element_rot[e];
+      if (weighted) w[mesh.tets[e][k]] += volume[e];
+    }
+  }
   if (!rot_group.empty()) {
     // every member of a group gets the group's sum
     group_acc.assign(rot_group_count, Eigen::Matrix3d::Zero());
-    for (int i = 0; i < n; ++i) group_acc[rot_group[i]] += acc[i];
-    for (int i = 0; i < n; ++i) acc[i] = group_acc[rot_group[i]];
+    std::vector<double> group_w(weighted ? static_cast<std::size_t>(rot_group_count) : 0, 0.0);
+    for (int i = 0; i < n; ++i) {
+      group_acc[rot_group[i]] += acc[i];
+      if (weighted) group_w[rot_group[i]] += w[i];
+    }
+    for (int i = 0; i < n; ++i) {
+      acc[i] = group_acc[rot_group[i]];
+      if (weighted) w[i] = group_w[rot_group[i]];
+    }
+  }
+  // smoothing: each pass gives every node the sum over its elements of their nodes' sums (one
+  // element layer wider on each side); rotations and weights alike, rescaled to the largest
+  // weight so that repeated passes cannot overflow (the polar factor ignores the scale)
+  if (smoothing_passes > 0) {
+    std::vector<Eigen::Matrix3d> tet_acc(static_cast<std::size_t>(mesh.tetCount()));
+    std::vector<double> tet_w(static_cast<std::size_t>(mesh.tetCount()));
+    for (int pass = 0; pass < smoothing_passes; ++pass) {
+      for (int e = 0; e < mesh.tetCount(); ++e) {
+        tet_acc[e].setZero();
+        tet_w[e] = 0.0;
+        for (int k = 0; k < 4; ++k) {
+          tet_acc[e] += acc[mesh.tets[e][k]];
+          tet_w[e] += w[mesh.tets[e][k]];
+        }
+      }
+      for (int i = 0; i < n; ++i) {
+        acc[i].setZero();
+        w[i] = 0.0;
+      }
+      for (int e = 0; e < mesh.tetCount(); ++e) {
+        for (int k = 0; k < 4; ++k) {
+          acc[mesh.tets[e][k]] += tet_acc[e];
+          w[mesh.tets[e][k]] += tet_w[e];
+        }
+      }
+      const double largest = *std::max_element(w.begin(), w.end());
+      if (largest > 0.0) {
+        for (int i = 0; i < n; ++i) {
+          acc[i] /= largest;
+          w[i] /= largest;
+        }
+      }
+    }
   }
   out.resize(n);
   for (int i = 0; i < n; ++i)

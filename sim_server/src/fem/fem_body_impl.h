@@ -158,9 +158,12 @@ struct FemBody::Impl : FemModel, FemState, FemScratch {
   }
   void buildRotationGroups();
   // Node rotations from element rotations: volume-weighted sum over the adjacent elements,
-  // summed over the node's rotation group, polar factor. Nodes with no weight get identity.
+  // summed over the node's rotation group, widened by `smoothing_passes` passes over the
+  // elements (FemBody::nodeRotations), polar factor. Nodes with no weight get identity.
+  // `weight` (optional): the same sums of the element volumes alone (acc's scale).
   void averageRotations(const std::vector<Eigen::Matrix3d>& element_rot,
-                        std::vector<Eigen::Matrix3d>& acc, std::vector<Eigen::Matrix3d>& out);
+                        std::vector<Eigen::Matrix3d>& acc, std::vector<Eigen::Matrix3d>& out,
+                        int smoothing_passes = 0, std::vector<double>* weight = nullptr);
   void ensureRestFactor(double h);
   void ensureCurrentFactor();
   // dv = A^-1 rhs by a fresh CHOLMOD factorisation of `a` (timed into stats); false when A is not

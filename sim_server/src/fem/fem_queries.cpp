@@ -2,12 +2,14 @@
 #include <cmath>
 
 #include "fem_body_impl.h"
+#include "tactus/shared/error.h"
 
 namespace tactus::sim {
 
-void FemBody::nodeRotations(std::vector<Eigen::Matrix3d>& out,
-                            std::vector<double>* coherence) const {
+void FemBody::nodeRotations(std::vector<Eigen::Matrix3d>& out, std::vector<double>* coherence,
+                            int smoothing_passes) const {
   Impl& m = *impl_;
+  if (smoothing_passes < 0) throw Error("nodeRotations: smoothing_passes must be >= 0");
   out.assign(m.n, Eigen::Matrix3d::Identity());
   if (coherence != nullptr) coherence->assign(m.n, 1.0);
   if (!m.corotational) return;
@@ -15,17 +17,11 @@ void FemBody::nodeRotations(std::vector<Eigen::Matrix3d>& out,
   for (int e = 0; e < m.mesh.tetCount(); ++e)
     element_rot[e] = fem_detail::polarRotation(m.elementF(e, m.q));
   m.counters.rotation_extractions += m.mesh.tetCount();
-  m.averageRotations(element_rot, acc, out);
+  std::vector<double> weight;
+  m.averageRotations(element_rot, acc, out, smoothing_passes,
+                     coherence != nullptr ? &weight : nullptr);
   if (coherence == nullptr) return;
-  // |sum v_e R_e|_F / (sqrt(3) sum v_e) over the same elements (and groups) as the average
-  std::vector<double> weight(static_cast<std::size_t>(m.n), 0.0);
-  for (int e = 0; e < m.mesh.tetCount(); ++e)
-    for (int k = 0; k < 4; ++k) weight[m.mesh.tets[e][k]] += m.volume[e];
-  if (!m.rot_group.empty()) {
-    std::vector<double> group(static_cast<std::size_t>(m.rot_group_count), 0.0);
-    for (int i = 0; i < m.n; ++i) group[m.rot_group[i]] += weight[i];
-    for (int i = 0; i < m.n; ++i) weight[i] = group[m.rot_group[i]];
-  }
+  // |sum v_e R_e|_F / (sqrt(3) sum v_e) over the same elements (groups, passes) as the average
   for (int i = 0; i < m.n; ++i)
     (*coherence)[i] = weight[i] > 0.0 ? acc[i].norm() / (std::sqrt(3.0) * weight[i]) : 1.0;
 }

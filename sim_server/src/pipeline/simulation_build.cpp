@@ -35,6 +35,7 @@ TissueState buildTissueState(const SimulationModel& model, const TissueSpec& ts,
   copt.cache_name = ts.name;
   copt.exact_correction = ts.exact_correction;
   copt.exact_below_coherence = ts.exact_below_coherence;
+  copt.rotation_smoothing_passes = ts.rotation_smoothing_passes;
   copt.c0_single_precision = ts.c0_single_precision;
   state.compliance = makeCompliance(ts.compliance, *state.body, copt);
   spdlog::info("tissue '{}': {} compliance, {:.1f} MiB", ts.name, toString(ts.compliance),

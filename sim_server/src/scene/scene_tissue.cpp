@@ -8,6 +8,7 @@
 #include <set>
 
 #include "scene_parser.h"
+#include "tactus/sim/compliance.h"
 
 namespace tactus::sim::scene_detail {
 
@@ -96,7 +97,7 @@ void SceneParser::readTissue(const YAML::Node& t, const std::string& path, Tissu
   if (section(t, path, "compliance", &n)) {
     const std::string p = join(path, "compliance");
     checkKeys(n, p, {"model", "cache_dir", "correction", "c0_precision",
-                     "exact_below_coherence"});
+                     "exact_below_coherence", "rotation_smoothing"});
     choice(n, p, "model", &tissue->compliance,
            {{"exact", ComplianceKind::kExact}, {"warped", ComplianceKind::kWarped},
             {"rest", ComplianceKind::kRest}, {"uncoupled", ComplianceKind::kUncoupled}});
@@ -107,6 +108,8 @@ void SceneParser::readTissue(const YAML::Node& t, const std::string& path, Tissu
            {{"double", false}, {"float", true}});
     number(n, p, "exact_below_coherence", &tissue->exact_below_coherence, kNonNegative,
            kAtMost(1.0), kNonNegativeUpTo(1.0));
+    integer(n, p, "rotation_smoothing", &tissue->rotation_smoothing_passes, 0,
+            kMaxRotationSmoothingPasses, 4);
   }
 }
 

@@ -195,6 +195,17 @@ TEST(Scene, ContactDetectionAndFaceContacts) {
             "'later')");
 }
 
+TEST(Scene, RotationSmoothing) {
+  const auto parse = [](const std::string& compliance) {
+    return parseScene(kHead + "    compliance: " + compliance + "\n", "s.yaml", kScenes);
+  };
+  EXPECT_EQ(parse("{model: warped}").tissues.at(0).rotation_smoothing_passes, 0);
+  EXPECT_EQ(parse("{model: warped, rotation_smoothing: 2}").tissues.at(0).rotation_smoothing_passes, 2);
+  EXPECT_THROW(parse("{model: warped, rotation_smoothing: -1}"), SceneError);
+  EXPECT_THROW(parse("{model: warped, rotation_smoothing: 11}"), SceneError);
+  EXPECT_THROW(parse("{model: warped, rotation_smoothing: 1.5}"), SceneError);
+}
+
 TEST(Scene, SplitContactGroups) {
   EXPECT_TRUE(parseScene(kHead, "s.yaml", kScenes).solver.split_contact_groups);
   EXPECT_FALSE(parseScene(kHead + "solver: {split_contact_groups: false}\n", "s.yaml", kScenes)

@@ -174,12 +174,21 @@ class FemBody {
   /// small wherever a node also has well-shaped elements. The warped PCG preconditioner uses the
   /// same groups.
   ///
+  /// Smoothing (`smoothing_passes` > 0; the warped compliance's
+  /// ComplianceOptions::rotation_smoothing_passes): each pass replaces every node's sum by the
+  /// sum, over its elements, of their four nodes' sums, so one pass averages over the elements
+  /// within two element layers of the node, and each further pass adds one layer on each side.
+  /// Under a rigid rotation nothing changes; where a grasp crushes elements their polar factors
+  /// scatter from one element to the next, and the warped correction R_i dq0_i then moves
+  /// neighbouring nodes apart by |R_i - R_j| |dq0| (docs/design.md, "Rotation smoothing").
+  ///
   /// `coherence` (optional): per node, |sum v_e R_e|_F / (sqrt(3) sum v_e) over the elements
-  /// (and group) the average uses: 1 when they all rotate alike, smaller as their rotations
-  /// spread (about 1 - theta^2/3 for a spread of theta rad). The warped compliance's error grows
-  /// like the spread squared (README "Accuracy against time": elements crushed by a grasp).
+  /// (group, smoothing passes) the average uses: 1 when they all rotate alike, smaller as their
+  /// rotations spread (about 1 - theta^2/3 for a spread of theta rad). The warped compliance's
+  /// error grows like the spread squared (README "Accuracy against time": elements crushed by a
+  /// grasp). Throws tactus::Error when smoothing_passes < 0.
   void nodeRotations(std::vector<Eigen::Matrix3d>& out,
-                     std::vector<double>* coherence = nullptr) const;
+                     std::vector<double>* coherence = nullptr, int smoothing_passes = 0) const;
 
   /// Per-element volume ratio det F = current signed volume / rest volume at the current
   /// positions (<= 0: inverted).

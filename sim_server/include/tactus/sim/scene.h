@@ -73,6 +73,8 @@ struct TissueSpec {
   bool c0_single_precision = false;
   /// compliance.exact_below_coherence -> ComplianceOptions::exact_below_coherence (0: off)
   double exact_below_coherence = 0.0;
+  /// compliance.rotation_smoothing -> ComplianceOptions::rotation_smoothing_passes (0: off)
+  int rotation_smoothing_passes = 0;
 };
 
 /// A pose: position [m] and orientation (unit quaternion), world frame.
