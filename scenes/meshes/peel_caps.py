@@ -64,23 +64,26 @@ def key(f):
     return tuple(sorted(f))
 
 
-def quality_and_height(nodes, t):
+def smallest_height(nodes, t):
+    """The tet's smallest height 3 V / A_max, and that height over its longest edge."""
     p = [nodes[v] for v in t]
     vol6 = dot(sub(p[1], p[0]), cross(sub(p[2], p[0]), sub(p[3], p[0])))
     edges = [math.dist(p[i], p[j]) for i in range(4) for j in range(i + 1, 4)]
     lmax = max(edges)
     areas = [0.5 * math.sqrt(dot(x, x)) for x in
              (cross(sub(nodes[f[1]], nodes[f[0]]), sub(nodes[f[2]], nodes[f[0]])) for f in faces(t))]
-    height = abs(vol6) / 2.0 / max(areas)   # 3 V / A_max: the smallest height
-    return math.sqrt(2.0) * vol6 / lmax ** 3, height / lmax, height
+    height = abs(vol6) / 2.0 / max(areas)
+    return height, height / lmax
 
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("input")
     ap.add_argument("output")
-    ap.add_argument("--max-height-ratio", type=float, default=0.25)
-    ap.add_argument("--overwrite", action="store_true")
+    ap.add_argument("--max-height-ratio", type=float, default=0.25,
+                    help="peel only caps whose smallest height is at most this part of their "
+                         "longest edge (default 0.25)")
+    ap.add_argument("--overwrite", action="store_true", help="replace an existing OUT.msh")
     a = ap.parse_args()
     if os.path.exists(a.output) and not a.overwrite:
         sys.exit(f"{a.output} exists (--overwrite to replace it)")
@@ -106,7 +109,7 @@ def main():
             shared = tuple(sorted(set(inner[0]) & set(inner[1])))
             if shared in surface_edge:
                 continue   # the two inner faces' edge is on the surface: a peel would pinch it
-            q, ratio, height = quality_and_height(nodes, t)
+            height, ratio = smallest_height(nodes, t)
             if ratio > a.max_height_ratio:
                 continue
             alive[i] = False

@@ -63,8 +63,8 @@ int main(int argc, char** argv) {
       std::sort(sweeps.begin(), sweeps.end());
       std::printf(
           "offset (%+.0f %+.0f %+.0f) mm roll %+3.0f deg: rise %6.1f %% (%d held nodes), smallest "
-          "tet %.3f (tet %d at t = %.2f s), contacts max %d (%d distinct nodes held), unconverged %d, sweeps median %.0f, normal force max %.2f N, "
-          "load max %.2f N\n",
+          "tet %.3f (tet %d at t = %.2f s), contacts max %d (%d distinct nodes held), unconverged "
+          "%d, sweeps median %.0f, normal force max %.2f N, load max %.2f N\n",
           offset_mm.x(), offset_mm.y(), offset_mm.z(), a.roll_deg,
           100.0 * r.held_rise_m / r.tool_rise_m, r.held_nodes, r.min_volume_ratio,
           r.min_volume_tet, r.min_volume_ratio_t_s, r.max_contacts, r.max_distinct_nodes_held,

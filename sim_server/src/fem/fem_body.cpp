@@ -211,8 +211,8 @@ void FemBody::Impl::averageRotations(const std::vector<Eigen::Matrix3d>& element
   // element layer wider on each side); rotations and weights alike, rescaled to the largest
   // weight so that repeated passes cannot overflow (the polar factor ignores the scale)
   if (smoothing_passes > 0) {
-    std::vector<Eigen::Matrix3d> tet_acc(static_cast<std::size_t>(mesh.tetCount()));
-    std::vector<double> tet_w(static_cast<std::size_t>(mesh.tetCount()));
+    tet_acc.resize(static_cast<std::size_t>(mesh.tetCount()));
+    tet_w.resize(static_cast<std::size_t>(mesh.tetCount()));
     for (int pass = 0; pass < smoothing_passes; ++pass) {
       for (int e = 0; e < mesh.tetCount(); ++e) {
         tet_acc[e].setZero();

@@ -117,6 +117,8 @@ struct FemScratch {
   // kCholmodReuse: this step's node rotations relative to the factor's (the preconditioner's warp)
   std::vector<Eigen::Matrix3d> relative_rot;
   std::vector<Eigen::Matrix3d> group_acc;           // averageRotations' per-group sums
+  std::vector<Eigen::Matrix3d> tet_acc;             // averageRotations' smoothing: per-tet sums
+  std::vector<double> tet_w;                        // and their weights
 };
 
 struct FemBody::Impl : FemModel, FemState, FemScratch {

@@ -168,7 +168,8 @@ double largestNeighbourSpread(const TetMesh& mesh, const std::vector<Eigen::Matr
       for (int b = a + 1; b < 4; ++b) {
         const int i = tet[static_cast<std::size_t>(a)], j = tet[static_cast<std::size_t>(b)];
         if (mesh.nodes(0, i) > 0.045 && mesh.nodes(0, j) > 0.045) {
-          largest = std::max(largest, (r[static_cast<std::size_t>(i)] - r[static_cast<std::size_t>(j)]).norm());
+          const Eigen::Matrix3d& ri = r[static_cast<std::size_t>(i)];
+          largest = std::max(largest, (ri - r[static_cast<std::size_t>(j)]).norm());
         }
       }
     }
@@ -226,7 +227,8 @@ TEST_F(ComplianceBound, WarpedModelUsesTheSmoothedRotations) {
   smoothed->correction(*body_, rows, f.data(), dq);
   Eigen::VectorXd moved(static_cast<Eigen::Index>(rows.size()));
   for (std::size_t k = 0; k < rows.size(); ++k) {
-    moved[static_cast<Eigen::Index>(k)] = rows[k].weight[0] * rows[k].dir.dot(dq.segment<3>(3 * rows[k].node[0]));
+    const Eigen::Vector3d dq_node = dq.segment<3>(3 * rows[k].node[0]);
+    moved[static_cast<Eigen::Index>(k)] = rows[k].weight[0] * rows[k].dir.dot(dq_node);
   }
   EXPECT_LT((moved - w_smoothed * f).norm(), 1e-9 * (w_smoothed * f).norm());
   // out of range

@@ -200,7 +200,8 @@ TEST(Scene, RotationSmoothing) {
     return parseScene(kHead + "    compliance: " + compliance + "\n", "s.yaml", kScenes);
   };
   EXPECT_EQ(parse("{model: warped}").tissues.at(0).rotation_smoothing_passes, 0);
-  EXPECT_EQ(parse("{model: warped, rotation_smoothing: 2}").tissues.at(0).rotation_smoothing_passes, 2);
+  EXPECT_EQ(
+      parse("{model: warped, rotation_smoothing: 2}").tissues.at(0).rotation_smoothing_passes, 2);
   EXPECT_THROW(parse("{model: warped, rotation_smoothing: -1}"), SceneError);
   EXPECT_THROW(parse("{model: warped, rotation_smoothing: 11}"), SceneError);
   EXPECT_THROW(parse("{model: warped, rotation_smoothing: 1.5}"), SceneError);
