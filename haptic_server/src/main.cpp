@@ -21,6 +21,7 @@
 #include "tactus/shared/cli_checks.h"
 #include "tactus/shared/clock.h"
 #include "tactus/shared/file_io.h"
+#include "tactus/shared/nsgs_kernels.h"
 #include "tactus/shared/rt.h"
 #include "tactus/shared/workspace_mapping.h"
 
@@ -175,6 +176,8 @@ int main(int argc, char** argv) {
                    device_names[static_cast<std::size_t>(i)],
                    devs[static_cast<std::size_t>(i)]->info().model, loop.forceLimitN(i), rate_hz);
     }
+    spdlog::info("NSGS kernel: {} (TACTUS_NSGS_KERNEL=generic|avx2|avx512 picks one)",
+                 shared::nsgsKernelName(shared::nsgsKernel()));
 
     haptic::Supervisor supervisor(loop, segment);
     if (core < 0) core = shared::availableCpuCount() - 1;

@@ -35,6 +35,7 @@
 #include "tactus/shared/cli_checks.h"
 #include "tactus/shared/haptic_limits.h"
 #include "tactus/shared/nsgs.h"
+#include "tactus/shared/nsgs_kernels.h"
 #include "tactus/shared/clock.h"
 #include "tactus/shared/error.h"
 #include "tactus/shared/rt.h"
@@ -167,12 +168,13 @@ int run(const Options& o) {
     std::printf(
         "replay: %zu snapshots from %s (%.2f s per pass%s), up to %d rows (%d contacts), "
         "%d device(s); "
-        "loop %.0f Hz on core %d, SCHED_FIFO %d, %d sweeps max, budget %.0f us; reader: %s\n",
+        "loop %.0f Hz on core %d, SCHED_FIFO %d, %d sweeps max, budget %.0f us; reader: %s; "
+        "NSGS kernel %s\n",
         replay_rig->snapshotCount(), o.replay.c_str(), 1e-9 * static_cast<double>(replay_rig->passNs()),
         o.loop_replay ? ", looping" : "", replay_rig->maxRows(), replay_rig->maxContacts(),
         replay_rig->devices(),
         o.rate_hz, core, o.priority, o.sweeps, 0.4 * 1e-3 * static_cast<double>(period_ns),
-        o.reader.c_str());
+        o.reader.c_str(), shared::nsgsKernelName(shared::nsgsKernel()));
     if (!o.loop_replay && shared::secondsToNs(o.duration_s) > replay_rig->passNs()) {
       std::printf(
           "note: the recording is shorter than --duration: after it the snapshot goes stale "
@@ -195,9 +197,10 @@ int run(const Options& o) {
     std::printf(
         "synthetic: %d rows (%d contacts), cold solve %d sweeps, error %.2e; "
         "loop %.0f Hz on core %d, SCHED_FIFO %d, %d sweeps max, budget %.0f us; "
-        "snapshots at %.0f Hz; reader: %s\n",
+        "snapshots at %.0f Hz; reader: %s; NSGS kernel %s\n",
         p.rows, p.contacts, p.solve_sweeps, p.solve_error, o.rate_hz, core, o.priority, o.sweeps,
-        0.4 * 1e-3 * static_cast<double>(period_ns), o.sim_rate_hz, o.reader.c_str());
+        0.4 * 1e-3 * static_cast<double>(period_ns), o.sim_rate_hz, o.reader.c_str(),
+        shared::nsgsKernelName(shared::nsgsKernel()));
   } else {
     attached = waitForSegment(o.segment, o.wait_s);
     std::printf("attached read-only to '%s' (generation %llu)\n", o.segment.c_str(),

@@ -13,6 +13,7 @@
 
 #include "tactus/shared/delassus_blocks.h"
 #include "tactus/shared/nsgs.h"
+#include "tactus/shared/nsgs_kernels.h"
 
 namespace tactus::shared::detail {
 
@@ -116,14 +117,8 @@ class DenseW {
 
   void addRowsTransposed(int /*i*/, int r, int k, const double* df,
                          double* delta) const noexcept {
-    const double* w0 = w_ + r * ld_;   // contiguous rows
-    if (k == 1) {
-      for (int j = 0; j < m_; ++j) delta[j] += w0[j] * df[0];
-      return;
-    }
-    const double* w1 = w0 + ld_;
-    const double* w2 = w1 + ld_;
-    for (int j = 0; j < m_; ++j) delta[j] += w0[j] * df[0] + w1[j] * df[1] + w2[j] * df[2];
+    // contiguous rows, in the CPU's widest kernel (nsgs_kernels.h; bit-identical to scalar)
+    addRowsScaled(w_ + r * ld_, ld_, k, df, delta, m_);
   }
 
   double computeDelta(const double* f, double* delta) const noexcept {

@@ -1,0 +1,81 @@
+// NSGS's SIMD row kernels (nsgs_kernels.h): every kernel this CPU runs gives the generic
+// kernel's bits, for 1- and 3-row contacts, every tail length and unaligned rows.
+#include <gtest/gtest.h>
+
+#include <cstdlib>
+#include <cstring>
+#include <random>
+#include <vector>
+
+#include "tactus/shared/nsgs_kernels.h"
+
+namespace tactus::shared {
+namespace {
+
+constexpr NsgsKernel kAll[] = {NsgsKernel::kGeneric, NsgsKernel::kAvx2, NsgsKernel::kAvx512};
+
+TEST(NsgsKernels, EverySupportedKernelMatchesTheGenericBits) {
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  int compared = 0;
+  for (NsgsKernel kernel : kAll) {
+    if (!nsgsKernelSupported(kernel)) continue;
+    for (int k : {1, 3}) {
+      for (int m = 0; m <= 41; ++m) {
+        for (int offset = 0; offset < 2; ++offset) {   // rows and delta off a 16-byte boundary
+          const std::ptrdiff_t ld = m + 5;
+          std::vector<double> w(static_cast<std::size_t>(3 * ld + offset));
+          for (double& x : w) x = u(rng) * 1e-3;
+          const double df[3] = {u(rng), u(rng) * 1e3, u(rng) * 1e-4};
+          std::vector<double> start(static_cast<std::size_t>(m + offset));
+          for (double& x : start) x = u(rng);
+          std::vector<double> want = start, got = start;
+          addRowsScaled(NsgsKernel::kGeneric, w.data() + offset, ld, k, df, want.data() + offset, m);
+          addRowsScaled(kernel, w.data() + offset, ld, k, df, got.data() + offset, m);
+          ASSERT_EQ(std::memcmp(want.data(), got.data(), want.size() * sizeof(double)), 0)
+              << nsgsKernelName(kernel) << " k " << k << " m " << m << " offset " << offset;
+          ++compared;
+        }
+      }
+    }
+  }
+  EXPECT_GE(compared, 2 * 42 * 2);   // at least the generic kernel against itself
+}
+
+TEST(NsgsKernels, TheGenericKernelAddsTheScaledRows) {
+  const double w[3 * 4] = {1, 2, 3, 0, 10, 20, 30, 0, 100, 200, 300, 0};   // ld 4, m 3
+  const double df[3] = {1.0, 0.5, -0.25};
+  double delta[3] = {1, 1, 1};
+  addRowsScaled(NsgsKernel::kGeneric, w, 4, 3, df, delta, 3);
+  EXPECT_DOUBLE_EQ(delta[0], 1 + 1 + 5 - 25);
+  EXPECT_DOUBLE_EQ(delta[1], 1 + 2 + 10 - 50);
+  EXPECT_DOUBLE_EQ(delta[2], 1 + 3 + 15 - 75);
+  double one[3] = {0, 0, 0};
+  addRowsScaled(NsgsKernel::kGeneric, w, 4, 1, df, one, 3);
+  EXPECT_DOUBLE_EQ(one[2], 3.0);
+}
+
+TEST(NsgsKernels, TheChoiceIsTheWidestSupportedUnlessANamedOneIsSupported) {
+  const NsgsKernel best = chooseNsgsKernel(nullptr);
+  EXPECT_TRUE(nsgsKernelSupported(best));
+  if (best == NsgsKernel::kGeneric) {
+    EXPECT_FALSE(nsgsKernelSupported(NsgsKernel::kAvx2));
+  }
+  if (best == NsgsKernel::kAvx2) {
+    EXPECT_FALSE(nsgsKernelSupported(NsgsKernel::kAvx512));
+  }
+  EXPECT_EQ(chooseNsgsKernel("generic"), NsgsKernel::kGeneric);
+  EXPECT_EQ(chooseNsgsKernel("sse9"), best);
+  EXPECT_EQ(chooseNsgsKernel(""), best);
+  for (NsgsKernel kernel : kAll) {
+    EXPECT_EQ(chooseNsgsKernel(nsgsKernelName(kernel)),
+              nsgsKernelSupported(kernel) ? kernel : best);
+  }
+  // without TACTUS_NSGS_KERNEL in the test's environment the process uses the widest
+  if (std::getenv("TACTUS_NSGS_KERNEL") == nullptr) {
+    EXPECT_EQ(nsgsKernel(), best);
+  }
+}
+
+}  // namespace
+}  // namespace tactus::shared
