@@ -38,7 +38,7 @@ __attribute__((target("avx2"))) void addRowsAvx2(const double* w0, std::ptrdiff_
       const __m256d t = _mm256_mul_pd(_mm256_loadu_pd(w0 + j), b0);
       _mm256_storeu_pd(delta + j, _mm256_add_pd(_mm256_loadu_pd(delta + j), t));
     }
-    for (; j < m; ++j) delta[j] += w0[j] * df[0];
+    addRowsGeneric(w0 + j, ld, k, df, delta + j, m - j);   // the tail
     return;
   }
   const double* w1 = w0 + ld;
@@ -51,7 +51,7 @@ __attribute__((target("avx2"))) void addRowsAvx2(const double* w0, std::ptrdiff_
     const __m256d t = _mm256_add_pd(t01, _mm256_mul_pd(_mm256_loadu_pd(w2 + j), b2));
     _mm256_storeu_pd(delta + j, _mm256_add_pd(_mm256_loadu_pd(delta + j), t));
   }
-  for (; j < m; ++j) delta[j] += w0[j] * df[0] + w1[j] * df[1] + w2[j] * df[2];
+  addRowsGeneric(w0 + j, ld, k, df, delta + j, m - j);   // the tail
 }
 
 __attribute__((target("avx512f"))) void addRowsAvx512(const double* w0, std::ptrdiff_t ld, int k,
@@ -64,7 +64,7 @@ __attribute__((target("avx512f"))) void addRowsAvx512(const double* w0, std::ptr
       const __m512d t = _mm512_mul_pd(_mm512_loadu_pd(w0 + j), b0);
       _mm512_storeu_pd(delta + j, _mm512_add_pd(_mm512_loadu_pd(delta + j), t));
     }
-    for (; j < m; ++j) delta[j] += w0[j] * df[0];
+    addRowsGeneric(w0 + j, ld, k, df, delta + j, m - j);   // the tail
     return;
   }
   const double* w1 = w0 + ld;
@@ -77,7 +77,7 @@ __attribute__((target("avx512f"))) void addRowsAvx512(const double* w0, std::ptr
     const __m512d t = _mm512_add_pd(t01, _mm512_mul_pd(_mm512_loadu_pd(w2 + j), b2));
     _mm512_storeu_pd(delta + j, _mm512_add_pd(_mm512_loadu_pd(delta + j), t));
   }
-  for (; j < m; ++j) delta[j] += w0[j] * df[0] + w1[j] * df[1] + w2[j] * df[2];
+  addRowsGeneric(w0 + j, ld, k, df, delta + j, m - j);   // the tail
 }
 #endif
 
