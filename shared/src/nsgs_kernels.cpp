@@ -28,6 +28,18 @@ void addRowsGeneric(const double* w0, std::ptrdiff_t ld, int k, const double* df
 }
 
 #ifdef TACTUS_NSGS_X86
+// The last m % lanes entries, by the generic kernel. Its code is SSE2 (the baseline build), and
+// SSE2 instructions run while the upper halves of the vector registers hold data are each
+// slowed down (measured here: the AVX-512 kernel 2-3x slower than the generic one on a 150-row
+// problem in L2, and the solver's own SSE2 code after it slowed too). The compiler clears the
+// upper halves before a return but not before a tail jump into other code, so it is done here.
+__attribute__((target("avx2"))) inline void tail(const double* w0, std::ptrdiff_t ld, int k,
+                                                 const double* df, double* delta,
+                                                 int m) noexcept {
+  _mm256_zeroupper();
+  addRowsGeneric(w0, ld, k, df, delta, m);
+}
+
 __attribute__((target("avx2"))) void addRowsAvx2(const double* w0, std::ptrdiff_t ld, int k,
                                                  const double* df, double* delta,
                                                  int m) noexcept {
@@ -38,7 +50,7 @@ __attribute__((target("avx2"))) void addRowsAvx2(const double* w0, std::ptrdiff_
       const __m256d t = _mm256_mul_pd(_mm256_loadu_pd(w0 + j), b0);
       _mm256_storeu_pd(delta + j, _mm256_add_pd(_mm256_loadu_pd(delta + j), t));
     }
-    addRowsGeneric(w0 + j, ld, k, df, delta + j, m - j);   // the tail
+    tail(w0 + j, ld, k, df, delta + j, m - j);
     return;
   }
   const double* w1 = w0 + ld;
@@ -51,7 +63,7 @@ __attribute__((target("avx2"))) void addRowsAvx2(const double* w0, std::ptrdiff_
     const __m256d t = _mm256_add_pd(t01, _mm256_mul_pd(_mm256_loadu_pd(w2 + j), b2));
     _mm256_storeu_pd(delta + j, _mm256_add_pd(_mm256_loadu_pd(delta + j), t));
   }
-  addRowsGeneric(w0 + j, ld, k, df, delta + j, m - j);   // the tail
+  tail(w0 + j, ld, k, df, delta + j, m - j);
 }
 
 __attribute__((target("avx512f"))) void addRowsAvx512(const double* w0, std::ptrdiff_t ld, int k,
@@ -64,7 +76,7 @@ __attribute__((target("avx512f"))) void addRowsAvx512(const double* w0, std::ptr
       const __m512d t = _mm512_mul_pd(_mm512_loadu_pd(w0 + j), b0);
       _mm512_storeu_pd(delta + j, _mm512_add_pd(_mm512_loadu_pd(delta + j), t));
     }
-    addRowsGeneric(w0 + j, ld, k, df, delta + j, m - j);   // the tail
+    tail(w0 + j, ld, k, df, delta + j, m - j);
     return;
   }
   const double* w1 = w0 + ld;
@@ -77,7 +89,7 @@ __attribute__((target("avx512f"))) void addRowsAvx512(const double* w0, std::ptr
     const __m512d t = _mm512_add_pd(t01, _mm512_mul_pd(_mm512_loadu_pd(w2 + j), b2));
     _mm512_storeu_pd(delta + j, _mm512_add_pd(_mm512_loadu_pd(delta + j), t));
   }
-  addRowsGeneric(w0 + j, ld, k, df, delta + j, m - j);   // the tail
+  tail(w0 + j, ld, k, df, delta + j, m - j);
 }
 #endif
 
