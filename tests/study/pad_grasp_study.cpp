@@ -22,6 +22,7 @@ int main(int argc, char** argv) {
   CLI::App app{"pad_grasp_study: the pad grasp over the nominal and five perturbed approaches"};
   std::string scene = std::string(TACTUS_SOURCE_DIR) + "/scenes/liver_grasp.yaml";
   double yaw_deg = 0.0, deeper_mm = 0.0, grip = -1.0;
+  std::vector<double> offset_mm_arg{0.0, 0.0, 0.0};
   bool nominal_only = false;
   app.add_option("--scene", scene, "Scene file")->check(CLI::ExistingFile);
   app.add_option("--yaw-deg", yaw_deg, "Turn the script about the world's vertical [deg]")
@@ -30,6 +31,10 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(-20.0, 20.0));
   app.add_option("--grip", grip, "Grip stiffness [N m/rad] (default: the scene's)")
       ->check(CLI::Range(0.0, 1.0));
+  app.add_option("--offset-mm", offset_mm_arg,
+                 "Move the whole script after the settling by x y z in the world frame [mm]")
+      ->expected(3)
+      ->check(CLI::Range(-30.0, 30.0));
   app.add_flag("--nominal-only", nominal_only, "Run the nominal approach only");
   CLI11_PARSE(app, argc, argv);
   try {
@@ -57,7 +62,8 @@ int main(int argc, char** argv) {
     approaches.insert(approaches.begin(), ApproachPerturbation{});
     for (ApproachPerturbation a : approaches) {
       const Eigen::Vector3d offset_mm = 1e3 * a.offset_m;
-      a.offset_m += deeper;
+      a.offset_m += deeper +
+                    1e-3 * Eigen::Vector3d(offset_mm_arg[0], offset_mm_arg[1], offset_mm_arg[2]);
       const auto r = tactus::test_support::runPadGrasp(spec, a);
       std::vector<double> sweeps = r.sweeps;
       std::sort(sweeps.begin(), sweeps.end());
