@@ -9,6 +9,8 @@ Neither overwrites an existing output.
 import os
 import sys
 
+from peel_caps import read_msh
+
 
 def refuse_existing(path):
     if os.path.exists(path):
@@ -23,24 +25,15 @@ def read_text(path):
 
 
 def to_tetgen(msh, base):
-    lines = read_text(msh).split("\n")
-    i = lines.index("$Nodes")
-    n = int(lines[i + 1])
-    nodes = [lines[i + 2 + k].split()[:4] for k in range(n)]
-    j = lines.index("$Elements")
-    tets = []
-    for k in range(int(lines[j + 1])):
-        f = lines[j + 2 + k].split()
-        if f[1] == "4":   # 4-node tetrahedron: after the tags
-            tets.append(f[3 + int(f[2]):])
+    nodes, tets = read_msh(msh)   # peel_caps.py's reader: tets only, 0-based node indices
     for ext in (".node", ".ele"):
         refuse_existing(base + ext)
     with open(base + ".node", "w") as out:
-        out.write(f"{n} 3 0 0\n")
-        out.writelines(" ".join(v) + "\n" for v in nodes)
+        out.write(f"{len(nodes)} 3 0 0\n")
+        out.writelines("%d %.17g %.17g %.17g\n" % (k + 1, *p) for k, p in enumerate(nodes))
     with open(base + ".ele", "w") as out:
         out.write(f"{len(tets)} 4 0\n")
-        out.writelines(f"{k + 1} {' '.join(t)}\n" for k, t in enumerate(tets))
+        out.writelines(f"{k + 1} {' '.join(str(v + 1) for v in t)}\n" for k, t in enumerate(tets))
 
 
 def rows(path):
