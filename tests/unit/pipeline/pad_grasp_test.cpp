@@ -22,6 +22,7 @@
 #include <cstdio>
 #include <string>
 
+#include "../../support/openblas_core.h"
 #include "../../support/pad_grasp.h"
 
 namespace tactus::sim {
@@ -71,6 +72,18 @@ void expectHeldAndWellPosed(const PadGraspResult& r) {
   EXPECT_GT(r.max_total_normal_n, r.max_load_n);
   EXPECT_LT(r.max_total_normal_n, 30.0 * r.max_load_n);
 }
+
+// ctest runs these tests once more per forced OpenBLAS kernel (tests/CMakeLists.txt): a kernel
+// this CPU cannot run skips the whole run with the reason.
+class OpenblasCoreEnvironment : public ::testing::Environment {
+ public:
+  void SetUp() override {
+    const std::string reason = test_support::openblasCoreUnsupportedReason();
+    if (!reason.empty()) GTEST_SKIP() << reason;
+  }
+};
+const ::testing::Environment* const kOpenblasCoreEnvironment =
+    ::testing::AddGlobalTestEnvironment(new OpenblasCoreEnvironment);
 
 TEST(PadGraspTest, NominalApproachHoldsTheLobe) {
   expectHeldAndWellPosed(test_support::runPadGrasp(scene("liver_grasp.yaml"), {}));
