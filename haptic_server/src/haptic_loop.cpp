@@ -66,10 +66,27 @@ void HapticSettings::validate() const {
   checkSetting("max_sweeps", max_sweeps, 1.0, false, L::kMaxSweeps, "");
   checkSetting("tolerance", tolerance, 0.0, true, L::kMaxTolerance, "");
   checkSetting("anderson_depth", anderson_depth, 0.0, false, shared::kMaxAndersonDepth, "");
-  checkSetting("solve_budget_ns", static_cast<double>(solve_budget_ns), 0.0, false,
-               static_cast<double>(L::kMaxPeriodNs), "ns");
   checkSetting("period_ns", static_cast<double>(period_ns), 0.0, true,
                static_cast<double>(L::kMaxPeriodNs), "ns");
+  // the deadline must leave room in the period; no deadline only with few sweeps
+  checkSetting("solve_budget_ns", static_cast<double>(solve_budget_ns), 0.0, false,
+               std::floor(L::kMaxBudgetFraction * static_cast<double>(period_ns)),
+               "ns (at most 90 % of period_ns)");
+  if (solve_budget_ns == 0 && max_sweeps > L::kMaxSweepsWithoutBudget) {
+    throw Error("haptic settings: solve_budget_ns = 0 (no deadline) with max_sweeps = " +
+                std::to_string(max_sweeps) + ": give a budget, or at most " +
+                std::to_string(L::kMaxSweepsWithoutBudget) + " sweeps");
+  }
+  localModel().validate();
+}
+
+LocalModelSettings HapticSettings::localModel() const noexcept {
+  LocalModelSettings m;
+  m.kind = local_model;
+  m.tolerance = tolerance;
+  m.max_sweeps = max_sweeps;
+  m.anderson_depth = anderson_depth;
+  return m;
 }
 
 const char* eventName(std::uint32_t code) noexcept {
@@ -80,6 +97,7 @@ const char* eventName(std::uint32_t code) noexcept {
     case kEventSnapshotTooLarge: return "snapshot_too_large";
     case kEventSimShuttingDown: return "simulation_shutting_down";
     case kEventIllPosedSnapshot: return "ill_posed_snapshot";
+    case kEventSnapshotRejected: return "snapshot_rejected";
     default: return shared::eventCodeName(code);
   }
 }
@@ -88,14 +106,8 @@ AttachedSegment::AttachedSegment(shared::Segment&& s)
     : segment(std::move(s)),
       snapshots(segment.snapshotSubscriber()),
       stats(segment.statsWriter()),
-      workspace(segment.capacity().max_rows, segment.capacity().max_contacts),
-      delta_free(static_cast<std::size_t>(segment.capacity().max_rows), 0.0),
-      f(static_cast<std::size_t>(segment.capacity().max_rows), 0.0),
-      warm_start(segment.capacity().max_contacts, segment.capacity().max_rows),
-      last_delta_free(static_cast<std::size_t>(segment.capacity().max_rows), 0.0),
-      row_instrument(static_cast<std::size_t>(segment.capacity().max_rows), 0),
-      blocks(segment.capacity().max_rows, segment.capacity().max_contacts),
-      reach_offset(static_cast<std::size_t>(segment.capacity().max_contacts) + 1, 0) {
+      preparer(snapshots, segment.capacity().max_rows, segment.capacity().max_contacts),
+      model(segment.capacity().max_rows, segment.capacity().max_contacts) {
   sample_writers = std::clamp(segment.capacity().devices, 0, shared::kMaxInstruments);
   for (int i = 0; i < sample_writers; ++i) {
     samples[static_cast<std::size_t>(i)] = segment.deviceWriter(i);
@@ -103,14 +115,14 @@ AttachedSegment::AttachedSegment(shared::Segment&& s)
 }
 
 HapticLoop::HapticLoop(device::Device& device, const HapticSettings& settings)
-    : settings_(settings) {
+    : settings_(settings), model_settings_(settings.localModel()) {
   settings_.validate();
   channels_[0].device = &device;
   initLimits(channels_[0]);
 }
 
 HapticLoop::HapticLoop(std::span<device::Device* const> devices, const HapticSettings& settings)
-    : settings_(settings) {
+    : settings_(settings), model_settings_(settings.localModel()) {
   settings_.validate();
   if (devices.empty() || devices.size() > static_cast<std::size_t>(shared::kMaxInstruments)) {
     throw Error("haptic loop: " + std::to_string(devices.size()) + " devices (1 to " +
@@ -126,7 +138,7 @@ HapticLoop::HapticLoop(std::span<device::Device* const> devices, const HapticSet
 
 HapticLoop::HapticLoop(device::Device& device, const HapticSettings& settings,
                        UncheckedSettingsForTest)
-    : settings_(settings) {
+    : settings_(settings), model_settings_(settings.localModel()) {
   channels_[0].device = &device;
   initLimits(channels_[0]);
 }
@@ -271,15 +283,29 @@ void HapticLoop::publishSample(DeviceChannel& ch, int i, std::int64_t now,
   writer.publish();
 }
 
-// The newest snapshot, its age, and the local model.
-void HapticLoop::takeSnapshot(std::int64_t now, TickOutput& out) noexcept {
+// The newest prepared snapshot, its age, and the local model.
+void HapticLoop::takeSnapshot(std::int64_t now, std::int64_t deadline_ns,
+                              TickOutput& out) noexcept {
   bool stale = true;
   bool switched = false;
   bool solved = false;
   if (link_ != nullptr) {
+    // each device at its last pose (held while it faults); solved while some device has a
+    // live pose
+    std::array<const shared::Pose*, shared::kMaxInstruments> poses{};
+    bool live = false;
+    for (int i = 0; i < device_count_; ++i) {
+      const DeviceChannel& ch = channels_[static_cast<std::size_t>(i)];
+      if (ch.have_pose) poses[static_cast<std::size_t>(i)] = &ch.last_pose;
+      live = live || (ch.have_pose && !ch.device_fault);
+    }
+    SnapshotPreparer& preparer = link_->preparer;
+    preparer.publishPoses(DevicePoses(poses.data(), static_cast<std::size_t>(device_count_)));
+    // without a preparer thread the tick prepares (tests, offline tools: not real-time)
+    if (!preparer.threaded()) (void)preparer.prepareNewest(model_settings_);
     bool fresh = false;
-    const shared::SnapshotView snap = link_->snapshots.latest(&fresh);
-    const auto& hdr = snap.header();
+    const PreparedSnapshot* snap = preparer.latest(&fresh);
+    const shared::ContactSnapshotHeader& hdr = snap->header();
     if (hdr.seq == 0) {
       out.flags |= shared::kStatsNoSnapshot;
     } else {
@@ -287,28 +313,43 @@ void HapticLoop::takeSnapshot(std::int64_t now, TickOutput& out) noexcept {
       const bool shutting = (hdr.flags & shared::kSnapshotShuttingDown) != 0;
       stale = watchdog_ns_ == 0 || age > watchdog_ns_ || shutting ||
               (hdr.flags & shared::kSnapshotValid) == 0;
+      if (link_->model.adopted() != snap || snap->generation() != adopted_generation_) {
+        // O(rows): the preparation's solution and its W f + delta_free become the warm start
+        // (a snapshot prepared again at newer poses too)
+        link_->model.adopt(snap);
+        adopted_generation_ = snap->generation();
+      }
       if (hdr.seq != snapshot_seq_) {
         switched = true;
-        // a new problem: warm start from the simulation's own solution plus the correction
-        // the last converged solve made to the previous one (shared/warm_start.h)
         snapshot_seq_ = hdr.seq;
         counters_.snapshots_taken.fetch_add(1, std::memory_order_relaxed);
-        link_->warm_start.adopt(snap, link_->solve_converged ? link_->f.data() : nullptr,
-                                link_->f.data());
-        link_->solve_converged = false;
         if (shutting) pushEvent(kEventSimShuttingDown);
+        const PrepareStatus ps = snap->status();
+        if (ps != PrepareStatus::kReady && ps != PrepareStatus::kEmpty) {
+          counters_.rejected_snapshots.fetch_add(1, std::memory_order_relaxed);
+          if (ps == PrepareStatus::kIllPosed) {
+            pushEvent(kEventIllPosedSnapshot, 0.0, static_cast<double>(hdr.seq));
+          } else if (ps == PrepareStatus::kTooLarge) {
+            pushEvent(kEventSnapshotTooLarge, hdr.rows);
+          } else {
+            pushEvent(kEventSnapshotRejected, static_cast<double>(ps),
+                      static_cast<double>(hdr.seq));
+          }
+        }
       }
-      // each device at its last pose (held while it faults); solved while some device has a
-      // live pose
-      std::array<const shared::Pose*, shared::kMaxInstruments> poses{};
-      bool live = false;
-      for (int i = 0; i < device_count_; ++i) {
-        const DeviceChannel& ch = channels_[static_cast<std::size_t>(i)];
-        if (ch.have_pose) poses[static_cast<std::size_t>(i)] = &ch.last_pose;
-        live = live || (ch.have_pose && !ch.device_fault);
-      }
+      (void)fresh;
+      out.prepare_ns = snap->prepareNs();
       if (!stale && live) {
-        solveLocalModel(*link_, snap, poses, out);
+        out.contacts = std::max(hdr.contacts, 0);
+        const PrepareStatus ps = snap->status();
+        if (ps == PrepareStatus::kIllPosed || ps == PrepareStatus::kNonFinite) {
+          // a corrupt problem: no force from it (the chain ramps the command down)
+          out.flags |= shared::kStatsSolverNotConverged;
+          auto& counter = ps == PrepareStatus::kIllPosed ? counters_.ill_posed_solves
+                                                          : counters_.non_finite_input;
+          counter.fetch_add(1, std::memory_order_relaxed);
+        }
+        solveLocalModel(*link_, poses, deadline_ns, out);
         solved = true;
       }
       if (stale != stale_) {
@@ -325,6 +366,63 @@ void HapticLoop::takeSnapshot(std::int64_t now, TickOutput& out) noexcept {
   out.stale = stale;
   out.snapshot_seq = snapshot_seq_;
   blendSnapshot(switched, solved, out);
+}
+
+void HapticLoop::solveLocalModel(
+    AttachedSegment& link, const std::array<const shared::Pose*, shared::kMaxInstruments>& poses,
+    std::int64_t deadline_ns, TickOutput& out) noexcept {
+  const LocalModelResult res = link.model.solve(
+      DevicePoses(poses.data(), static_cast<std::size_t>(device_count_)), model_settings_,
+      deadline_ns);
+  if (res.solved()) out.contacts = res.contacts;
+  out.sweeps = res.sweeps;
+  out.residual = res.error;
+  out.solve_ns = res.elapsed_ns;
+  out.model_used = res.used;
+  if (!res.solved()) return;
+  if (res.used == LocalModelUsed::kLinearized) {
+    counters_.linearized_ticks.fetch_add(1, std::memory_order_relaxed);
+  } else if (res.used == LocalModelUsed::kFallback) {
+    counters_.model_fallbacks.fetch_add(1, std::memory_order_relaxed);
+    out.flags |= shared::kStatsModelFallback;
+    link.preparer.requestRelinearization();
+  }
+  if (res.status == shared::NsgsStatus::kEmpty) return;
+  if (res.status == shared::NsgsStatus::kNonFinite) {   // NSGS has zeroed f
+    counters_.non_finite_input.fetch_add(1, std::memory_order_relaxed);
+    return;
+  }
+  // kIllPosed: W itself is unusable (a contact with a zero, negative or denormal diagonal). The
+  // simulation never publishes such a W from a real scene, so the snapshot is corrupt: render no
+  // force from it (the safety chain ramps the command down) and report it once per snapshot.
+  if (res.status == shared::NsgsStatus::kIllPosed) {
+    counters_.ill_posed_solves.fetch_add(1, std::memory_order_relaxed);
+    out.flags |= shared::kStatsSolverNotConverged;
+    if (link.ill_posed_seq != snapshot_seq_) {
+      link.ill_posed_seq = snapshot_seq_;
+      pushEvent(kEventIllPosedSnapshot, static_cast<double>(res.ill_posed_contacts),
+                static_cast<double>(snapshot_seq_));
+    }
+    return;
+  }
+  const bool not_converged = res.status != shared::NsgsStatus::kConverged;
+  if (not_converged) {
+    out.flags |= shared::kStatsSolverNotConverged;
+    counters_.solver_not_converged.fetch_add(1, std::memory_order_relaxed);
+    if (!not_converged_) {
+      pushRateLimited(kNoisyNotConverged, shared::kEventSolverNotConverged, last_tick_ns_,
+                      res.sweeps, res.error);
+    }
+  }
+  not_converged_ = not_converged;
+  const int tools = std::min(res.instruments, device_count_);
+  for (int i = 0; i < tools; ++i) {
+    const auto k = static_cast<std::size_t>(i);
+    out.device[k].force_n = res.force_n[k];
+    out.device[k].torque_nm = res.torque_nm[k];
+  }
+  out.force_n = out.device[0].force_n;
+  out.torque_nm = out.device[0].torque_nm;
 }
 
 void HapticLoop::blendSnapshot(bool switched, bool solved, TickOutput& out) noexcept {
@@ -388,10 +486,20 @@ void HapticLoop::recordStats(std::int64_t scheduled_ns, std::int64_t woken_ns,
         wrenchNorm(out.device[static_cast<std::size_t>(i)].force_n);
   }
   rec.snapshot_seq = snapshot_seq_;
+  rec.read_ns = out.read_ns;
+  rec.model_ns = out.model_ns;
+  rec.output_ns = out.output_ns;
+  rec.started_ns = out.started_ns;
+  rec.deadline_ns = out.deadline_ns;
+  rec.model = static_cast<std::int64_t>(out.model_used);
+  rec.prepare_ns = out.prepare_ns;
   // an overrun: the tick's work ended more than one period after its scheduled start
   const std::int64_t late_ns = rec.finished_ns - scheduled_ns - settings_.period_ns;
   const bool overrun = late_ns > 0;
-  rec.flags = out.flags | (overrun ? shared::kStatsOverrun : 0u);
+  const bool missed = out.deadline_ns > 0 && rec.finished_ns > out.deadline_ns;
+  if (missed) counters_.deadline_misses.fetch_add(1, std::memory_order_relaxed);
+  rec.flags = out.flags | (overrun ? shared::kStatsOverrun : 0u) |
+              (missed ? shared::kStatsDeadlineMissed : 0u);
   link_->stats.push(rec);
   link_->segment.beat(shared::Side::kHaptic, woken_ns);
   if (overrun) {
@@ -408,8 +516,16 @@ void HapticLoop::recordStats(std::int64_t scheduled_ns, std::int64_t woken_ns,
   overrun_ = overrun;
 }
 
+// The tick's phases after the model (safety chain, writes, stats) are kept out of the solve's
+// share of the deadline by this much [ns].
+constexpr std::int64_t kOutputReserveNs = 20'000;
+
 TickOutput HapticLoop::tick(std::int64_t scheduled_ns, std::int64_t woken_ns) noexcept {
   TickOutput out;
+  // one deadline for the whole tick, from the start of its work (on the real clock, whatever
+  // times the caller passes)
+  out.started_ns = shared::monotonicNs();
+  out.deadline_ns = settings_.solve_budget_ns > 0 ? out.started_ns + settings_.solve_budget_ns : 0;
   const std::int64_t now = woken_ns;
   const double dt =
       last_tick_ns_ > 0 ? std::clamp(1e-9 * static_cast<double>(ageNs(now, last_tick_ns_)), 1e-5,
@@ -423,7 +539,16 @@ TickOutput HapticLoop::tick(std::int64_t scheduled_ns, std::int64_t woken_ns) no
     DeviceChannel& ch = channels_[static_cast<std::size_t>(i)];
     publishSample(ch, i, now, readDevice(ch, i, now, out));
   }
-  takeSnapshot(now, out);   // one solve: the wrench on each instrument in out.device[i]
+  const std::int64_t t_read = shared::monotonicNs();
+  out.read_ns = t_read - out.started_ns;
+  const std::int64_t solve_deadline =
+      out.deadline_ns > 0
+          ? std::max(out.deadline_ns - std::min(kOutputReserveNs, settings_.solve_budget_ns / 4),
+                     out.started_ns + 1)
+          : 0;
+  takeSnapshot(now, solve_deadline, out);   // one solve: each instrument's wrench in out.device[i]
+  const std::int64_t t_model = shared::monotonicNs();
+  out.model_ns = t_model - t_read;
   std::array<double, 3> force0{};
   for (int i = 0; i < device_count_; ++i) {
     DeviceChannel& ch = channels_[static_cast<std::size_t>(i)];
@@ -436,6 +561,7 @@ TickOutput HapticLoop::tick(std::int64_t scheduled_ns, std::int64_t woken_ns) no
     if (i == 0) force0 = force;
   }
   static_cast<DeviceTickOutput&>(out) = out.device[0];
+  out.output_ns = shared::monotonicNs() - t_model;
   recordStats(scheduled_ns, woken_ns, out, force0);
   ++tick_index_;
   counters_.ticks.fetch_add(1, std::memory_order_relaxed);

@@ -82,6 +82,12 @@ int main(int argc, char** argv) {
   app.add_option("--nsgs-anderson-depth", settings.anderson_depth,
                  "NSGS Anderson acceleration over this many past sweeps (0: off)")
       ->check(CLI::Range(0, shared::kMaxAndersonDepth))->capture_default_str();
+  std::string local_model = "automatic";
+  app.add_option("--local-model", local_model,
+                 "Local model the tick solves: full (re-solve every tick), linearized (the "
+                 "snapshot's solution linearised in the device pose, re-solve where it does not "
+                 "hold) or automatic (linearized from the size where a re-solve costs more)")
+      ->check(CLI::IsMember({"full", "linearized", "automatic"}))->capture_default_str();
   app.add_flag("--render-torque", settings.render_torque, "Render torques too");
   // the device -> scene workspace mapping (docs/design.md, "Workspace mapping")
   shared::WorkspaceMappingParams workspace;
@@ -156,6 +162,7 @@ int main(int argc, char** argv) {
     settings.render_torque = settings.render_torque && all_rotation;
     settings.period_ns = static_cast<std::int64_t>(std::llround(1e9 / rate_hz));
     settings.solve_budget_ns = settings.period_ns * 4 / 10;
+    settings.local_model = *haptic::parseLocalModelKind(local_model);   // CLI checked the name
 
     // validates the settings and combines each clamp with its device's own limit (one loop for
     // every device: docs/design.md, "Several instruments and devices")

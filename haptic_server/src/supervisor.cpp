@@ -86,6 +86,8 @@ void Supervisor::poll() {
                        "one with another --segment");
   }
   link_ = std::make_unique<AttachedSegment>(std::move(*r.segment));
+  // every new snapshot is prepared on this thread, never in the tick
+  link_->preparer.start(loop_.settings().localModel());
   creator_alive_ = true;
   spdlog::info("attached to segment '{}' (generation {}, up to {} contacts / {} rows)", name_,
                link_->segment.generation(), link_->segment.capacity().max_contacts,

@@ -70,6 +70,10 @@ struct Options {
   int sweeps = 50;
   int anderson_depth = 0;
   double snapshot_blend_ms = 0.0;
+  std::string local_model = "automatic";
+  bool offline = false;
+  double offline_latency_ms = 10.0;
+  double budget_fraction = 0.4;
   double period_us = 0.0;
   std::string reader = "live";
   double wait_s = 10.0;
@@ -153,6 +157,43 @@ int run(const Options& o) {
   std::unique_ptr<ReplayRig> replay_rig;
   std::optional<shared::Segment> attached;
   std::int64_t period_ns = o.period_us > 0.0 ? static_cast<std::int64_t>(o.period_us * 1e3) : 0;
+  if (replay && o.offline) {
+    const std::vector<shared::RecordedSnapshot> snaps = shared::readSnapshotFile(o.replay);
+    OfflineReplayOptions oo;
+    oo.rate_hz = o.rate_hz;
+    oo.latency_ms = o.offline_latency_ms;
+    oo.settings.kind = *haptic::parseLocalModelKind(o.local_model);
+    oo.settings.max_sweeps = o.sweeps;
+    oo.settings.anderson_depth = o.anderson_depth;
+    const OfflineReplayReport r = replayOffline(snaps, oo);
+    const double n = static_cast<double>(std::max<std::uint64_t>(r.ticks, 1));
+    std::printf("offline replay of %s: %zu snapshots, %.0f Hz, snapshots adopted %.1f ms after "
+                "their time; local model %s\n",
+                o.replay.c_str(), snaps.size(), o.rate_hz, o.offline_latency_ms,
+                o.local_model.c_str());
+    std::printf("ticks %llu: linearized %.2f %%, fallback %.2f %%, full %.2f %%; converged %.2f %% "
+                "(reference not converged: %llu)\n",
+                static_cast<unsigned long long>(r.ticks), 100.0 * r.linearized / n,
+                100.0 * r.fallbacks / n, 100.0 * r.full / n, 100.0 * r.converged / n,
+                static_cast<unsigned long long>(r.reference_not_converged));
+    std::printf("fallback reasons:");
+    for (std::size_t k = 1; k < r.fallback_reasons.size(); ++k) {
+      if (r.fallback_reasons[k] == 0) continue;
+      std::printf(" %s %llu",
+                  std::string(haptic::toString(static_cast<haptic::FallbackReason>(k))).c_str(),
+                  static_cast<unsigned long long>(r.fallback_reasons[k]));
+    }
+    const Percentiles e = summarize(r.force_error);
+    const Percentiles su = summarize(r.solve_us);
+    const Percentiles pm = summarize(r.prepare_ms);
+    std::printf("\nheld force (median |F| of the full problem) %.4f N; |F_model - F_full| / held: "
+                "p50 %.4f %%, p99 %.4f %%, max %.4f %%\n",
+                r.held_force_n, 100.0 * e.p50, 100.0 * e.p99, 100.0 * e.max);
+    std::printf("model solve (offline) p50 %.1f us, p99 %.1f us, max %.1f us; preparation p50 "
+                "%.2f ms, p99 %.2f ms, max %.2f ms\n",
+                su.p50, su.p99, su.max, pm.p50, pm.p99, pm.max);
+    return 0;
+  }
   if (replay) {
     std::vector<shared::RecordedSnapshot> snaps = shared::readSnapshotFile(o.replay);
     ReplayOptions ro;
@@ -163,17 +204,20 @@ int run(const Options& o) {
     ro.max_sweeps = o.sweeps;
     ro.anderson_depth = o.anderson_depth;
     ro.snapshot_blend_ms = o.snapshot_blend_ms;
+    ro.local_model = *haptic::parseLocalModelKind(o.local_model);
+    ro.solve_budget_fraction = o.budget_fraction;
     replay_rig = std::make_unique<ReplayRig>(std::move(snaps), ro);
     period_ns = replay_rig->periodNs();
     std::printf(
         "replay: %zu snapshots from %s (%.2f s per pass%s), up to %d rows (%d contacts), "
         "%d device(s); "
-        "loop %.0f Hz on core %d, SCHED_FIFO %d, %d sweeps max, budget %.0f us; reader: %s; "
-        "NSGS kernel %s\n",
+        "loop %.0f Hz on core %d, SCHED_FIFO %d, %d sweeps max, deadline %.0f us, local model "
+        "%s; reader: %s; NSGS kernel %s\n",
         replay_rig->snapshotCount(), o.replay.c_str(), 1e-9 * static_cast<double>(replay_rig->passNs()),
         o.loop_replay ? ", looping" : "", replay_rig->maxRows(), replay_rig->maxContacts(),
         replay_rig->devices(),
-        o.rate_hz, core, o.priority, o.sweeps, 0.4 * 1e-3 * static_cast<double>(period_ns),
+        o.rate_hz, core, o.priority, o.sweeps,
+        o.budget_fraction * 1e-3 * static_cast<double>(period_ns), o.local_model.c_str(),
         o.reader.c_str(), shared::nsgsKernelName(shared::nsgsKernel()));
     if (!o.loop_replay && shared::secondsToNs(o.duration_s) > replay_rig->passNs()) {
       std::printf(
@@ -191,6 +235,8 @@ int run(const Options& o) {
     so.max_sweeps = o.sweeps;
     so.anderson_depth = o.anderson_depth;
     so.snapshot_blend_ms = o.snapshot_blend_ms;
+    so.local_model = *haptic::parseLocalModelKind(o.local_model);
+    so.solve_budget_fraction = o.budget_fraction;
     rig = std::make_unique<SyntheticRig>(so);
     period_ns = rig->periodNs();
     const auto& p = rig->problem();
@@ -199,7 +245,7 @@ int run(const Options& o) {
         "loop %.0f Hz on core %d, SCHED_FIFO %d, %d sweeps max, budget %.0f us; "
         "snapshots at %.0f Hz; reader: %s; NSGS kernel %s\n",
         p.rows, p.contacts, p.solve_sweeps, p.solve_error, o.rate_hz, core, o.priority, o.sweeps,
-        0.4 * 1e-3 * static_cast<double>(period_ns), o.sim_rate_hz, o.reader.c_str(),
+        o.budget_fraction * 1e-3 * static_cast<double>(period_ns), o.sim_rate_hz, o.reader.c_str(),
         shared::nsgsKernelName(shared::nsgsKernel()));
   } else {
     attached = waitForSegment(o.segment, o.wait_s);
@@ -405,6 +451,22 @@ int main(int argc, char** argv) {
                  "Synthetic/replay: blend each new snapshot's force in over this time [ms] "
                  "(haptic_server --snapshot-blend-ms; 0: off)")
       ->check(shared::finiteRange(0.0, shared::HapticLimits::kMaxSnapshotBlendMs, "ms"));
+  app.add_option("--local-model", o.local_model,
+                 "Synthetic/replay: the local model (haptic_server --local-model)")
+      ->check(CLI::IsMember({"full", "linearized", "automatic"}))
+      ->capture_default_str();
+  app.add_flag("--offline", o.offline,
+               "Replay: no real-time loop; tick the recording's timeline and compare the local "
+               "model's force with the full problem solved to 1e-9 at the same poses");
+  app.add_option("--offline-latency-ms", o.offline_latency_ms,
+                 "Offline replay: time from a snapshot to the tick adopting it [ms]")
+      ->check(CLI::Range(0.0, 1000.0))
+      ->capture_default_str();
+  app.add_option("--budget-fraction", o.budget_fraction,
+                 "Synthetic/replay: the tick's deadline as a fraction of the period "
+                 "(haptic_server uses 0.4)")
+      ->check(CLI::Range(0.01, 0.9))
+      ->capture_default_str();
   app.add_option("--sweeps", o.sweeps, "Synthetic/replay: NSGS sweeps per tick")
       ->check(CLI::Range(1, 10000))
       ->capture_default_str();

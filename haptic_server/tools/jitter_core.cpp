@@ -53,7 +53,15 @@ void JitterCollector::add(const shared::StatsRecord& r) {
     } else {
       ++non_finite_;
     }
+    if (r.model >= 0 && r.model < 4) ++model_counts_[r.model];
+    if (r.model == shared::kStatsModelFallbackSolve) {
+      fallback_us_.push_back(1e-3 * static_cast<double>(r.solve_ns));
+    }
+    model_us_.push_back(1e-3 * static_cast<double>(r.model_ns));
   }
+  if (r.started_ns > 0) work_us_.push_back(1e-3 * static_cast<double>(r.finished_ns - r.started_ns));
+  if (r.deadline_ns > 0) deadline_us_.push_back(1e-3 * static_cast<double>(r.deadline_ns - r.started_ns));
+  if ((r.flags & shared::kStatsDeadlineMissed) != 0) ++deadline_missed_;
   const bool flagged = (r.flags & shared::kStatsOverrun) != 0;
   flagged_.push_back(flagged ? 1 : 0);
   if (flagged) ++overrun_flags_;
@@ -99,6 +107,14 @@ JitterReport JitterCollector::report() const {
   rep.tick_us = summarize(tick_us_);
   rep.solve_us = summarize(solve_us_);
   rep.sweeps = summarize(sweeps_);
+  rep.work_us = summarize(work_us_);
+  rep.model_us = summarize(model_us_);
+  rep.fallback_us = summarize(fallback_us_);
+  rep.deadline_us_p50 = summarize(deadline_us_).p50;
+  rep.model_full = model_counts_[shared::kStatsModelFull];
+  rep.model_linearized = model_counts_[shared::kStatsModelLinearized];
+  rep.model_fallback = model_counts_[shared::kStatsModelFallbackSolve];
+  rep.deadline_missed = deadline_missed_;
   rep.contacts_p50 = summarize(contacts_).p50;
   rep.residual_p50 = summarize(residuals_).p50;
   return rep;
@@ -132,6 +148,9 @@ std::string formatTable(const JitterReport& r, const Percentiles* bare,
   out += row("tick duration", r.tick_us, 2);
   out += row("solve time", r.solve_us, 2);
   out += row("sweeps [count]", r.sweeps, 0);
+  out += row("tick work (deadline)", r.work_us, 2);
+  out += row("model phase", r.model_us, 2);
+  if (r.fallback_us.count > 0) out += row("fallback solve", r.fallback_us, 2);
   if (bare != nullptr) {
     out += row("bare loop period err", *bare, 2);
     out += fmt::format(
@@ -152,6 +171,15 @@ std::string formatTable(const JitterReport& r, const Percentiles* bare,
         "ticks with contacts {} (median {:.0f} contacts), residual p50 {:.2e}, "
         "not converged {}, non-finite residuals {}\n",
         r.solved, r.contacts_p50, r.residual_p50, r.not_converged, r.non_finite_residuals);
+    const double solved = static_cast<double>(r.solved);
+    out += fmt::format(
+        "local model: full {} ({:.2f} %), linearized {} ({:.2f} %), fallback re-solve {} "
+        "({:.2f} %); converged {:.2f} %; deadline {:.1f} us after the start, missed {}\n",
+        r.model_full, 100.0 * static_cast<double>(r.model_full) / solved, r.model_linearized,
+        100.0 * static_cast<double>(r.model_linearized) / solved, r.model_fallback,
+        100.0 * static_cast<double>(r.model_fallback) / solved,
+        100.0 * (solved - static_cast<double>(r.not_converged)) / solved, r.deadline_us_p50,
+        r.deadline_missed);
   }
   return out;
 }
@@ -166,7 +194,8 @@ std::string formatLine(double t_s, const JitterReport& r, std::uint64_t lost_tot
 
 const char* CsvWriter::header() {
   return "tick,scheduled_ns,woken_ns,finished_ns,period_error_ns,tick_ns,solve_ns,sweeps,residual,"
-         "contacts,force_norm_n,snapshot_seq,flags";
+         "contacts,force_norm_n,snapshot_seq,flags,model,read_ns,model_ns,output_ns,deadline_ns,"
+         "prepare_ns";
 }
 
 CsvWriter::CsvWriter(const std::string& path) : path_(path) {
@@ -185,7 +214,9 @@ CsvWriter::~CsvWriter() {
 }
 
 void CsvWriter::write(const shared::StatsRecord& r) {
-  std::fprintf(file_, "%llu,%lld,%lld,%lld,%lld,%lld,%lld,%lld,%.6g,%lld,%.6g,%llu,%llu\n",
+  std::fprintf(file_,
+               "%llu,%lld,%lld,%lld,%lld,%lld,%lld,%lld,%.6g,%lld,%.6g,%llu,%llu,%lld,%lld,%lld,"
+               "%lld,%lld,%lld\n",
                static_cast<unsigned long long>(r.tick), static_cast<long long>(r.scheduled_ns),
                static_cast<long long>(r.woken_ns), static_cast<long long>(r.finished_ns),
                static_cast<long long>(r.woken_ns - r.scheduled_ns),
@@ -193,7 +224,11 @@ void CsvWriter::write(const shared::StatsRecord& r) {
                static_cast<long long>(r.solve_ns), static_cast<long long>(r.sweeps), r.residual,
                static_cast<long long>(r.contacts), r.force_norm_n,
                static_cast<unsigned long long>(r.snapshot_seq),
-               static_cast<unsigned long long>(r.flags));
+               static_cast<unsigned long long>(r.flags), static_cast<long long>(r.model),
+               static_cast<long long>(r.read_ns), static_cast<long long>(r.model_ns),
+               static_cast<long long>(r.output_ns),
+               static_cast<long long>(r.deadline_ns > 0 ? r.deadline_ns - r.started_ns : 0),
+               static_cast<long long>(r.prepare_ns));
 }
 
 void CsvWriter::close() {

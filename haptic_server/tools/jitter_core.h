@@ -54,6 +54,11 @@ struct JitterReport {
   /// publisher was late past the watchdog, e.g. starved of CPU)
   std::uint64_t stale = 0;
   std::uint64_t not_converged = 0;  ///< records flagged kStatsSolverNotConverged
+  /// the local model each solving tick used (StatsRecord::model): full re-solve, the
+  /// linearisation, a re-solve where the linearisation did not hold
+  std::uint64_t model_full = 0, model_linearized = 0, model_fallback = 0;
+  std::uint64_t deadline_missed = 0;  ///< records flagged kStatsDeadlineMissed
+  double deadline_us_p50 = 0.0;     ///< the tick's budget (deadline - start), median
   std::uint64_t non_finite_residuals = 0;
   std::int64_t period_ns = 0;  ///< given, or the median scheduled-time step
   double span_s = 0.0;         ///< last woken - first woken
@@ -64,6 +69,9 @@ struct JitterReport {
   Percentiles tick_us;          ///< finished - woken
   Percentiles solve_us;         ///< solve_ns (ticks with contacts only)
   Percentiles sweeps;           ///< sweeps (ticks with contacts only)
+  Percentiles work_us;          ///< finished - started: the tick's work against its deadline
+  Percentiles model_us;         ///< the phase taking the snapshot and solving the model
+  Percentiles fallback_us;      ///< solve time of the fallback ticks
 };
 
 /// Accumulates StatsRecords (in order, as a reader returns them).
@@ -91,6 +99,9 @@ class JitterCollector {
   std::vector<std::int64_t> steps_ns_;
   std::uint64_t overrun_flags_ = 0;
   std::uint64_t not_converged_ = 0;
+  std::uint64_t model_counts_[4] = {};
+  std::uint64_t deadline_missed_ = 0;
+  std::vector<double> work_us_, model_us_, fallback_us_, deadline_us_;
   std::uint64_t stale_ = 0;
   std::uint64_t non_finite_ = 0;
   std::uint64_t lost_ = 0;
@@ -108,7 +119,8 @@ std::string formatLine(double t_s, const JitterReport& interval, std::uint64_t l
 
 /// CSV with a header and one row per record:
 /// tick,scheduled_ns,woken_ns,finished_ns,period_error_ns,tick_ns,solve_ns,sweeps,residual,
-/// contacts,force_norm_n,snapshot_seq,flags
+/// contacts,force_norm_n,snapshot_seq,flags,model,read_ns,model_ns,output_ns,deadline_ns,prepare_ns
+/// (model: StatsModel; deadline_ns relative to the tick's start, 0: none)
 class CsvWriter {
  public:
   /// Opens (truncates) `path`; throws tactus::Error when it cannot.

@@ -11,6 +11,7 @@
 #include "tactus/shared/clock.h"
 #include "tactus/shared/error.h"
 #include "tactus/shared/rt.h"
+#include "tactus/haptic/local_model.h"
 
 namespace tactus::haptic::jitter {
 namespace {
@@ -113,6 +114,84 @@ void ReplayRig::start() {
       ++i;
     }
   });
+}
+
+OfflineReplayReport replayOffline(const std::vector<shared::RecordedSnapshot>& snapshots,
+                                  const OfflineReplayOptions& options) {
+  const shared::SegmentCapacity cap = capacityFor(snapshots);
+  const shared::SnapshotLayout layout =
+      shared::SnapshotLayout::forCapacity(cap.max_rows, cap.max_contacts);
+  std::vector<unsigned char> bytes(layout.total_bytes + shared::kCacheLineBytes);
+  const auto misalign = reinterpret_cast<std::uintptr_t>(bytes.data()) % shared::kCacheLineBytes;
+  unsigned char* base = bytes.data() + (shared::kCacheLineBytes - misalign) % shared::kCacheLineBytes;
+  OfflineLocalModel model(cap.max_rows, cap.max_contacts, options.settings);
+  LocalModelSettings ref_settings = options.settings;
+  ref_settings.kind = LocalModelKind::kFull;
+  ref_settings.tolerance = options.reference_tolerance;
+  ref_settings.max_sweeps = 100'000;
+  OfflineLocalModel full(cap.max_rows, cap.max_contacts, ref_settings);
+  // the replay device's path about each snapshot's recorded pose
+  std::vector<std::unique_ptr<CircleDevice>> devices = devicesFor(snapshots);
+  CircleDevice& device = *devices.front();
+  const std::int64_t period = static_cast<std::int64_t>(std::llround(1e9 / options.rate_hz));
+  const std::int64_t latency = static_cast<std::int64_t>(std::llround(options.latency_ms * 1e6));
+  const std::int64_t t_first = snapshots.front().t_ns;
+  const std::int64_t pass = snapshots.back().t_ns - t_first + firstStepNs(snapshots);
+  OfflineReplayReport rep;
+  std::vector<double> held;
+  std::vector<std::array<double, 3>> model_f, full_f;
+  std::size_t next = 0;
+  bool adopted = false;
+  for (int k = 0; k < options.passes; ++k) {
+    next = 0;
+    for (std::int64_t t = 0; t < pass; t += period) {
+      // the device: the circle about the newest snapshot's pose at time t (as CircleDevice)
+      while (next < snapshots.size() && snapshots[next].t_ns - t_first + latency <= t) ++next;
+      if (next == 0) continue;
+      const std::size_t i = next - 1;
+      device.follow(i);
+      device::DeviceState st;
+      (void)device.readAt(t, &st);
+      shared::Pose pose;
+      pose.pos_m = Eigen::Vector3d(st.pos_m[0], st.pos_m[1], st.pos_m[2]);
+      pose.rot = Eigen::Quaterniond(st.quat_wxyz[0], st.quat_wxyz[1], st.quat_wxyz[2],
+                                    st.quat_wxyz[3]).normalized();
+      const shared::Pose* poses[] = {&pose};
+      if (!adopted || model.prepared().seq() != i + 1) {
+        shared::SnapshotWriter slot(base, layout);
+        snapshots[i].writeTo(slot, i + 1, t);
+        (void)model.adopt(slot.view(), poses);
+        (void)full.adopt(slot.view(), poses);
+        rep.prepare_ms.push_back(1e-6 * static_cast<double>(model.prepared().prepareNs()));
+        adopted = true;
+      }
+      const LocalModelResult r = model.solve(poses);
+      const LocalModelResult ref = full.solve(poses);
+      if (!r.solved()) continue;
+      ++rep.ticks;
+      rep.converged += r.converged() ? 1 : 0;
+      rep.linearized += r.used == LocalModelUsed::kLinearized ? 1 : 0;
+      rep.fallbacks += r.used == LocalModelUsed::kFallback ? 1 : 0;
+      rep.full += r.used == LocalModelUsed::kFull ? 1 : 0;
+      ++rep.fallback_reasons[static_cast<std::size_t>(r.fallback)];
+      rep.reference_not_converged += ref.converged() ? 0 : 1;
+      rep.solve_us.push_back(1e-3 * static_cast<double>(r.elapsed_ns));
+      model_f.push_back(r.force_n[0]);
+      full_f.push_back(ref.force_n[0]);
+      held.push_back(std::hypot(ref.force_n[0][0], ref.force_n[0][1], ref.force_n[0][2]));
+    }
+  }
+  if (held.empty()) return rep;
+  std::vector<double> sorted = held;
+  std::nth_element(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(sorted.size() / 2),
+                   sorted.end());
+  rep.held_force_n = sorted[sorted.size() / 2];
+  for (std::size_t j = 0; j < model_f.size(); ++j) {
+    const double d = std::hypot(model_f[j][0] - full_f[j][0], model_f[j][1] - full_f[j][1],
+                                model_f[j][2] - full_f[j][2]);
+    rep.force_error.push_back(rep.held_force_n > 0.0 ? d / rep.held_force_n : 0.0);
+  }
+  return rep;
 }
 
 }  // namespace tactus::haptic::jitter

@@ -68,4 +68,30 @@ class ReplayRig {
   LoopRig rig_;
 };
 
+/// The replay without the real-time loop, for accuracy: the recording's timeline ticked at
+/// `rate_hz`, each snapshot adopted `latency_ms` after its time and prepared at the device's pose
+/// of that moment, the device on the replay's circle (CircleDevice's path about the recorded
+/// device pose). Every tick solves the local model as the loop would (settings.kind) and the full
+/// problem to `reference_tolerance` (warm-started from the previous tick), and compares the
+/// wrenches on instrument 0.
+struct OfflineReplayOptions {
+  double rate_hz = 1000.0;
+  double latency_ms = 10.0;            ///< from a snapshot's time to the tick adopting it
+  LocalModelSettings settings;         ///< the model the loop renders
+  double reference_tolerance = 1e-9;   ///< the full problem's
+  int passes = 1;
+};
+struct OfflineReplayReport {
+  std::uint64_t ticks = 0, linearized = 0, fallbacks = 0, full = 0, converged = 0;
+  std::uint64_t reference_not_converged = 0;
+  /// |F_model - F_full| / held force (the median |F_full| over the ticks), per tick
+  std::vector<double> force_error;
+  std::vector<double> solve_us;           ///< the model's solve (offline wall time)
+  std::vector<double> prepare_ms;         ///< each preparation's time
+  double held_force_n = 0.0;
+  std::array<std::uint64_t, 8> fallback_reasons{};   ///< by FallbackReason
+};
+OfflineReplayReport replayOffline(const std::vector<shared::RecordedSnapshot>& snapshots,
+                                  const OfflineReplayOptions& options);
+
 }  // namespace tactus::haptic::jitter

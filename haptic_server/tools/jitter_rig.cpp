@@ -34,14 +34,20 @@ device::DeviceInfo CircleDevice::info() const {
 
 device::IoStatus CircleDevice::read(device::DeviceState* out) noexcept {
   const std::int64_t now = shared::monotonicNs();
-  const double t = 1e-9 * static_cast<double>(now - t0_ns_);
+  const device::IoStatus io = readAt(now - t0_ns_, out);
+  out->t_ns = now;
+  return io;
+}
+
+device::IoStatus CircleDevice::readAt(std::int64_t t_ns, device::DeviceState* out) const noexcept {
+  const double t = 1e-9 * static_cast<double>(t_ns);
   const double c = std::cos(omega_ * t);
   const double s = std::sin(omega_ * t);
   // relaxed: any recent index will do
   const std::size_t i = std::min(index_.load(std::memory_order_relaxed), centres_.size() - 1);
   const shared::PoseSample& centre = centres_[i];
   // a small circle starting at the centre, pressing in by up to one radius
-  out->t_ns = now;
+  out->t_ns = t_ns;
   out->pos_m = {centre.pos_m[0] + radius_m_ * (c - 1.0), centre.pos_m[1] + radius_m_ * s,
                 centre.pos_m[2] - 0.5 * radius_m_ * (1.0 - c)};
   out->vel_mps = {-radius_m_ * omega_ * s, radius_m_ * omega_ * c, -0.5 * radius_m_ * omega_ * s};
@@ -87,6 +93,7 @@ LoopRig::LoopRig(const std::string& segment_name, shared::SegmentCapacity capaci
   settings_.solve_budget_ns = static_cast<std::int64_t>(options.solve_budget_fraction *
                                                         static_cast<double>(settings_.period_ns));
   settings_.max_sweeps = options.max_sweeps;
+  settings_.local_model = options.local_model;
   settings_.anderson_depth = options.anderson_depth;
   settings_.snapshot_blend_ms = options.snapshot_blend_ms;
   settings_.engage_threshold_n = 1e9;
@@ -96,6 +103,7 @@ LoopRig::LoopRig(const std::string& segment_name, shared::SegmentCapacity capaci
   loop_ = std::make_unique<HapticLoop>(ptrs, settings_);
   link_ = std::make_unique<AttachedSegment>(
       shared::Segment::open(segment_.name(), shared::Access::kReadWrite));
+  link_->preparer.start(settings_.localModel());   // as haptic_server: off the real-time thread
   core_ = options.core >= 0 ? options.core : shared::availableCpuCount() - 1;
 }
 

@@ -33,6 +33,8 @@ class CircleDevice : public device::Device {
   void enableForces(bool) override {}
   void close() noexcept override {}
   [[nodiscard]] device::IoStatus read(device::DeviceState* out) noexcept override;
+  /// The sample read() gives `t_ns` after the device was made (offline replays).
+  device::IoStatus readAt(std::int64_t t_ns, device::DeviceState* out) const noexcept;
   [[nodiscard]] device::IoStatus write(const device::DeviceCommand& cmd) noexcept override;
   /// Selects the centre the device circles about (index into the table; clamped).
   void follow(std::size_t index) noexcept { index_.store(index, std::memory_order_relaxed); }
@@ -57,7 +59,8 @@ struct LoopRunOptions {
   int max_sweeps = 50;                 ///< NSGS sweeps per tick
   int anderson_depth = 0;              ///< NSGS Anderson acceleration (HapticSettings)
   double snapshot_blend_ms = 0.0;      ///< HapticSettings::snapshot_blend_ms
-  double solve_budget_fraction = 0.4;  ///< NSGS time budget as a fraction of the period
+  double solve_budget_fraction = 0.4;  ///< the tick's deadline as a fraction of the period
+  LocalModelKind local_model = LocalModelKind::kAutomatic;   ///< HapticSettings::local_model
 };
 
 /// The loop's settings in an in-process mode.

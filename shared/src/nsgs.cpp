@@ -276,7 +276,19 @@ NsgsResult solveWith(const ContactProblemView& p, const Storage& w, const NsgsSe
       }
     }
   }
+  const std::int64_t deadline = settings.deadline_ns;
+  auto pastDeadline = [&]() { return deadline > 0 && nowNs() >= deadline; };
+  auto stopAtDeadline = [&](double error) {
+    result.status = NsgsStatus::kTimeBudget;
+    result.error = error;
+    result.sor = sor;
+    result.elapsed_ns = nowNs() - t0;
+    return result;
+  };
   double delta2 = 0.0;
+  if (!delta_current && pastDeadline()) {
+    return stopAtDeadline(std::numeric_limits<double>::infinity());
+  }
   if (delta_current) {
     for (int j = 0; j < m; ++j) delta2 += delta[j] * delta[j];
   } else {
@@ -320,9 +332,17 @@ NsgsResult solveWith(const ContactProblemView& p, const Storage& w, const NsgsSe
   // running delta)
   detail::Anderson anderson(row_gather ? 0 : settings.anderson_depth, m,
                             workspace.anderson.data());
+  std::int64_t sweep_start = nowNs();
+  std::int64_t last_sweep_ns = 0;
   for (int sweep = 1; sweep <= max_sweeps; ++sweep) {
     anderson.keepInput(f);
+    bool stopped_inside = false;
     for (int i = 0; i < nc; ++i) {
+      if (deadline > 0 && i % kDeadlineCheckContacts == kDeadlineCheckContacts - 1 &&
+          pastDeadline()) {
+        stopped_inside = true;
+        break;
+      }
       const int r = p.row_offset[i];
       const int k = p.row_offset[i + 1] - r;
       double* fi = f + r;
@@ -348,14 +368,22 @@ NsgsResult solveWith(const ContactProblemView& p, const Storage& w, const NsgsSe
       }
     }
     result.sweeps = sweep;
+    const std::int64_t sweep_end = nowNs();
+    last_sweep_ns = sweep_end - sweep_start;
+    sweep_start = sweep_end;
+    const bool over_deadline = stopped_inside || (deadline > 0 && sweep_end >= deadline);
     const bool over_budget =
-        settings.time_budget_ns > 0 && nowNs() - t0 >= settings.time_budget_ns;
+        over_deadline || (settings.time_budget_ns > 0 && sweep_end - t0 >= settings.time_budget_ns);
     const bool last = sweep == max_sweeps || over_budget;
     if (sweep % check_every != 0 && !last) continue;
     if (row_gather) w.computeDelta(f, delta);
     result.error = normalisedError(errorParts(p, f, delta), q2);
     if (!std::isfinite(result.error)) return fail(NsgsStatus::kNonFinite);
     if (result.error <= settings.tolerance && !row_gather) {
+      // no time left for the confirmation pass (about one sweep): not claimed
+      if (deadline > 0 && nowNs() + last_sweep_ns >= deadline) {
+        return stopAtDeadline(result.error);
+      }
       // claim checked against delta = W f + q formed afresh (the running delta accumulates
       // rounding, worst when f is large)
       formDelta();

@@ -56,6 +56,7 @@ TEST(JitterSynthetic, ShortRunSolvesEveryContactEveryTick) {
   SyntheticOptions o;
   o.problem.rows = 150;
   o.rate_hz = 1000.0;
+  o.local_model = haptic::LocalModelKind::kFull;   // NSGS every tick (sweeps counted below)
   SyntheticRig rig(o);
   RingFollower follower(rig.segment(), shared::StatsRingReader::Start::kOldest);
   JitterCollector c;

@@ -309,9 +309,10 @@ TEST(HapticSettingsValidate, RejectsEveryNonFiniteOrOutOfRangeValueNamingIt) {
       {"period_ns",
        [](HapticSettings& s, double v) { s.period_ns = static_cast<std::int64_t>(v); },
        {0.0, -1.0, 1e12}},
+      // (the default period is 1 ms: a budget past 90 % of it leaves no room)
       {"solve_budget_ns",
        [](HapticSettings& s, double v) { s.solve_budget_ns = static_cast<std::int64_t>(v); },
-       {-1.0, 1e12}},
+       {-1.0, 1e12, 950'000.0, 1'000'000.0}},
   };
   for (const Case& c : cases) {
     for (double v : c.bad) {
@@ -329,6 +330,24 @@ TEST(HapticSettingsValidate, RejectsEveryNonFiniteOrOutOfRangeValueNamingIt) {
       EXPECT_THROW(haptic::HapticLoop(device, s), Error) << c.name << " = " << v;
     }
   }
+}
+
+// No deadline at all (budget 0) only with a bounded sweep count; the default budget is valid.
+TEST(HapticSettingsValidation, ABudgetOfZeroNeedsFewSweeps) {
+  HapticSettings s;
+  EXPECT_NO_THROW(s.validate());
+  s.solve_budget_ns = 0;
+  s.max_sweeps = HapticSettingsLimits::kMaxSweepsWithoutBudget;
+  EXPECT_NO_THROW(s.validate());
+  s.max_sweeps = 100'000;
+  try {
+    s.validate();
+    ADD_FAILURE() << "budget 0 with 100000 sweeps accepted";
+  } catch (const Error& e) {
+    EXPECT_THAT(e.what(), HasSubstr("no deadline"));
+  }
+  test::ScriptedDevice device;
+  EXPECT_THROW(haptic::HapticLoop(device, s), Error);
 }
 
 TEST(HapticDeviceLimit, APluginsNonsenseMaxForceIsIgnoredAndASaneOneLowersTheClamp) {

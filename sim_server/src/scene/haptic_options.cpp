@@ -22,6 +22,11 @@ std::vector<std::string> hapticServerOptions(const HapticsSpec& haptics) {
   if (haptics.snapshot_blend_ms > 0.0) {
     options.push_back(fmt::format("--snapshot-blend-ms={:.17g}", haptics.snapshot_blend_ms));
   }
+  if (haptics.local_model != HapticLocalModel::kAutomatic) {
+    options.push_back(fmt::format("--local-model={}", haptics.local_model == HapticLocalModel::kFull
+                                                          ? "full"
+                                                          : "linearized"));
+  }
   // haptics.workspaces: every field of each device's own mapping (haptic_server's
   // --workspace-option I:key=value; the scene parser refuses it together with `workspace`)
   for (std::size_t i = 0; i < haptics.workspaces.size(); ++i) {

@@ -106,7 +106,7 @@ void SceneParser::readHaptics(const YAML::Node& n, HapticsSpec* h, int instrumen
   const std::string p = "haptics";
   checkKeys(n, p, {"enabled", "rate", "device", "force_scale", "max_force", "watchdog_ms",
                    "max_sweeps_per_tick", "nsgs_tolerance", "nsgs_anderson_depth",
-                   "snapshot_blend_ms", "workspace", "workspaces"});
+                   "snapshot_blend_ms", "local_model", "workspace", "workspaces"});
   h->enabled = true;  // a haptics section turns haptics on unless it says otherwise
   boolean(n, p, "enabled", &h->enabled);
   number(n, p, "rate", &h->rate_hz, kPositive, Range{L::kMinRateHz, L::kMaxRateHz},
@@ -124,6 +124,10 @@ void SceneParser::readHaptics(const YAML::Node& n, HapticsSpec* h, int instrumen
           shared::kMaxAndersonDepth);
   number(n, p, "snapshot_blend_ms", &h->snapshot_blend_ms, kNonNegative,
          kAtMost(L::kMaxSnapshotBlendMs), kNonNegativeUpTo(L::kMaxSnapshotBlendMs));
+  choice(n, p, "local_model", &h->local_model,
+         {{"automatic", HapticLocalModel::kAutomatic},
+          {"full", HapticLocalModel::kFull},
+          {"linearized", HapticLocalModel::kLinearized}});
   YAML::Node w;
   if (section(n, p, "workspace", &w)) readWorkspace(w, p + ".workspace", &h->workspace);
   readWorkspaces(n, h, instruments);

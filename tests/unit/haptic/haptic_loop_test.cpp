@@ -28,7 +28,8 @@ class HapticLoopTest : public test::HapticSegmentTest {
   // with zero J (the device does not move delta_free) and the given flags.
   void publishProblem(const std::vector<int>& row_offset, const std::vector<double>& W,
                       const std::vector<double>& delta_free, const std::vector<double>& f,
-                      const std::vector<std::array<double, 3>>& normals, std::uint32_t flags) {
+                      const std::vector<std::array<double, 3>>& normals, std::uint32_t flags,
+                      double jz = 0.0) {
     auto slot = publisher_.slot();
     const int contacts = static_cast<int>(normals.size());
     const int rows = static_cast<int>(delta_free.size());
@@ -54,7 +55,7 @@ class HapticLoopTest : public test::HapticSegmentTest {
       for (int j = 0; j < rows; ++j) slot.W()[i * slot.ld() + j] = W[i * rows + j];
       slot.deltaFree()[i] = delta_free[i];
       slot.f()[i] = f[i];
-      for (int k = 0; k < 6; ++k) slot.J()[6 * i + k] = 0.0;
+      for (int k = 0; k < 6; ++k) slot.J()[6 * i + k] = k == 2 ? jz : 0.0;
     }
     publisher_.publish();
   }
@@ -404,15 +405,23 @@ TEST_F(HapticLoopTest, ClampSolverNoDataAndOverrunRaiseTheirEventsAndFlags) {
   codes = drain();
   EXPECT_EQ(std::count(codes.begin(), codes.end(), shared::kEventOverrun), 1);
 
-  // a loop allowed one sweep on a strongly coupled two-contact problem does not converge
+  // a loop allowed one sweep on a strongly coupled two-contact problem does not converge once
+  // the device has moved away from where the snapshot was prepared (the full re-solve)
   loop_->offerLink(nullptr);
   tickFor(1);
   settings_.max_sweeps = 1;
+  settings_.local_model = LocalModelKind::kFull;
   loop_.emplace(device_, settings_);
   loop_->offerLink(link_.get());
-  publishProblem({0, 1, 2}, {1e-3, 0.9e-3, 0.9e-3, 1e-3}, {-1e-3, -2e-3}, {0.0, 0.0},
+  device_.state.pos_m = {0.0, 0.0, 0.0};
+  publishProblem({0, 1, 2}, {1e-3, 0.9e-3, 0.9e-3, 1e-3}, {-2e-3, -2e-3}, {0.0, 0.0},
                  {{0.0, 0.0, 1.0}, {0.0, 0.0, 1.0}},
-                 shared::kSnapshotValid | shared::kSnapshotSymmetricW);
+                 shared::kSnapshotValid | shared::kSnapshotSymmetricW |
+                     shared::kSnapshotHasJacobian,
+                 1.0);
+  out = tickFor(1);
+  EXPECT_EQ(out.flags & shared::kStatsSolverNotConverged, 0u) << "prepared at this pose";
+  device_.state.pos_m = {0.0, 0.0, -5e-4};
   out = tickFor(1);
   EXPECT_NE(out.flags & shared::kStatsSolverNotConverged, 0u);
   tickFor(1);
@@ -446,15 +455,17 @@ class LargeProblemRig {
   /// Contact c's instrument (-1: an obstacle's or another body's contact, no instrument)
   using Tool = int (*)(int c);
 
-  LargeProblemRig(const std::string& tag, Coupling coupling, Tool tool = nullptr)
+  LargeProblemRig(const std::string& tag, Coupling coupling, Tool tool = nullptr,
+                  LocalModelKind kind = LocalModelKind::kFull, int contacts = kContacts)
       : name_("tactus_haptic_large_" + tag + std::to_string(::getpid())), coupling_(coupling),
-        tool_(tool) {
+        tool_(tool), contacts_(contacts) {
     shared::Segment::remove(name_);
     sim_.emplace(
-        shared::Segment::create(name_, shared::SegmentCapacity::forContacts(kContacts, true)));
+        shared::Segment::create(name_, shared::SegmentCapacity::forContacts(contacts_, true)));
     publisher_ = sim_->snapshotPublisher();
-    settings_.solve_budget_ns = 1'000'000'000;   // sweeps bound the solve, not the clock
+    settings_.solve_budget_ns = 0;   // sweeps bound the solve, not the clock
     settings_.max_sweeps = 20;
+    settings_.local_model = kind;
     loop_.emplace(device_, settings_);
     link_ = std::make_unique<AttachedSegment>(shared::Segment::open(name_));
     loop_->offerLink(link_.get());
@@ -468,6 +479,8 @@ class LargeProblemRig {
   }
 
   void publish(double depth_m) {
+    const int kContacts = contacts_;
+    const int kRows = 3 * contacts_;
     auto slot = publisher_.slot();
     ASSERT_TRUE(slot.setSize(kRows, kContacts));
     auto& h = slot.header();
@@ -504,11 +517,14 @@ class LargeProblemRig {
 
   ScriptedDevice& device() { return device_; }
   AttachedSegment& link() { return *link_; }
+  const PreparedSnapshot& prepared() { return *link_->model.adopted(); }
+  HapticLoop& loop() { return *loop_; }
 
  private:
   std::string name_;
   Coupling coupling_;
   Tool tool_;
+  int contacts_ = kContacts;
   std::optional<shared::Segment> sim_;
   shared::SnapshotPublisher publisher_;
   ScriptedDevice device_;
@@ -604,18 +620,18 @@ TEST(HapticLoopLarge, AFrictionalTickOf450RowsAllocatesNothing) {
   EXPECT_EQ(out.contacts, LargeProblemRig::kContacts);
   EXPECT_GT(out.sweeps, 0);
   EXPECT_GT(out.unlimited_force_norm_n, 0.0);
-  EXPECT_FALSE(rig.link().use_blocks);   // one tissue: dense
+  EXPECT_FALSE(rig.prepared().usesBlocks());   // one tissue: dense
 }
 
-// Several bodies: the tick converts each new snapshot's W to blocks (in the tick, without
-// allocating) and solves on them; the rendered force is the dense solution's.
+// Several bodies: each new snapshot's W is converted to blocks (by the preparation) and the tick
+// solves on them without allocating; the rendered force is the dense solution's.
 TEST(HapticLoopLarge, ASeveralBodiesTickSolvesOnTheBlocksWithoutAllocating) {
   LargeProblemRig rig("blocks", bodiesCoupling);
   const TickOutput out = tickWithoutAllocating(rig);
   EXPECT_EQ(out.contacts, LargeProblemRig::kContacts);
   EXPECT_GT(out.sweeps, 0);
-  EXPECT_TRUE(rig.link().use_blocks);
-  EXPECT_EQ(rig.link().blocks.blocks(), 10 * 15 * 15);
+  EXPECT_TRUE(rig.prepared().usesBlocks());
+  EXPECT_EQ(rig.prepared().blocks().blocks(), 10 * 15 * 15);
   // at the snapshot's pose the force is the dense solve's
   const SettledAndReference r =
       settleAndSolveDense(rig, bodiesCoupling, LargeProblemRig::kContacts);
@@ -638,9 +654,9 @@ TEST(HapticLoopLarge, ContactsNoDeviceCanMoveAreNotReSolved) {
   LargeProblemRig rig("reach", threeBodies, firstBodyTool);
   const TickOutput out = tickWithoutAllocating(rig);
   EXPECT_EQ(out.contacts, LargeProblemRig::kContacts);
-  EXPECT_TRUE(rig.link().reach_only);
-  EXPECT_EQ(rig.link().reach_begin, 0);
-  EXPECT_EQ(rig.link().reach_end, 50);
+  EXPECT_TRUE(rig.prepared().reachOnly());
+  EXPECT_EQ(rig.prepared().reachBegin(), 0);
+  EXPECT_EQ(rig.prepared().reachEnd(), 50);
   // at the snapshot's pose the force is the whole problem's (its first body's contacts)
   const SettledAndReference r = settleAndSolveDense(rig, threeBodies, 50);
   EXPECT_GT(r.reference_n, 0.0);
@@ -648,29 +664,60 @@ TEST(HapticLoopLarge, ContactsNoDeviceCanMoveAreNotReSolved) {
   EXPECT_NEAR(r.settled.unlimited_force_norm_n, r.reference_n, 1e-4 * r.reference_n);
 }
 
-// A new snapshot of the same problem, the device still off the snapshot's pose: its first tick
-// starts from the simulation's f* (zero here) plus the correction the last converged tick made,
-// so it is converged at once, where the first tick on the first snapshot (from f* alone) was not
-// (shared/warm_start.h).
-TEST(HapticLoopLarge, ANewSnapshotStartsFromTheLastTicksCorrection) {
+// A new snapshot, the device off the snapshot's pose: the preparation solved it at the device's
+// latest pose, so the first tick on it starts from that solution and is converged at once (where
+// 20 sweeps from the simulation's f* = 0 are not), at the force the ticks settle to.
+TEST(HapticLoopLarge, ANewSnapshotStartsFromThePreparedSolutionAtTheDevicesPose) {
   LargeProblemRig rig("carry", smoothTissueCoupling);
   rig.device().state.pos_m = {0.0, 0.0, -5e-5};
+  (void)rig.tick();   // the device's pose reaches the preparation
   rig.publish(2e-4);
   const TickOutput first = rig.tick();
-  EXPECT_NE(first.flags & shared::kStatsSolverNotConverged, 0u);   // 20 sweeps from f* = 0
+  EXPECT_EQ(first.flags & shared::kStatsSolverNotConverged, 0u);
+  EXPECT_LE(first.sweeps, 2);
+  EXPECT_TRUE(rig.prepared().preparedConverged());
+  EXPECT_GT(rig.prepared().preparedSweeps(), 20);
   TickOutput settled = first;
-  for (int i = 0; i < 200 && (settled.flags & shared::kStatsSolverNotConverged) != 0; ++i) {
-    settled = rig.tick();
-  }
-  ASSERT_EQ(settled.flags & shared::kStatsSolverNotConverged, 0u);
-  rig.publish(2e-4);
-  const TickOutput next = rig.tick();
-  EXPECT_EQ(next.snapshot_seq, settled.snapshot_seq + 1);
-  EXPECT_EQ(next.flags & shared::kStatsSolverNotConverged, 0u);
-  EXPECT_LE(next.sweeps, 2);
-  EXPECT_NEAR(next.unlimited_force_norm_n, settled.unlimited_force_norm_n,
+  for (int i = 0; i < 20; ++i) settled = rig.tick();
+  EXPECT_EQ(settled.flags & shared::kStatsSolverNotConverged, 0u);
+  EXPECT_NEAR(first.unlimited_force_norm_n, settled.unlimited_force_norm_n,
               1e-4 * settled.unlimited_force_norm_n);
-  EXPECT_GT(rig.link().f[0], 0.0);
+  EXPECT_GT(rig.link().model.forces()[0], 0.0);
+}
+
+// The linearised model at 900 rows (300 frictional contacts): ticks where it holds and ticks
+// where it falls back to the re-solve (the device beyond the linearisation's range), new
+// snapshots prepared in between, and no tick allocates.
+TEST(HapticLoopLarge, ALinearisedTickOf900RowsAndItsFallbackAllocateNothing) {
+  LargeProblemRig rig("lin900", tissueCoupling, nullptr, LocalModelKind::kLinearized, 300);
+  rig.device().state.pos_m = {0.0, 0.0, 0.0};
+  rig.publish(1e-4);
+  for (int i = 0; i < 3; ++i) (void)rig.tick();
+  ASSERT_TRUE(rig.prepared().linearized());
+  // the preparation runs in the tick here (no preparer thread): publish outside the scope and
+  // count only the ticks that do not prepare
+  test::AllocScope scope;
+  std::int64_t allocations = 0, c_allocations = 0;
+  TickOutput out;
+  for (int i = 0; i < 40; ++i) {
+    if (i % 10 == 0) {
+      const std::int64_t a = scope.allocations(), ca = scope.cAllocations();
+      rig.publish(1e-4 * (1 + i % 3));
+      out = rig.tick();
+      allocations -= scope.allocations() - a;
+      c_allocations -= scope.cAllocations() - ca;
+      continue;
+    }
+    // every fourth tick 3 mm away: out of the linearisation's range, re-solved
+    const double far = i % 4 == 0 ? -3e-3 : 0.0;
+    rig.device().state.pos_m = {1e-6 * (i % 4), 0.0, -1e-6 * (i % 7) + far};
+    out = rig.tick();
+  }
+  EXPECT_EQ(scope.allocations() + allocations, 0);
+  EXPECT_EQ(scope.cAllocations() + c_allocations, 0);
+  EXPECT_EQ(out.contacts, 300);
+  EXPECT_GT(rig.loop().counters().linearized_ticks.load(), 10u);
+  EXPECT_GT(rig.loop().counters().model_fallbacks.load(), 3u);
 }
 
 // Contacts a device can move in the first and the last body: not contiguous, so the whole
@@ -679,7 +726,7 @@ TEST(HapticLoopLarge, ReachedContactsThatAreNotContiguousSolveTheWholeProblem) {
   LargeProblemRig rig("reach_split", threeBodies, outerBodiesTool);
   const TickOutput out = tickWithoutAllocating(rig);
   EXPECT_EQ(out.contacts, LargeProblemRig::kContacts);
-  EXPECT_FALSE(rig.link().reach_only);
+  EXPECT_FALSE(rig.prepared().reachOnly());
   EXPECT_GT(out.sweeps, 0);
 }
 

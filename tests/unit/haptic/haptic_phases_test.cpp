@@ -26,12 +26,22 @@ struct HapticLoopPhases {
     l.publishSample(now, io);
   }
   static void takeSnapshot(HapticLoop& l, std::int64_t now, TickOutput& out) {
-    l.takeSnapshot(now, out);
+    l.takeSnapshot(now, 0, out);
   }
+  // Prepares the newest snapshot (as the preparer thread would) and adopts it; its sequence.
+  static std::uint64_t prepareNewest(HapticLoop& l, AttachedSegment& link) {
+    (void)link.preparer.prepareNewest(l.model_settings_);
+    bool fresh = false;
+    const PreparedSnapshot* p = link.preparer.latest(&fresh);
+    if (fresh) link.model.adopt(p);
+    return p->seq();
+  }
+  // The local model on the adopted snapshot with device 0 at `device_pose`.
   static void solveLocalModel(HapticLoop& l, AttachedSegment& link,
-                              const shared::SnapshotView& snap, const shared::Pose& device_pose,
-                              TickOutput& out) {
-    l.solveLocalModel(link, snap, device_pose, out);
+                              const shared::Pose& device_pose, TickOutput& out) {
+    std::array<const shared::Pose*, shared::kMaxInstruments> poses{};
+    poses[0] = &device_pose;
+    l.solveLocalModel(link, poses, 0, out);
   }
   static void applySafetyChain(HapticLoop& l, double dt, TickOutput& out,
                                std::array<double, 3>& force, std::array<double, 3>& torque) {
@@ -168,14 +178,12 @@ TEST_F(HapticPhasesTest, TakeSnapshotFlagsAMissingOrOldSnapshotAndSolvesAFreshOn
 
 TEST_F(HapticPhasesTest, LocalModelMovesDeltaFreeWithTheDevice) {
   publish(-0.002, 1e-3, 0.0, t_);
-  bool fresh = false;
-  const shared::SnapshotView snap = link_->snapshots.latest(&fresh);
-  ASSERT_EQ(snap.header().seq, 1u);
+  ASSERT_EQ(P::prepareNewest(*loop_, *link_), 1u);
   for (const double dz : {-0.001, 0.0, 0.0015, 0.003}) {
     shared::Pose device_pose;
     device_pose.pos_m = Eigen::Vector3d(0.0, 0.0, dz);
     TickOutput out;
-    P::solveLocalModel(*loop_, *link_, snap, device_pose, out);
+    P::solveLocalModel(*loop_, *link_, device_pose, out);
     // delta_free = -2 mm + dz; the contact pushes with f = max(0, -delta_free / w)
     EXPECT_NEAR(out.force_n[2], std::max(0.0, (0.002 - dz) / 1e-3), 1e-9) << "dz " << dz;
     EXPECT_EQ(out.contacts, 1);
@@ -214,16 +222,14 @@ TEST_F(HapticPhasesTest, AnObstaclesContactPushesNoHand) {
     slot.contactNormal()[k] = k % 3 == 2 ? 1.0 : 0.0;
   }
   publisher_.publish();
-  bool fresh = false;
-  const shared::SnapshotView snap = link_->snapshots.latest(&fresh);
-  ASSERT_EQ(snap.header().seq, 1u);
+  ASSERT_EQ(P::prepareNewest(*loop_, *link_), 1u);
   for (const double dz : {0.0, 0.001}) {
     shared::Pose device_pose;
     device_pose.pos_m = Eigen::Vector3d(0.0, 0.0, dz);
     TickOutput out;
-    P::solveLocalModel(*loop_, *link_, snap, device_pose, out);
+    P::solveLocalModel(*loop_, *link_, device_pose, out);
     EXPECT_EQ(out.contacts, 2);
-    EXPECT_NEAR(link_->f[1], 3.0, 1e-9) << "the obstacle's contact is solved";
+    EXPECT_NEAR(link_->model.forces()[1], 3.0, 1e-9) << "the obstacle's contact is solved";
     // the instrument's contact follows the device (2 N, then 1 N); the obstacle's 3 N is not felt
     EXPECT_NEAR(out.force_n[2], (0.002 - dz) / 1e-3, 1e-9) << "dz " << dz;
   }

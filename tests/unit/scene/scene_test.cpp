@@ -335,6 +335,9 @@ TEST(Scene, EachKindOfErrorHasItsExactMessage) {
             "s.yaml:4:31: solver.nsgs_anderson_depth: must be in [0, 8] (got 9)");
   EXPECT_EQ(sceneError(kHead + "haptics: {nsgs_anderson_depth: -1}\n"),
             "s.yaml:4:32: haptics.nsgs_anderson_depth: must be >= 0 (got -1)");
+  EXPECT_EQ(sceneError(kHead + "haptics: {local_model: reduced}\n"),
+            "s.yaml:4:24: haptics.local_model: must be one of automatic, full, linearized (got "
+            "'reduced')");
   EXPECT_EQ(sceneError(kHead + "haptics: {snapshot_blend_ms: 200}\n"),
             "s.yaml:4:30: haptics.snapshot_blend_ms: must be <= 100 (got 200): not a physically "
             "sensible value");

@@ -62,6 +62,9 @@ TEST(SceneWorkspace, ParsesScaleOffsetRotationAndClutchButton) {
   };
   EXPECT_EQ(optionsOf("{nsgs_anderson_depth: 3}"), withDefaults("--nsgs-anderson-depth=3"));
   EXPECT_EQ(optionsOf("{snapshot_blend_ms: 10}"), withDefaults("--snapshot-blend-ms=10"));
+  EXPECT_EQ(optionsOf("{local_model: full}"), withDefaults("--local-model=full"));
+  EXPECT_EQ(optionsOf("{local_model: linearized}"), withDefaults("--local-model=linearized"));
+  EXPECT_EQ(optionsOf("{local_model: automatic}").size(), 6u);   // the default: no option
   // haptics off: haptic_server keeps its own defaults
   EXPECT_TRUE(hapticServerOptions(parseScene(kHead, "s.yaml", kScenes).haptics).empty());
 }

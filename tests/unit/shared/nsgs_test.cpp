@@ -542,6 +542,37 @@ TEST(NsgsSettingsTest, ACurrentDeltaSkipsTheEntryPassAndGivesTheSameSolution) {
   // the delta it was given, so callers must keep the invariant (documented)
 }
 
+// An absolute deadline already past: no entry pass over W is started (kTimeBudget, f untouched);
+// with W f + q current the first sweep stops after its first look at the clock, every
+// kDeadlineCheckContacts contacts, leaving a consistent iterate (delta = W f + q).
+TEST(NsgsSettingsTest, ADeadlineIsCheckedWithinTheSweep) {
+  const FclibProblem p = boxStacks();
+  ASSERT_GT(p.contacts, 2 * kDeadlineCheckContacts);
+  NsgsWorkspace ws(p.rows(), p.contacts);
+  NsgsSettings s;
+  s.tolerance = 1e-12;
+  s.max_sweeps = 1000;
+  s.deadline_ns = 1;   // long past
+  std::vector<double> f(p.rows(), 0.0);
+  NsgsResult r = solveNsgs(p.view(), s, ws, f.data());
+  EXPECT_EQ(r.status, NsgsStatus::kTimeBudget);
+  EXPECT_EQ(r.sweeps, 0);
+  EXPECT_EQ(std::count(f.begin(), f.end(), 0.0), static_cast<long>(f.size()));
+  // delta = W f + q for f = 0 is q
+  std::copy(p.q.begin(), p.q.end(), ws.delta.begin());
+  s.delta_is_current = true;
+  r = solveNsgs(p.view(), s, ws, f.data());
+  EXPECT_EQ(r.status, NsgsStatus::kTimeBudget);
+  EXPECT_EQ(r.sweeps, 1);
+  int touched = 0;
+  for (int c = 0; c < p.contacts; ++c) touched += f[3 * c] != 0.0 ? 1 : 0;
+  EXPECT_GT(touched, 0);
+  EXPECT_LT(touched, kDeadlineCheckContacts);   // stopped inside the first sweep
+  std::vector<double> delta(p.rows());
+  (void)naturalMapError(p.view(), f.data(), delta.data());
+  for (int j = 0; j < p.rows(); ++j) EXPECT_NEAR(ws.delta[j], delta[j], 1e-12);
+}
+
 TEST(NsgsSettingsTest, MaxSweepsTimeBudgetAndCheckEvery) {
   const FclibProblem p = boxStacks();
   NsgsWorkspace ws(p.rows(), p.contacts);

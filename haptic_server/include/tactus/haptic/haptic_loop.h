@@ -33,8 +33,9 @@
 #include <vector>
 
 #include "tactus/device/device.h"
+#include "tactus/haptic/local_model.h"
+#include "tactus/haptic/snapshot_preparer.h"
 #include "tactus/haptic/workspace_mapping.h"
-#include "tactus/shared/delassus_blocks.h"
 #include "tactus/shared/event_ring.h"
 #include "tactus/shared/haptic_limits.h"
 #include "tactus/shared/stats_ring.h"
@@ -42,7 +43,6 @@
 #include "tactus/shared/nsgs.h"
 #include "tactus/shared/pose.h"
 #include "tactus/shared/segment.h"
-#include "tactus/shared/warm_start.h"
 
 namespace tactus::haptic {
 
@@ -64,8 +64,14 @@ struct HapticSettingsLimits {
   static constexpr int kMaxSweeps = shared::HapticLimits::kMaxSweeps;
   /// tolerance in (0, this]
   static constexpr double kMaxTolerance = shared::HapticLimits::kMaxTolerance;
-  /// period_ns in (0, this] ns, solve_budget_ns in [0, this] ns (0: sweeps only)
+  /// period_ns in (0, this] ns
   static constexpr std::int64_t kMaxPeriodNs = 1'000'000'000;
+  /// solve_budget_ns in (0, this x period_ns]: the rest of the period is the timer's wake-up
+  /// margin and the tick's phases after the deadline (safety chain, writes, stats)
+  static constexpr double kMaxBudgetFraction = 0.9;
+  /// solve_budget_ns = 0 (no clock, sweeps only: deterministic tests and offline tools) only with
+  /// max_sweeps at most this
+  static constexpr int kMaxSweepsWithoutBudget = 200;
   /// Limits below this are treated as zero by the guard (no force rather than denormal maths).
   static constexpr double kMinLimit = 1e-9;
 };
@@ -87,17 +93,27 @@ struct HapticSettings {
   double snapshot_blend_ms = 0.0;
   int max_sweeps = 50;                  ///< NSGS sweep budget per tick
   double tolerance = 1e-6;              ///< NSGS tolerance
+  /// The local model the tick solves (local_model.h; scene haptics.local_model, haptic_server
+  /// --local-model): the full re-solve, the linearisation with the re-solve as fallback, or
+  /// chosen per snapshot by its size.
+  LocalModelKind local_model = LocalModelKind::kAutomatic;
   /// Anderson acceleration of the tick's NSGS over this many past sweeps (0: off; at most
   /// shared::kMaxAndersonDepth; shared/nsgs.h). Mostly helps the first ticks on a new snapshot
   /// (README.md, "Anderson acceleration")
   int anderson_depth = 0;
-  std::int64_t solve_budget_ns = 400'000;  ///< NSGS time budget per tick (0: sweeps only)
+  /// The tick's deadline, from the start of its work: the local model's re-solve stops at it
+  /// (checked within sweeps). In (0, kMaxBudgetFraction x period_ns]; 0 (no clock) only with
+  /// max_sweeps <= kMaxSweepsWithoutBudget.
+  std::int64_t solve_budget_ns = 400'000;
   std::int64_t period_ns = 1'000'000;   ///< tick period (a tick ending later is an overrun)
   bool render_torque = false;           ///< devices without rotational feedback: false
 
   /// Throws tactus::Error naming the first setting that is not finite or outside its range
-  /// (HapticSettingsLimits; engage_threshold_n: finite and >= 0).
+  /// (HapticSettingsLimits; engage_threshold_n: finite and >= 0), or a budget that leaves no
+  /// room in the period.
   void validate() const;
+  /// The local model's settings these give (kind, tolerance, sweeps, Anderson depth).
+  LocalModelSettings localModel() const noexcept;
 };
 
 /// The tick's last stage, a pure function: replaces a non-finite force or torque by zero and
@@ -129,6 +145,13 @@ struct HapticCounters {
   std::atomic<std::uint64_t> overruns{0};            ///< ticks flagged shared::kStatsOverrun
   /// ticks where the final guard had to change the command (never with valid settings)
   std::atomic<std::uint64_t> guard_interventions{0};
+  /// ticks the linearised local model held, and ticks it did not (full re-solve instead)
+  std::atomic<std::uint64_t> linearized_ticks{0};
+  std::atomic<std::uint64_t> model_fallbacks{0};
+  /// snapshots the preparation refused (too large, inconsistent, non-finite, ill-posed)
+  std::atomic<std::uint64_t> rejected_snapshots{0};
+  /// ticks whose work ended after their deadline (StatsFlags kStatsDeadlineMissed)
+  std::atomic<std::uint64_t> deadline_misses{0};
 };
 
 /// Event codes of the haptic loop beyond shared::EventCode (drained into spdlog outside the
@@ -144,51 +167,32 @@ enum HapticEvent : std::uint32_t {
   /// the snapshot's W has a diagonal NSGS cannot use (arg0 = ill-posed contacts, arg1 = snapshot
   /// sequence); raised once per snapshot, no force is rendered from it
   kEventIllPosedSnapshot = shared::kEventUser + 6,
+  /// the preparation refused a snapshot: inconsistent counts or offsets, or non-finite numbers
+  /// (arg0 = haptic::PrepareStatus, arg1 = snapshot sequence); no force is rendered from it
+  kEventSnapshotRejected = shared::kEventUser + 7,
 };
 
 /// Name of a shared::EventCode or HapticEvent code.
 const char* eventName(std::uint32_t code) noexcept;
 
-/// What the tick uses of an attached segment, with the solver memory sized for the segment's
+/// What the tick uses of an attached segment, with the local model sized for the segment's
 /// capacity (built and destroyed by the non-real-time supervisor).
 struct AttachedSegment {
   shared::Segment segment;
+  /// Read by `preparer` only (its thread once started, else the tick through it).
   shared::SnapshotSubscriber snapshots;
   /// Device i's samples (one per device the loop serves, up to the segment's device count).
   std::array<shared::TripleWriter<shared::DeviceSample>, shared::kMaxInstruments> samples;
   int sample_writers = 0;               ///< entries of `samples` attached
   shared::StatsRingWriter stats;
-  shared::NsgsWorkspace workspace;
-  std::vector<double> delta_free;       ///< moved delta_free (capacity rows)
-  std::vector<double> f;                ///< forces, warm start across ticks
-  /// a new snapshot's warm start: its f* plus the last converged solve's correction to the
-  /// previous f*, by contact id (shared/warm_start.h)
-  shared::SnapshotWarmStart warm_start;
-  bool solve_converged = false;         ///< the last solve on the adopted snapshot converged
-  std::vector<double> last_delta_free;  ///< delta_free of the last solve (capacity rows)
-  std::vector<int> row_instrument;      ///< per row of the adopted snapshot: its instrument
-  std::uint64_t delta_seq = 0;          ///< snapshot whose W f + delta_free workspace.delta holds
-  std::uint64_t ill_posed_seq = 0;      ///< last snapshot reported ill-posed (one event each)
-  /// W's block form (shared::chooseStorage's rule), converted once per adopted snapshot in the
-  /// tick that first solves it (one pass over W, allocation-free: sized for the capacity at
-  /// shared::kBlockSparseMaxFill). The segment keeps carrying W dense (see docs/design.md).
-  shared::DelassusBlocks blocks;
-  std::uint64_t blocks_seq = 0;         ///< snapshot whose W `blocks` was chosen for (0: none)
-  bool use_blocks = false;              ///< blocks_seq's W is solved on `blocks`
-  /// The contacts the devices can move (docs/design.md, "Bodies that do not couple"): all but
-  /// those the simulation marks shared::kContactUnreachable (a group of coupled bodies without
-  /// instrument: an organ on its support once the grasped lobe has left it; W is zero between
-  /// them and every instrument contact, so no device changes their forces). Found once per
-  /// adopted snapshot (O(contacts)). When they are fewer than all and contiguous in the row
-  /// order (the simulation orders rows by tissue), the tick re-solves only them, in place on W's
-  /// diagonal block; the others keep the simulation's forces. Otherwise the whole problem.
-  std::uint64_t reach_seq = 0;          ///< snapshot the reach was found for (0: none)
-  bool reach_only = false;              ///< reach_seq's problem is solved on [reach_begin, end)
-  int reach_begin = 0, reach_end = 0;   ///< the reached contacts (when reach_only)
-  /// their row offsets from the first (capacity + 1; shared::contiguousSubproblem fills them
-  /// with each tick's view, O(reached contacts))
-  std::vector<int> reach_offset;
+  /// Prepares each new snapshot off the tick (snapshot_preparer.h): call
+  /// preparer.start(settings.localModel()) before offering the link to run it on its own
+  /// thread; otherwise the tick prepares inline (tests, offline tools).
+  SnapshotPreparer preparer;
+  LocalModel model;                     ///< the tick's solver state (local_model.h)
+  std::uint64_t ill_posed_seq = 0;      ///< last snapshot reported unusable (one event each)
   explicit AttachedSegment(shared::Segment&& s);
+  ~AttachedSegment() { preparer.stop(); }
 };
 
 /// What one tick renders to one device.
@@ -207,7 +211,12 @@ struct TickOutput : DeviceTickOutput {
   int contacts = 0;
   int sweeps = 0;
   double residual = 0.0;
-  std::int64_t solve_ns = 0;            ///< time in NSGS
+  std::int64_t solve_ns = 0;            ///< time in the local model's solve
+  LocalModelUsed model_used = LocalModelUsed::kNone;
+  // the tick's phases [ns] (StatsRecord) and its absolute deadline (0: none)
+  std::int64_t read_ns = 0, model_ns = 0, output_ns = 0;
+  std::int64_t started_ns = 0, deadline_ns = 0;
+  std::int64_t prepare_ns = 0;          ///< preparation time of the snapshot solved
   bool stale = true;
   std::uint64_t snapshot_seq = 0;
   std::uint64_t flags = 0;              ///< shared::StatsFlags
@@ -294,14 +303,12 @@ class HapticLoop {
   friend struct HapticLoopPhases;
 
  private:
-  /// The local model with device 0 at `device_pose` and the other devices at their last poses.
-  void solveLocalModel(AttachedSegment& link, const shared::SnapshotView& snap,
-                       const shared::Pose& device_pose, TickOutput& out) noexcept;
-  /// The local model with device i at *poses[i] (nullptr: no pose, the device stays at x_h*):
-  /// one solve, the wrench on instrument i into out.device[i] (and device 0's into out).
-  void solveLocalModel(AttachedSegment& link, const shared::SnapshotView& snap,
+  /// The local model on the adopted snapshot with device i at *poses[i] (nullptr: no pose, the
+  /// device stays at x_h*): one solve under `deadline_ns`, the wrench on instrument i into
+  /// out.device[i] (and device 0's into out).
+  void solveLocalModel(AttachedSegment& link,
                        const std::array<const shared::Pose*, shared::kMaxInstruments>& poses,
-                       TickOutput& out) noexcept;
+                       std::int64_t deadline_ns, TickOutput& out) noexcept;
   DeviceChannel& channel(int i) noexcept { return channels_[static_cast<std::size_t>(i)]; }
   const DeviceChannel& channel(int i) const noexcept {
     return channels_[static_cast<std::size_t>(i)];
@@ -330,7 +337,8 @@ class HapticLoop {
   void publishSample(std::int64_t now, device::IoStatus io) noexcept {
     publishSample(channels_[0], 0, now, io);
   }
-  void takeSnapshot(std::int64_t now, TickOutput& out) noexcept;   // and the local model
+  /// The newest prepared snapshot, its age, and the local model under `deadline_ns`.
+  void takeSnapshot(std::int64_t now, std::int64_t deadline_ns, TickOutput& out) noexcept;
   /// After takeSnapshot: blends a new snapshot's wrench in (HapticSettings::snapshot_blend_ms).
   void blendSnapshot(bool switched, bool solved, TickOutput& out) noexcept;
   void writeDevice(DeviceChannel& ch, const std::array<double, 3>& force,
@@ -354,6 +362,7 @@ class HapticLoop {
   std::array<DeviceChannel, shared::kMaxInstruments> channels_{};
   int device_count_ = 1;
   HapticSettings settings_;
+  LocalModelSettings model_settings_;   ///< settings_.localModel()
   HapticCounters counters_;
   shared::EventRing events_;
   std::atomic<AttachedSegment*> offered_{nullptr};
@@ -365,6 +374,7 @@ class HapticLoop {
   int blend_ticks_ = 0;            ///< snapshot_blend_ms in ticks (0: no blending)
 
   std::uint64_t snapshot_seq_ = 0;
+  std::uint64_t adopted_generation_ = 0;   ///< PreparedSnapshot::generation() adopted
   std::uint64_t tick_index_ = 0;
   bool stale_ = true;
   bool not_converged_ = false;     ///< the last solve did not converge (event on the transition)

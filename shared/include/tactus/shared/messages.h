@@ -320,6 +320,18 @@ enum StatsFlags : std::uint32_t {
   kStatsForceClamped = 1u << 4,
   kStatsDeviceNoData = 1u << 5,
   kStatsDeviceFault = 1u << 6,
+  /// the linearised local model did not hold at this pose: the tick re-solved the full problem
+  kStatsModelFallback = 1u << 7,
+  /// the tick's work ended after its deadline (its start plus the solve budget)
+  kStatsDeadlineMissed = 1u << 8,
+};
+
+/// StatsRecord::model: what the tick's local model solved (haptic::LocalModelUsed's values).
+enum StatsModel : std::int64_t {
+  kStatsModelNone = 0,        ///< no solve (no snapshot, stale, no pose)
+  kStatsModelFull = 1,        ///< full re-solve
+  kStatsModelLinearized = 2,  ///< the linearisation held
+  kStatsModelFallbackSolve = 3,  ///< the linearisation did not hold: full re-solve
 };
 
 /// One record per haptic tick, written into the stats ring. Only 8-byte fields (the ring copies
@@ -338,6 +350,15 @@ struct StatsRecord {
   std::uint64_t flags = 0;           ///< StatsFlags (any device's)
   std::int64_t devices = 0;          ///< devices served (entries of device_force_norm_n)
   std::array<double, kMaxInstruments> device_force_norm_n{};   ///< |rendered force| per device
+  // the tick's phases [ns]: reading and publishing the devices, taking the prepared snapshot and
+  // solving the local model, the safety chain and device writes; and its deadline
+  std::int64_t read_ns = 0;
+  std::int64_t model_ns = 0;
+  std::int64_t output_ns = 0;
+  std::int64_t started_ns = 0;       ///< when the tick's work began (its deadline's origin)
+  std::int64_t deadline_ns = 0;      ///< the tick's absolute deadline (0: sweeps only)
+  std::int64_t model = 0;            ///< StatsModel
+  std::int64_t prepare_ns = 0;       ///< off-thread preparation time of the snapshot solved
 };
 static_assert(std::is_trivially_copyable_v<StatsRecord>);
 static_assert(sizeof(StatsRecord) % 8 == 0);

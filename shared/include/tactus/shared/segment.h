@@ -62,8 +62,9 @@ inline constexpr std::uint64_t kSegmentMagic = 0x3147'4553'5554'4354ULL;  // "TC
 /// Bump on any change of SegmentHeader, the messages, the part layout or the ownership protocol
 /// (3: the creator holds the ownership lock, see the file comment; 4: several instruments and
 /// devices: per-instrument blocks in the snapshot header, each contact's instrument, one device
-/// triple buffer per device, per-device forces in the stats record).
-inline constexpr std::uint32_t kSegmentAbiVersion = 4;
+/// triple buffer per device, per-device forces in the stats record; 5: the stats record's phase
+/// times, deadline and local model).
+inline constexpr std::uint32_t kSegmentAbiVersion = 5;
 /// Stats ring capacity: 8192 records (8 s at 1 kHz).
 inline constexpr std::uint64_t kStatsRingCapacity = 8192;
 /// A creator whose heartbeat (or creation time) is older than this is considered gone.

@@ -183,6 +183,10 @@ struct SolverSpec {
   ContactDetection contact_detection = ContactDetection::kFreeState;
 };
 
+/// haptics.local_model: the model haptic_server's tick solves (haptic_server --local-model;
+/// haptic_server/include/tactus/haptic/local_model.h).
+enum class HapticLocalModel { kAutomatic, kFull, kLinearized };
+
 struct HapticsSpec {
   bool enabled = false;
   double rate_hz = 1000.0;
@@ -197,6 +201,8 @@ struct HapticsSpec {
   /// haptic_server --snapshot-blend-ms: each new snapshot's force blended in over this time
   /// [ms] (0: off)
   double snapshot_blend_ms = 0.0;
+  /// haptic_server --local-model: full re-solve, linearised with fallback, or automatic by size
+  HapticLocalModel local_model = HapticLocalModel::kAutomatic;
   /// device -> scene mapping and clutch button (haptics.workspace; docs/design.md)
   shared::WorkspaceMappingParams workspace;
   /// haptics.workspaces: device i's own mapping (entry i for instrument/device i; at most the

@@ -1,0 +1,109 @@
+#pragma once
+// Prepares each new contact snapshot for the haptic tick off the real-time thread (docs/design.md
+// section 4, "The tick's deadline"): copies and checks it, chooses W's storage, finds the reach,
+// solves and linearises it (SnapshotPreparation, local_model.h), and hands the tick a ready
+// PreparedSnapshot through a wait-free triple buffer. The tick never waits and never touches the
+// segment's snapshot slots.
+//
+// Two ways to run it:
+//  - start(settings): a thread polls the subscriber every kPollNs and prepares each new snapshot
+//    (haptic_server, tactus-jitter). It owns the subscriber from then on.
+//  - without start(): the tick itself calls prepareNewest() before latest() (tests, offline
+//    tools driving tick() by hand; then the tick does the preparation's work, not real-time).
+//
+// The tick publishes its devices' latest poses (publishPoses, wait-free); the preparation solves
+// and linearises each snapshot at them, so the tick evaluates the model close to where it was
+// prepared.
+
+#include <array>
+#include <atomic>
+#include <cstdint>
+#include <thread>
+
+#include "tactus/haptic/local_model.h"
+#include "tactus/shared/messages.h"
+#include "tactus/shared/triple_buffer.h"
+
+namespace tactus::haptic {
+
+class SnapshotPreparer {
+ public:
+  /// Polling period of the preparer thread [ns].
+  static constexpr std::int64_t kPollNs = 200'000;
+  /// A snapshot is prepared again (requestRelinearization) only after the thread was idle this
+  /// many times the last preparation's duration: at most a third of a core.
+  static constexpr std::int64_t kRepeatIdleFactor = 2;
+
+  /// `snapshots` must outlive the preparer. Sizes everything for the capacity (allocates).
+  SnapshotPreparer(shared::SnapshotSubscriber& snapshots, int max_rows, int max_contacts);
+  ~SnapshotPreparer();
+  SnapshotPreparer(const SnapshotPreparer&) = delete;
+  SnapshotPreparer& operator=(const SnapshotPreparer&) = delete;
+
+  /// SCHED_FIFO priority the preparer thread asks for: the lowest, above every normal thread
+  /// (the simulation's included) and below the real-time loop, so a loaded machine does not make
+  /// the prepared snapshots stale; its work is bounded (a preparation per snapshot, repeats at
+  /// most a third of a core). Refused without the right: it runs as a normal thread.
+  static constexpr int kFifoPriority = 1;
+
+  /// Starts the preparer thread with these settings (validated; throws tactus::Error) at
+  /// `fifo_priority` (0: a normal thread). Not real-time. Idempotent.
+  void start(const LocalModelSettings& settings, int fifo_priority = kFifoPriority);
+  /// Stops and joins the thread (idempotent; the destructor calls it).
+  void stop() noexcept;
+  bool threaded() const noexcept { return thread_.joinable(); }
+
+  /// Prepares the newest snapshot if the simulation published one since the last call (or the
+  /// current one again, at the newest poses, after requestRelinearization()), and publishes it
+  /// to latest(). Returns true when it prepared one. Not real-time; call it from
+  /// one thread only (the preparer thread when started, else the tick).
+  /// `repeat`: also honour requestRelinearization() (the thread does; the tick preparing inline
+  /// does not, so a test's tick prepares only new snapshots).
+  bool prepareNewest(const LocalModelSettings& settings, bool repeat = false) noexcept;
+
+  /// The tick: the newest prepared snapshot (seq() 0 before the first); `fresh` tells whether
+  /// it is new since the last call. Unchanged until the next call. Wait-free.
+  const PreparedSnapshot* latest(bool* fresh) noexcept;
+
+  /// The tick: its devices' poses (nullptr: none), for the next preparation. Wait-free.
+  void publishPoses(DevicePoses poses) noexcept;
+  /// The tick: the linearisation did not hold; prepare the current snapshot again at the
+  /// newest poses when no new snapshot is waiting (wait-free: one relaxed store).
+  void requestRelinearization() noexcept {
+    relinearize_.store(true, std::memory_order_relaxed);
+  }
+
+  /// Snapshots prepared, and the last preparation's wall time [ns] (any thread, relaxed).
+  std::uint64_t prepared() const noexcept { return prepared_count_.load(std::memory_order_relaxed); }
+  std::int64_t lastPrepareNs() const noexcept {
+    return last_prepare_ns_.load(std::memory_order_relaxed);
+  }
+
+ private:
+  struct PoseHint {
+    std::int32_t count = 0;
+    std::array<std::int32_t, shared::kMaxInstruments> have{};
+    std::array<shared::PoseSample, shared::kMaxInstruments> pose{};
+  };
+
+  shared::SnapshotSubscriber& snapshots_;
+  SnapshotPreparation preparation_;
+  std::array<PreparedSnapshot, 3> slots_;
+  // hand-over of slot indices: each triple-buffer slot holds its own index (0, 1, 2)
+  shared::TripleBufferStorage handoff_;
+  shared::TripleBufferWriter handoff_writer_;
+  shared::TripleBufferReader handoff_reader_;
+  shared::TripleBufferStorage hints_;
+  shared::TripleWriter<PoseHint> hint_writer_;
+  shared::TripleReader<PoseHint> hint_reader_;
+  std::uint64_t last_seq_ = 0;
+  std::atomic<bool> relinearize_{false};
+  std::int64_t last_end_ns_ = 0;   ///< when the last preparation ended (the thread's)
+  std::atomic<std::uint64_t> prepared_count_{0};
+  std::atomic<std::int64_t> last_prepare_ns_{0};
+  LocalModelSettings settings_;
+  std::atomic<bool> stop_{false};
+  std::thread thread_;
+};
+
+}  // namespace tactus::haptic
