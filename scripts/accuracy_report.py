@@ -96,9 +96,10 @@ def w_table(rows):
     return "\n".join(out)
 
 
-METHOD_ORDER = {"r1": 0, "r2": 1, "hold": 2, "extrapolate": 3, "coupling": 4, "local": 5}
+METHOD_ORDER = {"r1": 0, "r2": 1, "hold": 2, "extrapolate": 3, "coupling": 4, "local": 5,
+                "linearized": 6}
 METHOD_COLORS = {"r1": "k", "r2": "tab:gray", "hold": "tab:red", "extrapolate": "tab:orange",
-                 "coupling": "tab:purple", "local": "tab:blue"}
+                 "coupling": "tab:purple", "local": "tab:blue", "linearized": "tab:olive"}
 MOTION_MARKERS = {"slow_press": "o", "tremor": "s", "fast_tap": "^"}
 
 

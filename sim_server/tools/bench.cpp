@@ -28,7 +28,7 @@
 #include "tactus/shared/pose.h"
 #include "tactus/shared/segment.h"
 #include "tactus/shared/snapshot_file.h"
-#include "tactus/shared/warm_start.h"
+#include "tactus/haptic/local_model.h"
 #include "tactus/sim/pipeline.h"
 #include "tactus/sim/scene.h"
 
@@ -57,11 +57,16 @@ struct Series {
   std::vector<double> v;
 };
 
-// Writes the step's problem into the slot and publishes it, as sim_server's SegmentHost does.
+// Writes the step's problem into the slot and publishes it, as sim_server's SegmentHost does;
+// a problem larger than the segment would silently drop from the figures: an error.
 void publishProblem(const sim::Simulation& sim, shared::SnapshotPublisher& pub, std::uint64_t seq,
                     double max_opening_rad) {
   shared::SnapshotWriter slot = pub.slot();
-  sim::writeSnapshot(sim, max_opening_rad, seq, shared::monotonicNs(), 0, slot);
+  if (!sim::writeSnapshot(sim, max_opening_rad, seq, shared::monotonicNs(), 0, slot)) {
+    throw Error(fmt::format("step {}: the contact problem does not fit the segment ({} rows, {} "
+                            "contacts at most)",
+                            seq, slot.layout().max_rows, slot.layout().max_contacts));
+  }
   pub.publish();
 }
 
@@ -87,6 +92,7 @@ struct BenchOptions {
   std::string linear;                  ///< non-empty: overrides solver.linear
   int instruments = 0;                 ///< > 0: keep only the scene's first N instruments
   std::string split_contact_groups;    ///< "true"/"false": overrides solver.split_contact_groups
+  std::string local_model;             ///< non-empty: overrides haptics.local_model
 };
 
 int run(const BenchOptions& o) {
@@ -123,21 +129,32 @@ int run(const BenchOptions& o) {
 
   // a private segment with the capacity sim_server would create for this scene
   const std::string seg_name = fmt::format("tactus-bench-{}", static_cast<long>(::getpid()));
-  shared::Segment seg = shared::Segment::create(
-      seg_name, shared::SegmentCapacity::forContacts(sim::problemContactCapacity(spec),
-                                                     sim::anyFriction(spec)));
+  // (instruments', obstacles' and tissue pairs' contacts: the capacity sim_server creates)
+  shared::Segment seg = shared::Segment::create(seg_name, sim::problemCapacity(spec));
   shared::SnapshotPublisher pub = seg.snapshotPublisher();
   shared::SnapshotSubscriber sub = seg.snapshotSubscriber();
-  shared::NsgsWorkspace ws(seg.capacity().max_rows, seg.capacity().max_contacts);
-  std::vector<double> df(static_cast<std::size_t>(seg.capacity().max_rows));
-  std::vector<double> f(df.size());
-  // each snapshot's warm start as the haptic loop's: f* plus the last converged solve's correction
-  shared::SnapshotWarmStart warm_start(seg.capacity().max_contacts, seg.capacity().max_rows);
-  bool tick_converged_last = false;
-  // the device displacement: a fixed small translation (mm) along (1, -1, -1) / sqrt(3)
-  shared::Vector6d dx = shared::Vector6d::Zero();
-  const double d_m = 1e-3 * o.displacement_mm / std::sqrt(3.0);
-  dx << d_m, -d_m, -d_m, 0.0, 0.0, 0.0;
+  // the haptic side's local model, the one the loop solves (haptic/local_model.h): each snapshot
+  // prepared at the device's pose, then one tick 5 um further along the displacement
+  haptic::LocalModelSettings model_settings;
+  model_settings.kind = spec.haptics.local_model == sim::HapticLocalModel::kFull
+                            ? haptic::LocalModelKind::kFull
+                        : spec.haptics.local_model == sim::HapticLocalModel::kLinearized
+                            ? haptic::LocalModelKind::kLinearized
+                            : haptic::LocalModelKind::kAutomatic;
+  if (o.local_model == "full") model_settings.kind = haptic::LocalModelKind::kFull;
+  if (o.local_model == "linearized") model_settings.kind = haptic::LocalModelKind::kLinearized;
+  if (o.local_model == "automatic") model_settings.kind = haptic::LocalModelKind::kAutomatic;
+  model_settings.tolerance = spec.haptics.nsgs_tolerance;
+  model_settings.max_sweeps = tick_sweeps;
+  model_settings.anderson_depth = spec.haptics.nsgs_anderson_depth;
+  haptic::OfflineLocalModel model(seg.capacity().max_rows, seg.capacity().max_contacts,
+                                  model_settings);
+  // the device displacement from x_h*: a fixed small translation (mm) along (1, -1, -1) / sqrt(3)
+  const Eigen::Vector3d direction = Eigen::Vector3d(1.0, -1.0, -1.0).normalized();
+  const Eigen::Vector3d dx = 1e-3 * o.displacement_mm * direction;
+  const Eigen::Vector3d tick_step = 5e-6 * direction;
+  std::vector<double> prepare_ms;
+  long tick_linearized = 0, tick_fallbacks = 0;
 
   // total: the step and the publish
   std::vector<Series> stages = {{"free_motion", {}},       {"detect_collisions", {}},
@@ -224,33 +241,29 @@ int run(const BenchOptions& o) {
 
     // the haptic side's tick on this snapshot, read back from the slot
     const shared::SnapshotView snap = sub.latest();
-    const int m = snap.rows();
     if (snap.contacts() <= 0) {
-      warm_start.reset();
+      model.reset();
       continue;
     }
-    const double* J = snap.J();
-    for (int i = 0; i < m; ++i) {
-      double d = snap.deltaFree()[i];
-      for (int c = 0; c < 6; ++c) d += J[6 * i + c] * dx[c];
-      df[i] = d;
-    }
-    warm_start.adopt(snap, tick_converged_last ? f.data() : nullptr, f.data());
-    shared::NsgsSettings ns;
-    ns.tolerance = spec.haptics.nsgs_tolerance;
-    ns.max_sweeps = tick_sweeps;
-    ns.anderson_depth = spec.haptics.nsgs_anderson_depth;
-    // the sweep the haptic tick uses (local_model.cpp): row-wise when W is exactly symmetric
-    ns.coupling = snap.coupling();
-    ns.time_budget_ns = static_cast<std::int64_t>(budget_us * 1e3);
+    const shared::PoseSample& xs = snap.header().device_pose;
+    shared::Pose pose;
+    pose.pos_m = Eigen::Vector3d(xs.pos_m[0], xs.pos_m[1], xs.pos_m[2]) + dx;
+    pose.rot = Eigen::Quaterniond(xs.quat_wxyz[0], xs.quat_wxyz[1], xs.quat_wxyz[2],
+                                  xs.quat_wxyz[3]).normalized();
+    const shared::Pose* poses[] = {&pose};
+    (void)model.adopt(snap, poses);   // the preparation (off the tick in haptic_server)
+    prepare_ms.push_back(1e-6 * static_cast<double>(model.prepared().prepareNs()));
+    pose.pos_m += tick_step;
     const std::int64_t cpu0 = threadCpuNs();
-    const shared::NsgsResult res = shared::solveNsgs(snap.problem(df.data()), ns, ws, f.data());
+    const haptic::LocalModelResult res =
+        model.solve(poses, shared::monotonicNs() + static_cast<std::int64_t>(budget_us * 1e3));
     tick_cpu_us.push_back(1e-3 * static_cast<double>(threadCpuNs() - cpu0));
     tick_us.push_back(1e-3 * static_cast<double>(res.elapsed_ns));
     tick_sweeps_v.push_back(res.sweeps);
     tick_err.push_back(res.error);
-    tick_converged_last = res.status == shared::NsgsStatus::kConverged;
-    if (tick_converged_last) ++tick_converged;
+    if (res.converged()) ++tick_converged;
+    if (res.used == haptic::LocalModelUsed::kLinearized) ++tick_linearized;
+    if (res.used == haptic::LocalModelUsed::kFallback) ++tick_fallbacks;
     if (trace != nullptr) {
       std::fprintf(trace, "%ld,%.4f,%d,%d,%d,%.4f,%.3f,%d,%d,%.4f\n", k, sim.time(),
                    r.contacts, r.rows, r.nsgs.sweeps, 1e3 * stages[7].v.back(),
@@ -314,12 +327,16 @@ int run(const BenchOptions& o) {
         1e3 * spec.solver.penetration_tolerance_m);
   }
   std::printf(
-      "haptic tick solve (%.2f mm device displacement, warm start, <= %d sweeps, budget "
-      "%.0f us): wall median %.1f us, p99 %.1f us, max %.1f us; thread CPU median %.1f us, "
-      "p99 %.1f us; sweeps median %.0f, p99 %.0f; error median %.2e; converged %ld / %zu\n",
-      o.displacement_mm, tick_sweeps, budget_us, pct(tick_us, 0.5), pct(tick_us, 0.99),
-      pct(tick_us, 1.0), pct(tick_cpu_us, 0.5), pct(tick_cpu_us, 0.99), pct(tick_sweeps_v, 0.5),
-      pct(tick_sweeps_v, 0.99), pct(tick_err, 0.5), tick_converged, tick_us.size());
+      "haptic local model (%s; each snapshot prepared %.2f mm from x_h*, the tick 5 um further; "
+      "<= %d sweeps, deadline %.0f us): tick wall median %.1f us, p99 %.1f us, max %.1f us; "
+      "thread CPU median %.1f us, p99 %.1f us; sweeps median %.0f, p99 %.0f; error median "
+      "%.2e; converged %ld / %zu; linearized %ld, fallback %ld; preparation median %.2f ms, "
+      "p99 %.2f ms\n",
+      std::string(haptic::toString(model_settings.kind)).c_str(), o.displacement_mm, tick_sweeps,
+      budget_us, pct(tick_us, 0.5), pct(tick_us, 0.99), pct(tick_us, 1.0), pct(tick_cpu_us, 0.5),
+      pct(tick_cpu_us, 0.99), pct(tick_sweeps_v, 0.5), pct(tick_sweeps_v, 0.99),
+      pct(tick_err, 0.5), tick_converged, tick_us.size(), tick_linearized, tick_fallbacks,
+      pct(prepare_ms, 0.5), pct(prepare_ms, 0.99));
 
   if (!o.json.empty()) {
     std::string js = fmt::format(
@@ -344,14 +361,16 @@ int run(const BenchOptions& o) {
         "\"solve_us_median\": {:.3f}, \"solve_us_p99\": {:.3f}, \"solve_us_max\": {:.3f}, "
         "\"cpu_us_median\": {:.3f}, \"cpu_us_p99\": {:.3f}, "
         "\"sweeps_median\": {}, \"sweeps_p99\": {}, \"error_median\": {:.3e}, "
-        "\"converged\": {}, \"solves\": {}}}\n}}\n",
+        "\"converged\": {}, \"solves\": {}, \"local_model\": \"{}\", \"linearized\": {}, "
+        "\"fallbacks\": {}, \"prepare_ms_median\": {:.3f}, \"prepare_ms_p99\": {:.3f}}}\n}}\n",
         contacts.size(), pct(contacts, 0.5), pct(contacts, 1.0), pct(rows, 0.5), pct(rows, 1.0),
         pct(sim_sweeps, 0.5), pct(groups, 0.5), pct(groups, 1.0), split_steps, pct(passes, 0.5),
         pct(passes, 1.0), pct(geometric_pen_mm, 1.0),
         o.displacement_mm, tick_sweeps, budget_us, pct(tick_us, 0.5),
         pct(tick_us, 0.99), pct(tick_us, 1.0), pct(tick_cpu_us, 0.5), pct(tick_cpu_us, 0.99),
         pct(tick_sweeps_v, 0.5), pct(tick_sweeps_v, 0.99), pct(tick_err, 0.5), tick_converged,
-        tick_us.size());
+        tick_us.size(), haptic::toString(model_settings.kind), tick_linearized, tick_fallbacks,
+        pct(prepare_ms, 0.5), pct(prepare_ms, 0.99));
     std::FILE* fj = std::fopen(o.json.c_str(), "w");
     if (fj == nullptr) throw Error("cannot write " + o.json);
     std::fwrite(js.data(), 1, js.size(), fj);
@@ -407,6 +426,9 @@ int main(int argc, char** argv) {
                  "Override the scene's solver.split_contact_groups (true: one NSGS per group of "
                  "coupled bodies; false: one over the whole W)")
       ->check(CLI::IsMember({"true", "false"}));
+  app.add_option("--local-model", o.local_model,
+                 "Override the scene's haptics.local_model (full, linearized, automatic)")
+      ->check(CLI::IsMember({"full", "linearized", "automatic"}));
   app.add_option("--linear", o.linear, "Override the scene's solver.linear")
       ->check(CLI::IsMember({"cholmod", "pcg", "cholmod_reuse"}));
   app.add_option("--log-level", o.log_level, "spdlog level of the simulation library")

@@ -11,7 +11,9 @@
 #include "study.h"
 #include "tactus/shared/clock.h"
 #include "tactus/shared/error.h"
+#include "tactus/haptic/local_model.h"
 #include "tactus/shared/nsgs.h"
+#include "tactus/shared/segment.h"
 #include "tactus/sim/fem.h"
 #include "tactus/sim/instrument.h"
 
@@ -73,43 +75,67 @@ Eigen::Vector3d stepForce(sim::Simulation& sim, const sim::DeviceTarget& d, doub
   return contactWrench(p, p.f.data(), p.tool_pose.pos_m).head<3>();
 }
 
+// The haptic loop's local model (haptic/local_model.h), fed the snapshot as sim_server publishes
+// it: a slot in process memory, prepared at the device's pose of the first tick on it.
 struct LocalModel {
   int budget = 0;                          // sweeps per tick
   double tol = 1e-6;
-  shared::NsgsWorkspace ws;
-  std::vector<double> f, df, delta;
+  haptic::LocalModelKind kind = haptic::LocalModelKind::kFull;
+  shared::SnapshotLayout layout;
+  std::vector<unsigned char> slot_bytes;
+  std::unique_ptr<haptic::OfflineLocalModel> model;
+  std::vector<double> df, delta;
   long snapshot = -1;
+  void reserve(int rows, int contacts) {
+    layout = shared::SnapshotLayout::forCapacity(rows, contacts);
+    slot_bytes.assign(layout.total_bytes + shared::kCacheLineBytes, 0);
+    haptic::LocalModelSettings s;
+    s.kind = kind;
+    s.tolerance = tol;
+    s.max_sweeps = budget;
+    model = std::make_unique<haptic::OfflineLocalModel>(rows, contacts, s);
+    df.assign(static_cast<std::size_t>(rows), 0.0);
+    delta.assign(static_cast<std::size_t>(rows), 0.0);
+  }
+  shared::SnapshotWriter slot() {
+    const auto misalign =
+        reinterpret_cast<std::uintptr_t>(slot_bytes.data()) % shared::kCacheLineBytes;
+    return shared::SnapshotWriter(
+        slot_bytes.data() + (shared::kCacheLineBytes - misalign) % shared::kCacheLineBytes,
+        layout);
+  }
 };
 
-// One tick of the local model on the snapshot `p` at device pose x_h, as
-// HapticLoop::solveLocalModel (safety chain aside). Returns the force; the penetration of the
-// linearised problem after the solve goes to pen_m, the timed part to tick_s.
-Eigen::Vector3d localTick(LocalModel& lm, const sim::ContactProblemData& p, long snapshot,
-                          const shared::Pose& x_h, double& pen_m, double& tick_s) {
+// One tick of the local model on the snapshot `p` (of simulation `sim`) at device pose x_h, as
+// the haptic loop (safety chain aside). Returns the force; the penetration of the linearised
+// problem after the solve goes to pen_m, the timed part (the solve) to tick_s.
+Eigen::Vector3d localTick(LocalModel& lm, const sim::Simulation& sim,
+                          const sim::ContactProblemData& p, long snapshot,
+                          const shared::Pose& x_h, double max_opening_rad, double& pen_m,
+                          double& tick_s) {
   const int m = p.rows;
   pen_m = 0.0;
   tick_s = 0.0;
   if (m == 0) return Eigen::Vector3d::Zero();
-  const std::int64_t t0 = shared::monotonicNs();
+  const shared::Pose* poses[] = {&x_h};
   if (lm.snapshot != snapshot) {
-    lm.snapshot = snapshot;                // a new snapshot: warm start from its forces
-    std::copy_n(p.f.data(), m, lm.f.begin());
+    lm.snapshot = snapshot;   // a new snapshot: prepared (off the tick in the haptic loop)
+    shared::SnapshotWriter slot = lm.slot();
+    if (!sim::writeSnapshot(sim, max_opening_rad, static_cast<std::uint64_t>(snapshot + 1), 1, 0,
+                            slot)) {
+      throw Error("haptic study: the snapshot does not fit its slot");
+    }
+    (void)lm.model->adopt(slot.view(), poses);
   }
+  const haptic::LocalModelResult res = lm.model->solve(poses);
+  tick_s = 1e-9 * static_cast<double>(res.elapsed_ns);
+  if (!res.solved()) return Eigen::Vector3d::Zero();
+  const Eigen::Vector3d force(res.force_n[0][0], res.force_n[0][1], res.force_n[0][2]);
   const shared::Vector6d dx = shared::poseDifference(x_h, p.device_pose);
   for (int r = 0; r < m; ++r) lm.df[r] = p.delta_free[r] + p.J.row(r).dot(dx);
   shared::ContactProblemView view = p.view();
   view.delta_free = lm.df.data();
-  shared::NsgsSettings ns;
-  ns.tolerance = lm.tol;
-  ns.max_sweeps = lm.budget;
-  ns.time_budget_ns = 0;
-  ns.coupling = shared::NsgsCoupling::kSymmetricRowUpdate;   // the pipeline's W is symmetric
-  const shared::NsgsResult res = shared::solveNsgs(view, ns, lm.ws, lm.f.data());
-  if (res.status == shared::NsgsStatus::kNonFinite) std::fill_n(lm.f.begin(), m, 0.0);
-  const Eigen::Vector3d force =
-      contactWrench(p, lm.f.data(), p.tool_pose.pos_m + dx.head<3>()).head<3>();
-  tick_s = shared::secondsSinceNs(t0);
-  shared::naturalMapError(view, lm.f.data(), lm.delta.data());
+  shared::naturalMapError(view, lm.model->model().forces(), lm.delta.data());
   for (int c = 0; c < p.contacts; ++c) pen_m = std::max(pen_m, -lm.delta[p.row_offset[c]]);
   return force;
 }
@@ -203,22 +229,28 @@ void runCase(const Options& o, const sim::SceneSpec& base, const HapticPlan& pla
   out[1].label = "linear extrapolation of the force";
   out[2].method = "coupling";
   out[2].label = fmt::format("virtual coupling to the god object ({} N/m)", ins.coupling_k_npm);
-  std::vector<LocalModel> models(plan.budgets.size());
-  const int cap_rows = 3 * base.solver.max_contacts;
-  for (std::size_t b = 0; b < plan.budgets.size(); ++b) {
-    const bool converged = plan.budgets[b] <= 0;
-    models[b].budget = converged ? std::max(1000, o.ref_sweeps) : plan.budgets[b];
+  // the local model: the full re-solve per sweep budget (0: converged), then the linearised
+  // model (haptic/local_model.h) with the scene's tolerance and the largest budget
+  std::vector<LocalModel> models(plan.budgets.size() + 1);
+  const shared::SegmentCapacity cap = sim::problemCapacity(base);
+  int largest = 1;
+  for (const int b : plan.budgets) largest = std::max(largest, b);
+  for (std::size_t b = 0; b < models.size(); ++b) {
+    const bool linear = b == plan.budgets.size();
+    const bool converged = !linear && plan.budgets[b] <= 0;
+    models[b].kind = linear ? haptic::LocalModelKind::kLinearized : haptic::LocalModelKind::kFull;
+    models[b].budget = converged ? std::max(1000, o.ref_sweeps)
+                       : linear  ? largest
+                                 : plan.budgets[b];
     models[b].tol = converged ? o.ref_tolerance : base.haptics.nsgs_tolerance;
-    models[b].ws.reserve(cap_rows, base.solver.max_contacts);
-    models[b].f.assign(static_cast<std::size_t>(cap_rows), 0.0);
-    models[b].df.assign(static_cast<std::size_t>(cap_rows), 0.0);
-    models[b].delta.assign(static_cast<std::size_t>(cap_rows), 0.0);
+    models[b].reserve(cap.max_rows, cap.max_contacts);
     MethodSeries s;
-    s.method = "local";
-    s.sweeps = plan.budgets[b];
-    s.label = converged ? std::string("local model converged")
-                        : fmt::format("local model {} sweep{}", plan.budgets[b],
-                                      plan.budgets[b] == 1 ? "" : "s");
+    s.method = linear ? "linearized" : "local";
+    s.sweeps = linear ? largest : plan.budgets[b];
+    s.label = linear      ? std::string("local model linearised (re-solve where it fails)")
+              : converged ? std::string("local model converged")
+                          : fmt::format("local model {} sweep{}", plan.budgets[b],
+                                        plan.budgets[b] == 1 ? "" : "s");
     out.push_back(std::move(s));
   }
   const long first = std::min(ticks, lat * n);   // no snapshot yet
@@ -262,7 +294,8 @@ void runCase(const Options& o, const sim::SceneSpec& base, const HapticPlan& pla
       out[2].push(f_vc, snap_pen, shared::secondsSinceNs(t0));
       for (std::size_t b = 0; b < models.size(); ++b) {
         double lpen = 0.0, tick_s = 0.0;
-        const Eigen::Vector3d f = localTick(models[b], snap, k, d.pose, lpen, tick_s);
+        const Eigen::Vector3d f = localTick(models[b], sim, snap, k, d.pose,
+                                            base.instrument.max_opening_rad, lpen, tick_s);
         out[3 + b].push(f, lpen, tick_s);
       }
     }

@@ -16,10 +16,7 @@ namespace tactus::sim {
 /// some obstacle has friction (0 without obstacles).
 int obstacleRowCapacity(const SceneSpec& spec);
 
-/// The capacity a published contact problem needs: max_contacts per instrument plus the
-/// obstacles' per tissue, 3 rows per contact when an instrument or an obstacle has friction
-/// (devices: 1; the callers set one per instrument).
-shared::SegmentCapacity problemCapacity(const SceneSpec& spec);
+// problemCapacity(spec): declared in tactus/sim/pipeline.h (tools size their segments with it)
 
 /// Contacts of every tissue's surface vertices (at its current positions) with the obstacles, into
 /// TissueState::obstacle_found; the smallest gap (+inf if none).

@@ -21,6 +21,7 @@
 #include "tactus/shared/messages.h"
 #include "tactus/shared/nsgs.h"
 #include "tactus/shared/pose.h"
+#include "tactus/shared/segment.h"
 #include "tactus/sim/collision.h"
 #include "tactus/sim/reactions.h"
 #include "tactus/sim/scene.h"
@@ -228,6 +229,12 @@ bool deviceSampleFresh(const shared::DeviceSample& s, std::int64_t now_ns,
 /// overflow and the twist bounded (segment_host.h); jumps and the workspace are the link's.
 bool deviceTargetFromSample(const shared::DeviceSample& s, double max_opening_rad,
                             DeviceTarget& target);
+
+/// The capacity a published contact problem needs: max_contacts per instrument plus the
+/// obstacles' per tissue and the contacts between tissues, 3 rows per contact when an
+/// instrument, an obstacle or a tissue pair has friction (devices: 1; the callers set one per
+/// instrument). sim_server's segment and every tool that publishes snapshots use it.
+shared::SegmentCapacity problemCapacity(const SceneSpec& spec);
 
 /// Writes the last step's contact problem into a snapshot slot (what sim_server publishes each
 /// step; also used by tests and tools that run the haptic loop beside an in-process simulation).
