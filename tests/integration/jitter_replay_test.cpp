@@ -7,6 +7,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstddef>
@@ -341,6 +342,45 @@ fs::path recordPressCube(const TempDir& dir) {
                           "' > '" + (dir.path() / "bench.log").string() + "' 2>&1";
   EXPECT_EQ(runBounded(cmd, 120), 0) << readAll(dir.path() / "bench.log");
   return snap;
+}
+
+// tactus-bench sizes its segment as sim_server does (the obstacles' and tissue pairs' contacts
+// too): with room for 5 instrument contacts, three boxes pressing the cube's sides give more
+// obstacle contacts than that, and every step's problem is published and recorded whole (a
+// segment sized for the instrument alone dropped them: empty snapshots).
+TEST(JitterReplay, TheBenchPublishesObstacleContactsBeyondTheInstrumentsCapacity) {
+  TempDir dir;
+  const fs::path base_scene = writePressScene(dir);
+  std::string scene = readAll(base_scene);
+  const auto solver = scene.find("solver: {max_contacts: 50}");
+  ASSERT_NE(solver, std::string::npos);
+  scene.replace(solver, std::string("solver: {max_contacts: 50}").size(),
+                "solver: {max_contacts: 5}\n"
+                "obstacles:\n"
+                "  - name: right\n"
+                "    box: {min: [0.034, -0.1, -0.03], max: [0.2, 0.1, 0.03]}\n"
+                "  - name: left\n"
+                "    box: {min: [-0.2, -0.1, -0.03], max: [-0.034, 0.1, 0.03]}\n"
+                "  - name: back\n"
+                "    box: {min: [-0.2, 0.034, -0.03], max: [0.2, 0.2, 0.03]}\n"
+                "obstacle_contact: {alarm_distance: 0.002, max_contacts: 60}");
+  const fs::path scene_file = dir.path() / "press_side.yaml";
+  writeAll(scene_file, scene);
+  const fs::path snap = dir.path() / "side.snap";
+  const fs::path log = dir.path() / "bench.log";
+  const std::string cmd = std::string(TACTUS_BINARY_DIR) + "/sim_server/tools/tactus-bench '" +
+                          scene_file.string() + "' --steps 20 --record-snapshots '" +
+                          snap.string() + "' > '" + log.string() + "' 2>&1";
+  ASSERT_EQ(runBounded(cmd, 120), 0) << readAll(log);
+  const auto snaps = shared::readSnapshotFile(snap);
+  ASSERT_EQ(snaps.size(), 20u);
+  int most = 0, obstacle_contacts = 0;
+  for (const auto& s : snaps) {
+    most = std::max(most, s.contacts());
+    for (const std::int32_t i : s.contact_instrument) obstacle_contacts += i < 0 ? 1 : 0;
+  }
+  EXPECT_GT(most, 5) << readAll(log);
+  EXPECT_GT(obstacle_contacts, 0);
 }
 
 TEST(JitterReplay, SimServerRecordsEveryStepAndKeepsAnExistingFile) {
