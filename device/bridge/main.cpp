@@ -3,7 +3,8 @@
 // set point or trajectory, and the mass-spring-damper the rendered force pushes) and speaks the
 // bridge protocol to haptic_server's `bridge` backend: every period it sends the hand's state
 // and applies the newest force command received. A vendor-SDK bridge has the same shape with
-// the SDK's read/write in place of the simulated hand.
+// the SDK's read/write in place of the simulated hand. When no valid command has arrived for
+// --command-timeout-ms (haptic_server gone), it renders zero force until commands return.
 #include <CLI/CLI.hpp>
 #include <arpa/inet.h>
 #include <netinet/in.h>
@@ -38,6 +39,7 @@ int main(int argc, char** argv) {
   double duration_s = 0.0;
   std::vector<std::string> hand_options;
   bool status = false;
+  double command_timeout_ms = 100.0;
   app.add_option("--server", server, "haptic_server's bridge address (IPv4)")
       ->capture_default_str();
   app.add_option("--port", port, "its UDP port")->check(CLI::Range(1, 65535))
@@ -49,6 +51,10 @@ int main(int argc, char** argv) {
   app.add_option("--device-option", hand_options,
                  "Option of the simulated hand key=value (device/README.md), repeatable");
   app.add_flag("--status", status, "Print the commands received once a second");
+  app.add_option("--command-timeout-ms", command_timeout_ms,
+                 "No valid command for this long (haptic_server gone, the network down): "
+                 "render zero force until commands return")
+      ->check(CLI::Range(1.0, 10'000.0))->capture_default_str();
   CLI11_PARSE(app, argc, argv);
   std::signal(SIGINT, onSignal);
   std::signal(SIGTERM, onSignal);
@@ -78,8 +84,11 @@ int main(int argc, char** argv) {
     shared::PeriodicTimer timer(static_cast<std::int64_t>(1e9 / rate_hz), 0);
     const std::int64_t t0 = shared::monotonicNs();
     std::int64_t last_status = t0;
-    std::uint64_t seq = 0, commands = 0, bad = 0;
+    std::uint64_t seq = 0, commands = 0, bad = 0, timeouts = 0;
     device::DeviceCommand command;
+    std::int64_t last_command_ns = 0;   // 0: none yet
+    bool timed_out = false;
+    const auto timeout_ns = static_cast<std::int64_t>(command_timeout_ms * 1e6);
     unsigned char out[bridge::kStateBytes];
     unsigned char in[512];
     while (!g_stop.load()) {
@@ -96,9 +105,20 @@ int main(int argc, char** argv) {
                 bridge::DecodeStatus::kOk) {
           command = c;
           ++commands;
+          last_command_ns = tick.woken_ns;
+          timed_out = false;
         } else {
           ++bad;
         }
+      }
+      // the server went quiet: never keep rendering its last command
+      if (last_command_ns != 0 && !timed_out && tick.woken_ns - last_command_ns > timeout_ns) {
+        command = device::DeviceCommand{};
+        timed_out = true;
+        ++timeouts;
+        std::printf("no command for %.0f ms: rendering zero force until commands return\n",
+                    command_timeout_ms);
+        std::fflush(stdout);
       }
       (void)hand.write(command);
       device::DeviceState state;
@@ -122,9 +142,10 @@ int main(int argc, char** argv) {
       }
     }
     ::close(fd);
-    std::printf("tactus-bridge-client: %llu states sent, %llu commands received, %llu bad\n",
+    std::printf("tactus-bridge-client: %llu states sent, %llu commands received, %llu bad, "
+                "%llu command timeouts\n",
                 static_cast<unsigned long long>(seq), static_cast<unsigned long long>(commands),
-                static_cast<unsigned long long>(bad));
+                static_cast<unsigned long long>(bad), static_cast<unsigned long long>(timeouts));
     return 0;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "tactus-bridge-client: %s\n", e.what());

@@ -79,7 +79,7 @@ void BridgeDevice::open() {
   socklen_t len = sizeof a;
   ::getsockname(fd_, reinterpret_cast<sockaddr*>(&a), &len);
   port_ = ntohs(a.sin_port);
-  have_state_ = fresh_ = silent_ = have_peer_ = false;
+  have_state_ = fresh_ = silent_ = have_peer_ = had_session_ = false;
   newest_seq_ = 0;
 }
 
@@ -92,23 +92,63 @@ IoStatus BridgeDevice::read(DeviceState* out) noexcept {
   return readAt(shared::monotonicNs(), out);
 }
 
+namespace {
+
+bool sameSender(const sockaddr_in& a, const sockaddr_in& b) noexcept {
+  return a.sin_addr.s_addr == b.sin_addr.s_addr && a.sin_port == b.sin_port;
+}
+
+}  // namespace
+
+void BridgeDevice::startSession(const bridge::Header& h, const sockaddr_in& from,
+                                std::int64_t now_ns) noexcept {
+  if (had_session_) counters_.restarts.fetch_add(1, std::memory_order_relaxed);
+  had_session_ = true;
+  have_state_ = true;
+  window_ = 0;
+  first_seq_ = h.seq;
+  newest_seq_ = h.seq - 1;             // take() sees the first state as the next in sequence
+  newest_sender_ns_ = h.t_ns;
+  min_offset_ns_ = now_ns - h.t_ns;    // both >= 0: no overflow
+  peer_ = from;
+  have_peer_ = true;
+}
+
 void BridgeDevice::take(const bridge::Header& h, const DeviceState& s, const sockaddr_in& from,
                         std::int64_t now_ns) noexcept {
-  const std::int64_t offset = now_ns - h.t_ns;   // both >= 0: no overflow
-  if (have_state_ && h.seq <= newest_seq_ && h.t_ns > newest_sender_ns_) {
-    // a lower or equal seq stamped later than the newest: the sender restarted
-    counters_.restarts.fetch_add(1, std::memory_order_relaxed);
-    have_state_ = false;
+  const bool live = have_state_ && now_ns - last_accept_ns_ <= timeout_ns_;
+  if (live && !sameSender(from, peer_)) {
+    // another sender while the session is live: never followed, never answered
+    counters_.foreign.fetch_add(1, std::memory_order_relaxed);
+    return;
   }
-  if (!have_state_) {
-    have_state_ = true;
-    window_ = 0;
-    first_seq_ = h.seq;
-    min_offset_ns_ = offset;
-  } else if (h.seq == newest_seq_) {
+  // the sender's clock may not run ahead of ours by more than the timeout between two states
+  const auto sane_stamp = [&] {
+    const std::int64_t elapsed = now_ns - last_accept_ns_;
+    return h.t_ns - newest_sender_ns_ <= elapsed + timeout_ns_;   // both terms bounded: no overflow
+  };
+  if (live && h.seq <= newest_seq_ && h.t_ns > newest_sender_ns_ && sane_stamp() &&
+      h.seq < kMaxSaneValue) {
+    // the same sender, a lower or equal seq stamped later than the newest: it restarted
+    startSession(h, from, now_ns);
+  } else if (!live) {
+    // no live session (none yet, or silent past the timeout): this sender starts one
+    if (h.seq == 0 || h.seq >= kMaxSaneValue ||
+        static_cast<std::uint64_t>(h.t_ns) >= kMaxSaneValue) {
+      counters_.out_of_window.fetch_add(1, std::memory_order_relaxed);
+      return;
+    }
+    startSession(h, from, now_ns);
+  } else if (h.seq > newest_seq_ && (h.seq - newest_seq_ > kMaxSeqStep || !sane_stamp())) {
+    counters_.out_of_window.fetch_add(1, std::memory_order_relaxed);
+    return;
+  }
+  const std::int64_t offset = now_ns - h.t_ns;   // both >= 0: no overflow
+  if (h.seq == newest_seq_) {
     counters_.duplicated.fetch_add(1, std::memory_order_relaxed);
     return;
-  } else if (h.seq < newest_seq_) {
+  }
+  if (h.seq < newest_seq_) {
     const std::uint64_t age = newest_seq_ - h.seq;
     // within the window and this session: a set bit is a duplicate; an unset one (never the
     // session's first seq, whose bit is set when it is superseded) was counted lost at the gap
@@ -123,11 +163,12 @@ void BridgeDevice::take(const bridge::Header& h, const DeviceState& s, const soc
     }
     counters_.reordered.fetch_add(1, std::memory_order_relaxed);
     return;
-  } else {
-    const std::uint64_t step = h.seq - newest_seq_;
-    counters_.lost.fetch_add(step - 1, std::memory_order_relaxed);
-    window_ = step >= kWindowBits ? 0 : (window_ << step);
-    if (step <= kWindowBits) window_ |= std::uint64_t{1} << (step - 1);   // the old newest
+  }
+  const std::uint64_t step = h.seq - newest_seq_;   // 1 .. kMaxSeqStep
+  counters_.lost.fetch_add(step - 1, std::memory_order_relaxed);
+  window_ = step >= kWindowBits ? 0 : (window_ << step);
+  if (h.seq - 1 >= first_seq_ && step <= kWindowBits) {
+    window_ |= std::uint64_t{1} << (step - 1);   // the old newest
   }
   if (offset < min_offset_ns_) min_offset_ns_ = offset;
   if (offset - min_offset_ns_ > late_ns_) counters_.late.fetch_add(1, std::memory_order_relaxed);
@@ -136,8 +177,6 @@ void BridgeDevice::take(const bridge::Header& h, const DeviceState& s, const soc
   newest_ = s;
   newest_.t_ns = h.t_ns + min_offset_ns_;   // on this machine's clock
   last_accept_ns_ = now_ns;
-  peer_ = from;
-  have_peer_ = true;
   fresh_ = true;
   counters_.accepted.fetch_add(1, std::memory_order_relaxed);
 }
@@ -201,9 +240,10 @@ std::string BridgeDevice::describeCounters() const {
   const BridgeCounters& c = counters_;
   return "bridge: " + v(c.accepted) + " states, " + v(c.lost) + " lost, " + v(c.duplicated) +
          " duplicated, " + v(c.reordered) + " reordered, " + v(c.late) + " late, " +
-         v(c.malformed) + " malformed, " + v(c.silences) + " silences, " + v(c.restarts) +
-         " restarts, " + v(c.commands_sent) + " commands sent, " + v(c.send_failures) +
-         " not sent";
+         v(c.malformed) + " malformed, " + v(c.foreign) + " from another sender, " +
+         v(c.out_of_window) + " out of window, " + v(c.silences) + " silences, " +
+         v(c.restarts) + " new sessions, " + v(c.commands_sent) + " commands sent, " +
+         v(c.send_failures) + " not sent";
 }
 
 }  // namespace tactus::device

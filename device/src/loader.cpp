@@ -1,14 +1,19 @@
 #include <dlfcn.h>
 #include <sys/stat.h>
 
+#include <array>
+#include <atomic>
+#include <cmath>
 #include <cstdlib>
 #include <cstring>
+#include <exception>
 #include <functional>
 
 #include "tactus/device/backends.h"
 #include "tactus/device/bridge_device.h"
 #include "tactus/device/device.h"
 #include "tactus/device/plugin_abi.h"
+#include "tactus/shared/file_io.h"
 
 namespace tactus::device {
 
@@ -47,37 +52,66 @@ struct Library {
 };
 
 constexpr std::size_t kErrorBytes = 512;
+/// Largest recorder ring (samples, and commands): 2^24, about 4.6 hours at 1 kHz between two
+/// drains of the background writer, and 2 GB of memory at most.
+constexpr double kMaxRecordCapacity = 16'777'216.0;
 
-// A Device over the plugin C ABI.
+// The text a plugin wrote into an error buffer of `size` bytes: at most size - 1 bytes (the ABI
+// promises a terminated message within the buffer; a plugin may still leave it unterminated, so
+// nothing past the buffer is read), control bytes escaped.
+std::string pluginMessage(const char* err, std::size_t size, const char* fallback) {
+  const std::size_t n = size > 0 ? ::strnlen(err, size - 1) : 0;
+  if (n == 0) return fallback;
+  return shared::printable(std::string_view(err, n), size);
+}
+
+// A Device over the plugin C ABI. Every call into the plugin is wrapped: an exception escaping
+// it (against the ABI's contract) is caught here, at the C boundary, so that it never reaches the
+// real-time loop: read/write report kFault (the loop fades the force out), the other entries
+// throw DeviceError.
 class PluginDevice final : public Device {
  public:
-  PluginDevice(std::shared_ptr<Library> lib, const TactusDevicePlugin* plugin, std::string origin,
-               const DeviceConfig& config)
-      : lib_(std::move(lib)), plugin_(plugin), origin_(std::move(origin)) {
+  PluginDevice(std::shared_ptr<Library> lib, const TactusDevicePlugin* plugin,
+               bool has_halt, std::string origin, const DeviceConfig& config)
+      : lib_(std::move(lib)), plugin_(plugin), has_halt_(has_halt), origin_(std::move(origin)) {
     std::vector<TactusKeyValue> kv;
     kv.reserve(config.size());
     for (const auto& [k, v] : config) kv.push_back({k.c_str(), v.c_str()});
     char err[kErrorBytes] = {0};
-    handle_ = plugin_->create(kv.empty() ? nullptr : kv.data(), kv.size(), err, sizeof(err));
+    try {
+      handle_ = plugin_->create(kv.empty() ? nullptr : kv.data(), kv.size(), err, sizeof(err));
+    } catch (...) {
+      throw DeviceError(prefix() + "create threw an exception (a plugin's entries must not): " +
+                        what());
+    }
     if (handle_ == nullptr) {
-      throw DeviceError(prefix() + "create failed: " + message(err, "no reason given"));
+      throw DeviceError(prefix() + "create failed: " +
+                        pluginMessage(err, sizeof(err), "no reason given"));
     }
   }
   ~PluginDevice() override {
     if (handle_ != nullptr) {
       close();
-      plugin_->destroy(handle_);
+      try {
+        plugin_->destroy(handle_);
+      } catch (...) {
+        // nothing sensible to do in a destructor: the plugin broke its contract
+      }
     }
   }
 
   DeviceInfo info() const override {
     TactusDeviceInfo ci{};
     DeviceInfo i;
-    if (plugin_->info(handle_, &ci) != TACTUS_DEVICE_OK) {
-      throw DeviceError(prefix() + "info() failed");
+    int rc = TACTUS_DEVICE_ERROR;
+    try {
+      rc = plugin_->info(handle_, &ci);
+    } catch (...) {
+      throw DeviceError(prefix() + "info() threw an exception: " + what());
     }
+    if (rc != TACTUS_DEVICE_OK) throw DeviceError(prefix() + "info() failed");
     ci.model[sizeof(ci.model) - 1] = '\0';
-    i.model = ci.model;
+    i.model = shared::printable(ci.model, sizeof(ci.model));
     i.max_force_n = ci.max_force_n;
     i.max_stiffness_npm = ci.max_stiffness_npm;
     i.workspace_radius_m = ci.workspace_radius_m;
@@ -86,32 +120,38 @@ class PluginDevice final : public Device {
     return i;
   }
   void open() override {
-    char err[kErrorBytes] = {0};
-    if (plugin_->open(handle_, err, sizeof(err)) != TACTUS_DEVICE_OK) {
-      throw DeviceError(prefix() + "open failed: " + message(err, "no reason given"));
-    }
+    call("open", [&](char* err, std::size_t n) { return plugin_->open(handle_, err, n); });
     opened_ = true;
   }
   void calibrate() override {
-    char err[kErrorBytes] = {0};
-    if (plugin_->calibrate(handle_, err, sizeof(err)) != TACTUS_DEVICE_OK) {
-      throw DeviceError(prefix() + "calibration failed: " + message(err, "no reason given"));
-    }
+    call("calibration", [&](char* err, std::size_t n) {
+      return plugin_->calibrate(handle_, err, n);
+    });
   }
   void enableForces(bool on) override {
-    char err[kErrorBytes] = {0};
-    if (plugin_->enable_forces(handle_, on ? 1 : 0, err, sizeof(err)) != TACTUS_DEVICE_OK) {
-      throw DeviceError(prefix() + (on ? "enabling" : "disabling") + " forces failed: " +
-                        message(err, "no reason given"));
-    }
+    call(on ? "enabling forces" : "disabling forces", [&](char* err, std::size_t n) {
+      return plugin_->enable_forces(handle_, on ? 1 : 0, err, n);
+    });
   }
   void close() noexcept override {
-    if (opened_) plugin_->close(handle_);
+    if (opened_) {
+      try {
+        plugin_->close(handle_);
+      } catch (...) {
+        // the plugin broke its contract; it is closed as far as we are concerned
+      }
+    }
     opened_ = false;
   }
   IoStatus read(DeviceState* out) noexcept override {
     TactusDeviceState s{};
-    const int rc = plugin_->read(handle_, &s);
+    int rc = TACTUS_IO_FAULT;
+    try {
+      rc = plugin_->read(handle_, &s);
+    } catch (...) {
+      caught(read_exceptions_);
+      return IoStatus::kFault;
+    }
     if (rc != TACTUS_IO_OK) return rc == TACTUS_IO_NO_DATA ? IoStatus::kNoData : IoStatus::kFault;
     out->t_ns = s.t_ns;
     for (std::size_t i = 0; i < 3; ++i) {
@@ -131,25 +171,108 @@ class PluginDevice final : public Device {
       c.torque_nm[i] = cmd.torque_nm[i];
     }
     c.gripper_force_n = cmd.gripper_force_n;
-    const int rc = plugin_->write(handle_, &c);
+    int rc = TACTUS_IO_FAULT;
+    try {
+      rc = plugin_->write(handle_, &c);
+    } catch (...) {
+      caught(write_exceptions_);
+      return IoStatus::kFault;
+    }
     if (rc == TACTUS_IO_OK) return IoStatus::kOk;
     return rc == TACTUS_IO_NO_DATA ? IoStatus::kNoData : IoStatus::kFault;
+  }
+  bool halt() noexcept override {
+    if (!has_halt_ || plugin_->halt == nullptr) return false;
+    try {
+      plugin_->halt(handle_);
+    } catch (...) {
+      return false;
+    }
+    return true;
+  }
+  std::string takeDiagnostics() override {
+    const std::uint64_t r = read_exceptions_.load(std::memory_order_relaxed);
+    const std::uint64_t w = write_exceptions_.load(std::memory_order_relaxed);
+    if (r == reported_read_ && w == reported_write_) return {};
+    std::string text = prefix() + "exceptions escaped read() " + std::to_string(r - reported_read_) +
+                       " and write() " + std::to_string(w - reported_write_) +
+                       " time(s) (caught; each counted as a device fault)";
+    // acquire: pairs with the release in caught(): the message is complete
+    if (first_message_ready_.load(std::memory_order_acquire) && !first_message_logged_) {
+      text += "; the first: " + shared::printable(first_message_.data(), first_message_.size());
+      first_message_logged_ = true;
+    }
+    reported_read_ = r;
+    reported_write_ = w;
+    return text;
   }
 
  private:
   std::string prefix() const {
-    return "device plugin '" + std::string(plugin_->name != nullptr ? plugin_->name : "?") +
-           "' (" + origin_ + "): ";
+    return "device plugin '" +
+           shared::printable(plugin_->name != nullptr ? plugin_->name : "?", 64) + "' (" +
+           origin_ + "): ";
   }
-  static std::string message(const char* err, const char* fallback) {
-    return err[0] != '\0' ? std::string(err) : std::string(fallback);
+  // The current exception's message (non-real-time).
+  static std::string what() {
+    try {
+      throw;
+    } catch (const std::exception& e) {
+      return shared::printable(e.what(), 256);
+    } catch (...) {
+      return "not a std::exception";
+    }
+  }
+  // Calls a non-real-time entry with an error buffer; throws DeviceError naming `what` on an
+  // error code or an exception.
+  template <class Entry>
+  void call(const char* what_failed, Entry entry) {
+    char err[kErrorBytes] = {0};
+    int rc = TACTUS_DEVICE_ERROR;
+    try {
+      rc = entry(err, sizeof(err));
+    } catch (...) {
+      throw DeviceError(prefix() + what_failed + " threw an exception (a plugin's entries must "
+                        "not): " + what());
+    }
+    if (rc != TACTUS_DEVICE_OK) {
+      throw DeviceError(prefix() + what_failed + " failed: " +
+                        pluginMessage(err, sizeof(err), "no reason given"));
+    }
+  }
+  // Inside a catch block on the real-time thread: count, and keep the very first message (a
+  // bounded copy into a fixed buffer, no allocation).
+  void caught(std::atomic<std::uint64_t>& counter) noexcept {
+    // relaxed: a statistic
+    counter.fetch_add(1, std::memory_order_relaxed);
+    if (first_message_taken_) return;
+    first_message_taken_ = true;
+    const char* text = "not a std::exception";
+    try {
+      throw;
+    } catch (const std::exception& e) {
+      text = e.what();
+    } catch (...) {
+    }
+    std::strncpy(first_message_.data(), text, first_message_.size() - 1);
+    // release: the copy is complete before the flag is seen
+    first_message_ready_.store(true, std::memory_order_release);
   }
 
   std::shared_ptr<Library> lib_;     // declared first: released last
   const TactusDevicePlugin* plugin_;
+  bool has_halt_ = false;            ///< an ABI 2 table (version 1 has no halt entry)
   std::string origin_;
   TactusDeviceHandle handle_ = nullptr;
   bool opened_ = false;
+  // exceptions caught on the real-time thread (counted there, reported by takeDiagnostics)
+  std::atomic<std::uint64_t> read_exceptions_{0};
+  std::atomic<std::uint64_t> write_exceptions_{0};
+  bool first_message_taken_ = false;                ///< real-time thread only
+  std::array<char, 160> first_message_{};
+  std::atomic<bool> first_message_ready_{false};
+  bool first_message_logged_ = false;               ///< takeDiagnostics' thread only
+  std::uint64_t reported_read_ = 0, reported_write_ = 0;
 };
 
 std::unique_ptr<Device> loadPlugin(const std::string& request, const DeviceConfig& config) {
@@ -217,17 +340,21 @@ std::unique_ptr<Device> loadPlugin(const std::string& request, const DeviceConfi
   if (plugin == nullptr) {
     throw DeviceError("device plugin '" + origin + "': tactus_device_plugin() returned NULL");
   }
-  if (plugin->abi_version != TACTUS_DEVICE_PLUGIN_ABI_VERSION) {
+  // version 2, or version 1 (the same table without halt): both load
+  const bool v1 = plugin->abi_version == 1u;
+  if (plugin->abi_version != TACTUS_DEVICE_PLUGIN_ABI_VERSION && !v1) {
     throw DeviceError("device plugin '" + origin + "' was built for device plugin ABI version " +
-                      std::to_string(plugin->abi_version) + ", this program uses version " +
+                      std::to_string(plugin->abi_version) + ", this program loads versions 1 to " +
                       std::to_string(TACTUS_DEVICE_PLUGIN_ABI_VERSION) +
                       ": rebuild the plugin against this checkout's "
                       "device/include/tactus/device/plugin_abi.h");
   }
-  if (plugin->struct_size != sizeof(TactusDevicePlugin)) {
+  const std::size_t expected_size = v1 ? TACTUS_DEVICE_PLUGIN_V1_SIZE : sizeof(TactusDevicePlugin);
+  if (plugin->struct_size != expected_size) {
     throw DeviceError("device plugin '" + origin + "' has a function table of " +
-                      std::to_string(plugin->struct_size) + " bytes, expected " +
-                      std::to_string(sizeof(TactusDevicePlugin)) +
+                      std::to_string(plugin->struct_size) + " bytes for ABI version " +
+                      std::to_string(plugin->abi_version) + ", expected " +
+                      std::to_string(expected_size) +
                       ": rebuild the plugin against this checkout's plugin_abi.h");
   }
   const bool complete = plugin->create && plugin->destroy && plugin->open && plugin->calibrate &&
@@ -237,7 +364,7 @@ std::unique_ptr<Device> loadPlugin(const std::string& request, const DeviceConfi
     throw DeviceError("device plugin '" + origin + "' leaves some functions of its "
                       "TactusDevicePlugin table NULL: every entry must be set");
   }
-  return std::make_unique<PluginDevice>(std::move(lib), plugin, origin, config);
+  return std::make_unique<PluginDevice>(std::move(lib), plugin, /*has_halt=*/!v1, origin, config);
 }
 
 }  // namespace
@@ -260,6 +387,14 @@ std::unique_ptr<Device> loadDevice(std::string_view name_or_path, const DeviceCo
     inner_config.erase(it);
     if (record.empty()) throw DeviceError("device option record= needs a file name");
   }
+  std::string record_commands;
+  if (auto it = inner_config.find("record_commands"); it != inner_config.end()) {
+    record_commands = it->second;
+    inner_config.erase(it);
+    if (record_commands.empty()) {
+      throw DeviceError("device option record_commands= needs a file name");
+    }
+  }
   bool record_overwrite = false;
   if (auto it = inner_config.find("record_overwrite"); it != inner_config.end()) {
     OptionReader opt("recorder", inner_config);
@@ -268,8 +403,11 @@ std::unique_ptr<Device> loadDevice(std::string_view name_or_path, const DeviceCo
   }
   if (auto it = inner_config.find("record_capacity"); it != inner_config.end()) {
     OptionReader opt("recorder", inner_config);
-    const double cap = opt.number("record_capacity", 0.0);
-    if (cap < 2.0) throw DeviceError("device option record_capacity must be >= 2 samples");
+    // the rings are allocated at once (a sample or command each): bounded, as memory is
+    const double cap = opt.number("record_capacity", 0.0, 2.0, kMaxRecordCapacity);
+    if (cap != std::floor(cap)) {
+      throw DeviceError("device option record_capacity must be a whole number of samples");
+    }
     record_capacity = static_cast<std::size_t>(cap);
     inner_config.erase("record_capacity");
   }
@@ -281,9 +419,9 @@ std::unique_ptr<Device> loadDevice(std::string_view name_or_path, const DeviceCo
   } else {
     device = loadPlugin(request, inner_config);
   }
-  if (!record.empty()) {
+  if (!record.empty() || !record_commands.empty()) {
     device = std::make_unique<RecordingDevice>(std::move(device), record, record_capacity,
-                                               record_overwrite);
+                                               record_overwrite, record_commands);
   }
   return device;
 }

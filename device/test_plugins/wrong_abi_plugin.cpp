@@ -2,11 +2,11 @@
 #include "tactus/device/plugin_abi.h"
 
 namespace {
-const TactusDevicePlugin kPlugin = {TACTUS_DEVICE_PLUGIN_ABI_VERSION + 6,
+const TactusDevicePlugin kPlugin = {7u,
                                     sizeof(TactusDevicePlugin),
                                     "wrong_abi",
                                     nullptr, nullptr, nullptr, nullptr, nullptr, nullptr, nullptr,
-                                    nullptr, nullptr};
+                                    nullptr, nullptr, nullptr};
 }  // namespace
 
 extern "C" const TactusDevicePlugin* tactus_device_plugin(void) { return &kPlugin; }

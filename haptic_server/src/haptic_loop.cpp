@@ -98,6 +98,9 @@ const char* eventName(std::uint32_t code) noexcept {
     case kEventSimShuttingDown: return "simulation_shutting_down";
     case kEventIllPosedSnapshot: return "ill_posed_snapshot";
     case kEventSnapshotRejected: return "snapshot_rejected";
+    case kEventDisengaged: return "forces_disengaged";
+    case kEventUnusableOrientation: return "unusable_device_orientation";
+    case kEventSnapshotFromTheFuture: return "snapshot_from_the_future";
     default: return shared::eventCodeName(code);
   }
 }
@@ -156,6 +159,15 @@ void HapticLoop::initLimits(DeviceChannel& ch) {
   blend_ticks_ = std::isfinite(blend_ticks) && blend_ticks >= 0.5 && blend_ticks <= 1e5
                      ? static_cast<int>(std::lround(blend_ticks))
                      : 0;
+  // the fade and the slew limit count nominal periods, not elapsed time: a late tick (a stalled
+  // device read) gets no larger budget; unchecked settings that are not usable: no ramp, no slew
+  const double period_s = 1e-9 * static_cast<double>(settings_.period_ns);
+  const double fade_ticks = 1e-3 * settings_.fade_ms / period_s;
+  fade_ticks_ = std::isfinite(fade_ticks) && fade_ticks >= 1.0 && fade_ticks <= 1e7
+                    ? static_cast<int>(std::lround(fade_ticks))
+                    : 1;
+  const double slew_step = settings_.slew_n_per_s * period_s;
+  slew_step_n_ = std::isfinite(slew_step) && slew_step > 0.0 ? slew_step : 0.0;
   const device::DeviceInfo info = ch.device->info();
   const double device_max = info.max_force_n;
   if (std::isfinite(device_max) && device_max > 0.0) {
@@ -176,6 +188,21 @@ AttachedSegment* HapticLoop::linkInUse() const noexcept {
   return in_use_.load(std::memory_order_seq_cst);
 }
 
+void HapticLoop::stopped() noexcept {
+  link_ = nullptr;
+  in_use_.store(nullptr, std::memory_order_seq_cst);
+}
+
+HapticLoop::TickProgress HapticLoop::tickProgress(std::int64_t now_ns) const noexcept {
+  TickProgress p;
+  // relaxed: a diagnostic; a stale value only delays the watchdog by one poll
+  const std::int64_t started = tick_started_ns_.load(std::memory_order_relaxed);
+  if (started == 0) return p;
+  p.running_ns = std::max<std::int64_t>(0, ageNs(now_ns, started));
+  p.device = in_device_.load(std::memory_order_relaxed);
+  return p;
+}
+
 void HapticLoop::adoptOfferedLink() noexcept {
   AttachedSegment* offered = offered_.load(std::memory_order_seq_cst);
   if (offered == link_) return;
@@ -191,6 +218,12 @@ void HapticLoop::adoptOfferedLink() noexcept {
   link_ = offered;
   snapshot_seq_ = 0;
   stale_ = true;
+  // another simulation (or none): every device's forces fade out and re-engage only below the
+  // engage threshold, whatever the new link's first snapshot says
+  for (int i = 0; i < device_count_; ++i) {
+    DeviceChannel& ch = channels_[static_cast<std::size_t>(i)];
+    if (ch.engaged) disengage(ch, i);
+  }
   pushEvent(link_ != nullptr ? shared::kEventSegmentAttached : shared::kEventSegmentLost,
             link_ != nullptr ? static_cast<double>(link_->segment.generation()) : 0.0);
 }
@@ -212,29 +245,53 @@ void HapticLoop::pushRateLimited(NoisyEvent which, std::uint32_t code, std::int6
 
 device::IoStatus HapticLoop::readDevice(DeviceChannel& ch, int i, std::int64_t now,
                                         TickOutput& out) noexcept {
+  // relaxed: for the supervisor's watchdog only
+  in_device_.store(i, std::memory_order_relaxed);
   device::IoStatus io = ch.device->read(&ch.raw_state);
-  if (io == device::IoStatus::kOk) ch.state = ch.raw_state;
+  in_device_.store(-1, std::memory_order_relaxed);
+  if (io == device::IoStatus::kOk) {
+    ch.state = ch.raw_state;
+    ch.last_sample_ns = now;
+  }
   if (io == device::IoStatus::kOk && ch.state.t_ns > 0 &&
       ageNs(now, ch.state.t_ns) > watchdog_ns_) {
     // a sample stamped long ago: the device stopped updating (disconnected, stuck driver)
     counters_.stale_device_samples.fetch_add(1, std::memory_order_relaxed);
     io = device::IoStatus::kFault;
   }
+  if (io == device::IoStatus::kNoData && ch.have_pose &&
+      (watchdog_ns_ == 0 || ageNs(now, ch.last_sample_ns) > watchdog_ns_)) {
+    // silent for longer than the watchdog: the held pose may be far from the hand by now
+    counters_.silent_device_ticks.fetch_add(1, std::memory_order_relaxed);
+    io = device::IoStatus::kFault;
+  }
   if (io == device::IoStatus::kOk) {
     const auto& q = ch.state.quat_wxyz;
-    if (finite(ch.state.pos_m) && std::isfinite(q[0]) && std::isfinite(q[1]) &&
-        std::isfinite(q[2]) && std::isfinite(q[3])) {
+    const bool finite_pose = finite(ch.state.pos_m) && std::isfinite(q[0]) &&
+                             std::isfinite(q[1]) && std::isfinite(q[2]) && std::isfinite(q[3]);
+    // a device's quaternion is unit up to its rounding; zero or far from unit is no orientation
+    // (never replaced by identity: the instrument would turn to the scene's axes)
+    const double q_norm2 = finite_pose ? q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]
+                                       : 0.0;
+    const bool unit = q_norm2 > kMinQuaternionNorm2 && q_norm2 < kMaxQuaternionNorm2;
+    if (finite_pose && unit) {
       ch.mapping.toScene(ch.state);   // the one place where the device pose becomes the scene's
       const auto& p = ch.state.pos_m;
+      const auto& qs = ch.state.quat_wxyz;
       ch.last_pose.pos_m = Eigen::Vector3d(p[0], p[1], p[2]);
-      const Eigen::Quaterniond rot(q[0], q[1], q[2], q[3]);
-      ch.last_pose.rot = rot.norm() > 1e-9 ? rot.normalized() : Eigen::Quaterniond::Identity();
+      const Eigen::Quaterniond rot(qs[0], qs[1], qs[2], qs[3]);
+      ch.last_pose.rot = rot.normalized();
       ch.have_pose = true;
       if (ch.device_fault) pushEvent(kEventDeviceRecovered, i);
       ch.device_fault = false;
     } else {
-      counters_.non_finite_input.fetch_add(1, std::memory_order_relaxed);
-      if (!ch.device_fault) pushEvent(kEventNonFinite, 0.0, i);
+      if (finite_pose) {
+        counters_.unusable_orientation.fetch_add(1, std::memory_order_relaxed);
+        if (!ch.device_fault) pushEvent(kEventUnusableOrientation, std::sqrt(q_norm2), i);
+      } else {
+        counters_.non_finite_input.fetch_add(1, std::memory_order_relaxed);
+        if (!ch.device_fault) pushEvent(kEventNonFinite, 0.0, i);
+      }
       ch.device_fault = true;
       out.flags |= shared::kStatsDeviceFault;
     }
@@ -277,8 +334,11 @@ void HapticLoop::publishSample(DeviceChannel& ch, int i, std::int64_t now,
              (io == device::IoStatus::kOk ? shared::kDeviceOk : 0u) |
              (io == device::IoStatus::kNoData ? shared::kDeviceNoData : 0u) |
              (ch.engaged ? shared::kDeviceForcesEnabled : 0u) |
-             (ch.gain < 1.0 && ch.engaged ? shared::kDeviceForceFading : 0u) |
-             (ch.clamped ? shared::kDeviceForceClamped : 0u);
+             (ch.gain > 0.0 && ch.gain < 1.0 ? shared::kDeviceForceFading : 0u) |
+             (ch.clamped ? shared::kDeviceForceClamped : 0u) |
+             // only a pose the device delivered may move the instrument (none yet: the
+             // simulation keeps the scene's own pose)
+             (ch.have_pose ? shared::kDevicePoseValid : 0u);
   s.snapshot_seq = snapshot_seq_;
   writer.publish();
 }
@@ -289,6 +349,7 @@ void HapticLoop::takeSnapshot(std::int64_t now, std::int64_t deadline_ns,
   bool stale = true;
   bool switched = false;
   bool solved = false;
+  bool usable = false;   // the solve gave a model the hand may feel
   if (link_ != nullptr) {
     // each device at its last pose (held while it faults); solved while some device has a
     // live pose
@@ -311,8 +372,13 @@ void HapticLoop::takeSnapshot(std::int64_t now, std::int64_t deadline_ns,
     } else {
       const std::int64_t age = ageNs(now, hdr.t_ns);
       const bool shutting = (hdr.flags & shared::kSnapshotShuttingDown) != 0;
-      stale = watchdog_ns_ == 0 || age > watchdog_ns_ || shutting ||
+      // stamped in the future (both sides share CLOCK_MONOTONIC): corrupt, never fresh
+      const bool future = age < -kFutureSnapshotSlackNs;
+      stale = watchdog_ns_ == 0 || age > watchdog_ns_ || future || shutting ||
               (hdr.flags & shared::kSnapshotValid) == 0;
+      if (future && hdr.seq != snapshot_seq_) {
+        pushEvent(kEventSnapshotFromTheFuture, static_cast<double>(-age));
+      }
       if (link_->model.adopted() != snap || snap->generation() != adopted_generation_) {
         // O(rows): the preparation's solution and its W f + delta_free become the warm start
         // (a snapshot prepared again at newer poses too)
@@ -343,13 +409,16 @@ void HapticLoop::takeSnapshot(std::int64_t now, std::int64_t deadline_ns,
         out.contacts = std::max(hdr.contacts, 0);
         const PrepareStatus ps = snap->status();
         if (ps == PrepareStatus::kIllPosed || ps == PrepareStatus::kNonFinite) {
-          // a corrupt problem: no force from it (the chain ramps the command down)
+          // a corrupt problem: no force from it (the chain fades the force it held)
           out.flags |= shared::kStatsSolverNotConverged;
           auto& counter = ps == PrepareStatus::kIllPosed ? counters_.ill_posed_solves
                                                           : counters_.non_finite_input;
           counter.fetch_add(1, std::memory_order_relaxed);
         }
-        solveLocalModel(*link_, poses, deadline_ns, out);
+        // a model the hand may feel: a problem the preparation accepted (or one without
+        // contact) and a solve that gave a usable wrench
+        const bool solved_ok = solveLocalModel(*link_, poses, deadline_ns, out);
+        usable = ps == PrepareStatus::kEmpty || (ps == PrepareStatus::kReady && solved_ok);
         solved = true;
       }
       if (stale != stale_) {
@@ -365,10 +434,16 @@ void HapticLoop::takeSnapshot(std::int64_t now, std::int64_t deadline_ns,
   }
   out.stale = stale;
   out.snapshot_seq = snapshot_seq_;
+  // a device has a model this tick when the solve was usable and it has a live pose
+  for (int i = 0; i < device_count_; ++i) {
+    const DeviceChannel& ch = channels_[static_cast<std::size_t>(i)];
+    out.device[static_cast<std::size_t>(i)].model =
+        usable && !stale && ch.have_pose && !ch.device_fault;
+  }
   blendSnapshot(switched, solved, out);
 }
 
-void HapticLoop::solveLocalModel(
+bool HapticLoop::solveLocalModel(
     AttachedSegment& link, const std::array<const shared::Pose*, shared::kMaxInstruments>& poses,
     std::int64_t deadline_ns, TickOutput& out) noexcept {
   const LocalModelResult res = link.model.solve(
@@ -379,7 +454,7 @@ void HapticLoop::solveLocalModel(
   out.residual = res.error;
   out.solve_ns = res.elapsed_ns;
   out.model_used = res.used;
-  if (!res.solved()) return;
+  if (!res.solved()) return false;
   if (res.used == LocalModelUsed::kLinearized) {
     counters_.linearized_ticks.fetch_add(1, std::memory_order_relaxed);
   } else if (res.used == LocalModelUsed::kFallback) {
@@ -387,10 +462,10 @@ void HapticLoop::solveLocalModel(
     out.flags |= shared::kStatsModelFallback;
     link.preparer.requestRelinearization();
   }
-  if (res.status == shared::NsgsStatus::kEmpty) return;
+  if (res.status == shared::NsgsStatus::kEmpty) return false;
   if (res.status == shared::NsgsStatus::kNonFinite) {   // NSGS has zeroed f
     counters_.non_finite_input.fetch_add(1, std::memory_order_relaxed);
-    return;
+    return false;
   }
   // kIllPosed: W itself is unusable (a contact with a zero, negative or denormal diagonal). The
   // simulation never publishes such a W from a real scene, so the snapshot is corrupt: render no
@@ -403,7 +478,7 @@ void HapticLoop::solveLocalModel(
       pushEvent(kEventIllPosedSnapshot, static_cast<double>(res.ill_posed_contacts),
                 static_cast<double>(snapshot_seq_));
     }
-    return;
+    return false;
   }
   const bool not_converged = res.status != shared::NsgsStatus::kConverged;
   if (not_converged) {
@@ -423,6 +498,7 @@ void HapticLoop::solveLocalModel(
   }
   out.force_n = out.device[0].force_n;
   out.torque_nm = out.device[0].torque_nm;
+  return true;
 }
 
 void HapticLoop::blendSnapshot(bool switched, bool solved, TickOutput& out) noexcept {
@@ -461,7 +537,11 @@ void HapticLoop::writeDevice(DeviceChannel& ch, const std::array<double, 3>& for
   device::DeviceCommand cmd;
   cmd.force_n = force;
   cmd.torque_nm = torque;
-  if (ch.device->write(cmd) != device::IoStatus::kOk) {
+  // relaxed: for the supervisor's watchdog only
+  in_device_.store(static_cast<int>(&ch - channels_.data()), std::memory_order_relaxed);
+  const device::IoStatus io = ch.device->write(cmd);
+  in_device_.store(-1, std::memory_order_relaxed);
+  if (io != device::IoStatus::kOk) {
     counters_.write_faults.fetch_add(1, std::memory_order_relaxed);
   }
 }
@@ -526,11 +606,9 @@ TickOutput HapticLoop::tick(std::int64_t scheduled_ns, std::int64_t woken_ns) no
   // times the caller passes)
   out.started_ns = shared::monotonicNs();
   out.deadline_ns = settings_.solve_budget_ns > 0 ? out.started_ns + settings_.solve_budget_ns : 0;
+  // relaxed: for the supervisor's watchdog only
+  tick_started_ns_.store(out.started_ns, std::memory_order_relaxed);
   const std::int64_t now = woken_ns;
-  const double dt =
-      last_tick_ns_ > 0 ? std::clamp(1e-9 * static_cast<double>(ageNs(now, last_tick_ns_)), 1e-5,
-                                     0.05)
-                        : 1e-3;
   last_tick_ns_ = now;
 
   adoptOfferedLink();   // never waits
@@ -546,25 +624,34 @@ TickOutput HapticLoop::tick(std::int64_t scheduled_ns, std::int64_t woken_ns) no
           ? std::max(out.deadline_ns - std::min(kOutputReserveNs, settings_.solve_budget_ns / 4),
                      out.started_ns + 1)
           : 0;
-  takeSnapshot(now, solve_deadline, out);   // one solve: each instrument's wrench in out.device[i]
+  // one solve: each instrument's wrench in out.device[i]; the snapshot's age is taken at this
+  // moment (a device read may have stalled since the tick woke), so a snapshot published
+  // meanwhile is not taken for one from the future
+  takeSnapshot(now + (t_read - out.started_ns), solve_deadline, out);
   const std::int64_t t_model = shared::monotonicNs();
   out.model_ns = t_model - t_read;
   std::array<double, 3> force0{};
+  bool all_zero = true;
   for (int i = 0; i < device_count_; ++i) {
     DeviceChannel& ch = channels_[static_cast<std::size_t>(i)];
     DeviceTickOutput& dev = out.device[static_cast<std::size_t>(i)];
     ch.mapping.wrenchToDevice(dev.force_n, dev.torque_nm);   // the chain clamps in device frame
     std::array<double, 3> force{};
     std::array<double, 3> torque{};
-    applySafetyChain(ch, dt, out, dev, force, torque);
+    applySafetyChain(ch, i, out, dev, force, torque);
     writeDevice(ch, force, torque);
     if (i == 0) force0 = force;
+    all_zero = all_zero && ch.gain == 0.0 && force == std::array<double, 3>{} &&
+               torque == std::array<double, 3>{};
   }
+  // relaxed: read by a stopping program's thread, nothing else depends on it
+  all_forces_zero_.store(all_zero, std::memory_order_relaxed);
   static_cast<DeviceTickOutput&>(out) = out.device[0];
   out.output_ns = shared::monotonicNs() - t_model;
   recordStats(scheduled_ns, woken_ns, out, force0);
   ++tick_index_;
   counters_.ticks.fetch_add(1, std::memory_order_relaxed);
+  tick_started_ns_.store(0, std::memory_order_relaxed);
   return out;
 }
 

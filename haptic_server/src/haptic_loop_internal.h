@@ -9,8 +9,22 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdint>
 
 #include "tactus/haptic/haptic_loop.h"
+
+namespace tactus::haptic {
+
+/// A device quaternion is usable when its squared norm lies in (this, kMaxQuaternionNorm2):
+/// unit up to the device's rounding, never zero (the sample is refused otherwise).
+inline constexpr double kMinQuaternionNorm2 = 0.25;
+inline constexpr double kMaxQuaternionNorm2 = 4.0;
+/// A snapshot stamped more than this ahead of the tick's clock is from the future (corrupt) and
+/// never fresh. Both daemons stamp with CLOCK_MONOTONIC and the age is taken after the snapshot
+/// was read, so a real publisher is never ahead; the slack covers the clock's granularity.
+inline constexpr std::int64_t kFutureSnapshotSlackNs = 1'000'000;
+
+}  // namespace tactus::haptic
 
 namespace tactus::haptic::detail {
 

@@ -7,11 +7,14 @@
 #include <chrono>
 #include <cmath>
 #include <csignal>
+#include <cstdlib>
+#include <map>
 #include <optional>
 #include <thread>
 
 #include "tactus/device/backends.h"
 #include "tactus/device/bridge_device.h"
+#include "tactus/device/bridge_protocol.h"
 #include "tactus/device/device.h"
 #include "tactus/haptic/clutch_key.h"
 #include "tactus/haptic/device_options.h"
@@ -26,6 +29,10 @@
 #include "tactus/shared/workspace_mapping.h"
 
 namespace {
+/// After a stop request, how long the real-time thread may take to end (a device call that
+/// blocks against its contract) before the process ends without it, with kExitStuck.
+constexpr int kStopGraceMs = 1000;
+constexpr int kExitStuck = 4;
 std::atomic<bool> g_stop{false};
 void onSignal(int) {
   g_stop.store(true);
@@ -144,6 +151,29 @@ int main(int argc, char** argv) {
     return 2;
   }
 
+  // two network bridges on one UDP port: the second could not bind it; say which before any
+  // device opens (usage, like the mappings)
+  try {
+    const std::vector<device::DeviceConfig> configs =
+        haptic::splitDeviceOptions(device_options, device_names.size());
+    std::map<std::string, std::size_t> bridge_port;
+    for (std::size_t i = 0; i < device_names.size(); ++i) {
+      if (device_names[i] != "bridge") continue;
+      const auto it = configs[i].find("port");
+      const std::string port =
+          it != configs[i].end() ? it->second : std::to_string(device::bridge::kDefaultPort);
+      if (port == "0") continue;   // any free port
+      if (const auto [at, fresh] = bridge_port.emplace(port, i); !fresh) {
+        spdlog::error("devices {} and {} are both network bridges on UDP port {}: give each its "
+                      "own, --device-option {}:port=N", at->second, i, port, i);
+        return 2;
+      }
+    }
+  } catch (const std::exception& e) {
+    spdlog::error("{}", e.what());
+    return 2;
+  }
+
   try {
     shared::Segment::validateName(segment);
     const std::vector<device::DeviceConfig> configs =
@@ -190,6 +220,7 @@ int main(int argc, char** argv) {
     if (core < 0) core = shared::availableCpuCount() - 1;
 
     std::atomic<bool> loop_stop{false};
+    std::atomic<bool> rt_done{false};
     std::string rt_summary;
     std::atomic<bool> rt_ready{false};
     std::exception_ptr rt_error;
@@ -210,8 +241,9 @@ int main(int argc, char** argv) {
         const shared::TimerTick t = timer.wait();
         loop.tick(t.scheduled_ns, t.woken_ns);
       }
-      // leave every device with zero force
+      // leave every device with zero force (the forces faded out before the stop)
       for (auto& d : devs) (void)d->write(device::DeviceCommand{});
+      rt_done.store(true);
     });
     while (!rt_ready.load()) std::this_thread::sleep_for(std::chrono::milliseconds(1));
     if (rt_error) {
@@ -258,9 +290,31 @@ int main(int argc, char** argv) {
     }
     spdlog::info("stopping: {} ticks", loop.counters().ticks.load());
     if (bridge != nullptr) spdlog::info("{}", bridge->describeCounters());
+    // withdrawing the link fades every force out (over --fade-ms): wait for it, then stop ticking
     supervisor.detach();
+    const auto fade_wait = std::chrono::milliseconds(static_cast<int>(settings.fade_ms) + 500);
+    const auto fade_end = std::chrono::steady_clock::now() + fade_wait;
+    while (!loop.allForcesZero() && std::chrono::steady_clock::now() < fade_end &&
+           !rt_done.load()) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    }
     loop_stop.store(true);
+    // a device call that blocks (against its contract) would hold the real-time thread for
+    // ever: wait a bounded grace period, then end the process without it
+    const auto join_end = std::chrono::steady_clock::now() + std::chrono::milliseconds(kStopGraceMs);
+    while (!rt_done.load() && std::chrono::steady_clock::now() < join_end) {
+      supervisor.watchTick(shared::monotonicNs());
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+    if (!rt_done.load()) {
+      spdlog::error("the real-time thread is still stuck in a device call {} ms after the stop "
+                    "request: exiting without it (the device keeps its last command unless its "
+                    "driver stops it)", kStopGraceMs);
+      spdlog::shutdown();
+      std::_Exit(kExitStuck);
+    }
     rt.join();
+    loop.stopped();
     supervisor.drainEvents();
     for (auto& d : devs) {
       d->enableForces(false);

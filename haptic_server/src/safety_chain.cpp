@@ -64,32 +64,50 @@ bool guardWrench(std::array<double, 3>& force_n, std::array<double, 3>& torque_n
   return changed;
 }
 
-void HapticLoop::applySafetyChain(DeviceChannel& ch, double dt, TickOutput& out,
+void HapticLoop::disengage(DeviceChannel& ch, int i) noexcept {
+  ch.engaged = false;
+  counters_.disengaged.fetch_add(1, std::memory_order_relaxed);
+  pushEvent(kEventDisengaged, i, wrenchNorm(ch.held_force_n));
+}
+
+void HapticLoop::applySafetyChain(DeviceChannel& ch, int i, TickOutput& out,
                                   DeviceTickOutput& dev, std::array<double, 3>& force,
                                   std::array<double, 3>& torque) noexcept {
   // scale, engage gate, fade, clamp, slew
-  for (int i = 0; i < 3; ++i) {
-    force[i] = settings_.force_scale * dev.force_n[i];
-    torque[i] = settings_.render_torque ? settings_.force_scale * dev.torque_nm[i] : 0.0;
+  for (int k = 0; k < 3; ++k) {
+    force[k] = settings_.force_scale * dev.force_n[k];
+    torque[k] = settings_.render_torque ? settings_.force_scale * dev.torque_nm[k] : 0.0;
   }
-  if (!finite(force) || !finite(torque)) {
+  bool usable = dev.model;
+  if (!finite(force) || !finite(torque)) {   // never rendered, and no model this tick
     force = {};
     torque = {};
+    usable = false;
   }
   dev.unlimited_force_norm_n = wrenchNorm(force);
-  const bool usable = !out.stale && ch.have_pose && !ch.device_fault;
-  if (!ch.engaged && usable && dev.unlimited_force_norm_n < settings_.engage_threshold_n) {
+  // Engage gate: any interruption closes it; it opens again only once the fade-out has ended
+  // and the requested force is below the threshold (no kick with the hand inside tissue).
+  if (!usable) {
+    if (ch.engaged) disengage(ch, i);
+  } else if (!ch.engaged && ch.gain_ticks == 0 &&
+             dev.unlimited_force_norm_n < settings_.engage_threshold_n) {
     ch.engaged = true;
     pushEvent(kEventEngaged, dev.unlimited_force_norm_n);
   }
-  const double target_gain = (usable && ch.engaged) ? 1.0 : 0.0;
-  const double ramp = settings_.fade_ms > 0.0 ? dt / (1e-3 * settings_.fade_ms) : 1.0;
-  ch.gain = target_gain > ch.gain ? std::min(target_gain, ch.gain + ramp)
-                              : std::max(target_gain, ch.gain - ramp);
-  if (!(ch.gain >= 0.0 && ch.gain <= 1.0)) ch.gain = 0.0;   // NaN ramp (unchecked settings)
-  for (int i = 0; i < 3; ++i) {
-    force[i] *= ch.gain;
-    torque[i] *= ch.gain;
+  // Fade: engaged, the gain ramps up on the live wrench; otherwise it ramps down on the held
+  // one (the last engaged tick's), so a lost model fades what the hand felt, over fade_ms.
+  // (counted in whole ticks, so the ramp is exact: k / n of the held wrench)
+  if (ch.engaged) {
+    ch.held_force_n = force;
+    ch.held_torque_nm = torque;
+    ch.gain_ticks = std::min(fade_ticks_, ch.gain_ticks + 1);
+  } else {
+    ch.gain_ticks = std::max(0, ch.gain_ticks - 1);
+  }
+  ch.gain = static_cast<double>(ch.gain_ticks) / fade_ticks_;
+  for (int k = 0; k < 3; ++k) {
+    force[k] = ch.held_force_n[k] * ch.gain;
+    torque[k] = ch.held_torque_nm[k] * ch.gain;
   }
   const double requested_n = wrenchNorm(force);
   const bool clamped = clampNorm(force, ch.force_limit_n);
@@ -103,7 +121,8 @@ void HapticLoop::applySafetyChain(DeviceChannel& ch, double dt, TickOutput& out,
   }
   ch.clamped = clamped;
   clampNorm(torque, ch.torque_limit_nm);
-  slewLimit(force, ch.last_force_n, settings_.slew_n_per_s * dt);
+  // per nominal period: a late tick gets no larger step
+  slewLimit(force, ch.last_force_n, slew_step_n_);
   // the slew limiter never lets a faded command exceed the clamp
   clampNorm(force, ch.force_limit_n);
 

@@ -18,10 +18,11 @@ SnapshotPreparer::SnapshotPreparer(shared::SnapshotSubscriber& snapshots, int ma
       hints_(sizeof(PoseHint)) {
   for (int i = 0; i < 3; ++i) {
     const std::int32_t index = i;
-    std::memcpy(handoff_.control()->slot(i), &index, sizeof(index));
+    std::memcpy(shared::tripleBufferSlot(handoff_.control(), i, handoff_.slotBytes()), &index,
+                sizeof(index));
   }
-  handoff_writer_ = shared::TripleBufferWriter(handoff_.control());
-  handoff_reader_ = shared::TripleBufferReader(handoff_.control());
+  handoff_writer_ = shared::TripleBufferWriter(handoff_.control(), handoff_.slotBytes());
+  handoff_reader_ = shared::TripleBufferReader(handoff_.control(), handoff_.slotBytes());
   hint_writer_ = shared::TripleWriter<PoseHint>(hints_.control());
   hint_reader_ = shared::TripleReader<PoseHint>(hints_.control());
   hint_writer_.publish(PoseHint{});

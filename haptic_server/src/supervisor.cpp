@@ -9,6 +9,7 @@
 #include <signal.h>
 #include <unistd.h>
 
+#include "tactus/shared/clock.h"
 #include "tactus/shared/error.h"
 
 namespace tactus::haptic {
@@ -19,8 +20,20 @@ Supervisor::Supervisor(HapticLoop& loop, std::string segment_name)
 }
 
 Supervisor::~Supervisor() {
-  // the loop may already be stopped: nothing uses the links any more
   loop_.offerLink(nullptr);
+  auto held = [this] {
+    const AttachedSegment* in_use = loop_.linkInUse();
+    return in_use != nullptr && (in_use == link_.get() || in_use == retired_.get());
+  };
+  // a ticking loop adopts the withdrawal within a period; a stopped one has let go already
+  // (HapticLoop::stopped); a stuck one may hold the link for ever
+  for (int i = 0; i < 250 && held(); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  if (held()) {
+    spdlog::error("the haptic tick still holds the link to segment '{}': leaving it mapped until "
+                  "the process ends", name_);
+    (void)link_.release();      // never freed while the tick may use it
+    (void)retired_.release();
+  }
 }
 
 const shared::Segment* Supervisor::segment() const {
@@ -40,7 +53,63 @@ void Supervisor::detach() {
   }
 }
 
+bool Supervisor::watchTick(std::int64_t now_ns) {
+  const HapticLoop::TickProgress p = loop_.tickProgress(now_ns);
+  // twice the watchdog: a device read that stalls for a while (tens of ms) is late, not stuck
+  const auto bound_ns = static_cast<std::int64_t>(2e6 * loop_.settings().watchdog_ms);
+  if (p.running_ns <= bound_ns) {
+    if (stuck_) {
+      spdlog::warn("the haptic tick is running again (it was stuck for at least {:.0f} ms)",
+                   1e-6 * static_cast<double>(stuck_longest_ns_));
+    }
+    stuck_ = false;
+    still_stuck_reported_ = false;
+    return false;
+  }
+  stuck_longest_ns_ = p.running_ns;
+  if (stuck_) {
+    // a device that took the halt but did not return from its call: say so once
+    if (!still_stuck_reported_ && p.running_ns > 2 * bound_ns && p.device >= 0) {
+      spdlog::error("the haptic tick is still stuck in device {}'s read or write {:.0f} ms "
+                    "after the halt request: the device does not honour halt and keeps rendering "
+                    "its last command; stop haptic_server (SIGTERM ends it after a grace period) "
+                    "and fix the device backend",
+                    p.device, 1e-6 * static_cast<double>(p.running_ns - bound_ns));
+      still_stuck_reported_ = true;
+    }
+    return true;
+  }
+  stuck_ = true;
+  if (p.device < 0) {
+    spdlog::error("the haptic tick has been stuck for {:.0f} ms (watchdog {} ms), not in a device "
+                  "call: the device keeps its last command", 1e-6 * static_cast<double>(p.running_ns),
+                  loop_.settings().watchdog_ms);
+    return true;
+  }
+  const bool halted = loop_.device(p.device).halt();
+  if (halted) {
+    spdlog::error("the haptic tick has been stuck for {:.0f} ms in device {}'s read or write "
+                  "(the device contract forbids blocking): asked the device to halt; its force "
+                  "fades out once the call returns",
+                  1e-6 * static_cast<double>(p.running_ns), p.device);
+  } else {
+    spdlog::error("the haptic tick has been stuck for {:.0f} ms in device {}'s read or write "
+                  "(the device contract forbids blocking) and the device cannot be halted: it "
+                  "keeps rendering its last command; stop haptic_server (SIGTERM ends it after a "
+                  "grace period) and fix the device backend",
+                  1e-6 * static_cast<double>(p.running_ns), p.device);
+  }
+  return true;
+}
+
 void Supervisor::poll() {
+  watchTick(shared::monotonicNs());
+  for (int i = 0; i < loop_.deviceCount(); ++i) {
+    if (std::string d = loop_.device(i).takeDiagnostics(); !d.empty()) {
+      spdlog::warn("device {}: {}", i, d);
+    }
+  }
+
   // free a retired link once the loop has published that it no longer holds it: retire()
   // withdrew the offer first, and the tick re-checks the offer after announcing a link, so a
   // linkInUse() other than the retired link now means the tick will never touch it again
@@ -81,9 +150,11 @@ void Supervisor::poll() {
   // compare-exchange claims it, so two racing haptic_servers cannot both win
   const std::int64_t other = r.segment->claimHaptic(static_cast<std::int64_t>(::getpid()));
   if (other != 0) {
-    throw SegmentError("segment '" + name_ + "' is already served by haptic_server pid " +
-                       std::to_string(other) + ": stop it first (scripts/stop.sh) or start this "
-                       "one with another --segment");
+    throw SegmentError("segment '" + name_ + "' is already served by " +
+                       (other > 0 ? "haptic_server pid " + std::to_string(other)
+                                  : std::string("another haptic_server")) +
+                       ": stop it first (scripts/stop.sh) or start this one with another "
+                       "--segment");
   }
   link_ = std::make_unique<AttachedSegment>(std::move(*r.segment));
   // every new snapshot is prepared on this thread, never in the tick
@@ -114,6 +185,19 @@ int Supervisor::drainEvents() {
       case kEventNonFinite:
         spdlog::warn("device returned NaN/Inf: sample ignored, force faded out (device {})",
                      e.arg1);
+        break;
+      case kEventUnusableOrientation:
+        spdlog::warn("device returned an orientation that is not a unit quaternion (norm {:.3g}): "
+                     "sample ignored, pose held, force faded out (device {})", e.arg0, e.arg1);
+        break;
+      case kEventDisengaged:
+        spdlog::warn("forces of device {} disengaged: the last force ({:.3f} N) fades out; they "
+                     "re-engage once the requested force is below {} N", e.arg0, e.arg1,
+                     loop_.settings().engage_threshold_n);
+        break;
+      case kEventSnapshotFromTheFuture:
+        spdlog::warn("contact snapshot stamped {:.1f} ms in the future: treated as stale",
+                     1e-6 * e.arg0);
         break;
       case shared::kEventDeviceNoData:
         spdlog::info("device returned no new data: holding the last pose (device {})", e.arg0);

@@ -17,6 +17,7 @@
 #include <ctime>
 #include <limits>
 #include <new>
+#include <optional>
 #include <sstream>
 #include <utility>
 
@@ -90,6 +91,30 @@ bool Segment::remove(const std::string& name) noexcept {
   return bip::shared_memory_object::remove(name.c_str());
 }
 
+namespace {
+
+// The stale object under `name`, opened and with its ownership lock taken, while the name still
+// refers to it; nullopt when it vanished, was replaced, or another process holds its lock (it is
+// replacing it right now).
+std::optional<bip::shared_memory_object> claimStale(const std::string& name) {
+  std::optional<bip::shared_memory_object> shm;
+  try {
+    shm.emplace(bip::open_only, name.c_str(), bip::read_write);
+  } catch (const bip::interprocess_exception&) {
+    return std::nullopt;
+  }
+  const int fd = shm->get_mapping_handle().handle;
+  if (!takeOwnerLock(fd)) return std::nullopt;
+  struct stat held {}, named {};
+  if (::fstat(fd, &held) != 0 || ::stat(Segment::pathOf(name).c_str(), &named) != 0 ||
+      held.st_dev != named.st_dev || held.st_ino != named.st_ino) {
+    return std::nullopt;
+  }
+  return shm;
+}
+
+}  // namespace
+
 Segment Segment::create(const std::string& name, SegmentCapacity capacity,
                         const CreateOptions& options) {
   validateName(name);
@@ -119,6 +144,8 @@ Segment Segment::create(const std::string& name, SegmentCapacity capacity,
   impl->remove_on_destroy = options.remove_on_destroy;
   std::uint64_t generation = 1;
   bip::permissions owner_only(0600);
+  // the stale object being replaced, its ownership lock held until our own create succeeded
+  std::optional<bip::shared_memory_object> stale_claim;
   // exclusive create; on a name clash inspect the owner and replace it only if stale
   for (int attempt = 0;; ++attempt) {
     try {
@@ -139,12 +166,19 @@ Segment Segment::create(const std::string& name, SegmentCapacity capacity,
     const Existing ex = inspectExisting(name, options.stale_after_ns);
     if (ex.live) throw SegmentError(ex.message);
     if (!ex.vanished) {
+      // Claim the stale object (take its ownership lock, free since its creator is gone) and
+      // remove the name only while it still refers to that object: of two creators replacing
+      // it at once one claims it, and neither can remove the other's new segment.
+      std::optional<bip::shared_memory_object> stale = claimStale(name);
+      if (!stale) continue;   // gone, replaced or being replaced: look again
       generation = ex.generation + 1;
       impl->note = "replaced a stale segment '" + name + "' (generation " +
                    std::to_string(ex.generation) + ", creator " + ex.creator + ")";
       remove(name);
+      stale_claim = std::move(stale);
     }
   }
+  stale_claim.reset();
 
   // size, map, and initialise every part; the magic goes last
   try {
@@ -304,6 +338,18 @@ TryOpenResult Segment::tryOpen(const std::string& name, Access access) {
   stored.display_triangles = h->display_max_triangles;
   stored.devices = static_cast<std::int32_t>(h->devices);
   const SegmentLayout l = SegmentLayout::forCapacity(stored);
+  // the capacity sizes what the attacher allocates (the haptic side's solver memory): never
+  // beyond what a simulation may create
+  if (l.total_bytes > kMaxSegmentBytes) {
+    r.message = "segment '" + name + "' claims a capacity of " + std::to_string(h->max_rows) +
+                " rows / " + std::to_string(h->max_contacts) + " contacts, " +
+                (l.total_bytes == SnapshotLayout::kNoLayout
+                     ? std::string("which has no layout")
+                     : "which needs " + std::to_string(l.total_bytes >> 20) + " MiB") +
+                ", more than any simulation creates (" + std::to_string(kMaxSegmentBytes >> 20) +
+                " MiB): refusing it; " + fix;
+    return r;
+  }
   std::ostringstream diff;
   bool any = false;
   describeDiff(diff, any, "total_bytes", h->total_bytes, l.total_bytes);
@@ -331,6 +377,31 @@ TryOpenResult Segment::tryOpen(const std::string& name, Access access) {
   if (any) {
     r.message = "segment '" + name + "' layout differs from this " + programName() + "'s (" +
                 diff.str() + "): " + fix;
+    return r;
+  }
+  // every triple buffer's control block: a valid state and the slot sizes of this layout (its
+  // endpoints then never read the sizes from shared memory again)
+  const auto* base = static_cast<const unsigned char*>(impl->region.get_address());
+  auto control = [base](std::size_t offset) {
+    return reinterpret_cast<const TripleBufferControl*>(base + offset);
+  };
+  std::string corrupt;
+  if (!tripleBufferMatches(control(l.snapshot_offset), l.snapshot.total_bytes)) {
+    corrupt = "snapshot";
+  }
+  for (std::uint32_t i = 0; i < h->devices && corrupt.empty(); ++i) {
+    if (!tripleBufferMatches(control(l.device_offset + i * l.device_stride_bytes),
+                             sizeof(DeviceSample))) {
+      corrupt = "device " + std::to_string(i) + " sample";
+    }
+  }
+  if (corrupt.empty() && l.display_bytes > 0 &&
+      !tripleBufferMatches(control(l.display_offset), l.display.frame_bytes)) {
+    corrupt = "display frame";
+  }
+  if (!corrupt.empty()) {
+    r.message = "segment '" + name + "': its " + corrupt + " triple buffer is corrupt (an invalid "
+                "slot state or slot size): refusing it; restart sim_server, or remove " + path;
     return r;
   }
   impl->recordIdentity();
@@ -475,17 +546,21 @@ void Segment::setHapticPid(std::int64_t pid) noexcept {
 std::int64_t Segment::claimHaptic(std::int64_t pid) noexcept {
   if (impl_->access == Access::kReadOnly || pid <= 0) return -1;
   std::atomic<std::int64_t>& claim = impl_->header->haptic_pid;
-  // acquire/release: a claimant that loses sees the winner's pid
-  std::int64_t seen = claim.load(std::memory_order_acquire);
-  for (;;) {
-    if (seen == pid) return 0;
-    if (seen > 0 && pidAlive(seen)) return seen;
-    // free (0) or a dead process's claim: take it only if nobody changed it meanwhile
-    if (claim.compare_exchange_weak(seen, pid, std::memory_order_acq_rel,
-                                    std::memory_order_acquire)) {
-      return 0;
-    }
+  // The claim is a lock the kernel drops when the holder's process ends, however it ends: a
+  // recycled pid (a dead holder's pid reused by another program) can never hold it. One
+  // attempt, no waiting: of racing claimants exactly one gets it.
+  if (!takeHapticLock(impl_->shm.get_mapping_handle().handle)) {
+    // acquire: the holder stored its pid after taking the lock (0 while it is about to)
+    const std::int64_t holder = claim.load(std::memory_order_acquire);
+    return holder > 0 ? holder : -1;
   }
+  // release: a claimant that loses reads this pid (informational: the lock decides)
+  claim.store(pid, std::memory_order_release);
+  return 0;
+}
+
+bool Segment::hapticAttached() const noexcept {
+  return hapticLockHeld(impl_->shm.get_mapping_handle().handle);
 }
 
 bool Segment::creatorAlive(std::int64_t stale_after_ns) const noexcept {

@@ -9,6 +9,11 @@ namespace tactus::shared {
 SegmentLayout SegmentLayout::forCapacity(SegmentCapacity capacity) noexcept {
   SegmentLayout l;
   l.snapshot = SnapshotLayout::forCapacity(capacity.max_rows, capacity.max_contacts);
+  if (l.snapshot.total_bytes == SnapshotLayout::kNoLayout || capacity.devices < 0 ||
+      capacity.devices > kMaxInstruments) {
+    l.total_bytes = SnapshotLayout::kNoLayout;   // no layout: refused by create and attach
+    return l;
+  }
   std::size_t at = roundUpToCacheLine(sizeof(SegmentHeader));
   l.snapshot_offset = at;
   l.snapshot_bytes = tripleBufferBytes(l.snapshot.total_bytes);

@@ -60,20 +60,24 @@ bool pidAlive(std::int64_t pid) noexcept {
 // OFD locks conflict between open file descriptions even inside one process, and closing some
 // other descriptor of the same object does not drop them (unlike classic fcntl locks).
 namespace {
-// A lock request of `type` over the whole object.
-struct flock wholeObjectLock(short type) noexcept {
+// The byte each lock covers: the creator's ownership lock and the haptic claim.
+constexpr off_t kOwnerLockByte = 0;
+constexpr off_t kHapticLockByte = 1;
+
+// A lock request of `type` on one byte of the object.
+struct flock byteLock(short type, off_t at) noexcept {
   struct flock lk {};
   lk.l_type = type;
   lk.l_whence = SEEK_SET;
-  lk.l_start = 0;
-  lk.l_len = 0;
+  lk.l_start = at;
+  lk.l_len = 1;
   return lk;
 }
 
 }  // namespace
 
 bool takeOwnerLock(int fd) noexcept {
-  struct flock lk = wholeObjectLock(F_WRLCK);
+  struct flock lk = byteLock(F_WRLCK, kOwnerLockByte);
   return ::fcntl(fd, F_OFD_SETLK, &lk) == 0;
 }
 
@@ -81,8 +85,19 @@ bool takeOwnerLock(int fd) noexcept {
 // running or stopped). A probe through a read-only descriptor is enough: a read lock conflicts
 // with the creator's write lock.
 bool ownerLockHeld(int fd) noexcept {
-  struct flock lk = wholeObjectLock(F_RDLCK);
+  struct flock lk = byteLock(F_RDLCK, kOwnerLockByte);
   if (::fcntl(fd, F_OFD_GETLK, &lk) != 0) return true;  // cannot tell: assume alive (refuse)
+  return lk.l_type != F_UNLCK;
+}
+
+bool takeHapticLock(int fd) noexcept {
+  struct flock lk = byteLock(F_WRLCK, kHapticLockByte);
+  return ::fcntl(fd, F_OFD_SETLK, &lk) == 0;
+}
+
+bool hapticLockHeld(int fd) noexcept {
+  struct flock lk = byteLock(F_RDLCK, kHapticLockByte);
+  if (::fcntl(fd, F_OFD_GETLK, &lk) != 0) return false;
   return lk.l_type != F_UNLCK;
 }
 
@@ -159,6 +174,15 @@ Existing inspectExisting(const std::string& name, std::int64_t stale_after_ns) {
     ex.message = "segment '" + name + "': " + why;
     return ex;
   }
+  // a directory (or anything else) under the name is not a segment being created
+  struct stat st {};
+  if (::fstat(fd, &st) == 0 && !S_ISREG(st.st_mode)) {
+    ex.live = true;
+    ex.message = "'" + path + "' exists and is not a shared-memory object (" +
+                 (S_ISDIR(st.st_mode) ? "a directory" : "not a regular file") +
+                 "): choose another --segment name, or remove it if you know it is unused";
+    return ex;
+  }
   const bool lock_held = ownerLockHeld(fd);
   bip::offset_t size = 0;
   shm.get_size(size);
@@ -201,7 +225,12 @@ Existing inspectExisting(const std::string& name, std::int64_t stale_after_ns) {
   const bool alive = locking_abi ? lock_held : (lock_held || pidAlive(pid));
   if (!alive) return ex;
   ex.live = true;
-  if (since <= stale_after_ns) {
+  if (locking_abi && !pidAlive(pid)) {
+    // its creator is gone but the lock is held: another creator is replacing it right now
+    ex.message = "segment '" + name + "' (of dead process " + std::to_string(pid) +
+                 ") is being replaced by another process right now: wait for it or choose "
+                 "another --segment name";
+  } else if (since <= stale_after_ns) {
     ex.message = "segment '" + name + "' is in use by a live simulation (pid " +
                  std::to_string(pid) + ", last heartbeat " + secondsText(since) +
                  " ago): stop that sim_server first or pass another --segment name";

@@ -20,11 +20,18 @@ inline constexpr std::size_t kMaxSegmentBytes = std::size_t{2} << 30;  // 2 GiB
 std::string programName();
 /// True when process `pid` exists (also when it belongs to another user).
 bool pidAlive(std::int64_t pid) noexcept;
-/// The creator's ownership lock (an OFD write lock over the whole object, held for the
-/// creator's life): take it on `fd`; true on success.
+/// The creator's ownership lock (an OFD write lock on the object's first byte, held for the
+/// creator's life; creators of ABI 3 and 4 locked the whole object, which covers it): take it
+/// on `fd`; true on success.
 bool takeOwnerLock(int fd) noexcept;
 /// True when some open file description holds the ownership lock of the object behind `fd`.
 bool ownerLockHeld(int fd) noexcept;
+/// The haptic claim (an OFD write lock on the object's second byte, held while the claimant's
+/// segment is open): take it on `fd`; true on success, false when another holds it.
+bool takeHapticLock(int fd) noexcept;
+/// True when some other open file description holds the haptic claim of the object behind `fd`
+/// (a live haptic process serves the segment, ticking or not).
+bool hapticLockHeld(int fd) noexcept;
 /// Empty when the object behind `fd` may be trusted (owned by this user, mode 0600), else why
 /// not; *other_user tells whether another user owns it.
 std::string trustProblem(int fd, const std::string& name, bool* other_user);

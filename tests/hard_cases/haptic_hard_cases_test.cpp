@@ -304,6 +304,13 @@ TEST(HapticHardCases, NonFiniteDeviceDataFadesAndRecovers) {
   hold(rig, 50);
   rig.corrupt = nullptr;
   hold(rig, 100);
+  // healthy again with the hand still pressing: the engage gate keeps the force off
+  const double f_healthy_pressed = rig.lastForce().norm();
+  // the hand leaves the tissue and presses again: the force is back
+  glide(rig, kStart, 300);
+  hold(rig, 100);
+  glide(rig, kPressed, 300);
+  hold(rig, 200);
   const double f_after = rig.lastForce().norm();
   glide(rig, kStart, 300);
   hold(rig, 100);
@@ -314,13 +321,14 @@ TEST(HapticHardCases, NonFiniteDeviceDataFadesAndRecovers) {
   EXPECT_EQ(rig.nonfiniteSamples(), 0) << "a non-finite device sample reached the segment";
   EXPECT_GT(rig.loop().counters().non_finite_input.load(), 0u);
   EXPECT_EQ(nonzero_during_fault, 0) << "force not faded out during a device fault";
+  EXPECT_EQ(f_healthy_pressed, 0.0) << "the force came back with the hand in the tissue";
   EXPECT_NEAR(f_after, f_pressed, 0.05 * f_pressed);
   expectPassive(rig, "nan device");
 }
 
 // --- the simulation stalls for 200 ms ----------------------------------------------------------
 
-TEST(HapticHardCases, SimulationStallFadesTheForceAndItComesBack) {
+TEST(HapticHardCases, SimulationStallFadesTheForceAndItComesBackAfterTheHandLeftTheTissue) {
   Rig rig("stall");
   start(rig);
   glide(rig, kPressed, 300);
@@ -346,8 +354,14 @@ TEST(HapticHardCases, SimulationStallFadesTheForceAndItComesBack) {
                                    o.force_n[2] * o.force_n[2]);
       },
       /*simulate=*/false);
-  // resume: fresh snapshots, the force fades back in
+  // resume: fresh snapshots; with the hand still pressing the engage gate keeps the force off
   hold(rig, static_cast<int>(rig.settings().fade_ms) + 50);
+  const double f_resumed_pressed = rig.lastForce().norm();
+  // the hand leaves the tissue and presses again: the force is back
+  glide(rig, kStart, 300);
+  hold(rig, 100);
+  glide(rig, kPressed, 300);
+  hold(rig, 200);
   const double f_after = rig.lastForce().norm();
   glide(rig, kStart, 300);
   hold(rig, 100);
@@ -358,6 +372,7 @@ TEST(HapticHardCases, SimulationStallFadesTheForceAndItComesBack) {
   EXPECT_TRUE(stale_seen);
   EXPECT_NEAR(f_during_grace, f_pressed, 0.05 * f_pressed) << "faded before the watchdog";
   EXPECT_EQ(f_end_of_stall, 0.0) << "not faded out after watchdog + fade";
+  EXPECT_EQ(f_resumed_pressed, 0.0) << "the force came back with the hand in the tissue";
   EXPECT_NEAR(f_after, f_pressed, 0.05 * f_pressed) << "force did not come back";
   expectPassive(rig, "stall");
 }

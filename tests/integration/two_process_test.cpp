@@ -81,11 +81,20 @@ class TwoProcessTest : public ::testing::Test {
     name_ = "tactus_two_process_" + std::to_string(::getpid());
     dir_ = std::string(::testing::TempDir()) + "/" + name_;
     std::system(("mkdir -p " + dir_).c_str());
-    // the hand hovers 2 mm above the cube for 1 s, then presses 12 mm deep over 3 s, then holds
+    // the hand hovers 2 mm above the cube for 1 s, then presses 12 mm deep over 3 s, holds
+    // until 7 s, then lifts off and presses again every 3 s (after an interruption the force
+    // re-engages only once the hand has left the tissue)
     std::ofstream csv(dir_ + "/press.csv");
     csv << "t_s,x,y,z,qw,qx,qy,qz,gripper\n";
     csv << "0,0.004,0.003,0.043,1,0,0,0,0\n1.0,0.004,0.003,0.043,1,0,0,0,0\n";
-    csv << "4.0,0.004,0.003,0.031,1,0,0,0,0\n60,0.004,0.003,0.031,1,0,0,0,0\n";
+    csv << "4.0,0.004,0.003,0.031,1,0,0,0,0\n7.0,0.004,0.003,0.031,1,0,0,0,0\n";
+    for (int k = 0; k < 17; ++k) {
+      const double t = 7.0 + 3.0 * k;
+      csv << t + 0.5 << ",0.004,0.003,0.043,1,0,0,0,0\n"
+          << t + 1.0 << ",0.004,0.003,0.043,1,0,0,0,0\n"
+          << t + 2.0 << ",0.004,0.003,0.031,1,0,0,0,0\n"
+          << t + 3.0 << ",0.004,0.003,0.031,1,0,0,0,0\n";
+    }
   }
   void TearDown() override {
     stop(haptic_);
@@ -190,7 +199,8 @@ TEST_F(TwoProcessTest, ForcesFollowPenetrationAndSurviveSimulationRestarts) {
   }
   EXPECT_TRUE(alive(haptic_));
 
-  // restart it: the haptic side re-attaches to the new segment and forces come back
+  // restart it: the haptic side re-attaches to the new segment and forces come back once the
+  // hand has left the tissue and pressed again
   sim_ = startSim();
   std::this_thread::sleep_for(500ms);
   seg.reset();
@@ -202,7 +212,7 @@ TEST_F(TwoProcessTest, ForcesFollowPenetrationAndSurviveSimulationRestarts) {
   ASSERT_TRUE(seg2);
   StatsRingReader reader2 = seg2->statsReader(StatsRingReader::Start::kNewest);
   double resumed = 0.0;
-  for (int i = 0; i < 10 && resumed < 0.2; ++i) resumed = meanForce(collect(reader2, 500ms));
+  for (int i = 0; i < 16 && resumed < 0.2; ++i) resumed = meanForce(collect(reader2, 500ms));
   EXPECT_GT(resumed, 0.2) << slurp(dir_ + "/haptic.log");
 
   // kill the haptic side: the simulation keeps running on its own

@@ -513,5 +513,38 @@ TEST(HapticSnapshot, ARealSceneIsPublishedWithAnExactlySymmetricWAndItsSolverFie
   shared::Segment::remove(name);
 }
 
+// A problem larger than the segment's capacity is not published as an empty problem still
+// flagged valid (the haptic side would render "no contact" from it): it is flagged not valid,
+// which the haptic loop treats as stale (it fades the held force out).
+TEST(HapticSnapshot, AProblemBeyondTheCapacityIsPublishedNotValid) {
+  const sim::SceneSpec spec =
+      sim::loadScene(std::string(TACTUS_SOURCE_DIR) + "/tests/hard_cases/scenes/drag_mu2.yaml");
+  sim::Simulation simulation(spec);
+  const std::string name = "tactus_sec_overflow_" + std::to_string(::getpid());
+  shared::Segment::remove(name);
+  shared::Segment segment =
+      shared::Segment::create(name, shared::SegmentCapacity::forContacts(1, true));
+  shared::SnapshotPublisher publisher = segment.snapshotPublisher();
+  int overflowed = 0;
+  for (int step = 0; step < 60; ++step) {
+    simulation.setDeviceTarget(simulation.scriptedTarget(simulation.time()));
+    simulation.step();
+    auto slot = publisher.slot();
+    const bool fits = sim::writeSnapshot(simulation, 1.0, static_cast<std::uint64_t>(step + 1), 1,
+                                         0, slot);
+    const auto& h = slot.view().header();
+    if (fits) {
+      EXPECT_NE(h.flags & shared::kSnapshotValid, 0u) << "step " << step;
+      continue;
+    }
+    ++overflowed;
+    EXPECT_EQ(h.rows, 0);
+    EXPECT_EQ(h.contacts, 0);
+    EXPECT_EQ(h.flags & shared::kSnapshotValid, 0u) << "step " << step;
+  }
+  EXPECT_GT(overflowed, 10) << "the scene should need more than one contact";
+  shared::Segment::remove(name);
+}
+
 }  // namespace
 }  // namespace tactus

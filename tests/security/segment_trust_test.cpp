@@ -4,8 +4,9 @@
 //    stopped notices on resume and stops with a message (real sim_server processes);
 //  * the haptic attach refuses a segment owned by another user or open to others (mode 0666),
 //    and create() never replaces another user's object;
-//  * the single-haptic-process claim is one compare-exchange: of many racing claimants exactly
-//    one wins, and a dead claimant's claim is taken over;
+//  * the single-haptic-process claim is a lock: of many racing claimants exactly one wins, a dead
+//    claimant's claim is taken over, and a recycled pid does not block it; two creators replacing
+//    one stale segment never displace each other;
 //  * an absurd but finite device pose (1e300 m) neither carries the god object away nor sticks:
 //    it is rejected and counted, the god object stays where it was, and it follows the device
 //    again once the samples are sane.
@@ -18,12 +19,16 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <fstream>
+#include <functional>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include "../../sim_server/src/pipeline/segment_host.h"
@@ -44,6 +49,7 @@ using tactus::shared::DeviceSample;
 using tactus::shared::OpenStatus;
 using tactus::shared::Segment;
 using tactus::shared::SegmentCapacity;
+using tactus::shared::SegmentHeader;
 using tactus::shared::Side;
 
 const std::string kBin = TACTUS_BINARY_DIR;
@@ -216,6 +222,94 @@ TEST(SegmentTrust, AnotherUsersSegmentIsRefused) {
   ::close(fd);
 }
 
+// The header's first page, mapped read-write by hand (what another process of this user could
+// write into a segment).
+SegmentHeader* mapHeader(int fd) {
+  void* p = ::mmap(nullptr, 4096, PROT_READ | PROT_WRITE, MAP_SHARED, fd, 0);
+  return p == MAP_FAILED ? nullptr : static_cast<SegmentHeader*>(p);
+}
+
+// A header claiming a capacity whose layout needs 31 GiB (a sparse object of that size, every
+// offset and size consistent with it): the attacher would size its solver memory from it. It is
+// refused before anything is allocated (tryOpen used to trust it once the layout matched).
+TEST(SegmentTrust, AnAbsurdCapacityIsRefusedBeforeAnythingIsSizedFromIt) {
+  NameGuard g(uniqueName("capacity"));
+  Segment sim = Segment::create(g.name, SegmentCapacity::forContacts(2));
+  SegmentCapacity big = SegmentCapacity::forContacts(12'000, true);
+  const tactus::shared::SegmentLayout l = tactus::shared::SegmentLayout::forCapacity(big);
+  ASSERT_GT(l.total_bytes, std::size_t{16} << 30);
+  const int fd = openShm(g.name);
+  ASSERT_GE(fd, 0);
+  ASSERT_EQ(::ftruncate(fd, static_cast<off_t>(l.total_bytes)), 0) << "a sparse object";
+  SegmentHeader* h = mapHeader(fd);
+  ASSERT_NE(h, nullptr);
+  h->total_bytes = l.total_bytes;
+  h->max_rows = big.max_rows;
+  h->max_contacts = big.max_contacts;
+  h->snapshot_offset = l.snapshot_offset;
+  h->snapshot_bytes = l.snapshot_bytes;
+  h->snapshot_slot_bytes = l.snapshot.total_bytes;
+  h->device_offset = l.device_offset;
+  h->device_bytes = l.device_bytes;
+  h->stats_offset = l.stats_offset;
+  h->stats_bytes = l.stats_bytes;
+  h->display_max_contacts = l.display.capacity.max_contacts;
+  h->display_offset = l.display_offset;
+  h->display_bytes = l.display_bytes;
+  h->display_slot_bytes = l.display.frame_bytes;
+  h->topology_offset = l.topology_offset;
+  h->topology_bytes = l.topology_bytes;
+  ::munmap(h, 4096);
+  const auto r = Segment::tryOpen(g.name);
+  EXPECT_FALSE(r.ok());
+  EXPECT_THAT(r.message, HasSubstr("more than any simulation creates"));
+  ::close(fd);
+}
+
+// A triple buffer whose control block is corrupt (its slot state not a permutation of the three
+// slots) is refused on attach, never used.
+TEST(SegmentTrust, ACorruptTripleBufferIsRefused) {
+  NameGuard g(uniqueName("triple"));
+  Segment sim = Segment::create(g.name, SegmentCapacity::forContacts(2));
+  const int fd = openShm(g.name);
+  ASSERT_GE(fd, 0);
+  const std::size_t at = sim.header().snapshot_offset;
+  void* p = ::mmap(nullptr, at + 4096, PROT_READ | PROT_WRITE, MAP_SHARED, fd, 0);
+  ASSERT_NE(p, MAP_FAILED);
+  auto* control = reinterpret_cast<tactus::shared::TripleBufferControl*>(
+      static_cast<unsigned char*>(p) + at);
+  const std::uint8_t good = control->state.load();
+  control->state.store(tactus::shared::TripleBufferControl::make(3, 0, 1, true));
+  auto r = Segment::tryOpen(g.name);
+  EXPECT_FALSE(r.ok());
+  EXPECT_THAT(r.message, HasSubstr("snapshot triple buffer is corrupt"));
+  control->state.store(good);
+  control->slot_stride = 64;   // a stride that is not the layout's
+  r = Segment::tryOpen(g.name);
+  EXPECT_FALSE(r.ok());
+  EXPECT_THAT(r.message, HasSubstr("snapshot triple buffer is corrupt"));
+  control->slot_stride = tactus::shared::roundUpToCacheLine(control->slot_bytes);
+  EXPECT_TRUE(Segment::tryOpen(g.name).ok());
+  ::munmap(p, at + 4096);
+  ::close(fd);
+}
+
+// A directory under the segment's name is not a segment being created (create() used to say
+// "being created by another process right now").
+TEST(SegmentTrust, ADirectoryUnderTheNameIsNotASegment) {
+  NameGuard g(uniqueName("directory"));
+  const std::string path = Segment::pathOf(g.name);
+  ASSERT_EQ(::mkdir(path.c_str(), 0700), 0);
+  std::string message;
+  try {
+    Segment::create(g.name, SegmentCapacity::forContacts(1));
+  } catch (const SegmentError& e) {
+    message = e.what();
+  }
+  ::rmdir(path.c_str());
+  EXPECT_THAT(message, HasSubstr("exists and is not a shared-memory object (a directory)"));
+}
+
 TEST(SegmentTrust, AWorldWritableSegmentIsRefused) {
   NameGuard g(uniqueName("mode"));
   Segment sim = Segment::create(g.name, SegmentCapacity::forContacts(2));
@@ -287,7 +381,71 @@ TEST(SegmentTrust, AnotherUsersStaleSegmentIsNotReplaced) {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Item 8: the haptic claim is one compare-exchange.
+// Item 8: the haptic claim (a lock the kernel drops with its holder).
+
+// What a racing child process uses to start with the others and to stay alive until all tried.
+struct ChildSync {
+  int go, done, quit;
+  /// Blocks until the parent releases every child at once; false on a pipe problem.
+  bool waitForGo() const {
+    char c = 0;
+    return ::read(go, &c, 1) == 0;   // released when the parent closes its end
+  }
+  /// Tells the parent this child tried, then stays alive (holding what it got) until every child
+  /// has; false on a pipe problem.
+  bool triedThenWaitForAll() const {
+    char c = 1;
+    if (::write(done, &c, 1) != 1) return false;
+    return ::read(quit, &c, 1) == 0;
+  }
+};
+
+// Forks `n` children that run `child` (its return value is the child's exit code; an exception
+// is code 3) released at once; `after_all_tried` runs in the parent once every child has said
+// it tried and before they end. Returns the exit codes in fork order (-1: did not exit
+// normally) and the count of children that said they tried.
+std::pair<std::vector<int>, int> raceInChildren(int n,
+                                                const std::function<int(const ChildSync&)>& child,
+                                                const std::function<void()>& after_all_tried,
+                                                std::vector<pid_t>* pids = nullptr) {
+  int go[2], done[2], quit[2];
+  if (::pipe(go) != 0 || ::pipe(done) != 0 || ::pipe(quit) != 0) return {{}, 0};
+  std::vector<pid_t> kids;
+  for (int i = 0; i < n; ++i) {
+    const pid_t pid = ::fork();
+    if (pid == 0) {
+      ::close(go[1]);
+      ::close(done[0]);
+      ::close(quit[1]);
+      int code = 3;
+      try {
+        code = child(ChildSync{go[0], done[1], quit[0]});
+      } catch (...) {
+        code = 3;
+      }
+      ::_exit(code);
+    }
+    kids.push_back(pid);
+  }
+  ::close(go[0]);
+  ::close(done[1]);
+  ::close(quit[0]);
+  ::close(go[1]);   // start them all at once
+  int finished = 0;
+  char c = 0;
+  while (finished < n && ::read(done[0], &c, 1) == 1) ++finished;
+  after_all_tried();
+  ::close(quit[1]);
+  ::close(done[0]);
+  std::vector<int> codes;
+  for (pid_t pid : kids) {
+    int status = 0;
+    const bool reaped = pid > 0 && ::waitpid(pid, &status, 0) == pid;
+    codes.push_back(reaped && WIFEXITED(status) ? WEXITSTATUS(status) : -1);
+  }
+  if (pids != nullptr) *pids = kids;
+  return {codes, finished};
+}
 
 TEST(SegmentHapticClaim, ExactlyOneOfManyRacingClaimantsWins) {
   NameGuard g(uniqueName("claim"));
@@ -296,79 +454,106 @@ TEST(SegmentHapticClaim, ExactlyOneOfManyRacingClaimantsWins) {
   constexpr int kRounds = 10;
   for (int round = 0; round < kRounds; ++round) {
     SCOPED_TRACE("round " + std::to_string(round));
-    int go[2], done[2], quit[2];
-    ASSERT_EQ(::pipe(go), 0);
-    ASSERT_EQ(::pipe(done), 0);
-    ASSERT_EQ(::pipe(quit), 0);
+    std::int64_t holder = 0;
     std::vector<pid_t> kids;
-    for (int i = 0; i < kClaimants; ++i) {
-      const pid_t pid = ::fork();
-      ASSERT_GE(pid, 0);
-      if (pid == 0) {
-        ::close(go[1]);
-        ::close(done[0]);
-        ::close(quit[1]);
-        int code = 2;
-        try {
+    const auto [codes, finished] = raceInChildren(
+        kClaimants,
+        [&](const ChildSync& sync) {
           Segment mine = Segment::open(g.name);
-          char c = 0;
-          if (::read(go[0], &c, 1) != 0) ::_exit(4);   // released when the parent closes it
-          code = mine.claimHaptic(::getpid()) == 0 ? 0 : 1;
-          c = 1;
-          if (::write(done[1], &c, 1) != 1) ::_exit(5);
-          // stay alive (holding or losing) until every claimant has tried
-          if (::read(quit[0], &c, 1) != 0) ::_exit(6);
-        } catch (...) {
-          ::_exit(3);
-        }
-        ::_exit(code);
-      }
-      kids.push_back(pid);
-    }
-    ::close(go[0]);
-    ::close(done[1]);
-    ::close(quit[0]);
-    ::close(go[1]);   // start them all at once
-    int finished = 0;
-    char c = 0;
-    while (finished < kClaimants && ::read(done[0], &c, 1) == 1) ++finished;
-    const std::int64_t holder = sim.header().haptic_pid.load();
-    ::close(quit[1]);
-    ::close(done[0]);
+          if (!sync.waitForGo()) return 4;
+          const int code = mine.claimHaptic(::getpid()) == 0 ? 0 : 1;
+          return sync.triedThenWaitForAll() ? code : 5;
+        },
+        [&] { holder = sim.header().haptic_pid.load(); }, &kids);
     int winners = 0;
     pid_t winner = -1;
-    for (pid_t pid : kids) {
-      int status = 0;
-      ASSERT_EQ(::waitpid(pid, &status, 0), pid);
-      ASSERT_TRUE(WIFEXITED(status));
-      ASSERT_LE(WEXITSTATUS(status), 1) << "claimant failed with " << WEXITSTATUS(status);
-      if (WEXITSTATUS(status) == 0) {
+    for (std::size_t i = 0; i < codes.size(); ++i) {
+      ASSERT_GE(codes[i], 0);
+      ASSERT_LE(codes[i], 1) << "claimant failed with " << codes[i];
+      if (codes[i] == 0) {
         ++winners;
-        winner = pid;
+        winner = kids[i];
       }
     }
     EXPECT_EQ(finished, kClaimants);
     EXPECT_EQ(winners, 1);
     EXPECT_EQ(holder, winner);
     // the winner is dead now: its claim can be taken over (here by the test process)
-    EXPECT_EQ(sim.claimHaptic(::getpid()), 0);
-    EXPECT_EQ(sim.header().haptic_pid.load(), ::getpid());
+    {
+      Segment taker = Segment::open(g.name);
+      EXPECT_EQ(taker.claimHaptic(::getpid()), 0);
+      EXPECT_EQ(sim.header().haptic_pid.load(), ::getpid());
+    }
     sim.setHapticPid(0);
   }
 }
 
-TEST(SegmentHapticClaim, ALiveHoldersClaimIsRefusedAndNamed) {
-  NameGuard g(uniqueName("claim_live"));
+// A dead holder's pid, recycled by an unrelated live process, must not block a new claim (the
+// claim used to trust kill(pid, 0)); a live holder's claim still refuses it.
+TEST(SegmentHapticClaim, ARecycledPidOfADeadHolderDoesNotBlockTheClaim) {
+  NameGuard g(uniqueName("claim_recycled"));
   Segment sim = Segment::create(g.name, SegmentCapacity::forContacts(1));
-  Segment a = Segment::open(g.name);
-  Segment b = Segment::open(g.name);
-  const std::int64_t parent = ::getppid();   // alive for the whole test
-  EXPECT_EQ(a.claimHaptic(parent), 0);
-  EXPECT_EQ(a.claimHaptic(parent), 0);       // already ours
-  EXPECT_EQ(b.claimHaptic(::getpid()), parent);
-  EXPECT_EQ(sim.header().haptic_pid.load(), parent);
-  Segment ro = Segment::open(g.name, Access::kReadOnly);
-  EXPECT_EQ(ro.claimHaptic(::getpid()), -1);
+  sim.setHapticPid(::getppid());   // a live process that holds no claim
+  {
+    Segment mine = Segment::open(g.name);
+    EXPECT_EQ(mine.claimHaptic(::getpid()), 0);
+    EXPECT_EQ(sim.header().haptic_pid.load(), ::getpid());
+    Segment other = Segment::open(g.name);
+    EXPECT_EQ(other.claimHaptic(::getpid() + 1), ::getpid()) << "a live holder refuses";
+  }
+  Segment next = Segment::open(g.name);   // the holder's segment is closed: free again
+  EXPECT_EQ(next.claimHaptic(::getpid() + 1), 0);
+}
+
+// Two simulations replacing the same stale segment at once: exactly one gets it, and the other
+// never removes the winner's new segment (create() used to judge the segment stale and then
+// remove whatever the name referred to by then).
+TEST(SegmentOwnership, TwoCreatorsReplacingAStaleSegmentNeverDisplaceEachOther) {
+  NameGuard g(uniqueName("stale_race"));
+  constexpr int kCreators = 6;
+  constexpr int kRounds = 8;
+  CreateOptions keep;
+  keep.remove_on_destroy = false;
+  for (int round = 0; round < kRounds; ++round) {
+    SCOPED_TRACE("round " + std::to_string(round));
+    // a stale segment: its creator died
+    const pid_t dead = ::fork();
+    ASSERT_GE(dead, 0);
+    if (dead == 0) {
+      try {
+        Segment s = Segment::create(g.name, SegmentCapacity::forContacts(1), keep);
+        ::_exit(0);
+      } catch (...) {
+        ::_exit(1);
+      }
+    }
+    int status = 0;
+    ASSERT_EQ(::waitpid(dead, &status, 0), dead);
+    ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0);
+    ASSERT_TRUE(Segment::exists(g.name));
+    // 0: created it and still owns the name once every creator has tried; 1: refused; 2: created
+    // it but another creator displaced it
+    const auto [codes, finished] = raceInChildren(
+        kCreators,
+        [&](const ChildSync& sync) {
+          if (!sync.waitForGo()) return 4;
+          std::optional<Segment> mine;
+          try {
+            mine.emplace(Segment::create(g.name, SegmentCapacity::forContacts(1), keep));
+          } catch (const SegmentError&) {
+          }
+          if (!sync.triedThenWaitForAll()) return 5;
+          if (!mine) return 1;
+          return mine->stillCurrent() ? 0 : 2;
+        },
+        [] {});
+    const std::string all = ::testing::PrintToString(codes);
+    EXPECT_EQ(finished, kCreators) << all;
+    EXPECT_EQ(std::count(codes.begin(), codes.end(), 2), 0)
+        << "a creator's new segment was removed by another: " << all;
+    EXPECT_EQ(std::count(codes.begin(), codes.end(), 0), 1) << all;
+    for (int code : codes) EXPECT_TRUE(code >= 0 && code <= 2) << all;
+  }
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -379,13 +564,15 @@ tactus::sim::SceneSpec pressCube() {
 }
 
 void writeSample(tactus::shared::TripleWriter<DeviceSample>& writer, std::uint64_t seq,
-                 const Eigen::Vector3d& pos_m) {
+                 const Eigen::Vector3d& pos_m, bool pose_valid = true, bool fault = false) {
   DeviceSample s{};
   s.seq = seq;
   s.t_ns = tactus::shared::monotonicNs();
   s.pos_m = {pos_m.x(), pos_m.y(), pos_m.z()};
   s.quat_wxyz = {1.0, 0.0, 0.0, 0.0};
   s.gripper_rad = 0.0;
+  s.status = (fault ? tactus::shared::kDeviceFault : tactus::shared::kDeviceOk) |
+             (pose_valid ? tactus::shared::kDevicePoseValid : 0u);
   writer.publish(s);
 }
 
@@ -435,6 +622,134 @@ TEST(DeviceSanity, AbsurdPoseIsRejectedAndTheGodObjectRecovers) {
   EXPECT_LT((tool.pose().pos_m - moved).norm(), 1e-3);
   EXPECT_EQ(link.rejectedJumps(), 100u);
   EXPECT_TRUE(tool.twist().allFinite());
+}
+
+// Before its first real sample, haptic_server publishes samples at the origin (the pose it does
+// not have yet); they must never move the instrument, however long they keep coming and whatever
+// the jump allowance has grown to: the instrument holds the scene's own pose (its script).
+TEST(DeviceSanity, SamplesWithoutADevicePoseNeverMoveTheInstrument) {
+  NameGuard g(uniqueName("nopose"));
+  tactus::sim::SceneSpec spec = pressCube();
+  tactus::sim::Simulation sim(spec);
+  tactus::sim::Instrument& tool = *sim.instrument();
+  tactus::sim::SegmentHost link(g.name, spec, tool.workspace());
+  Segment haptic = Segment::open(g.name);
+  auto writer = haptic.deviceWriter();
+  const Eigen::Vector3d start = spec.instrument.initial_pose.position_m;
+  std::uint64_t seq = 0;
+  auto step = [&](const Eigen::Vector3d& device_m, bool pose_valid) {
+    writeSample(writer, ++seq, device_m, pose_valid);
+    tactus::sim::DeviceTarget target = sim.scriptedTarget(sim.time());
+    const bool driven = link.deviceTarget(target);
+    sim.setDeviceTarget(target);
+    sim.step();
+    return driven;
+  };
+  // half a simulated second of origin samples (the allowance would cover 4.5 cm after 4 ms)
+  for (int k = 0; k < 50; ++k) {
+    ASSERT_FALSE(step(Eigen::Vector3d::Zero(), false)) << "step " << k;
+    ASSERT_LT((tool.pose().pos_m - start).norm(), 1e-3) << "step " << k << ": dragged";
+  }
+  // the device's first real pose, 4 mm aside: followed
+  const Eigen::Vector3d real = start + Eigen::Vector3d(0.004, 0.0, 0.0);
+  for (int k = 0; k < 50; ++k) EXPECT_TRUE(step(real, true));
+  EXPECT_LT((tool.pose().pos_m - real).norm(), 1e-3);
+}
+
+// The shutdown snapshot is the newest snapshot: the next seq and stamped now (it used to keep
+// the slot's old seq and time, so readers saw the seq go backwards, and at seq 0, before any
+// snapshot, they never saw the flag at all).
+TEST(SegmentShutdown, TheShutdownSnapshotIsTheNewestOne) {
+  for (int published : {0, 3}) {
+    SCOPED_TRACE(published);
+    NameGuard g(uniqueName("shutdown"));
+    tactus::sim::SceneSpec spec = pressCube();
+    tactus::sim::Simulation sim(spec);
+    std::optional<tactus::sim::SegmentHost> host;
+    host.emplace(g.name, spec, sim.instrument()->workspace());
+    Segment haptic = Segment::open(g.name);
+    auto sub = haptic.snapshotSubscriber();
+    for (int k = 0; k < published; ++k) {
+      sim.step();
+      host->publish(sim);
+    }
+    const std::uint64_t last_seq = sub.latest().header().seq;
+    EXPECT_EQ(last_seq, static_cast<std::uint64_t>(published));
+    const std::int64_t before = tactus::shared::monotonicNs();
+    host.reset();
+    bool fresh = false;
+    const auto& h = sub.latest(&fresh).header();
+    EXPECT_TRUE(fresh);
+    EXPECT_EQ(h.seq, last_seq + 1);
+    EXPECT_GE(h.t_ns, before);
+    EXPECT_NE(h.flags & tactus::shared::kSnapshotShuttingDown, 0u);
+    EXPECT_EQ(h.flags & tactus::shared::kSnapshotValid, 0u);
+  }
+}
+
+// A device that faults after it drove the instrument holds the instrument where it was (the
+// haptic side holds the same pose): it used to go back to the scene's script, away from the hand,
+// and on recovery the hand met tissue the local model had not had, past the engage gate.
+TEST(DeviceSanity, AFaultingDeviceHoldsTheInstrumentWhereItWas) {
+  NameGuard g(uniqueName("fault_hold"));
+  tactus::sim::SceneSpec spec = pressCube();
+  tactus::sim::Simulation sim(spec);
+  tactus::sim::Instrument& tool = *sim.instrument();
+  tactus::sim::SegmentHost link(g.name, spec, tool.workspace());
+  Segment haptic = Segment::open(g.name);
+  auto writer = haptic.deviceWriter();
+  const Eigen::Vector3d start = spec.instrument.initial_pose.position_m;
+  const Eigen::Vector3d pressed = start - Eigen::Vector3d(0.0, 0.0, 0.006);
+  std::uint64_t seq = 0;
+  auto step = [&](bool fault) {
+    writeSample(writer, ++seq, pressed, true, fault);
+    tactus::sim::DeviceTarget target = sim.scriptedTarget(sim.time());
+    const bool driven = link.deviceTarget(target);
+    sim.setDeviceTarget(target);
+    sim.step();
+    return std::make_pair(driven, target.pose.pos_m);
+  };
+  for (int k = 0; k < 30; ++k) step(false);
+  for (int k = 0; k < 30; ++k) {
+    const auto [driven, target] = step(true);
+    ASSERT_TRUE(driven) << k;
+    ASSERT_LT((target - pressed).norm(), 1e-12) << k << ": the instrument left the held pose";
+  }
+  const auto [driven, target] = step(false);   // recovered: followed at once
+  EXPECT_TRUE(driven);
+  EXPECT_LT((target - pressed).norm(), 1e-12);
+}
+
+// Samples that stop while haptic_server is still attached (its device read stalls or blocks)
+// hold the instrument where it was too; once no haptic process holds the segment any more, the
+// instrument follows the scene's script again.
+TEST(DeviceSanity, StoppedSamplesHoldTheInstrumentWhileHapticServerIsAttached) {
+  NameGuard g(uniqueName("stall_hold"));
+  tactus::sim::SceneSpec spec = pressCube();
+  tactus::sim::Simulation sim(spec);
+  tactus::sim::SegmentHost link(g.name, spec, sim.instrument()->workspace());
+  std::optional<Segment> claim(Segment::open(g.name));   // the haptic process's claim
+  ASSERT_EQ(claim->claimHaptic(::getpid()), 0);
+  Segment haptic = Segment::open(g.name);
+  auto writer = haptic.deviceWriter();
+  const Eigen::Vector3d pressed =
+      spec.instrument.initial_pose.position_m - Eigen::Vector3d(0.0, 0.0, 0.006);
+  for (std::uint64_t seq = 1; seq <= 10; ++seq) {
+    writeSample(writer, seq, pressed);
+    tactus::sim::DeviceTarget target = sim.scriptedTarget(sim.time());
+    ASSERT_TRUE(link.deviceTarget(target));
+  }
+  // no sample for longer than the watchdog
+  std::this_thread::sleep_for(std::chrono::milliseconds(
+      static_cast<int>(2 * spec.haptics.watchdog_ms)));
+  tactus::sim::DeviceTarget held = sim.scriptedTarget(sim.time());
+  EXPECT_TRUE(link.deviceTarget(held)) << "the instrument went back to the script";
+  EXPECT_LT((held.pose.pos_m - pressed).norm(), 1e-12);
+  claim.reset();                                        // haptic_server is gone
+  tactus::sim::DeviceTarget script = sim.scriptedTarget(sim.time());
+  const Eigen::Vector3d scripted = script.pose.pos_m;
+  EXPECT_FALSE(link.deviceTarget(script));
+  EXPECT_EQ(script.pose.pos_m, scripted);
 }
 
 TEST(DeviceSanity, TheInstrumentBoundsAnyTargetToItsWorkspace) {

@@ -13,6 +13,7 @@
 #include <optional>
 #include <string>
 
+#include "one_contact_problem.h"
 #include "scripted_device.h"
 #include "tactus/haptic/haptic_loop.h"
 #include "tactus/shared/clock.h"
@@ -47,26 +48,9 @@ class HapticSegmentTest : public ::testing::Test {
 
   // Publishes the one-contact problem with gap_m at device height z_star.
   void publish(double gap_m, double w_m_per_n, double z_star, std::int64_t t_ns = 0) {
-    auto slot = publisher_.slot();
-    auto& h = slot.header();
-    ASSERT_TRUE(slot.setSize(1, 1));
-    h.seq = ++seq_;
-    h.t_ns = t_ns != 0 ? t_ns : t_;
-    h.flags = shared::kSnapshotValid | shared::kSnapshotHasJacobian;
-    h.device_pose.pos_m = {0.0, 0.0, z_star};
-    h.tool_pose.pos_m = {0.0, 0.0, z_star};
-    slot.rowOffset()[0] = 0;
-    slot.rowOffset()[1] = 1;
-    slot.contactId()[0] = 7;
-    slot.mu()[0] = 0.0;
-    slot.W()[0] = w_m_per_n;
-    slot.deltaFree()[0] = gap_m;
-    slot.f()[0] = std::max(0.0, -gap_m / w_m_per_n);
-    for (int k = 0; k < 6; ++k) slot.J()[k] = k == 2 ? 1.0 : 0.0;
-    for (int k = 0; k < 3; ++k) {
-      slot.contactPoint()[k] = 0.0;
-      slot.contactNormal()[k] = k == 2 ? 1.0 : 0.0;
-    }
+    ASSERT_TRUE(writeOneContactProblem(publisher_.slot(), ++seq_, t_ns != 0 ? t_ns : t_, gap_m,
+                                       w_m_per_n, {0.0, 0.0, z_star},
+                                       std::max(0.0, -gap_m / w_m_per_n)));
     publisher_.publish();
   }
 

@@ -10,6 +10,7 @@
 #include <optional>
 #include <string>
 
+#include "one_contact_problem.h"
 #include "tactus/haptic/haptic_loop.h"
 
 namespace tactus::test {
@@ -41,26 +42,8 @@ class OneContactRig {
 
   /// The contact problem with gap_m when the instrument is at scene height z_star, stamped t_ns.
   void publish(double gap_m, double w_m_per_n, double z_star, std::int64_t t_ns) {
-    auto slot = publisher_.slot();
-    ASSERT_TRUE(slot.setSize(1, 1));
-    auto& h = slot.header();
-    h.seq = ++seq_;
-    h.t_ns = t_ns;
-    h.flags = shared::kSnapshotValid | shared::kSnapshotHasJacobian;
-    h.device_pose.pos_m = {0.0, 0.0, z_star};
-    h.tool_pose.pos_m = {0.0, 0.0, z_star};
-    slot.rowOffset()[0] = 0;
-    slot.rowOffset()[1] = 1;
-    slot.contactId()[0] = 1;
-    slot.mu()[0] = 0.0;
-    slot.W()[0] = w_m_per_n;
-    slot.deltaFree()[0] = gap_m;
-    slot.f()[0] = 0.0;
-    for (int k = 0; k < 6; ++k) slot.J()[k] = k == 2 ? 1.0 : 0.0;
-    for (int k = 0; k < 3; ++k) {
-      slot.contactPoint()[k] = 0.0;
-      slot.contactNormal()[k] = k == 2 ? 1.0 : 0.0;
-    }
+    ASSERT_TRUE(writeOneContactProblem(publisher_.slot(), ++seq_, t_ns, gap_m, w_m_per_n,
+                                       {0.0, 0.0, z_star}, 0.0));
     publisher_.publish();
   }
 

@@ -122,10 +122,11 @@ int springInfo(TactusDeviceHandle h, TactusDeviceInfo* out) {
   return TACTUS_DEVICE_OK;
 }
 
+// halt (the last entry) is NULL: read and write never block, so the loop is never stuck in them.
 const TactusDevicePlugin kPlugin = {
     TACTUS_DEVICE_PLUGIN_ABI_VERSION, sizeof(TactusDevicePlugin), "spring",
     springCreate, springDestroy, springOpen, springCalibrate, springEnableForces, springClose,
-    springRead, springWrite, springInfo};
+    springRead, springWrite, springInfo, nullptr};
 
 }  // namespace
 

@@ -54,9 +54,12 @@ SegmentHost::SegmentHost(const std::string& name, const SceneSpec& spec,
 }
 
 SegmentHost::~SegmentHost() {
-  // tell the haptic side to fade out now rather than after its watchdog
+  // tell the haptic side to fade out now rather than after its watchdog: a snapshot like any
+  // other (the next seq, stamped now, so readers see it as the newest) flagged shutting down
   if (publisher_.attached()) {
     auto slot = publisher_.slot();
+    slot.header().seq = ++published_;
+    slot.header().t_ns = shared::monotonicNs();
     slot.header().flags = shared::kSnapshotShuttingDown;
     slot.setSize(0, 0);
     publisher_.publish();
@@ -64,9 +67,13 @@ SegmentHost::~SegmentHost() {
 }
 
 bool deviceSampleFresh(const shared::DeviceSample& s, std::int64_t now_ns,
-                       std::int64_t watchdog_ns) {
-  const std::int64_t age = now_ns - s.t_ns;
-  return s.seq != 0 && age < watchdog_ns && (s.status & shared::kDeviceFault) == 0;
+                       std::int64_t watchdog_ns, bool faulted_too) {
+  std::int64_t age = 0;
+  if (__builtin_sub_overflow(now_ns, s.t_ns, &age)) return false;
+  // (a sample from the future is as untrustworthy as an old one)
+  return s.seq != 0 && age < watchdog_ns && age > -watchdog_ns &&
+         (faulted_too || (s.status & shared::kDeviceFault) == 0) &&
+         (s.status & shared::kDevicePoseValid) != 0;
 }
 
 bool deviceTargetFromSample(const shared::DeviceSample& s, double max_opening_rad,
@@ -99,20 +106,51 @@ bool SegmentHost::deviceTarget(int i, DeviceTarget& target) {
   DeviceLink& d = devices_[static_cast<std::size_t>(i)];
   const shared::DeviceSample& s = d.reader.latest();
   const std::int64_t now = shared::monotonicNs();
+  // A device that faults (the haptic side holds its last pose and fades its force) holds the
+  // instrument where it was: going back to the script would move the instrument away from where
+  // the hand still is, and on recovery the hand would meet tissue the local model did not have.
+  if (d.have_good && (s.status & shared::kDeviceFault) != 0 &&
+      deviceSampleFresh(s, now, watchdog_ns_, /*faulted_too=*/true)) {
+    if (!d.holding_fault) {
+      spdlog::info("device {} faults: the instrument holds its last target until it recovers", i);
+      d.holding_fault = true;
+    }
+    target = d.last_good;
+    return true;
+  }
+  d.holding_fault = false;
   const bool fresh = deviceSampleFresh(s, now, watchdog_ns_);
+  // samples stopped while haptic_server lives (its device stalled, or a read blocks): the hand is
+  // still where it was, so is the instrument
+  const bool hold = !fresh && d.have_good && segment_.hapticAttached();
   if (fresh != d.device_active) {
     if (fresh) {
       spdlog::info("device samples arriving: the instrument follows the device (device {})", i);
-    } else {
+    } else if (!hold) {
       spdlog::info("no fresh device sample: the instrument follows the scene's script (device {})",
                    i);
     }
     d.device_active = fresh;
   }
   if (!fresh) {
+    if (hold) {
+      if (!d.holding_stall) {
+        spdlog::info("device {}'s samples stopped with haptic_server still attached: the "
+                     "instrument holds its last target", i);
+        d.holding_stall = true;
+      }
+      target = d.last_good;
+      return true;
+    }
+    if (d.holding_stall) {
+      spdlog::info("haptic_server is gone: the instrument follows the scene's script (device {})",
+                   i);
+      d.holding_stall = false;
+    }
     d.have_good = false;   // the script took over: the next device sample starts afresh
     return false;
   }
+  d.holding_stall = false;
   if (!d.have_good) {
     // the device takes over from the script: its first sample is judged against the script
     d.last_good = target;
@@ -193,7 +231,9 @@ bool writeSnapshot(const Simulation& sim, double max_opening_rad, std::uint64_t 
   const bool solved = fits && rows > 0 && p.solve.status != shared::NsgsStatus::kEmpty;
   hdr.solver_sweeps = solved ? p.solve.sweeps : 0;
   hdr.solver_error = solved ? p.solve.error : 0.0;
-  hdr.flags = shared::kSnapshotValid | shared::kSnapshotHasJacobian |
+  // a problem that did not fit is not this step's problem: published empty and not valid, so
+  // the haptic side treats it as stale (fades out) instead of rendering no contact
+  hdr.flags = (fits ? shared::kSnapshotValid | shared::kSnapshotHasJacobian : 0u) |
               (solved && p.solve.status == shared::NsgsStatus::kConverged
                    ? shared::kSnapshotConverged
                    : 0u);

@@ -54,8 +54,11 @@ class SegmentHost {
   /// Replaces `target` by the newest sample of device `i` (instrument i's; 0 when not given)
   /// when one arrived within the watchdog period (bounded as described above; a rejected jump
   /// holds the last accepted target); otherwise leaves the scripted target (the simulation
-  /// holds or follows its script). True when the device drives the target. Each device is
-  /// judged on its own: one device silent or faulty leaves the others driving.
+  /// holds or follows its script). A device that reports a fault after it drove the instrument,
+  /// or whose samples stop while haptic_server is still attached (Segment::hapticAttached: a
+  /// stalled or blocked device), holds the last accepted target (at rest) until it recovers. True when the device drives
+  /// (or holds) the target. Each device is judged on its own: one device silent or faulty leaves
+  /// the others driving.
   bool deviceTarget(DeviceTarget& target) { return deviceTarget(0, target); }
   bool deviceTarget(int i, DeviceTarget& target);
   /// Publishes the last step's contact problem and beats the heartbeat.
@@ -80,6 +83,8 @@ class SegmentHost {
     bool device_active = false;
     bool have_good = false;                      ///< an accepted sample exists
     bool rejecting = false;                      ///< in an episode of rejected samples
+    bool holding_fault = false;                  ///< holding the target while the device faults
+    bool holding_stall = false;                  ///< ... or while its samples stopped
     DeviceTarget last_good;                      ///< the last accepted target (held on a jump)
     std::int64_t last_good_ns = 0;               ///< when it was accepted (this clock)
   };

@@ -381,6 +381,7 @@ TEST(BimanualSegmentHost, EachDeviceDrivesItsOwnInstrument) {
   sample.seq = 1;
   sample.t_ns = shared::monotonicNs();
   sample.pos_m = {0.040, -0.002, 0.012};   // near instrument 1's start (a plausible jump)
+  sample.status = shared::kDeviceOk | shared::kDevicePoseValid;
   writer1.publish(sample);
   sim::DeviceTarget t0 = s.scriptedTarget(0, 0.0);
   sim::DeviceTarget t1 = s.scriptedTarget(1, 0.0);

@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <random>
 #include <thread>
 
@@ -25,7 +26,7 @@ constexpr std::int64_t kT0 = 1'000'000'000'000;   // the sender's clock
 constexpr std::int64_t kNow = 5'000'000'000'000;  // the bridge's clock (another machine's)
 
 std::uint64_t handled(const BridgeCounters& c) {
-  return c.accepted + c.duplicated + c.reordered + c.malformed;
+  return c.accepted + c.duplicated + c.reordered + c.malformed + c.foreign + c.out_of_window;
 }
 
 class BridgeDeviceTest : public ::testing::Test {
@@ -194,6 +195,83 @@ TEST_F(BridgeDeviceTest, LateStatesAndARestartedSenderAreRecognised) {
   EXPECT_EQ(device_->counters().restarts, 1u);
   EXPECT_DOUBLE_EQ(out.pos_m[0], 0.05);
   EXPECT_EQ(device_->counters().duplicated + device_->counters().reordered, 0u);
+}
+
+// One datagram must not take the device from a live client: a state from another sender
+// (address and port) is dropped while the session is live, whatever its seq and stamp (seq
+// 2^64-1 and t = INT64_MAX used to lock the real client out until a restart and wrap the lost
+// counter), and a second sender interleaving with the client is never followed.
+TEST_F(BridgeDeviceTest, AnotherSenderNeverTakesOrJoinsALiveSession) {
+  DeviceState out;
+  test::BridgeSender spoofer(device_->port());
+  sender_->sendState(1, kT0, {0.01, 0, 0});
+  readUntil(1, kNow, &out);
+  spoofer.sendState(~std::uint64_t{0}, std::numeric_limits<std::int64_t>::max(), {0.5, 0, 0});
+  EXPECT_NE(readUntil(2, kNow + 1'000'000, &out), IoStatus::kOk);
+  EXPECT_EQ(device_->counters().foreign, 1u);
+  std::uint64_t handled_so_far = 2;
+  for (std::uint64_t seq = 2; seq <= 40; ++seq) {   // interleaved: client, spoofer, client, ...
+    const std::int64_t t = 1'000'000 * static_cast<std::int64_t>(seq);
+    sender_->sendState(seq, kT0 + t, {0.01, 0, 0});
+    spoofer.sendState(seq, kT0 + t, {0.5, 0, 0});
+    handled_so_far += 2;
+    readUntil(handled_so_far, kNow + t, &out);
+    EXPECT_DOUBLE_EQ(out.pos_m[0], 0.01) << "the second sender's pose was used (seq " << seq << ")";
+  }
+  EXPECT_EQ(device_->counters().accepted, 40u);
+  EXPECT_EQ(device_->counters().foreign, 40u);
+  EXPECT_EQ(device_->counters().lost, 0u);
+  EXPECT_EQ(device_->counters().restarts, 0u);
+  // commands keep going to the client
+  device_->enableForces(true);
+  ASSERT_EQ(device_->write(DeviceCommand{}), IoStatus::kOk);
+  DeviceCommand got;
+  std::uint64_t state_seq = 0;
+  ASSERT_TRUE(sender_->receive(&got, &state_seq));
+  EXPECT_EQ(state_seq, 40u);
+}
+
+// Within its own session a sender cannot jump out of a sane window either (a seq far ahead, a
+// stamp running ahead of the time elapsed here), and no session starts on absurd values.
+TEST_F(BridgeDeviceTest, ASeqOrStampOutsideTheSaneWindowIsDropped) {
+  DeviceState out;
+  sender_->sendState(~std::uint64_t{0}, 5, {0.3, 0, 0});                 // no session on it
+  sender_->sendState(1, std::numeric_limits<std::int64_t>::max(), {0.3, 0, 0});
+  EXPECT_EQ(readUntil(2, kNow, &out), IoStatus::kNoData);
+  EXPECT_EQ(device_->counters().out_of_window, 2u);
+  sender_->sendState(1, kT0, {0.01, 0, 0});
+  readUntil(3, kNow, &out);
+  sender_->sendState(~std::uint64_t{0}, kT0 + 1'000'000, {0.3, 0, 0});    // a seq jump
+  sender_->sendState(2, kT0 + 3'600'000'000'000, {0.3, 0, 0});           // an hour ahead
+  readUntil(5, kNow + 1'000'000, &out);
+  EXPECT_EQ(device_->counters().out_of_window, 4u);
+  sender_->sendState(2, kT0 + 1'000'000, {0.02, 0, 0});                   // sane: used
+  EXPECT_EQ(readUntil(6, kNow + 1'000'000, &out), IoStatus::kOk);
+  EXPECT_DOUBLE_EQ(out.pos_m[0], 0.02);
+  EXPECT_EQ(device_->counters().lost, 0u);
+}
+
+// A client restarted on a new port takes over once the old session has been silent past the
+// timeout (and not before): the documented way to restart the real client.
+TEST_F(BridgeDeviceTest, ARestartedClientOnANewPortTakesOverAfterTheTimeout) {
+  DeviceState out;
+  sender_->sendState(100, kT0, {0.01, 0, 0});
+  readUntil(1, kNow, &out);
+  test::BridgeSender restarted(device_->port());
+  restarted.sendState(1, kT0 + 10'000'000, {0.02, 0, 0});
+  EXPECT_NE(readUntil(2, kNow + 10'000'000, &out), IoStatus::kOk);   // within the timeout
+  EXPECT_EQ(device_->counters().foreign, 1u);
+  EXPECT_EQ(device_->readAt(kNow + 60'000'000, &out), IoStatus::kFault);   // silent: ended
+  restarted.sendState(2, kT0 + 61'000'000, {0.03, 0, 0});
+  EXPECT_EQ(readUntil(3, kNow + 61'000'000, &out), IoStatus::kOk);
+  EXPECT_DOUBLE_EQ(out.pos_m[0], 0.03);
+  EXPECT_EQ(device_->counters().restarts, 1u);
+  device_->enableForces(true);
+  ASSERT_EQ(device_->write(DeviceCommand{}), IoStatus::kOk);
+  DeviceCommand got;
+  std::uint64_t state_seq = 0;
+  ASSERT_TRUE(restarted.receive(&got, &state_seq)) << "commands go to the new session's client";
+  EXPECT_EQ(state_seq, 2u);
 }
 
 TEST_F(BridgeDeviceTest, CommandsGoBackToTheSenderAndZeroWhileForcesAreDisabled) {

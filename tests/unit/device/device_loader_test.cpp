@@ -5,8 +5,11 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <atomic>
+#include <chrono>
 #include <cstdlib>
 #include <string>
+#include <thread>
 
 #include "tactus/device/backends.h"
 #include "tactus/device/device.h"
@@ -19,6 +22,7 @@ using ::testing::HasSubstr;
 const std::string kSpringDir = std::string(TACTUS_BINARY_DIR) + "/device/examples/spring_plugin";
 const std::string kSpringPlugin = kSpringDir + "/libtactus_spring_device.so";
 const std::string kFixtures = std::string(TACTUS_BINARY_DIR) + "/device/test_plugins";
+const std::string kFaultPlugin = kFixtures + "/libfault_plugin.so";
 
 std::string loadError(const std::string& name, const DeviceConfig& config = {}) {
   try {
@@ -58,6 +62,9 @@ TEST(DeviceLoader, BadOptionsAreExplained) {
   addDeviceOption(c, "origin=0,0,0.1");
   EXPECT_EQ(c.at("mass"), "0.5");
   EXPECT_EQ(c.at("origin"), "0,0,0.1");
+  // a recorder ring is allocated at once: its capacity is bounded (1e15 ended in bad_alloc)
+  EXPECT_THAT(loadError("null", {{"record", "/nonexistent/r.csv"}, {"record_capacity", "1e15"}}),
+              HasSubstr("record_capacity=1e15 must be in [2, 16777216]"));
   EXPECT_THROW(addDeviceOption(c, "novalue"), DeviceError);
   EXPECT_THROW(addDeviceOption(c, "=3"), DeviceError);
 }
@@ -85,8 +92,8 @@ TEST(DeviceLoader, MissingSymbolIsRefused) {
 
 TEST(DeviceLoader, WrongAbiIsRefused) {
   const std::string msg = loadError(kFixtures + "/libwrong_abi_plugin.so");
-  EXPECT_THAT(msg, HasSubstr("was built for device plugin ABI version 7, this program uses "
-                             "version 1"));
+  EXPECT_THAT(msg, HasSubstr("was built for device plugin ABI version 7, this program loads "
+                             "versions 1 to 2"));
   EXPECT_THAT(msg, HasSubstr("rebuild the plugin against"));
 }
 
@@ -122,6 +129,73 @@ TEST(DeviceLoader, PluginOptionErrorsComeThrough) {
   const std::string msg = loadError(kSpringPlugin, {{"stifness", "1"}});
   EXPECT_THAT(msg, HasSubstr("device plugin 'spring'"));
   EXPECT_THAT(msg, HasSubstr("create failed: unknown option 'stifness' (known: stiffness, rest)"));
+}
+
+// A plugin built for version 1 of the ABI (no halt entry) keeps loading and working; it cannot
+// be halted.
+TEST(DeviceLoader, AVersionOnePluginStillLoads) {
+  auto dev = loadDevice(kFixtures + "/libabi_v1_plugin.so");
+  EXPECT_EQ(dev->info().model, "abi v1 plugin");
+  dev->open();
+  DeviceState s;
+  ASSERT_EQ(dev->read(&s), IoStatus::kOk);
+  EXPECT_DOUBLE_EQ(s.pos_m[2], 0.25);
+  EXPECT_FALSE(dev->halt());
+  dev->close();
+}
+
+// create() may leave its error buffer unterminated: the message holds what fits in the buffer
+// and nothing read beyond it (the loader used to read on into its stack until a zero byte).
+TEST(DeviceLoader, AnUnterminatedCreateErrorIsCutAtTheBuffer) {
+  const std::string msg = loadError(kFaultPlugin, {{"create_error", "unterminated"}});
+  const std::string::size_type at = msg.find("create failed: ");
+  ASSERT_NE(at, std::string::npos) << msg;
+  const std::string text = msg.substr(at + 15);
+  EXPECT_EQ(text, std::string(511, 'E')) << "the message must end with the buffer";
+}
+
+// An exception escaping a plugin's read or write (against the ABI) is caught at the C boundary:
+// the call reports a fault, the diagnostics say what happened, nothing reaches the caller.
+TEST(DeviceLoader, APluginsExceptionsNeverCrossTheCBoundary) {
+  for (const char* kind : {"throw", "throw_write"}) {
+    SCOPED_TRACE(kind);
+    auto dev = loadDevice(kFaultPlugin, {{"fault", kind}, {"fault_at_ms", "0"},
+                                         {"fault_ms", "1e9"}});
+    dev->open();
+    DeviceState s;
+    const bool in_read = std::string(kind) == "throw";
+    EXPECT_EQ(dev->read(&s), in_read ? IoStatus::kFault : IoStatus::kOk);
+    EXPECT_EQ(dev->write(DeviceCommand{}), in_read ? IoStatus::kOk : IoStatus::kFault);
+    EXPECT_EQ(dev->write(DeviceCommand{}), in_read ? IoStatus::kOk : IoStatus::kFault);
+    const std::string d = dev->takeDiagnostics();
+    EXPECT_THAT(d, HasSubstr(in_read ? "read() 1 and write() 0" : "read() 0 and write() 2"));
+    EXPECT_THAT(d, HasSubstr("throws on purpose"));
+    EXPECT_EQ(dev->takeDiagnostics(), "") << "reported once";
+    dev->close();
+  }
+}
+
+// halt() from another thread unblocks a read that blocks (against the contract); a plugin that
+// does not honour it stays blocked (the supervisor then says so; see HapticWatchdog).
+TEST(DeviceLoader, HaltUnblocksABlockedReadFromAnotherThread) {
+  auto dev = loadDevice(kFaultPlugin, {{"fault", "block"}, {"fault_at_ms", "0"},
+                                       {"fault_ms", "1e9"}});
+  dev->open();
+  std::atomic<bool> returned{false};
+  IoStatus io = IoStatus::kOk;
+  std::thread rt([&] {
+    DeviceState s;
+    io = dev->read(&s);
+    returned.store(true);
+  });
+  std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  EXPECT_FALSE(returned.load()) << "the fixture's read should block";
+  EXPECT_TRUE(dev->halt());
+  rt.join();
+  EXPECT_EQ(io, IoStatus::kFault);
+  DeviceState s;
+  EXPECT_EQ(dev->read(&s), IoStatus::kFault) << "faulty after a halt";
+  dev->close();
 }
 
 }  // namespace

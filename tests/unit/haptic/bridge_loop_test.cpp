@@ -60,6 +60,13 @@ TEST_F(BridgeLoopTest, SilenceHoldsThePoseAndFadesTheForceThenStatesBringItBack)
   TickOutput out;
   for (int i = 0; i < 200; ++i) out = sendAndTick(-0.002);   // 2 mm in: 2 N up
   EXPECT_NEAR(out.force_n[2], 2.0, 1e-9);
+  {
+    auto& c = rig_->loop().counters();
+    std::printf("DBG ticks %lu nodata %lu faults %lu stale %lu snaps %lu gain %g unl %g flags %lx contacts %d silent %lu\n",
+      (unsigned long)c.ticks.load(), (unsigned long)c.device_no_data.load(), (unsigned long)c.device_faults.load(),
+      (unsigned long)c.stale_ticks.load(), (unsigned long)c.snapshots_taken.load(), out.gain, out.unlimited_force_norm_n,
+      (unsigned long)out.flags, out.contacts, (unsigned long)c.silent_device_ticks.load());
+  }
   EXPECT_DOUBLE_EQ(rig_->sample().pos_m[2], -0.002);
   // the remote side receives that force (its queue emptied first: it overflowed long ago)
   device::DeviceCommand cmd;
@@ -83,9 +90,13 @@ TEST_F(BridgeLoopTest, SilenceHoldsThePoseAndFadesTheForceThenStatesBringItBack)
   EXPECT_DOUBLE_EQ(held.pos_m[2], -0.002);           // the last pose, held
   EXPECT_TRUE(held.status & shared::kDeviceFault);
 
-  for (int i = 0; i < 200; ++i) out = sendAndTick(-0.002);   // the hand is back
-  EXPECT_NEAR(out.force_n[2], 2.0, 1e-9);
+  // the hand is back, still 2 mm deep: the engage gate stays closed (no kick in the tissue)
+  for (int i = 0; i < 100; ++i) out = sendAndTick(-0.002);
+  EXPECT_EQ(out.force_n[2], 0.0);
   EXPECT_FALSE(out.flags & shared::kStatsDeviceFault);
+  for (int i = 0; i < 20; ++i) sendAndTick(0.001);            // out of the tissue: engages
+  for (int i = 0; i < 200; ++i) out = sendAndTick(-0.002);   // and presses again
+  EXPECT_NEAR(out.force_n[2], 2.0, 1e-9);
 }
 
 }  // namespace

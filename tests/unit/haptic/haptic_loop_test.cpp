@@ -2,9 +2,14 @@
 // moves delta_free with the device, forces rise with penetration, the safety chain (engage gate,
 // clamp, watchdog fade) holds, bad device data is survived, and a tick allocates nothing.
 #include <gtest/gtest.h>
+#include <sys/mman.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <thread>
+#include <limits>
 #include <cmath>
 #include <cstdlib>
 #include <string>
@@ -136,23 +141,191 @@ TEST_F(HapticLoopTest, ForceNeverExceedsTheClamp) {
   }
 }
 
-TEST_F(HapticLoopTest, StaleSnapshotFadesTheForceAndFreshDataBringsItBack) {
+// A lost model (here a stale snapshot) fades what the hand felt: the last rendered wrench is held
+// and scaled down linearly over fade_ms (20 ticks here), checked at 25, 50 and 75 % of the ramp,
+// with no slew limit to shape it; zero after. Fresh data with the hand still in the tissue does
+// not bring the force back (the gate stays closed above the engage threshold); once the hand has
+// left the tissue, the force re-engages and a new press is rendered.
+TEST_F(HapticLoopTest, StaleSnapshotFadesTheHeldForceOverTheFadeTimeAndReengagesOnlyOutside) {
+  settings_.fade_ms = 20.0;
+  restartLoop();
   device_.state.pos_m = {0.0, 0.0, 0.0};
   publish(0.0, 1e-3, 0.0);
-  tickFor(20);                         // engaged, fade-in ramp complete
+  tickFor(30);                         // engaged, fade-in ramp complete
   publish(-0.002, 1e-3, 0.0, t_);
   TickOutput out = tickFor(1);
-  EXPECT_NEAR(out.force_n[2], 2.0, 1e-9);
-  // no new snapshot for longer than the watchdog: fade to zero within fade_ms, keep ticking
-  out = tickFor(static_cast<int>(settings_.watchdog_ms) + 1);
-  EXPECT_TRUE(out.stale);
-  out = tickFor(static_cast<int>(settings_.fade_ms) + 1);
+  ASSERT_NEAR(out.force_n[2], 2.0, 1e-9);
+  // the force is held while the snapshot is younger than the watchdog; the first stale tick
+  // starts the fade
+  int fresh_ticks = 0;
+  for (out = tickFor(1); !out.stale && fresh_ticks < 100; out = tickFor(1)) {
+    ASSERT_NEAR(out.force_n[2], 2.0, 1e-9);
+    ++fresh_ticks;
+  }
+  EXPECT_GE(fresh_ticks, static_cast<int>(settings_.watchdog_ms) - 2);
+  std::vector<double> ramp = {out.force_n[2]};
+  for (int k = 2; k <= 20; ++k) {
+    out = tickFor(1);
+    ASSERT_TRUE(out.stale) << k;
+    ramp.push_back(out.force_n[2]);
+  }
+  EXPECT_NEAR(ramp[4], 2.0 * 0.75, 1e-9) << "25 % of the ramp";
+  EXPECT_NEAR(ramp[9], 2.0 * 0.50, 1e-9) << "50 % of the ramp";
+  EXPECT_NEAR(ramp[14], 2.0 * 0.25, 1e-9) << "75 % of the ramp";
+  EXPECT_DOUBLE_EQ(ramp[19], 0.0) << "zero at the end of the fade";
+  out = tickFor(10);
   EXPECT_DOUBLE_EQ(out.force_n[2], 0.0);
   EXPECT_GT(loop_->counters().stale_ticks.load(), 0u);
+  EXPECT_EQ(loop_->counters().disengaged.load(), 1u);
+  // fresh again, the hand still 2 mm deep: no force fades back in
   publish(-0.002, 1e-3, 0.0, t_ + 1'000'000);
-  out = tickFor(static_cast<int>(settings_.fade_ms) + 2);
+  out = tickFor(40);
   EXPECT_FALSE(out.stale);
+  EXPECT_DOUBLE_EQ(out.force_n[2], 0.0);
+  EXPECT_GT(out.unlimited_force_norm_n, 1.9);
+  // the hand leaves the tissue: the gate opens; pressing again renders the force
+  device_.state.pos_m = {0.0, 0.0, 0.003};
+  tickFor(5);
+  device_.state.pos_m = {0.0, 0.0, 0.0};
+  publish(-0.002, 1e-3, 0.0);
+  out = tickFor(30);
   EXPECT_NEAR(out.force_n[2], 2.0, 1e-9);
+}
+
+// The other losses of the model fade the held wrench the same way: a device fault, a corrupt
+// snapshot (an ill-posed W) and a snapshot larger than the segment's capacity.
+TEST_F(HapticLoopTest, EveryLossOfTheModelFadesTheHeldWrenchLinearly) {
+  settings_.fade_ms = 20.0;
+  restartLoop();
+  enum Loss { kDeviceFault, kIllPosed, kTooLarge };
+  for (Loss loss : {kDeviceFault, kIllPosed, kTooLarge}) {
+    SCOPED_TRACE(loss);
+    device_.fault = false;
+    device_.state.pos_m = {0.0, 0.0, 0.003};   // out of the tissue: the gate opens
+    publish(0.0, 1e-3, 0.003);
+    tickFor(30);
+    device_.state.pos_m = {0.0, 0.0, 0.0};     // 3 mm in: 3 N
+    publish(0.0, 1e-3, 0.003);                 // (a fresh snapshot)
+    ASSERT_NEAR(tickFor(30).force_n[2], 3.0, 1e-9);
+    if (loss == kDeviceFault) device_.fault = true;
+    if (loss == kIllPosed) {
+      publishProblem({0, 1}, {-1e-3}, {-0.003}, {3.0}, {{0.0, 0.0, 1.0}},
+                     shared::kSnapshotValid | shared::kSnapshotSymmetricW);
+    }
+    if (loss == kTooLarge) {
+      // rows and contacts beyond the segment's capacity (50 contacts, 150 rows)
+      auto slot = publisher_.slot();
+      auto& h = slot.header();
+      h.seq = ++seq_;
+      h.t_ns = t_;
+      h.flags = shared::kSnapshotValid | shared::kSnapshotHasJacobian;
+      h.rows = 151;
+      h.contacts = 51;
+      publisher_.publish();
+    }
+    std::vector<double> ramp;
+    for (int k = 1; k <= 20; ++k) ramp.push_back(tickFor(1).force_n[2]);
+    EXPECT_NEAR(ramp[4], 3.0 * 0.75, 1e-9);
+    EXPECT_NEAR(ramp[9], 3.0 * 0.50, 1e-9);
+    EXPECT_NEAR(ramp[14], 3.0 * 0.25, 1e-9);
+    EXPECT_DOUBLE_EQ(ramp[19], 0.0);
+    EXPECT_DOUBLE_EQ(tickFor(5).force_n[2], 0.0);
+  }
+}
+
+// The engage gate closes at every interruption, not only at start: after a device fault, a
+// stale period or a link change the force returns only once the requested force is below the
+// threshold, never with the hand deep in tissue.
+TEST_F(HapticLoopTest, TheGateReengagesOnlyBelowTheThresholdAfterEveryInterruption) {
+  enum Interruption { kDeviceFault, kStale, kLinkChange };
+  for (Interruption what : {kDeviceFault, kStale, kLinkChange}) {
+    SCOPED_TRACE(what);
+    device_.state.pos_m = {0.0, 0.0, 0.003};
+    publish(0.0, 1e-3, 0.003);
+    tickFor(30);
+    device_.state.pos_m = {0.0, 0.0, 0.0};
+    publish(0.0, 1e-3, 0.003);
+    ASSERT_NEAR(tickFor(30).force_n[2], 3.0, 1e-9);
+    if (what == kDeviceFault) {
+      device_.fault = true;
+      tickFor(3);
+      device_.fault = false;
+    } else if (what == kStale) {
+      tickFor(static_cast<int>(settings_.watchdog_ms) + 3);
+    } else {
+      loop_->offerLink(nullptr);
+      tickFor(2);
+      loop_->offerLink(nullptr);
+      link_ = std::make_unique<AttachedSegment>(shared::Segment::open(name_));
+      loop_->offerLink(link_.get());
+    }
+    publish(-0.003, 1e-3, 0.0);                 // a fresh model, the hand 3 mm deep
+    TickOutput out;
+    for (int k = 0; k < 40; ++k) {   // (within the snapshot's watchdog)
+      out = tickFor(1);
+      ASSERT_LE(out.force_n[2], std::max(0.0, 3.0 * (1.0 - (k + 1) / 10.0)) + 1e-9)
+          << "tick " << k;
+    }
+    EXPECT_DOUBLE_EQ(out.force_n[2], 0.0);
+    EXPECT_FALSE(out.stale);
+  }
+}
+
+// The slew limit is a budget per nominal period: a tick that comes 50 ms after the previous one
+// (a stalled device read) may change the force by no more than any other tick.
+TEST_F(HapticLoopTest, TheSlewBudgetIsPerNominalPeriodWhateverTheTimeSinceTheLastTick) {
+  settings_.slew_n_per_s = 100.0;   // 0.1 N per 1 ms period
+  restartLoop();
+  device_.state.pos_m = {0.0, 0.0, 0.003};
+  publish(0.0, 1e-3, 0.003);
+  tickFor(30);
+  device_.state.pos_m = {0.0, 0.0, 0.0};
+  double last = tickFor(1).force_n[2];
+  EXPECT_NEAR(last, 0.1, 1e-12);
+  for (int k = 0; k < 5; ++k) {
+    t_ += 50'000'000;                // 50 ms late
+    publish(-0.003, 1e-3, 0.0, t_);  // (keep the snapshot fresh)
+    const double f = loop_->tick(t_, t_).force_n[2];
+    EXPECT_NEAR(f - last, 0.1, 1e-12) << k;
+    last = f;
+  }
+}
+
+// A snapshot stamped in the future is never fresh (its negative age used to pass the watchdog).
+TEST_F(HapticLoopTest, ASnapshotStampedInTheFutureIsStale) {
+  device_.state.pos_m = {0.0, 0.0, 0.0};
+  publish(0.0, 1e-3, 0.0, t_ + 3'600'000'000'000);   // an hour ahead
+  TickOutput out = tickFor(5);
+  EXPECT_TRUE(out.stale);
+  EXPECT_EQ(out.contacts, 0) << "no model solved from it";
+  publish(0.0, 1e-3, 0.0, std::numeric_limits<std::int64_t>::max());
+  EXPECT_TRUE(tickFor(5).stale);
+  publish(0.0, 1e-3, 0.0);
+  EXPECT_FALSE(tickFor(1).stale);
+}
+
+// A zero (or far from unit) quaternion from a device is not an orientation: the sample is
+// refused like a non-finite one (the pose held, the force faded), never taken as identity.
+TEST_F(HapticLoopTest, AZeroQuaternionFromTheDeviceIsAFaultNotIdentity) {
+  auto samples = sim_->deviceReader();
+  device_.state.pos_m = {0.0, 0.0, 0.0};
+  device_.state.quat_wxyz = {0.0, 0.7071067811865476, 0.0, 0.7071067811865476};
+  publish(0.001, 1e-3, 0.0);
+  tickFor(5);
+  EXPECT_NEAR(samples.latest().quat_wxyz[1], 0.7071067811865476, 1e-15);
+  for (const auto& q : {std::array<double, 4>{0.0, 0.0, 0.0, 0.0},
+                        std::array<double, 4>{1e-10, 0.0, 0.0, 0.0},
+                        std::array<double, 4>{3.0, 0.0, 0.0, 0.0}}) {
+    device_.state.quat_wxyz = q;
+    const TickOutput out = tickFor(2);
+    EXPECT_NE(out.flags & shared::kStatsDeviceFault, 0u);
+    const shared::DeviceSample& s = samples.latest();
+    EXPECT_NE(s.status & shared::kDeviceFault, 0u);
+    EXPECT_NEAR(s.quat_wxyz[1], 0.7071067811865476, 1e-15) << "the last orientation is held";
+  }
+  EXPECT_EQ(loop_->counters().unusable_orientation.load(), 6u);
+  device_.state.quat_wxyz = {1.0, 0.0, 0.0, 1e-4};   // unit up to rounding: accepted
+  EXPECT_EQ(tickFor(1).flags & shared::kStatsDeviceFault, 0u);
 }
 
 TEST_F(HapticLoopTest, DeviceFaultAndNonFiniteDataFadeWithoutPropagatingNaN) {
@@ -172,6 +345,10 @@ TEST_F(HapticLoopTest, DeviceFaultAndNonFiniteDataFadeWithoutPropagatingNaN) {
   EXPECT_DOUBLE_EQ(out.force_n[2], 0.0);
   EXPECT_GT(loop_->counters().device_faults.load(), 0u);
   device_.fault = false;
+  device_.state.pos_m = {0.0, 0.0, 0.003};    // out of the tissue: the gate reopens
+  publish(-0.002, 1e-3, 0.0);
+  tickFor(20);
+  device_.state.pos_m = {0.0, 0.0, 0.0};
   publish(-0.002, 1e-3, 0.0);
   out = tickFor(40);
   EXPECT_NEAR(out.force_n[2], 2.0, 1e-9);
@@ -193,8 +370,8 @@ TEST_F(HapticLoopTest, StaleDeviceTimestampsFadeTheForceLikeAFault) {
 }
 
 TEST_F(HapticLoopTest, ASecondHapticProcessOnTheSameSegmentIsRefused) {
-  // the segment records a live haptic process (our parent stands in for it)
-  link_->segment.setHapticPid(static_cast<std::int64_t>(::getppid()));
+  // the fixture's link holds the haptic claim (as a live haptic_server would)
+  ASSERT_EQ(link_->segment.claimHaptic(static_cast<std::int64_t>(::getpid())), 0);
   ScriptedDevice other_device;
   HapticLoop other(other_device, settings_);
   Supervisor supervisor(other, name_);
@@ -207,6 +384,47 @@ TEST_F(HapticLoopTest, ASecondHapticProcessOnTheSameSegmentIsRefused) {
   }
 }
 
+// ~Supervisor must never free a link the tick may still hold: here the real-time thread has
+// adopted the link and then stalls (it never ticks again), and the supervisor is destroyed. The
+// link's mapping must still be there afterwards (it used to be unmapped at once).
+TEST_F(HapticLoopTest, TheSupervisorNeverFreesALinkTheTickMayStillHold) {
+  ScriptedDevice other_device;
+  HapticLoop other(other_device, settings_);
+  const void* mapped = nullptr;
+  AttachedSegment* held = nullptr;
+  {
+    Supervisor supervisor(other, name_);
+    supervisor.poll();                         // attaches and offers the link
+    t_ += 1'000'000;
+    other.tick(t_, t_);                        // the tick adopts it
+    held = other.linkInUse();
+    ASSERT_NE(held, nullptr);
+    mapped = held->segment.data();
+  }                                            // the tick stalls: it never lets go
+  const long page = ::sysconf(_SC_PAGESIZE);
+  void* first_page = reinterpret_cast<void*>(reinterpret_cast<std::uintptr_t>(mapped) &
+                                             ~static_cast<std::uintptr_t>(page - 1));
+  unsigned char resident = 0;
+  EXPECT_EQ(::mincore(first_page, static_cast<std::size_t>(page), &resident), 0)
+      << "the link the tick holds was unmapped";
+  t_ += 1'000'000;
+  other.tick(t_, t_);                          // the tick lets go at last (it was offered none)
+  EXPECT_EQ(other.linkInUse(), nullptr);
+  delete held;                                 // (the supervisor left it to the process)
+  // a loop that has stopped lets go (HapticLoop::stopped): then the link is freed at once
+  ScriptedDevice third_device;
+  HapticLoop third(third_device, settings_);
+  {
+    Supervisor supervisor(third, name_);
+    supervisor.poll();
+    t_ += 1'000'000;
+    third.tick(t_, t_);
+    ASSERT_NE(third.linkInUse(), nullptr);
+    third.stopped();
+    EXPECT_EQ(third.linkInUse(), nullptr);
+  }
+}
+
 TEST_F(HapticLoopTest, TheSimulationSeesTheDeviceAndEveryTickWritesAStatsRecord) {
   auto samples = sim_->deviceReader();
   auto stats = sim_->statsReader(shared::StatsRingReader::Start::kOldest);
@@ -216,6 +434,7 @@ TEST_F(HapticLoopTest, TheSimulationSeesTheDeviceAndEveryTickWritesAStatsRecord)
   tickFor(10);
   const shared::DeviceSample& s = samples.latest();
   EXPECT_EQ(s.seq, 10u);
+  EXPECT_NE(s.status & shared::kDevicePoseValid, 0u);
   EXPECT_DOUBLE_EQ(s.pos_m[1], 0.02);
   EXPECT_DOUBLE_EQ(s.gripper_rad, 0.25);
   std::vector<shared::StatsRecord> recs(64);
@@ -728,6 +947,67 @@ TEST(HapticLoopLarge, ReachedContactsThatAreNotContiguousSolveTheWholeProblem) {
   EXPECT_EQ(out.contacts, LargeProblemRig::kContacts);
   EXPECT_FALSE(rig.prepared().reachOnly());
   EXPECT_GT(out.sweeps, 0);
+}
+
+// A device whose read blocks (against the contract) until halt() is called from another thread.
+class BlockingDevice : public ScriptedDevice {
+ public:
+  device::IoStatus read(device::DeviceState* out) noexcept override {
+    if (block.load()) {
+      while (!halted.load()) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+      block.store(false);
+      return device::IoStatus::kFault;
+    }
+    return ScriptedDevice::read(out);
+  }
+  bool halt() noexcept override {
+    if (!haltable) return false;
+    halted.store(true);
+    return true;
+  }
+  std::atomic<bool> block{false};
+  std::atomic<bool> halted{false};
+  bool haltable = true;
+};
+
+// The supervisor's watchdog: a tick stuck in a device read past the watchdog is reported and the
+// device asked to halt, which lets the tick return (the force then fades like on any fault); a
+// device that cannot be halted is reported as such. No durations are asserted: the watchdog is
+// polled until it reports.
+TEST(HapticWatchdog, ATickStuckInADeviceReadIsReportedAndTheDeviceHalted) {
+  for (bool haltable : {true, false}) {
+    SCOPED_TRACE(haltable);
+    BlockingDevice device;
+    device.haltable = haltable;
+    HapticSettings settings;
+    settings.watchdog_ms = 5.0;
+    HapticLoop loop(device, settings);
+    Supervisor supervisor(loop, "tactus_watchdog_test_" + std::to_string(::getpid()));
+    EXPECT_FALSE(supervisor.watchTick(shared::monotonicNs())) << "no tick runs";
+    device.block.store(true);
+    std::atomic<bool> returned{false};
+    std::thread rt([&] {
+      const std::int64_t now = shared::monotonicNs();
+      loop.tick(now, now);
+      returned.store(true);
+    });
+    bool stuck = false;
+    for (int i = 0; i < 5000 && !stuck; ++i) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+      stuck = supervisor.watchTick(shared::monotonicNs());
+    }
+    EXPECT_TRUE(stuck);
+    if (!haltable) {
+      EXPECT_EQ(loop.tickProgress(shared::monotonicNs()).device, 0) << "stuck in device 0";
+      EXPECT_FALSE(returned.load());
+      device.halted.store(true);   // the test lets it go
+    }
+    rt.join();
+    EXPECT_TRUE(returned.load());
+    EXPECT_EQ(loop.counters().device_faults.load(), 1u);
+    EXPECT_FALSE(supervisor.watchTick(shared::monotonicNs()));
+    loop.stopped();
+  }
 }
 
 }  // namespace

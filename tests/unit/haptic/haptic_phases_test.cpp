@@ -43,9 +43,9 @@ struct HapticLoopPhases {
     poses[0] = &device_pose;
     l.solveLocalModel(link, poses, 0, out);
   }
-  static void applySafetyChain(HapticLoop& l, double dt, TickOutput& out,
-                               std::array<double, 3>& force, std::array<double, 3>& torque) {
-    l.applySafetyChain(dt, out, force, torque);
+  static void applySafetyChain(HapticLoop& l, TickOutput& out, std::array<double, 3>& force,
+                               std::array<double, 3>& torque) {
+    l.applySafetyChain(out, force, torque);
   }
   static void writeDevice(HapticLoop& l, const std::array<double, 3>& force,
                           const std::array<double, 3>& torque) {
@@ -126,13 +126,17 @@ TEST_F(HapticPhasesTest, PublishSampleGivesTheSimulationThePoseHeldAndTheDeviceS
   auto samples = sim_->deviceReader();
   P::adoptOfferedLink(*loop_);
   TickOutput out;
+  // before the device's first sample the pose is not one it delivered: never to be followed
+  P::publishSample(*loop_, t_, device::IoStatus::kNoData);
+  EXPECT_EQ(samples.latest().status & shared::kDevicePoseValid, 0u);
   device_.state.pos_m = {0.01, 0.02, 0.03};
   device_.state.t_ns = t_;
   device_.state.gripper_rad = 0.25;
   device::IoStatus io = P::readDevice(*loop_, t_, out);
   P::publishSample(*loop_, t_, io);
   shared::DeviceSample s = samples.latest();
-  EXPECT_EQ(s.seq, 1u);
+  EXPECT_EQ(s.seq, 2u);
+  EXPECT_NE(s.status & shared::kDevicePoseValid, 0u);
   EXPECT_EQ(s.t_ns, t_);
   EXPECT_DOUBLE_EQ(s.pos_m[0], 0.01);
   EXPECT_DOUBLE_EQ(s.pos_m[2], 0.03);
@@ -145,7 +149,7 @@ TEST_F(HapticPhasesTest, PublishSampleGivesTheSimulationThePoseHeldAndTheDeviceS
   io = P::readDevice(*loop_, t_ + 1'000'000, out);
   P::publishSample(*loop_, t_ + 1'000'000, io);
   s = samples.latest();
-  EXPECT_EQ(s.seq, 2u);
+  EXPECT_EQ(s.seq, 3u);
   EXPECT_DOUBLE_EQ(s.pos_m[0], 0.01);
   EXPECT_DOUBLE_EQ(s.pos_m[1], 0.02);
   EXPECT_NE(s.status & shared::kDeviceFault, 0u);
@@ -239,12 +243,14 @@ TEST_F(HapticPhasesTest, SafetyChainEngagesFadesInClampsAndZeroesNonFiniteWrench
   readValidPose();
   std::array<double, 3> force{}, torque{};
   TickOutput out;
-  // one tick's chain on the local model's wrench `command` (the chain overwrites out.force_n)
-  auto chain = [&](const std::array<double, 3>& command, bool stale = false) {
+  // one tick's chain on the local model's wrench `command` (the chain overwrites out.force_n);
+  // model: the tick solved a usable model for the device
+  auto chain = [&](const std::array<double, 3>& command, bool model = true) {
     out = {};
-    out.stale = stale;
+    out.stale = !model;
+    out.model = model;
     out.force_n = command;
-    P::applySafetyChain(*loop_, 1e-3, out, force, torque);
+    P::applySafetyChain(*loop_, out, force, torque);
   };
   chain({0.0, 0.0, 2.0});                   // above the 0.5 N engage threshold: held at zero
   EXPECT_DOUBLE_EQ(out.gain, 0.0);
@@ -262,12 +268,19 @@ TEST_F(HapticPhasesTest, SafetyChainEngagesFadesInClampsAndZeroesNonFiniteWrench
   EXPECT_NE(out.flags & shared::kStatsForceClamped, 0u);
   EXPECT_NEAR(force[2] / force[1], 40.0 / 30.0, 1e-9) << "the clamp keeps the direction";
 
-  chain({std::nan(""), 0.0, 1.0});
-  for (const double component : force) EXPECT_EQ(component, 0.0) << "a NaN command is zero";
-
-  for (int i = 0; i < 20; ++i) chain({0.0, 0.0, 0.4}, /*stale=*/true);   // no fresh snapshot
+  chain({0.0, 0.0, 1.0});
+  chain({std::nan(""), 0.0, 1.0});          // never rendered: the 1 N held and faded (10 ticks)
+  EXPECT_TRUE(std::isfinite(force[0]));
+  EXPECT_NEAR(force[2], 0.9, 1e-12);
+  for (int i = 0; i < 4; ++i) chain({0.0, 0.0, 0.4}, /*model=*/false);   // no fresh snapshot
+  EXPECT_NEAR(force[2], 0.5, 1e-12) << "the held 1 N keeps fading";
+  for (int i = 0; i < 20; ++i) chain({0.0, 0.0, 0.4}, /*model=*/false);
   EXPECT_DOUBLE_EQ(out.gain, 0.0);
   EXPECT_DOUBLE_EQ(force[2], 0.0);
+  chain({0.0, 0.0, 0.6});                   // back, above the threshold: the gate stays closed
+  EXPECT_DOUBLE_EQ(force[2], 0.0);
+  chain({0.0, 0.0, 0.3});                   // below it: engaged again
+  EXPECT_NEAR(force[2], 0.03, 1e-12);
 }
 
 TEST_F(HapticPhasesTest, WriteDeviceSendsTheCommandAndCountsRefusedWrites) {

@@ -14,6 +14,7 @@
 #include <unistd.h>
 
 #include <cstring>
+#include <limits>
 #include <string>
 
 #include "tactus/shared/error.h"
@@ -87,6 +88,24 @@ TEST(Segment, LayoutIsAlignedAndSizedFromCapacity) {
   }
   EXPECT_GT(b.total_bytes, a.total_bytes);
   EXPECT_EQ(b.snapshot.max_rows, 192);
+}
+
+// A capacity too large for any layout (W alone is rows^2 doubles: 2^31 rows would wrap the byte
+// count to a small number) has none: the count saturates, and creators and attachers refuse it.
+TEST(Segment, LayoutOfAnAbsurdCapacitySaturates) {
+  constexpr std::int32_t kMax = std::numeric_limits<std::int32_t>::max();
+  EXPECT_EQ(SnapshotLayout::forCapacity(kMax, kMax).total_bytes, SnapshotLayout::kNoLayout);
+  EXPECT_EQ(SnapshotLayout::forCapacity(1'518'500'250, 1).total_bytes,
+            SnapshotLayout::kNoLayout);   // its W would wrap to 277 MiB
+  EXPECT_EQ(SnapshotLayout::forCapacity(-3, 1).total_bytes, SnapshotLayout::kNoLayout);
+  SegmentCapacity c;
+  c.max_rows = kMax;
+  c.max_contacts = kMax;
+  EXPECT_EQ(SegmentLayout::forCapacity(c).total_bytes, SnapshotLayout::kNoLayout);
+  EXPECT_THROW(Segment::create("tactus_absurd_capacity", c), SegmentError);
+  const SnapshotLayout fine = SnapshotLayout::forCapacity(900, 300);
+  EXPECT_GT(fine.total_bytes, 900u * 900u * 8u);
+  EXPECT_LT(fine.total_bytes, 8u << 20);
 }
 
 TEST(Segment, CreateOpenRoundTripThroughEveryPart) {

@@ -58,10 +58,15 @@ TEST(TripleBuffer, LayoutIsCacheLineAlignedForRuntimeSizes) {
     EXPECT_EQ(c->slot_stride % kCacheLineBytes, 0u);
     EXPECT_GE(c->slot_stride, bytes);
     for (int i = 0; i < 3; ++i) {
-      EXPECT_EQ(reinterpret_cast<std::uintptr_t>(c->slot(i)) % kCacheLineBytes, 0u);
+      EXPECT_EQ(reinterpret_cast<std::uintptr_t>(tripleBufferSlot(c, i, bytes)) %
+                    kCacheLineBytes,
+                0u);
     }
     EXPECT_EQ(storage.bytes(), tripleBufferBytes(bytes));
-    EXPECT_LE(c->slot(2) + bytes, reinterpret_cast<unsigned char*>(c) + storage.bytes());
+    EXPECT_LE(tripleBufferSlot(c, 2, bytes) + bytes,
+              reinterpret_cast<unsigned char*>(c) + storage.bytes());
+    EXPECT_TRUE(tripleBufferMatches(c, bytes));
+    EXPECT_FALSE(tripleBufferMatches(c, bytes + 64));
   }
 }
 
@@ -94,8 +99,8 @@ TEST(TripleBuffer, ReaderGetsNewestAndFreshFlag) {
 
 TEST(TripleBuffer, WriterNeverTouchesTheReadersSlot) {
   TripleBufferStorage storage(sizeof(Payload));
-  TripleBufferWriter w(storage.control());
-  TripleBufferReader r(storage.control());
+  TripleBufferWriter w(storage.control(), storage.slotBytes());
+  TripleBufferReader r(storage.control(), storage.slotBytes());
   std::set<const void*> seen;
   for (std::uint64_t i = 1; i <= 50; ++i) {
     fill(static_cast<Payload*>(w.buffer()), i);
@@ -107,6 +112,36 @@ TEST(TripleBuffer, WriterNeverTouchesTheReadersSlot) {
     seen.insert(w.buffer());
   }
   EXPECT_EQ(seen.size(), 3u);  // the writer rotates through all three slots
+}
+
+// The control block lives in shared memory another process can write. Neither endpoint reads
+// the slot stride from it (a stride written there after attaching must not move their slots),
+// and a state byte that is not a permutation of the slots (an index of 3 would address memory
+// past the buffer) is never followed: the writer does not publish, the reader keeps its slot.
+TEST(TripleBuffer, ACorruptControlBlockIsNeverFollowed) {
+  TripleBufferStorage storage(sizeof(Payload));
+  TripleWriter<Payload> w(storage.control());
+  TripleReader<Payload> r(storage.control());
+  fill(&w.buffer(), 1);
+  w.publish();
+  const void* slot = &r.latest();
+  ASSERT_EQ(r.current().seq, 1u);
+  storage.control()->slot_stride = 1 << 30;           // another process writes nonsense
+  EXPECT_EQ(static_cast<const void*>(&r.current()), slot);
+  EXPECT_TRUE(intact(r.current()));
+  const std::uint8_t good = storage.control()->state.load();
+  // back = 3: the writer's next slot would lie past the three slots
+  storage.control()->state.store(TripleBufferControl::make(3, 0, 1, true));
+  fill(&w.buffer(), 2);
+  EXPECT_FALSE(w.publish());
+  EXPECT_EQ(storage.control()->state.load(), TripleBufferControl::make(3, 0, 1, true));
+  bool fresh = true;
+  EXPECT_EQ(static_cast<const void*>(&r.latest(&fresh)), slot) << "the reader followed it";
+  EXPECT_FALSE(fresh);
+  EXPECT_FALSE(tripleBufferMatches(storage.control(), sizeof(Payload)));
+  storage.control()->state.store(good);
+  storage.control()->slot_stride = roundUpToCacheLine(sizeof(Payload));
+  EXPECT_TRUE(tripleBufferMatches(storage.control(), sizeof(Payload)));
 }
 
 TEST(TripleBuffer, RestartedSidesReattachToTheirSlots) {

@@ -175,17 +175,24 @@ class ReplayDevice final : public Device {
 };
 
 /// Wraps any device and records every sample its read() returns with kOk into a CSV in the
-/// replay format. read() only copies the sample into a preallocated single-producer ring
-/// (capacity samples; full => the sample is dropped and counted); a background thread writes
-/// the file, and close() drains the ring and closes it. No file I/O on the real-time thread.
-/// The file is written through a temporary file in the same folder and renamed into place by
-/// close() (after fsync); an existing file is never replaced unless `overwrite` (device option
-/// record_overwrite=1). open() throws DeviceError when the target exists or cannot be created;
-/// a later write, fsync or rename failure is kept in writeError() (the file is then not created).
+/// replay format, and (with a `commands_path`, device option record_commands=FILE.csv) every
+/// command its write() receives into a second CSV:
+///
+///   t_ns,force_x_n,force_y_n,force_z_n,torque_x_nm,torque_y_nm,torque_z_nm
+///
+/// one row per write, t_ns the CLOCK_MONOTONIC time of the write, in order. read() and write()
+/// only copy into preallocated single-producer rings (capacity entries each; full => the entry
+/// is dropped and counted, and close() reports the recording incomplete in writeError()); a
+/// background thread writes the files, and close() drains the rings and closes them. No file
+/// I/O on the real-time thread. The files are written through a temporary file in the same
+/// folder and renamed into place by close() (after fsync); an existing file is never replaced
+/// unless `overwrite` (device option record_overwrite=1). open() throws DeviceError when a
+/// target exists or cannot be created; a later write, fsync or rename failure is kept in
+/// writeError() (the file is then not created).
 class RecordingDevice final : public Device {
  public:
   RecordingDevice(std::unique_ptr<Device> inner, std::string path, std::size_t capacity = 1 << 16,
-                  bool overwrite = false);
+                  bool overwrite = false, std::string commands_path = {});
   ~RecordingDevice() override;
   DeviceInfo info() const override { return inner_->info(); }
   void open() override;
@@ -193,28 +200,49 @@ class RecordingDevice final : public Device {
   void enableForces(bool on) override { inner_->enableForces(on); }
   void close() noexcept override;
   IoStatus read(DeviceState* out) noexcept override;
-  IoStatus write(const DeviceCommand& cmd) noexcept override { return inner_->write(cmd); }
+  IoStatus write(const DeviceCommand& cmd) noexcept override;
+  bool halt() noexcept override { return inner_->halt(); }
+  std::string takeDiagnostics() override { return inner_->takeDiagnostics(); }
 
   Device& inner() noexcept { return *inner_; }
   std::uint64_t recorded() const noexcept { return written_.load(std::memory_order_relaxed); }
   std::uint64_t dropped() const noexcept { return dropped_.load(std::memory_order_relaxed); }
+  std::uint64_t recordedCommands() const noexcept {
+    return commands_written_.load(std::memory_order_relaxed);
+  }
+  std::uint64_t droppedCommands() const noexcept {
+    return commands_dropped_.load(std::memory_order_relaxed);
+  }
   /// Empty while the recording is intact; else why the file was not (completely) written. Valid
   /// after close().
   const std::string& writeError() const noexcept { return write_error_; }
 
  private:
+  /// One recorded command.
+  struct CommandRecord {
+    std::int64_t t_ns = 0;
+    DeviceCommand command;
+  };
   void flushLoop() noexcept;
   std::size_t drainToFile() noexcept;
+  std::size_t drainCommandsToFile() noexcept;
 
   std::unique_ptr<Device> inner_;
-  std::string path_;
+  std::string path_;                 ///< samples (empty: not recorded)
+  std::string commands_path_;        ///< commands (empty: not recorded)
   std::vector<DeviceState> ring_;
   alignas(64) std::atomic<std::uint64_t> head_{0};
   alignas(64) std::atomic<std::uint64_t> tail_{0};
   std::atomic<std::uint64_t> dropped_{0};
   std::atomic<std::uint64_t> written_{0};
+  std::vector<CommandRecord> command_ring_;
+  alignas(64) std::atomic<std::uint64_t> command_head_{0};
+  alignas(64) std::atomic<std::uint64_t> command_tail_{0};
+  std::atomic<std::uint64_t> commands_dropped_{0};
+  std::atomic<std::uint64_t> commands_written_{0};
   std::atomic<bool> stop_{false};
   std::unique_ptr<shared::OutputFile> file_;
+  std::unique_ptr<shared::OutputFile> commands_file_;
   bool overwrite_ = false;
   std::string write_error_;
   std::thread flusher_;

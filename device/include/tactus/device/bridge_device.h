@@ -16,12 +16,23 @@
 //   max_force=N      the remote device's force limit, reported by info() (default 10, (0, 100]).
 //   rotation=0|1, gripper=0|1   what the remote device has (info(); default 0).
 //
+// Sessions: the bridge follows one sender (IPv4 address and UDP port) at a time. The first
+// valid state starts a session with its sender; while the session is live (a state accepted
+// within timeout_ms), states from any other sender are dropped (counted `foreign`), and states
+// of the session's sender must stay within a sane window: seq at most kMaxSeqStep ahead of the
+// newest, a time stamp that does not run ahead of the time elapsed here by more than timeout_ms
+// (a datagram outside it is dropped, `out_of_window`). Once the session has been silent past
+// timeout_ms it ends and the next valid state, from any sender, starts a new one: a restarted
+// client (a new port) takes over after the old one's timeout; a client restarted on the same
+// port (a lower seq, a later sane stamp) at once (`restarts`). A session never starts on a seq or
+// time stamp beyond kMaxSaneValue. So one datagram cannot take the device from a live client,
+// and a second sender cannot interleave with it.
+//
 // read() never blocks: it drains up to kMaxDatagramsPerRead datagrams from a non-blocking
 // socket into a preallocated buffer, validates each (a malformed one is counted and dropped),
-// classifies sequence numbers (lost, duplicated, reordered; a lower seq with a newer time stamp
-// is a restarted sender and starts a new session), and returns the newest state: kOk if one
-// arrived, kNoData while quiet (the loop holds the last pose), kFault once quiet for longer
-// than timeout_ms. The returned t_ns is on this machine's clock (the sender's stamp plus the
+// applies the session rules above, classifies sequence numbers (lost, duplicated, reordered),
+// and returns the newest state: kOk if one arrived, kNoData while quiet (the loop holds the last
+// pose), kFault once quiet for longer than timeout_ms. The returned t_ns is on this machine's clock (the sender's stamp plus the
 // smallest receive-minus-send offset seen). write() sends the command to the address the newest
 // state came from, non-blocking; a send that would block or fails is counted, never waited for.
 // No allocation, lock or logging in read() and write().
@@ -48,7 +59,11 @@ struct BridgeCounters {
   std::atomic<std::uint64_t> late{0};          ///< accepted but late (late_ms)
   std::atomic<std::uint64_t> malformed{0};     ///< refused by the protocol checks (dropped)
   std::atomic<std::uint64_t> silences{0};      ///< times the sender went quiet past timeout_ms
-  std::atomic<std::uint64_t> restarts{0};      ///< new sessions (the sender restarted its seq)
+  std::atomic<std::uint64_t> restarts{0};      ///< new sessions after the first one
+  /// states from another sender than the live session's (dropped)
+  std::atomic<std::uint64_t> foreign{0};
+  /// states of the session's sender whose seq or time stamp leaves the sane window (dropped)
+  std::atomic<std::uint64_t> out_of_window{0};
   std::atomic<std::uint64_t> commands_sent{0};
   std::atomic<std::uint64_t> send_failures{0}; ///< commands not sent (would block, no route)
 };
@@ -56,6 +71,11 @@ struct BridgeCounters {
 class BridgeDevice final : public Device {
  public:
   static constexpr int kMaxDatagramsPerRead = 64;
+  /// Largest seq step within a session (a live session is at most timeout_ms <= 10 s silent: no
+  /// real sender skips a million datagrams in that time).
+  static constexpr std::uint64_t kMaxSeqStep = std::uint64_t{1} << 20;
+  /// A session never starts on a seq or a time stamp beyond this (2^62: 146 years of ns).
+  static constexpr std::uint64_t kMaxSaneValue = std::uint64_t{1} << 62;
 
   explicit BridgeDevice(const DeviceConfig& config = {});
   ~BridgeDevice() override;
@@ -84,6 +104,8 @@ class BridgeDevice final : public Device {
  private:
   void take(const bridge::Header& h, const DeviceState& s, const sockaddr_in& from,
             std::int64_t now_ns) noexcept;
+  /// Starts a session with `from` (its first state is taken by take()).
+  void startSession(const bridge::Header& h, const sockaddr_in& from, std::int64_t now_ns) noexcept;
 
   std::string bind_;
   std::uint16_t port_ = 0;
@@ -100,6 +122,7 @@ class BridgeDevice final : public Device {
   std::array<unsigned char, 2048> buf_{};
   DeviceState newest_{};
   bool have_state_ = false;          ///< a state was accepted in this session
+  bool had_session_ = false;         ///< a session existed before (the next one is a restart)
   bool fresh_ = false;               ///< accepted since the last read
   bool silent_ = false;              ///< in a silence past the timeout
   std::uint64_t newest_seq_ = 0;

@@ -71,6 +71,17 @@ class Device {
   // RT, once per tick: no allocation, locks, logging, blocking system calls, or throw
   [[nodiscard]] virtual IoStatus read(DeviceState* out) noexcept = 0;
   [[nodiscard]] virtual IoStatus write(const DeviceCommand& cmd) noexcept = 0;
+
+  /// Non-real-time, from another thread, possibly while read() or write() runs on the
+  /// real-time thread (haptic_server's supervisor calls it when the tick has been stuck in this
+  /// device's read or write past its watchdog): stop rendering force and make a blocked read or
+  /// write return; later reads report kFault until the device is usable again. Must not block.
+  /// Returns false when the backend cannot (the default: its read and write never block).
+  virtual bool halt() noexcept { return false; }
+  /// Non-real-time: what went wrong inside read()/write() since the last call that the loop's
+  /// status codes cannot say (e.g. a plugin's exception caught at the C boundary), for the log;
+  /// empty when nothing.
+  virtual std::string takeDiagnostics() { return {}; }
 };
 
 /// Names of the built-in backends ("bridge", "null", "replay", "simulated").
@@ -85,7 +96,8 @@ inline constexpr std::string_view kDefaultDevice = "simulated";
 ///   - another name X: libX.so searched in $TACTUS_DEVICE_PATH (':'-separated), then by the
 ///     dynamic loader's usual search.
 /// Option `record=FILE.csv` (any backend) wraps the device in a recorder that writes every sample
-/// read, in the replay CSV format, from a non-real-time thread.
+/// read, in the replay CSV format, from a non-real-time thread; `record_commands=FILE.csv` makes
+/// it write every command the device receives too (RecordingDevice).
 /// Throws DeviceError: unknown backend, missing file, missing symbol, wrong ABI, bad options.
 std::unique_ptr<Device> loadDevice(std::string_view name_or_path, const DeviceConfig& config = {});
 

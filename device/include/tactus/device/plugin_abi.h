@@ -22,8 +22,16 @@
  * Frames and units: SI units; device frame x toward the operator, z up; quaternion scalar first
  * (w, x, y, z); t_ns from CLOCK_MONOTONIC.
  *
- * Versioning: abi_version must equal TACTUS_DEVICE_PLUGIN_ABI_VERSION of the loading program,
- * which refuses any other value. struct_size lets the loader check the table's size too.
+ * Versioning: abi_version is TACTUS_DEVICE_PLUGIN_ABI_VERSION of the header the plugin was built
+ * against and struct_size its sizeof(TactusDevicePlugin). This program loads version 2 (the
+ * table below) and version 1 (the same table without `halt`, struct_size
+ * TACTUS_DEVICE_PLUGIN_V1_SIZE): a plugin built for version 1 loads unchanged. Any other version
+ * or size is refused.
+ *
+ * Exceptions: the entries are C functions. A C++ plugin must not let an exception escape them;
+ * if one does anyway, the loader catches it at this boundary (read/write then report a fault
+ * and the haptic loop fades the force out; the other entries fail with a message), so it never
+ * reaches the real-time loop.
  */
 #ifndef TACTUS_DEVICE_PLUGIN_ABI_H_
 #define TACTUS_DEVICE_PLUGIN_ABI_H_
@@ -35,7 +43,7 @@
 extern "C" {
 #endif
 
-#define TACTUS_DEVICE_PLUGIN_ABI_VERSION 1u
+#define TACTUS_DEVICE_PLUGIN_ABI_VERSION 2u
 #define TACTUS_DEVICE_PLUGIN_SYMBOL "tactus_device_plugin"
 
 /* Return codes of open/calibrate/enable_forces/info. */
@@ -102,7 +110,20 @@ typedef struct TactusDevicePlugin {
   int (*write)(TactusDeviceHandle handle, const TactusDeviceCommand* command);
 
   int (*info)(TactusDeviceHandle handle, TactusDeviceInfo* out);
+
+  /* Since ABI version 2; may be NULL. Called from another (non-real-time) thread, possibly while
+   * read or write is running, when haptic_server sees the real-time thread stuck in this
+   * device's read or write for longer than its watchdog (a plugin that blocks, against the
+   * contract above). It must be safe to call concurrently with read/write and must not block.
+   * The plugin then stops rendering force (brings it to zero in the device's own safe way) and
+   * makes the blocked read/write return (TACTUS_IO_FAULT), and later reads report
+   * TACTUS_IO_FAULT until the device is usable again; the loop then fades the force out and
+   * holds the pose. */
+  void (*halt)(TactusDeviceHandle handle);
 } TactusDevicePlugin;
+
+/* The size of a version 1 table (everything before `halt`). */
+#define TACTUS_DEVICE_PLUGIN_V1_SIZE offsetof(TactusDevicePlugin, halt)
 
 /* The one symbol a plugin exports. */
 typedef const TactusDevicePlugin* (*TactusDevicePluginEntry)(void);

@@ -81,10 +81,16 @@ struct HapticSettings {
   double force_scale = 1.0;             ///< rendered = scale * contact wrench
   double max_force_n = 8.0;             ///< clamp on |force| (the device's own limit also applies)
   double max_torque_nm = 0.5;           ///< clamp on |torque|
-  double slew_n_per_s = 2000.0;         ///< max change of |force| per second
-  double engage_threshold_n = 0.5;      ///< forces engage only once the command is below this
+  /// max change of the force per second, applied per nominal period: no two consecutive
+  /// commands differ by more than slew_n_per_s * period, however long the tick between them
+  double slew_n_per_s = 2000.0;
+  /// Forces engage (at start, and again after every interruption: a link change, a device
+  /// fault, a stale snapshot, an unusable model) only once the requested command is below this.
+  double engage_threshold_n = 0.5;
   double watchdog_ms = 50.0;            ///< snapshot older than this: fade out
-  double fade_ms = 100.0;               ///< fade-out and fade-in ramp
+  /// Fade-out and fade-in ramp, counted in nominal periods (fade_ms / period ticks): the gain
+  /// moves by period / fade_ms per tick, however late the tick
+  double fade_ms = 100.0;
   /// Blends each new snapshot in over this time (0: off). The wrench the new local model gives
   /// differs from the last one rendered by the step between the simulation's two solutions; the
   /// loop renders the new model plus that step, shrunk linearly to zero over the blend, so the
@@ -133,11 +139,20 @@ struct HapticCounters {
   std::atomic<std::uint64_t> device_faults{0};
   std::atomic<std::uint64_t> write_faults{0};
   std::atomic<std::uint64_t> stale_device_samples{0};  ///< samples older than the watchdog
+  /// ticks on which a device that had delivered a pose had returned no data for longer than
+  /// the watchdog (a silent device counts as faulty: its force fades)
+  std::atomic<std::uint64_t> silent_device_ticks{0};
   std::atomic<std::uint64_t> stale_ticks{0};
   std::atomic<std::uint64_t> snapshots_taken{0};
   std::atomic<std::uint64_t> solver_not_converged{0};
   std::atomic<std::uint64_t> clamped{0};
   std::atomic<std::uint64_t> non_finite_input{0};
+  /// device samples whose orientation is not a usable quaternion (zero, or far from unit): the
+  /// sample is refused like a non-finite one
+  std::atomic<std::uint64_t> unusable_orientation{0};
+  /// times a device's forces disengaged (an interruption: they fade out and re-engage only
+  /// below HapticSettings::engage_threshold_n)
+  std::atomic<std::uint64_t> disengaged{0};
   /// solves that found a contact NSGS cannot solve (zero, negative or denormal W diagonal):
   /// the snapshot is corrupt, so the tick renders no force from it (shared::NsgsStatus::kIllPosed)
   std::atomic<std::uint64_t> ill_posed_solves{0};
@@ -170,6 +185,13 @@ enum HapticEvent : std::uint32_t {
   /// the preparation refused a snapshot: inconsistent counts or offsets, or non-finite numbers
   /// (arg0 = haptic::PrepareStatus, arg1 = snapshot sequence); no force is rendered from it
   kEventSnapshotRejected = shared::kEventUser + 7,
+  /// a device's forces disengaged (arg0 = device, arg1 = the held |F| N that fades out): they
+  /// re-engage only once the requested force is below the engage threshold
+  kEventDisengaged = shared::kEventUser + 8,
+  /// a device sample's orientation is zero or far from a unit quaternion (arg1 = device)
+  kEventUnusableOrientation = shared::kEventUser + 9,
+  /// the snapshot's time stamp lies in the future (arg0 = ns ahead): treated as stale
+  kEventSnapshotFromTheFuture = shared::kEventUser + 10,
 };
 
 /// Name of a shared::EventCode or HapticEvent code.
@@ -201,6 +223,9 @@ struct DeviceTickOutput {
   std::array<double, 3> torque_nm{};
   double unlimited_force_norm_n = 0.0;  ///< before clamp/slew/fade
   double gain = 0.0;                    ///< fade/engage gain in [0, 1]
+  /// this tick solved a usable local model for the device (false: stale or missing snapshot,
+  /// an unusable or refused problem, no device pose): the chain then fades the held wrench
+  bool model = false;
 };
 
 /// Output of one tick (for tests and tools). The DeviceTickOutput part is device 0's (a copy of
@@ -232,15 +257,24 @@ struct DeviceChannel {
   double force_limit_n = 0.0;      ///< min(settings, device), what the chain and guard clamp to
   double torque_limit_nm = 0.0;
   std::uint64_t sample_seq = 0;
+  std::int64_t last_sample_ns = 0; ///< tick time of the device's last sample (kOk)
   device::DeviceState raw_state{}; ///< the device's last sample, device frame
   device::DeviceState state{};     ///< the same mapped to the scene frame
   shared::Pose last_pose;
   bool have_pose = false;
+  /// the engage gate is open: closed at start and by every interruption (link change, device
+  /// fault, stale snapshot, unusable model), opened again only once the fade-out has ended and
+  /// the requested force is below the threshold
   bool engaged = false;
   bool device_fault = false;
   bool no_data = false;            ///< the last read returned kNoData (event on the transition)
   bool clamped = false;            ///< the last command was clamped (sample flag, event)
-  double gain = 0.0;
+  double gain = 0.0;                ///< gain_ticks / the fade's ticks
+  int gain_ticks = 0;               ///< the fade gain in ticks (exact: 0 and 1 are reached)
+  /// the wrench (device frame, scaled, before the gain) of the last engaged tick with a usable
+  /// model: what a fade-out scales down
+  std::array<double, 3> held_force_n{};
+  std::array<double, 3> held_torque_nm{};
   std::array<double, 3> last_force_n{};
   std::array<double, 3> last_torque_nm{};
   // snapshot blending (HapticSettings::snapshot_blend_ms), in the scene frame
@@ -277,6 +311,25 @@ class HapticLoop {
   /// may the old link be destroyed. Withdrawn links must never be offered again.
   void offerLink(AttachedSegment* link) noexcept;
   AttachedSegment* linkInUse() const noexcept;
+  /// Call once the thread that runs tick() has ended (joined): the loop lets go of its link, so
+  /// linkInUse() is nullptr and the supervisor may free it. A later tick adopts the offer again.
+  void stopped() noexcept;
+
+  /// Where the tick now running is, for the supervisor's watchdog (any thread; relaxed reads):
+  /// running_ns is how long it has been running by the monotonic clock at now_ns (0: no tick
+  /// runs), device the device whose read or write it is inside (-1: none).
+  struct TickProgress {
+    std::int64_t running_ns = 0;
+    int device = -1;
+  };
+  TickProgress tickProgress(std::int64_t now_ns) const noexcept;
+  /// True when the last tick wrote a zero command to every device with every fade gain at zero
+  /// (any thread). A stopping program withdraws the link (the forces fade out) and waits for
+  /// this before it stops ticking, so the hand never feels a step at shutdown.
+  bool allForcesZero() const noexcept { return all_forces_zero_.load(std::memory_order_relaxed); }
+  /// Device i (the supervisor halts it and logs its diagnostics; Device::halt and
+  /// Device::takeDiagnostics may be called from another thread while the tick runs).
+  device::Device& device(int i = 0) noexcept { return *channel(i).device; }
 
   /// The force and torque clamps in use (settings and device combined, see the constructor), of
   /// device 0 or of device i.
@@ -305,8 +358,9 @@ class HapticLoop {
  private:
   /// The local model on the adopted snapshot with device i at *poses[i] (nullptr: no pose, the
   /// device stays at x_h*): one solve under `deadline_ns`, the wrench on instrument i into
-  /// out.device[i] (and device 0's into out).
-  void solveLocalModel(AttachedSegment& link,
+  /// out.device[i] (and device 0's into out). False when it gave no usable wrench (not solved,
+  /// non-finite, ill-posed): the devices then fade their held wrench.
+  bool solveLocalModel(AttachedSegment& link,
                        const std::array<const shared::Pose*, shared::kMaxInstruments>& poses,
                        std::int64_t deadline_ns, TickOutput& out) noexcept;
   DeviceChannel& channel(int i) noexcept { return channels_[static_cast<std::size_t>(i)]; }
@@ -351,13 +405,15 @@ class HapticLoop {
                    const std::array<double, 3>& force) noexcept;
   /// `dev` holds the contact wrench on the channel's instrument (mapped to the device frame) on
   /// entry and the command on exit; flags go to `out`.
-  void applySafetyChain(DeviceChannel& ch, double dt, TickOutput& out, DeviceTickOutput& dev,
+  void applySafetyChain(DeviceChannel& ch, int i, TickOutput& out, DeviceTickOutput& dev,
                         std::array<double, 3>& force, std::array<double, 3>& torque) noexcept;
-  void applySafetyChain(double dt, TickOutput& out, std::array<double, 3>& force,
+  void applySafetyChain(TickOutput& out, std::array<double, 3>& force,
                         std::array<double, 3>& torque) noexcept {
-    applySafetyChain(channels_[0], dt, out, out, force, torque);
+    applySafetyChain(channels_[0], 0, out, out, force, torque);
   }
   void initLimits(DeviceChannel& ch);
+  /// Closes device i's engage gate (an interruption): its held wrench fades out.
+  void disengage(DeviceChannel& ch, int i) noexcept;
 
   std::array<DeviceChannel, shared::kMaxInstruments> channels_{};
   int device_count_ = 1;
@@ -365,6 +421,9 @@ class HapticLoop {
   LocalModelSettings model_settings_;   ///< settings_.localModel()
   HapticCounters counters_;
   shared::EventRing events_;
+  std::atomic<std::int64_t> tick_started_ns_{0};   ///< monotonic start of the running tick (0: none)
+  std::atomic<int> in_device_{-1};                ///< device whose read/write the tick is in
+  std::atomic<bool> all_forces_zero_{true};       ///< see allForcesZero()
   std::atomic<AttachedSegment*> offered_{nullptr};
   std::atomic<AttachedSegment*> in_use_{nullptr};
   AttachedSegment* link_ = nullptr;
@@ -372,6 +431,8 @@ class HapticLoop {
   void* adoption_context_ = nullptr;
   std::int64_t watchdog_ns_ = 0;   ///< settings' watchdog (0 when not usable: always stale)
   int blend_ticks_ = 0;            ///< snapshot_blend_ms in ticks (0: no blending)
+  int fade_ticks_ = 1;             ///< the fade in ticks: fade_ms / period (1: no ramp)
+  double slew_step_n_ = 0.0;       ///< largest force change per tick: slew * nominal period
 
   std::uint64_t snapshot_seq_ = 0;
   std::uint64_t adopted_generation_ = 0;   ///< PreparedSnapshot::generation() adopted

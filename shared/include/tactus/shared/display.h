@@ -232,7 +232,7 @@ class DisplayPublisher {
   DisplayPublisher() = default;
   DisplayPublisher(TripleBufferControl* frames, unsigned char* topology,
                    const DisplayLayout& layout) noexcept
-      : writer_(frames), topology_(topology), layout_(layout) {}
+      : writer_(frames, layout.frame_bytes), topology_(topology), layout_(layout) {}
   bool attached() const noexcept { return writer_.attached() && layout_.capacity.enabled(); }
   const DisplayLayout& layout() const noexcept { return layout_; }
 
@@ -383,7 +383,8 @@ class DisplaySubscriber {
     for (int attempt = 0; attempt < kMaxTries; ++attempt) {
       // acquire: the middle slot was handed over by the writer's release CAS
       const std::uint8_t s = frames_->state.load(std::memory_order_acquire);
-      const unsigned char* slot = const_cast<C*>(frames_)->slot(C::middle(s));
+      if (!C::valid(s)) return DisplayRead::kBusy;   // corrupt: never follow it
+      const unsigned char* slot = tripleBufferSlot(frames_, C::middle(s), layout_.frame_bytes);
       const auto* words = reinterpret_cast<const std::uint64_t*>(slot);
       const std::size_t end_at = offsetof(DisplayFrameHeader, seq_end) / 8;
       // acquire: pairs with the writer's release of seq_end (payload complete)

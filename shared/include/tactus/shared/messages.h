@@ -103,13 +103,26 @@ struct SnapshotLayout {
   std::size_t contact_instrument = 0;  ///< int32[cap_c] the instrument of each contact (-1: none)
   std::size_t total_bytes = 0;       ///< slot payload size
 
-  /// Layout for a capacity (max_rows >= 0, max_contacts >= 0). Pure function: both processes
-  /// compute the same offsets from the capacity stored in the segment header.
+  /// Rows and contacts beyond these have no layout (W alone would need 8 TiB); the bound keeps
+  /// every product below from overflowing.
+  static constexpr std::int32_t kMaxRows = std::int32_t{1} << 20;
+  static constexpr std::int32_t kMaxContacts = std::int32_t{1} << 20;
+  /// total_bytes of a capacity that has no layout (negative or beyond the bounds above): larger
+  /// than any segment, so creators and attachers refuse it.
+  static constexpr std::size_t kNoLayout = ~std::size_t{0};
+
+  /// Layout for a capacity (0 <= max_rows <= kMaxRows, 0 <= max_contacts <= kMaxContacts;
+  /// otherwise total_bytes = kNoLayout and no offsets). Pure function: both processes compute
+  /// the same offsets from the capacity stored in the segment header.
   static constexpr SnapshotLayout forCapacity(std::int32_t max_rows,
                                               std::int32_t max_contacts) noexcept {
     SnapshotLayout l;
     l.max_rows = max_rows;
     l.max_contacts = max_contacts;
+    if (max_rows < 0 || max_contacts < 0 || max_rows > kMaxRows || max_contacts > kMaxContacts) {
+      l.total_bytes = kNoLayout;
+      return l;
+    }
     const auto r = static_cast<std::size_t>(max_rows);
     const auto c = static_cast<std::size_t>(max_contacts);
     std::size_t at = roundUpToCacheLine(sizeof(ContactSnapshotHeader));
@@ -245,7 +258,7 @@ class SnapshotPublisher {
  public:
   SnapshotPublisher() = default;
   SnapshotPublisher(TripleBufferControl* control, const SnapshotLayout& layout) noexcept
-      : writer_(control), layout_(layout) {}
+      : writer_(control, layout.total_bytes), layout_(layout) {}
   bool attached() const noexcept { return writer_.attached(); }
   const SnapshotLayout& layout() const noexcept { return layout_; }
   /// The slot being filled (the writer's back slot); valid until publish().
@@ -263,7 +276,7 @@ class SnapshotSubscriber {
  public:
   SnapshotSubscriber() = default;
   SnapshotSubscriber(TripleBufferControl* control, const SnapshotLayout& layout) noexcept
-      : reader_(control), layout_(layout) {}
+      : reader_(control, layout.total_bytes), layout_(layout) {}
   bool attached() const noexcept { return reader_.attached(); }
   const SnapshotLayout& layout() const noexcept { return layout_; }
   bool hasNew() const noexcept { return reader_.hasNew(); }
@@ -289,6 +302,9 @@ enum DeviceSampleStatus : std::uint32_t {
   /// the fade gain is below 1: fading out (stale snapshot, device fault) or back in
   kDeviceForceFading = 1u << 5,
   // bit 6 (formerly "shutting down", never raised) is unused
+  /// the pose is one the device delivered (not the zero pose before its first sample): only
+  /// such a sample may move the instrument
+  kDevicePoseValid = 1u << 7,
 };
 
 /// The haptic side's device state and rendered wrench, published every tick (haptic -> sim).

@@ -23,21 +23,24 @@
 //
 // Lifetime. Either daemon may start first (the haptic side polls tryOpen(), which never blocks).
 //  * Alive = holds the ownership lock. Right after its exclusive create, the creator takes an
-//    open-file-description write lock (fcntl F_OFD_SETLK) over the whole object and keeps it for
+//    open-file-description write lock (fcntl F_OFD_SETLK) on the object's first byte and keeps it for
 //    its lifetime; the kernel releases it when the process ends, however it ends (SIGKILL, crash).
 //    A stopped (SIGSTOP) or hung creator still holds it, and a recycled pid does not. create()
 //    probes the lock (F_OFD_GETLK) of an existing segment: held -> refused, whatever the
 //    heartbeat says ("in use by a live simulation", with how long it has been silent); free ->
-//    the segment is stale and is replaced, bumping the generation. A segment of an older ABI
-//    (< 3, no lock) counts as alive while its creator pid exists.
+//    the segment is stale and is replaced, bumping the generation: the replacing creator takes
+//    the stale object's lock and removes the name only while it still refers to that object, so
+//    two creators replacing it at once cannot remove each other's new segment. A segment of an
+//    older ABI (< 3, no lock) counts as alive while its creator pid exists.
 //  * Displacement. The name can still be removed by hand (rm /dev/shm/<name>) and re-created
 //    while a creator is stopped. stillCurrent() tells any holder, creator included, whether the
 //    name still refers to the object it mapped (stat of the name: same device and inode; a
 //    re-created object is a new inode even under the same name). The simulation checks it a few
 //    times a second off the hot path and stops with a message when it was displaced; the haptic
 //    side detaches and re-opens.
-//  * One haptic process per segment: claimHaptic() is one compare-exchange on haptic_pid, so of
-//    two racing claimants exactly one wins; a dead process's claim can be taken over.
+//  * One haptic process per segment: claimHaptic() takes a second OFD lock (the object's second
+//    byte; the creator's lock covers the first), so of two racing claimants exactly one wins and
+//    a dead process's claim is free at once, whatever became of its pid.
 //
 // Not real-time: create/open/remove/stillCurrent/claimHaptic allocate and make system calls. The accessors
 // (header, heartbeats, shutdown flags) and the endpoints they return are real-time safe.
@@ -63,8 +66,9 @@ inline constexpr std::uint64_t kSegmentMagic = 0x3147'4553'5554'4354ULL;  // "TC
 /// (3: the creator holds the ownership lock, see the file comment; 4: several instruments and
 /// devices: per-instrument blocks in the snapshot header, each contact's instrument, one device
 /// triple buffer per device, per-device forces in the stats record; 5: the stats record's phase
-/// times, deadline and local model).
-inline constexpr std::uint32_t kSegmentAbiVersion = 5;
+/// times, deadline and local model; 6: a device sample moves the instrument only with
+/// kDevicePoseValid, and the haptic claim is a lock on the object's second byte).
+inline constexpr std::uint32_t kSegmentAbiVersion = 6;
 /// Stats ring capacity: 8192 records (8 s at 1 kHz).
 inline constexpr std::uint64_t kStatsRingCapacity = 8192;
 /// A creator whose heartbeat (or creation time) is older than this is considered gone.
@@ -245,11 +249,17 @@ class Segment {
   bool shutdownRequested(Side side) const noexcept;
   /// Unconditional store of haptic_pid (tests and tools; a daemon uses claimHaptic).
   void setHapticPid(std::int64_t pid) noexcept;
-  /// Claims the haptic side of this segment for `pid` with one compare-exchange on haptic_pid:
-  /// succeeds (returns 0) when the claim is free, already `pid`'s, or held by a process that no
-  /// longer exists; otherwise returns the live holder's pid. Of concurrent claimants exactly one
-  /// wins. -1 on a read-only segment or pid <= 0. Not real-time (kill(pid, 0)).
+  /// Claims the haptic side of this segment for `pid`: takes the claim lock (an OFD lock on the
+  /// object's second byte, held until this Segment is destroyed; the kernel drops it however the
+  /// process ends, so a dead holder's recycled pid never blocks a claim) and stores pid in
+  /// haptic_pid. Returns 0 when claimed (or already claimed through this Segment), the holder's
+  /// pid when another holds it (-1 when it has not stored its pid yet). Of concurrent claimants
+  /// exactly one wins. -1 on a read-only segment or pid <= 0. Not real-time.
   std::int64_t claimHaptic(std::int64_t pid) noexcept;
+  /// Whether a live haptic process holds this segment's claim (through another mapping than
+  /// this one), whether or not its loop is ticking: the kernel holds the claim for exactly as
+  /// long as the process lives. Not real-time (one fcntl).
+  bool hapticAttached() const noexcept;
 
   /// The creator process exists and its heartbeat (or creation time if it never beat) is at most
   /// stale_after_ns old. Not real-time (kill(pid, 0)).

@@ -84,15 +84,12 @@ struct alignas(kCacheLineBytes) TripleBufferControl {
     return static_cast<std::uint8_t>((b << kBackShift) | (m << kMiddleShift) |
                                      (f << kFrontShift) | (fresh ? kFresh : 0));
   }
-  /// True when the byte is a valid permutation of the three slots (used when attaching).
+  /// True when the byte is a valid permutation of the three slots. Checked when a segment is
+  /// attached (Segment::tryOpen), and by both endpoints before each transition: a byte another
+  /// process corrupted is never followed to a slot index of 3.
   static constexpr bool valid(std::uint8_t s) noexcept {
     const int b = back(s), m = middle(s), f = front(s);
     return b != m && m != f && b != f && b < 3 && m < 3 && f < 3 && (s & 0x80) == 0;
-  }
-
-  unsigned char* slot(int index) noexcept {
-    return reinterpret_cast<unsigned char*>(this) + sizeof(TripleBufferControl) +
-           static_cast<std::size_t>(index) * slot_stride;
   }
 };
 static_assert(sizeof(TripleBufferControl) == kCacheLineBytes);
@@ -103,42 +100,70 @@ constexpr std::size_t tripleBufferBytes(std::size_t slot_bytes) noexcept {
   return sizeof(TripleBufferControl) + 3 * roundUpToCacheLine(slot_bytes);
 }
 
+/// Slot `index` (0..2) of the triple buffer at `control` with slots of `slot_bytes`: the stride
+/// comes from the size the caller expects, never from the control block (shared memory that
+/// another process may change).
+inline unsigned char* tripleBufferSlot(TripleBufferControl* control, int index,
+                                       std::size_t slot_bytes) noexcept {
+  return reinterpret_cast<unsigned char*>(control) + sizeof(TripleBufferControl) +
+         static_cast<std::size_t>(index) * roundUpToCacheLine(slot_bytes);
+}
+inline const unsigned char* tripleBufferSlot(const TripleBufferControl* control, int index,
+                                             std::size_t slot_bytes) noexcept {
+  return tripleBufferSlot(const_cast<TripleBufferControl*>(control), index, slot_bytes);
+}
+
+/// Whether the triple buffer at `control` is one of `slot_bytes`-byte slots in a valid state
+/// (for an attacher: a control block that does not match is refused, never used).
+inline bool tripleBufferMatches(const TripleBufferControl* control,
+                                std::size_t slot_bytes) noexcept {
+  // acquire: pairs with initTripleBuffer's release
+  const std::uint8_t s = control->state.load(std::memory_order_acquire);
+  return TripleBufferControl::valid(s) && control->slot_bytes == slot_bytes &&
+         control->slot_stride == roundUpToCacheLine(slot_bytes);
+}
+
 /// Constructs a triple buffer at `base` (64-byte aligned, tripleBufferBytes(slot_bytes) bytes):
 /// zeroes the slots and sets the initial state. Call once, before any writer or reader attaches.
 inline TripleBufferControl* initTripleBuffer(void* base, std::size_t slot_bytes) noexcept {
   auto* control = new (base) TripleBufferControl();
   control->slot_bytes = slot_bytes;
   control->slot_stride = roundUpToCacheLine(slot_bytes);
-  std::memset(control->slot(0), 0, 3 * control->slot_stride);
+  std::memset(tripleBufferSlot(control, 0, slot_bytes), 0, 3 * roundUpToCacheLine(slot_bytes));
   // release: a thread that acquires the state sees the zeroed slots and sizes
   control->state.store(TripleBufferControl::kInitialState, std::memory_order_release);
   return control;
 }
 
-/// The writer's process-local handle. Attaching reads the writer's slot from the state, so a
-/// restarted writer resumes on the right slot.
+/// The writer's process-local handle for slots of `slot_bytes` (the size the caller expects: the
+/// stride is computed from it, never read from shared memory). Attaching reads the writer's slot
+/// from the state, so a restarted writer resumes on the right slot.
 class TripleBufferWriter {
  public:
   TripleBufferWriter() = default;
-  explicit TripleBufferWriter(TripleBufferControl* control) noexcept : control_(control) {
+  TripleBufferWriter(TripleBufferControl* control, std::size_t slot_bytes) noexcept
+      : control_(control), slot_bytes_(slot_bytes) {
     // acquire: pairs with the reader's release in case the slot we own was its front before
-    back_ = TripleBufferControl::back(control_->state.load(std::memory_order_acquire));
+    const std::uint8_t s = control_->state.load(std::memory_order_acquire);
+    back_ = TripleBufferControl::valid(s) ? TripleBufferControl::back(s) : 0;
   }
 
   bool attached() const noexcept { return control_ != nullptr; }
-  std::size_t slotBytes() const noexcept { return control_->slot_bytes; }
+  std::size_t slotBytes() const noexcept { return slot_bytes_; }
 
   /// The slot to fill; valid until publish().
-  void* buffer() noexcept { return control_->slot(back_); }
+  void* buffer() noexcept { return tripleBufferSlot(control_, back_, slot_bytes_); }
 
   /// Hands the filled slot to the reader. Returns true when it replaced a value the reader had
-  /// not taken yet (informational: the reader only ever wants the newest).
+  /// not taken yet (informational: the reader only ever wants the newest). A corrupt state (not
+  /// a permutation of the slots) is left alone: nothing is published.
   bool publish() noexcept {
     using C = TripleBufferControl;
     // relaxed: only the value is needed; the CAS below carries the ordering
     std::uint8_t s = control_->state.load(std::memory_order_relaxed);
     std::uint8_t next;
     do {
+      if (!C::valid(s)) return false;
       next = C::make(C::middle(s), C::back(s), C::front(s), true);
       // success acq_rel: release makes our slot writes visible to the reader that acquires this
       // state; acquire makes the reader's earlier reads of the slot we get back (possibly its old
@@ -151,6 +176,7 @@ class TripleBufferWriter {
 
  private:
   TripleBufferControl* control_ = nullptr;
+  std::size_t slot_bytes_ = 0;
   std::uint8_t back_ = 0;
 };
 
@@ -160,13 +186,16 @@ class TripleBufferReader {
   static constexpr int kMaxReaderRetries = 64;
 
   TripleBufferReader() = default;
-  explicit TripleBufferReader(TripleBufferControl* control) noexcept : control_(control) {
+  /// For slots of `slot_bytes` (as TripleBufferWriter).
+  TripleBufferReader(TripleBufferControl* control, std::size_t slot_bytes) noexcept
+      : control_(control), slot_bytes_(slot_bytes) {
     // acquire: the slot we attach to was last handed over by a release CAS
-    front_ = TripleBufferControl::front(control_->state.load(std::memory_order_acquire));
+    const std::uint8_t s = control_->state.load(std::memory_order_acquire);
+    front_ = TripleBufferControl::valid(s) ? TripleBufferControl::front(s) : 2;
   }
 
   bool attached() const noexcept { return control_ != nullptr; }
-  std::size_t slotBytes() const noexcept { return control_->slot_bytes; }
+  std::size_t slotBytes() const noexcept { return slot_bytes_; }
 
   /// True when the writer published since the reader last took a slot.
   bool hasNew() const noexcept {
@@ -182,7 +211,9 @@ class TripleBufferReader {
     bool took = false;
     // relaxed: only tests the fresh bit; the CAS acquires
     std::uint8_t s = control_->state.load(std::memory_order_relaxed);
-    for (int attempt = 0; attempt < kMaxReaderRetries && (s & C::kFresh) != 0; ++attempt) {
+    // (a corrupt state is never followed: the reader keeps its slot)
+    for (int attempt = 0;
+         attempt < kMaxReaderRetries && (s & C::kFresh) != 0 && C::valid(s); ++attempt) {
       const std::uint8_t next = C::make(C::back(s), C::front(s), C::middle(s), false);
       // success acq_rel: acquire sees the writer's slot contents (its release CAS); release
       // orders our reads of the old front before the writer may reuse it as back.
@@ -195,14 +226,17 @@ class TripleBufferReader {
       }
     }
     if (fresh != nullptr) *fresh = took;
-    return control_->slot(front_);
+    return tripleBufferSlot(control_, front_, slot_bytes_);
   }
 
   /// The reader's current slot, without looking for a newer one.
-  const void* current() const noexcept { return control_->slot(front_); }
+  const void* current() const noexcept {
+    return tripleBufferSlot(control_, front_, slot_bytes_);
+  }
 
  private:
   TripleBufferControl* control_ = nullptr;
+  std::size_t slot_bytes_ = 0;
   std::uint8_t front_ = 2;
 };
 
@@ -213,7 +247,7 @@ class TripleWriter {
 
  public:
   TripleWriter() = default;
-  explicit TripleWriter(TripleBufferControl* control) noexcept : raw_(control) {}
+  explicit TripleWriter(TripleBufferControl* control) noexcept : raw_(control, sizeof(T)) {}
   bool attached() const noexcept { return raw_.attached(); }
   T& buffer() noexcept { return *static_cast<T*>(raw_.buffer()); }
   bool publish() noexcept { return raw_.publish(); }
@@ -233,7 +267,7 @@ class TripleReader {
 
  public:
   TripleReader() = default;
-  explicit TripleReader(TripleBufferControl* control) noexcept : raw_(control) {}
+  explicit TripleReader(TripleBufferControl* control) noexcept : raw_(control, sizeof(T)) {}
   bool attached() const noexcept { return raw_.attached(); }
   bool hasNew() const noexcept { return raw_.hasNew(); }
   const T& latest(bool* fresh = nullptr) noexcept {
@@ -249,7 +283,8 @@ class TripleReader {
 class TripleBufferStorage {
  public:
   explicit TripleBufferStorage(std::size_t slot_bytes)
-      : bytes_(tripleBufferBytes(slot_bytes)),
+      : slot_bytes_(slot_bytes),
+        bytes_(tripleBufferBytes(slot_bytes)),
         memory_(static_cast<unsigned char*>(std::aligned_alloc(kCacheLineBytes, bytes_))) {
     if (memory_ == nullptr) throw std::bad_alloc();
     control_ = initTripleBuffer(memory_, slot_bytes);
@@ -260,8 +295,10 @@ class TripleBufferStorage {
 
   TripleBufferControl* control() noexcept { return control_; }
   std::size_t bytes() const noexcept { return bytes_; }
+  std::size_t slotBytes() const noexcept { return slot_bytes_; }
 
  private:
+  std::size_t slot_bytes_;
   std::size_t bytes_;
   unsigned char* memory_;
   TripleBufferControl* control_ = nullptr;

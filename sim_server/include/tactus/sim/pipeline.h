@@ -220,9 +220,13 @@ class Simulation {
 
 /// The device-sample half of sim_server's haptic link (also used by tests that run the haptic
 /// loop beside an in-process simulation): a sample is fresh when it was published (seq != 0),
-/// is younger than watchdog_ns at now_ns and carries no device fault.
+/// is younger than watchdog_ns at now_ns, carries no device fault and carries a pose the device
+/// delivered (shared::kDevicePoseValid: before its first real sample the haptic side publishes
+/// a zero pose that must never move the instrument).
+/// With `faulted_too` a sample flagged kDeviceFault counts too (its held pose is still the
+/// device's last real one).
 bool deviceSampleFresh(const shared::DeviceSample& s, std::int64_t now_ns,
-                       std::int64_t watchdog_ns);
+                       std::int64_t watchdog_ns, bool faulted_too = false);
 /// Fills `target` from a sample (pose, twist, gripper opening = gripper_rad / max_opening_rad
 /// clamped to [0, 1]; max_opening_rad <= 0 counts as 1 rad); false, leaving `target` unchanged,
 /// when the pose is not finite or the orientation is zero. The quaternion is normalised without
@@ -239,7 +243,8 @@ shared::SegmentCapacity problemCapacity(const SceneSpec& spec);
 /// Writes the last step's contact problem into a snapshot slot (what sim_server publishes each
 /// step; also used by tests and tools that run the haptic loop beside an in-process simulation).
 /// `max_opening_rad` maps the jaw opening to the gripper angle reported in the poses. Returns
-/// false (and writes an empty problem) when the problem exceeds the slot's capacity.
+/// false (and writes an empty problem without kSnapshotValid, which the haptic side treats as
+/// stale) when the problem exceeds the slot's capacity.
 bool writeSnapshot(const Simulation& sim, double max_opening_rad, std::uint64_t seq,
                    std::int64_t t_ns, std::uint64_t device_seq, shared::SnapshotWriter& slot);
 
