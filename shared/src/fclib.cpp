@@ -54,9 +54,15 @@ class TokenReader {
 
   int integer(const std::string& field) {
     const int line_no = line();
+    const std::string text = done() ? std::string() : tokens_[next_].text;
     const double v = number(field);
-    if (v != std::floor(v) || std::abs(v) > 2e9) {
-      fail(line_no, field + " must be an integer, got " + std::to_string(v));
+    // the token as written (std::to_string would print 999999999999.000000)
+    if (v != std::floor(v)) {
+      fail(line_no, field + " must be a whole number, got '" + printable(text) + "'");
+    }
+    if (std::abs(v) > 2e9) {
+      fail(line_no, field + " = " + printable(text) + " is beyond 2e9: not a problem this "
+                    "reader can hold");
     }
     return static_cast<int>(v);
   }

@@ -73,23 +73,36 @@ bool RecordedSnapshot::writeTo(SnapshotWriter slot, std::uint64_t seq,
   return true;
 }
 
-SnapshotFileWriter::SnapshotFileWriter(const std::filesystem::path& path, OutputOptions options)
-    : out_(path, "snapshot file", options) {
+SnapshotFileWriter::SnapshotFileWriter(const std::filesystem::path& path, OutputOptions options,
+                                       std::uint64_t max_bytes)
+    : out_(path, "snapshot file", options),
+      max_bytes_(std::min<std::uint64_t>(max_bytes, kMaxSnapshotFileBytes)) {
   FileHeader fh{};
   std::memcpy(fh.magic, kMagic, sizeof(kMagic));
   fh.version = kSnapshotFileVersion;
   fh.record_header_bytes = sizeof(ContactSnapshotHeader);
   fh.reserved = 0;
   out_.write(bytesOf(&fh, 1));
+  bytes_ = sizeof(fh);
 }
 
-void SnapshotFileWriter::append(const SnapshotView& s, std::int64_t t_ns) {
+bool SnapshotFileWriter::append(const SnapshotView& s, std::int64_t t_ns) {
   const int m = std::max(0, s.rows());
   const int nc = std::max(0, s.contacts());
   if (m > kMaxRecordedRows || nc > kMaxRecordedContacts) {
     throw FileError(cat("snapshot file: a snapshot of ", m, " rows / ", nc,
                                 " contacts exceeds the recordable ", kMaxRecordedRows, " / ",
                                 kMaxRecordedContacts));
+  }
+  {
+    // the record's size (see the header comment): never past max_bytes_
+    const auto um = static_cast<std::uint64_t>(m), unc = static_cast<std::uint64_t>(nc);
+    const std::uint64_t record = sizeof(std::int64_t) + sizeof(ContactSnapshotHeader) +
+                                 4 * (nc == 0 ? 1 : unc + 1) + 8 * unc + 8 * unc +
+                                 8 * um * um + 8 * um + 8 * um + 48 * um + 24 * unc + 24 * unc +
+                                 48 * unc + 4 * unc;
+    if (bytes_ + record > max_bytes_) return false;
+    bytes_ += record;
   }
   ContactSnapshotHeader h = s.header();
   h.rows = m;
@@ -117,6 +130,7 @@ void SnapshotFileWriter::append(const SnapshotView& s, std::int64_t t_ns) {
   out_.write(bytesOf(s.contactTangent(), unc * 6));
   if (!out_.write(bytesOf(s.contactInstrument(), unc))) throw FileError(out_.error());
   ++count_;
+  return true;
 }
 
 void SnapshotFileWriter::commit() { out_.commit(); }

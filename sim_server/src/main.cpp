@@ -2,6 +2,7 @@
 // table at the end, or as a daemon paced to real time that publishes the contact problem to the
 // haptic process through the shared segment (when the scene enables haptics).
 #include <CLI/CLI.hpp>
+#include <new>
 #include <spdlog/spdlog.h>
 
 #include <atomic>
@@ -58,6 +59,10 @@ int main(int argc, char** argv) {
   app.add_option("--record-snapshots", opt.record_snapshots,
                  "Record every step's contact snapshot (simulated time stamps) to FILE, written "
                  "at the end of the run, for tactus-jitter --replay FILE");
+  app.add_option("--record-snapshots-max-mb", opt.record_snapshots_max_mb,
+                 "Stop recording snapshots (the run goes on) before the file passes this size "
+                 "[MiB]; 2048 is what tactus-jitter --replay reads")
+      ->check(CLI::Range(1, 2048))->capture_default_str();
   app.add_flag("--overwrite", opt.overwrite,
                "Replace existing --stats-json / --export-trajectory / --record-snapshots files "
                "and an earlier "
@@ -87,6 +92,12 @@ int main(int argc, char** argv) {
   } catch (const tactus::Cancelled& e) {
     spdlog::error("{}; exiting", e.what());
     return 128 + (g_signal != 0 ? static_cast<int>(g_signal) : SIGTERM);
+  } catch (const std::bad_alloc&) {
+    spdlog::error("out of memory: the scene needs more memory than this machine can give (a "
+                  "large mesh's compliance block C0, a large max_contacts); see the memory "
+                  "figures logged above, use a coarser mesh, compliance.c0_precision: float, or "
+                  "compliance.model: exact");
+    return 1;
   } catch (const std::exception& e) {
     spdlog::error("{}", e.what());
     return 1;

@@ -180,6 +180,7 @@ int run(const BenchOptions& o) {
     oo.overwrite_hint = "pass --overwrite";
     recorder = std::make_unique<shared::SnapshotFileWriter>(o.record_snapshots, oo);
   }
+  bool recorder_full = false;   // the recording stopped at the replay limit
   std::FILE* trace = nullptr;
   if (!o.trace.empty()) {
     trace = std::fopen(o.trace.c_str(), "w");
@@ -197,7 +198,12 @@ int run(const BenchOptions& o) {
     publishProblem(sim, pub, static_cast<std::uint64_t>(k + 1), spec.instrument.max_opening_rad);
     seg.beat(shared::Side::kSim);
     const double publish_s = 1e-9 * static_cast<double>(shared::monotonicNs() - tp);
-    if (recorder) recorder->append(sub.latest(), std::llround(sim.time() * 1e9));
+    if (recorder && !recorder_full && !recorder->append(sub.latest(), std::llround(sim.time() * 1e9))) {
+      spdlog::warn("--record-snapshots reached the replay limit ({} MiB) after {} snapshots: "
+                   "recording stopped, the file keeps them", recorder->bytes() >> 20,
+                   recorder->count());
+      recorder_full = true;
+    }
     stages[0].v.push_back(r.times.free_motion_s);
     fem_cg.push_back(r.fem_cg_iterations);
     fem_factorisations += r.fem_factorisations;

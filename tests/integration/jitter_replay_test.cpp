@@ -101,7 +101,7 @@ void writeFile(const fs::path& path, int n) {
   shared::SnapshotFileWriter out(path);
   for (int i = 0; i < n; ++i) {
     fill(slot.writer(), i % 5, i);
-    out.append(slot.writer().view(), 10'000'000LL * i);
+    ASSERT_TRUE(out.append(slot.writer().view(), 10'000'000LL * i));
   }
   EXPECT_EQ(out.count(), static_cast<std::uint64_t>(n));
   out.commit();
@@ -199,6 +199,32 @@ TEST(SnapshotFile, ExistingFileIsNotReplaced) {
   EXPECT_TRUE(shared::readSnapshotFile(file).empty());
 }
 
+// The writer never grows a file past its cap (what the reader accepts at most): the snapshot
+// that would pass it is refused, and the file written so far is whole and readable.
+TEST(SnapshotFile, TheWriterStopsBeforeItsCapAndTheFileStaysReadable) {
+  TempDir dir;
+  const fs::path file = dir.path() / "run.snap";
+  SlotBuffer slot(12, 4);
+  shared::SnapshotFileWriter w(file, {}, 20'000);
+  int written = 0;
+  std::uint64_t before = 0;
+  for (int i = 0; i < 1000; ++i) {
+    fill(slot.writer(), 4, i);
+    before = w.bytes();
+    if (!w.append(slot.writer().view(), 10'000'000LL * i)) break;
+    ++written;
+  }
+  EXPECT_GT(written, 5);
+  EXPECT_LT(written, 1000);
+  EXPECT_LE(w.bytes(), 20'000u);
+  EXPECT_EQ(w.bytes(), before) << "the refused snapshot wrote nothing";
+  const std::uint64_t count = w.count();
+  const std::uint64_t bytes = w.bytes();
+  w.commit();
+  EXPECT_EQ(fs::file_size(file), bytes);
+  EXPECT_EQ(shared::readSnapshotFile(file).size(), count);
+}
+
 TEST(SnapshotFile, UncommittedWriterLeavesNoFile) {
   TempDir dir;
   const fs::path file = dir.path() / "run.snap";
@@ -206,7 +232,7 @@ TEST(SnapshotFile, UncommittedWriterLeavesNoFile) {
     SlotBuffer slot(12, 4);
     fill(slot.writer(), 2, 0);
     shared::SnapshotFileWriter w(file);
-    w.append(slot.writer().view(), 0);
+    ASSERT_TRUE(w.append(slot.writer().view(), 0));
   }
   EXPECT_FALSE(fs::exists(file));
 }

@@ -120,6 +120,23 @@ TEST_F(CliTest, HapticServerRejectsBadPerDeviceWorkspaceOptions) {
             std::string::npos) << log;
 }
 
+// Two bridge devices on one UDP port: said as such before anything opens (the second used to fail
+// to bind with "another haptic_server or program may hold it").
+TEST_F(CliTest, HapticServerRefusesTwoBridgesOnOnePort) {
+  for (const std::vector<std::string>& ports :
+       {std::vector<std::string>{}, std::vector<std::string>{"--device-option", "0:port=47123",
+                                                             "--device-option", "1:port=47123"}}) {
+    std::vector<std::string> argv = {kHaptic, "--device", "bridge", "--device", "bridge",
+                                     "--segment", segment_, "--duration", "0.1"};
+    argv.insert(argv.end(), ports.begin(), ports.end());
+    const tactus::test::RunResult r = runProgram(argv, dir_, 20s);
+    EXPECT_EQ(r.exit_code, 2) << r.err << r.out;
+    EXPECT_NE((r.err + r.out).find("devices 0 and 1 are both network bridges on UDP port"),
+              std::string::npos)
+        << r.err << r.out;
+  }
+}
+
 TEST_F(CliTest, HapticServerRejectsInvalidDurations) {
   for (const std::string& duration : std::vector<std::string>{"-1", "nan", "inf", "1e400"}) {
     expectRejected(

@@ -25,6 +25,7 @@
 #include "tactus/device/device.h"
 #include "tactus/shared/error.h"
 #include "tactus/shared/file_io.h"
+#include "tactus/shared/snapshot_file.h"
 #include "tactus/sim/mesh.h"
 #include "tactus/sim/runner.h"
 #include "tactus/sim/scene.h"
@@ -59,7 +60,8 @@ std::string readAll(const fs::path& p) {
 // limit some tests set must not cut the log), optionally with a file size limit [bytes].
 class Child {
  public:
-  explicit Child(const std::vector<std::string>& argv, long fsize_limit = -1) {
+  explicit Child(const std::vector<std::string>& argv, long fsize_limit = -1,
+                 long address_space_limit = -1) {
     int fds[2];
     if (::pipe2(fds, O_CLOEXEC) != 0) return;
     pid_ = ::fork();
@@ -70,6 +72,11 @@ class Child {
         ::signal(SIGXFSZ, SIG_IGN);  // a write past the limit fails with EFBIG instead
         const rlimit lim{static_cast<rlim_t>(fsize_limit), static_cast<rlim_t>(fsize_limit)};
         ::setrlimit(RLIMIT_FSIZE, &lim);
+      }
+      if (address_space_limit >= 0) {
+        const rlimit lim{static_cast<rlim_t>(address_space_limit),
+                         static_cast<rlim_t>(address_space_limit)};
+        ::setrlimit(RLIMIT_AS, &lim);
       }
       std::vector<char*> args;
       for (const auto& a : argv) args.push_back(const_cast<char*>(a.c_str()));
@@ -200,8 +207,8 @@ class FilesTest : public ::testing::Test {
   }
 
   RunResult run(const std::vector<std::string>& argv, std::chrono::seconds limit = std::chrono::seconds(30),
-                long fsize_limit = -1) {
-    Child c(argv, fsize_limit);
+                long fsize_limit = -1, long address_space_limit = -1) {
+    Child c(argv, fsize_limit, address_space_limit);
     return c.wait(limit);
   }
 
@@ -421,6 +428,45 @@ TEST_F(FilesTest, StatsJsonReportsTheVtkOutputTime) {
   const double output_median_ms = std::stod(js.substr(at + key.size()));
   EXPECT_GT(output_median_ms, 0.0) << js;
   EXPECT_TRUE(fs::exists(out_dir / "series.pvd"));
+}
+
+// --record-snapshots is bounded: the recording stops (with a warning; the run goes on and exits
+// 0) before the file passes --record-snapshots-max-mb, and what was written stays readable. It
+// had no cap: a long hold wrote 2.73 GB that the replay then refused, and a daemon would fill
+// the disk.
+TEST_F(FilesTest, RecordSnapshotsStopsAtItsCapAndTheFileStaysReadable) {
+  const fs::path snaps = dir_ / "run.snap";
+  const RunResult r =
+      run({kSim, std::string(TACTUS_TEST_DATA_DIR) + "/scenes/press_cube.yaml", "--steps", "5000",
+           "--record-snapshots", snaps.string(), "--record-snapshots-max-mb", "1"});
+  ASSERT_TRUE(r.exited) << r.output;
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("reached its cap of 1 MiB"));
+  ASSERT_TRUE(fs::exists(snaps));
+  EXPECT_LE(fs::file_size(snaps), std::uintmax_t{1} << 20);
+  const auto recorded = tactus::shared::readSnapshotFile(snaps);
+  EXPECT_GT(recorded.size(), 1000u);
+  EXPECT_LT(recorded.size(), 5000u);
+  const RunResult big =
+      run({kSim, std::string(TACTUS_TEST_DATA_DIR) + "/scenes/press_cube.yaml", "--steps", "1",
+           "--record-snapshots", (dir_ / "b.snap").string(), "--record-snapshots-max-mb", "4096"});
+  EXPECT_NE(big.code, 0) << "a cap beyond what the replay reads is refused";
+  EXPECT_THAT(big.output, HasSubstr("--record-snapshots-max-mb"));
+}
+
+// A compliance block C0 that cannot fit the memory the process may have is refused up front
+// with its size and what to do (it used to end in a bare std::bad_alloc once the allocation
+// failed). liver_23k's C0 is 1.66 GB; the process may have 1.2 GB here (ulimit -v).
+TEST_F(FilesTest, AComplianceBlockBeyondTheMemoryIsRefusedWithItsSize) {
+  const fs::path scene = this->scene("big.yaml", "liver_23k.msh", 1.0);
+  const RunResult r = run({kSim, scene.string(), "--steps", "1"}, std::chrono::seconds(60), -1,
+                          1200L << 20);
+  ASSERT_TRUE(r.exited) << r.output;
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("rest compliance block C0"));
+  EXPECT_THAT(r.output, HasSubstr("needs 1.7 GB"));
+  EXPECT_THAT(r.output, HasSubstr("compliance.model: exact"));
+  EXPECT_THAT(r.output, Not(HasSubstr("C0 precompute")));
 }
 
 TEST_F(FilesTest, ExportTrajectoryChecksWritesAndRefusesOverwrite) {

@@ -2,7 +2,8 @@
 # scripts/start.sh exit status and run dir: 0 after a clean --duration run, non-zero for a bad
 # scene and for a missing device plugin; an explicit --run-dir leaves the checkout's run/latest
 # alone; no segment is left behind; the scene's haptics clamp and rate reach haptic_server and
-# --rate overrides the rate; haptics.workspaces reaches each device. Uses the built binaries (--no-build), a temp run dir and
+# --rate overrides the rate; haptics.workspaces reaches each device; stop.sh never kills what a
+# stale pid file names. Uses the built binaries (--no-build), a temp run dir and
 # unique segment names; every run is bounded by `timeout`.
 #
 # Usage: start_script_test.sh SOURCE_DIR BUILD_DIR
@@ -91,6 +92,19 @@ rm -f "$ws_scene"
 
 run bad_duration "$scene" --duration nan
 [[ $rc -eq 2 ]] || fail "--duration nan: exit $rc (want 2)"
+
+# stop.sh and a stale pid file: the pid now names another program, which must survive
+mkdir -p "$tmp/stale"
+sleep 300 &
+sleeper=$!
+echo "$sleeper" >"$tmp/stale/sim.pid"
+echo "junk" >"$tmp/stale/haptic.pid"
+bash "$src/scripts/stop.sh" "$tmp/stale" >"$tmp/stale.out" 2>&1
+kill -0 "$sleeper" 2>/dev/null || fail "stop.sh killed the program a stale pid file named"
+grep -q "not sim_server" "$tmp/stale.out" || fail "stop.sh: no word on the stale pid file"
+grep -q "stopped sim_server" "$tmp/stale.out" && fail "stop.sh reported stopping a sim_server"
+[[ -e "$tmp/stale/sim.pid" ]] && fail "stop.sh kept the stale pid file"
+kill "$sleeper" 2>/dev/null; wait "$sleeper" 2>/dev/null
 
 latest_after="$(readlink "$src/run/latest" 2>/dev/null || echo "(none)")"
 [[ "$latest_before" == "$latest_after" ]] ||

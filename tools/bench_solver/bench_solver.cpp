@@ -179,7 +179,9 @@ struct Settings {
   double tolerance = 1e-6;
   int max_sweeps = 10000;
   int reps = 5;
-  bool sparse_block = false;
+  /// Siconos' W: auto (like for like: 3x3 sparse blocks where Tactus solves on blocks, dense
+  /// where Tactus solves dense), dense or sparse-block
+  std::string siconos_storage = "auto";
   bool light_error = false;
   std::string tactus_storage = "auto";   ///< auto (chooseStorage), dense or blocks
 };
@@ -208,6 +210,10 @@ struct Row {
   bool t_conv = false, s_conv = false;
   double fill = 0;       ///< block fill of W (stored blocks / nc^2)
   bool blocks = false;   ///< Tactus solved on W's blocks
+  bool s_blocks = false; ///< Siconos was given W as 3x3 sparse blocks
+  /// Siconos not run: Tactus found W ill-posed (a zero, negative or denormal diagonal), on
+  /// which Siconos' NSGS stops the whole program on an assertion (Debian keeps them)
+  bool s_skipped = false;
   double convert_ms = 0; ///< median time of the block conversion (once per W, untimed in t_ms)
 };
 
@@ -234,7 +240,11 @@ Row benchOne(const FclibProblem& p, const Settings& s) {
   tactus::shared::NsgsSettings ts;
   ts.tolerance = s.tolerance;
   ts.max_sweeps = s.max_sweeps;
-  SiconosProblem sp(p, s.sparse_block);
+  Row row;
+  row.blocks = view.blocks != nullptr;
+  row.s_blocks = s.siconos_storage == "sparse-block" ||
+                 (s.siconos_storage == "auto" && row.blocks);
+  SiconosProblem sp(p, row.s_blocks);
   SolverOptions* options = makeSiconosOptions(s);
 
   std::vector<double> r_t(m), r_s(m), u_s(m);
@@ -250,22 +260,24 @@ Row benchOne(const FclibProblem& p, const Settings& s) {
     const auto t0 = Clock::now();
     t_result = tactus::shared::solveNsgs(view, ts, workspace, r_t.data());
     const auto t1 = Clock::now();
+    // a W Tactus finds ill-posed is never handed to Siconos: its NSGS asserts on it and the
+    // whole run would end there, with no figure printed
+    row.s_skipped = t_result.status == tactus::shared::NsgsStatus::kIllPosed;
     std::fill(r_s.begin(), r_s.end(), 0.0);
     std::fill(u_s.begin(), u_s.end(), 0.0);
     const auto t2 = Clock::now();
-    s_info = fc3d_driver(sp.get(), r_s.data(), u_s.data(), options);
+    if (!row.s_skipped) s_info = fc3d_driver(sp.get(), r_s.data(), u_s.data(), options);
     const auto t3 = Clock::now();
     if (rep < 0) continue;
     convert_ms.push_back(std::chrono::duration<double, std::milli>(tc1 - tc).count());
     t_ms.push_back(std::chrono::duration<double, std::milli>(t1 - t0).count());
     s_ms.push_back(std::chrono::duration<double, std::milli>(t3 - t2).count());
+    if (row.s_skipped) break;
   }
 
-  Row row;
   row.name = p.name;
   row.contacts = p.contacts;
   row.fill = measure.fill();
-  row.blocks = view.blocks != nullptr;
   row.convert_ms = row.blocks ? median(convert_ms) : 0.0;
   // Both solutions scored by one function: the natural-map error normalised by
   // max(|q|, |r|, |u|) (tactus::shared::naturalMapError), u recomputed as W r + q for both.
@@ -284,7 +296,7 @@ Row benchOne(const FclibProblem& p, const Settings& s) {
   row.t_sweeps = t_result.sweeps;
   row.s_iters = options->iparam[SICONOS_IPARAM_ITER_DONE];
   row.t_conv = t_result.status == tactus::shared::NsgsStatus::kConverged;
-  row.s_conv = s_info == 0;
+  row.s_conv = s_info == 0 && !row.s_skipped;
   row.t_ms = median(t_ms);
   row.s_ms = median(s_ms);
   // scale: u = W r + q, so |q| is part of it (u itself is ~0 on a resting stack)
@@ -341,8 +353,14 @@ int run(int argc, char** argv) {
   app.add_option("--reps", s.reps, "runs of each solver per problem (median time)")
       ->capture_default_str()
       ->check(CLI::Range(1, 1000));
-  app.add_flag("--siconos-sparse-block", s.sparse_block,
-               "give Siconos W as a 3x3 sparse-block matrix (default: dense, as Tactus)");
+  app.add_option("--siconos-storage", s.siconos_storage,
+                 "W's storage for Siconos: auto (like for like: 3x3 sparse blocks on the problems "
+                 "Tactus solves on blocks, dense on the others), dense or sparse-block; the "
+                 "columns T W and S W say what each side used")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"auto", "dense", "sparse-block"}));
+  app.add_flag_callback("--siconos-sparse-block", [&s] { s.siconos_storage = "sparse-block"; },
+                        "the same as --siconos-storage sparse-block");
   app.add_flag("--siconos-light-error", s.light_error,
                "keep Siconos' default error evaluation (incremental, full check at the end)");
   app.add_option("--csv", csv_path, "also write the table to FILE (must not exist)");
@@ -413,19 +431,23 @@ int run(int argc, char** argv) {
                  "problem,nc,tactus_error,tactus_sweeps,tactus_ms,tactus_converged,"
                  "siconos_error,siconos_reported_error,siconos_iterations,siconos_ms,"
                  "siconos_converged,time_ratio,sweep_time_ratio,u_rel_diff,norm_q,siconos_norm_r,"
-                 "siconos_norm_u,block_fill,tactus_blocks,convert_ms\n");
+                 "siconos_norm_u,block_fill,tactus_blocks,convert_ms,siconos_blocks\n");
   }
 
-  std::printf("tol %.1e, max sweeps %d, %d runs each (median), Siconos W %s, Siconos error "
-              "evaluation %s\n",
-              s.tolerance, s.max_sweeps, s.reps, s.sparse_block ? "sparse-block" : "dense",
+  std::printf("tol %.1e, max sweeps %d, %d runs each (median), Tactus W %s, Siconos W %s, "
+              "Siconos error evaluation %s\n",
+              s.tolerance, s.max_sweeps, s.reps,
+              s.tactus_storage == "auto" ? "auto (chooseStorage)" : s.tactus_storage.c_str(),
+              s.siconos_storage == "auto" ? "as Tactus (like for like)"
+                                          : s.siconos_storage.c_str(),
               s.light_error ? "default (light)" : "full every sweep");
-  std::printf("%-44s %5s | %9s %6s %9s %4s | %9s %6s %9s %4s | %7s %7s | %9s | %6s %6s %7s\n",
+  std::printf("%-44s %5s | %9s %6s %9s %4s | %9s %6s %9s %4s | %7s %7s | %9s | %6s %6s %6s "
+              "%7s\n",
               "problem", "nc", "T error", "sweeps", "T ms", "conv", "S error", "iters", "S ms",
-              "conv", "t T/S", "swp T/S", "u diff", "fill", "T W", "conv ms");
+              "conv", "t T/S", "swp T/S", "u diff", "fill", "T W", "S W", "conv ms");
   std::vector<double> time_ratios, sweep_ratios;
   double worst_u = 0.0;
-  int t_conv = 0, s_conv = 0, both = 0, failed = 0, total = 0;
+  int t_conv = 0, s_conv = 0, both = 0, failed = 0, total = 0, skipped = 0;
   const std::size_t jobs = files.size() + generated.size();
   for (std::size_t job = 0; job < jobs; ++job) {
     Row row;
@@ -438,6 +460,15 @@ int run(int argc, char** argv) {
       continue;
     }
     ++total;
+    if (row.s_skipped) {
+      ++skipped;
+      std::printf("%-44s %5d | %9.2e %6d %9.3f %4s | Siconos not run: W is ill-posed (a zero, "
+                  "negative or denormal diagonal; Siconos' NSGS asserts on it)\n",
+                  row.name.c_str(), row.contacts, row.t_error, row.t_sweeps, row.t_ms,
+                  row.t_conv ? "yes" : "no");
+      std::fflush(stdout);
+      continue;
+    }
     const double tr = ratio(row.t_ms, row.s_ms);
     const double sr =
         ratio(row.t_ms / std::max(row.t_sweeps, 1), row.s_ms / std::max(row.s_iters, 1));
@@ -450,29 +481,33 @@ int run(int argc, char** argv) {
       worst_u = std::max(worst_u, row.u_diff);
     }
     std::printf("%-44s %5d | %9.2e %6d %9.3f %4s | %9.2e %6d %9.3f %4s | %7.2f %7.2f | %9.2e | "
-                "%6.3f %6s %7.3f\n",
+                "%6.3f %6s %6s %7.3f\n",
                 row.name.c_str(), row.contacts, row.t_error, row.t_sweeps, row.t_ms,
                 row.t_conv ? "yes" : "no", row.s_error, row.s_iters, row.s_ms,
                 row.s_conv ? "yes" : "no", tr, sr, row.u_diff, row.fill,
-                row.blocks ? "blocks" : "dense", row.convert_ms);
+                row.blocks ? "blocks" : "dense", row.s_blocks ? "blocks" : "dense",
+                row.convert_ms);
     std::fflush(stdout);
     if (csv != nullptr &&
         std::fprintf(csv,
                      "%s,%d,%.6e,%d,%.6f,%d,%.6e,%.6e,%d,%.6f,%d,%.6f,%.6f,%.6e,%.6e,%.6e,%.6e,"
-                     "%.6f,%d,%.6f\n",
+                     "%.6f,%d,%.6f,%d\n",
                      row.name.c_str(), row.contacts, row.t_error, row.t_sweeps, row.t_ms,
                      row.t_conv, row.s_error, row.s_reported, row.s_iters, row.s_ms, row.s_conv,
                      tr, sr, row.u_diff, row.norm_q, row.norm_r_s, row.norm_u_s, row.fill,
-                     row.blocks ? 1 : 0, row.convert_ms) < 0) {
+                     row.blocks ? 1 : 0, row.convert_ms, row.s_blocks ? 1 : 0) < 0) {
       std::fclose(csv);
       throw tactus::Error(csv_path + ": write failed");
     }
   }
   if (failed > 0) std::printf("failed: %d file(s) could not be read (above)\n", failed);
+  if (skipped > 0) {
+    std::printf("skipped: Siconos not run on %d ill-posed problem(s) (above)\n", skipped);
+  }
   std::printf("summary: %d problems; tactus converged %d/%d, siconos converged %d/%d, both "
               "converged %d/%d; over those: median time ratio T/S %.2f (min %.2f, max %.2f), "
               "median per-sweep ratio %.2f, worst u diff %.2e\n",
-              total, t_conv, total, s_conv, total, both, total, median(time_ratios),
+              total, t_conv, total, s_conv, total - skipped, both, total, median(time_ratios),
               time_ratios.empty() ? 0.0 : *std::min_element(time_ratios.begin(), time_ratios.end()),
               time_ratios.empty() ? 0.0 : *std::max_element(time_ratios.begin(), time_ratios.end()),
               median(sweep_ratios), worst_u);

@@ -168,6 +168,8 @@ private:
     FemBody &body = *body_;
     blk_.surface = body.surfaceNodes();
     blk_.single = opt_.c0_single_precision;
+    // C0 is dense (3s x 3s): say before anything is allocated or factorised when it cannot fit
+    c0_detail::checkRestBlockFits(blk_.surface.size(), blk_.single);
     blk_.local.assign(body.nodeCount(), -1);
     for (std::size_t i = 0; i < blk_.surface.size(); ++i)
       blk_.local[blk_.surface[i]] = static_cast<int>(i);

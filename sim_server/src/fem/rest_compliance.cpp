@@ -1,11 +1,15 @@
 // The rest compliance block's precomputation (rest_compliance_block.h).
+#include <sys/resource.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <cstdio>
 #include <string>
 
+#include <fmt/format.h>
+
 #include "rest_compliance_block.h"
+#include "tactus/shared/error.h"
 #include "tactus/shared/file_io.h"
 
 namespace tactus::sim::c0_detail {
@@ -47,6 +51,54 @@ void progress(bool show, int done, int total) {
 }
 
 } // namespace
+
+namespace {
+
+// The memory this process can still have [bytes]: MemAvailable of /proc/meminfo, and no more
+// than its address-space limit (ulimit -v) leaves; a negative value when unknown.
+double availableMemoryBytes() {
+  double have = -1.0;
+  if (std::FILE *f = std::fopen("/proc/meminfo", "r"); f != nullptr) {
+    char line[256];
+    double kb = -1.0;
+    while (std::fgets(line, sizeof(line), f) != nullptr) {
+      if (std::sscanf(line, "MemAvailable: %lf kB", &kb) == 1)
+        break;
+    }
+    std::fclose(f);
+    if (kb >= 0.0)
+      have = kb * 1024.0;
+  }
+  rlimit as{};
+  if (::getrlimit(RLIMIT_AS, &as) == 0 && as.rlim_cur != RLIM_INFINITY) {
+    double used = 0.0;
+    if (std::FILE *f = std::fopen("/proc/self/statm", "r"); f != nullptr) {
+      double pages = 0.0;
+      if (std::fscanf(f, "%lf", &pages) == 1)
+        used = pages * static_cast<double>(::sysconf(_SC_PAGESIZE));
+      std::fclose(f);
+    }
+    const double left = std::max(0.0, static_cast<double>(as.rlim_cur) - used);
+    have = have < 0.0 ? left : std::min(have, left);
+  }
+  return have;
+}
+
+} // namespace
+
+void checkRestBlockFits(std::size_t surface_nodes, bool single) {
+  const double need = restBlockBytes(surface_nodes, single);
+  const double have = availableMemoryBytes();
+  if (have < 0.0 || need <= have)
+    return;
+  throw NumericalError(fmt::format(
+      "the rest compliance block C0 of this tissue's {} surface nodes needs {:.1f} GB ({} x {} "
+      "{}s, dense) and this machine has {:.1f} GB available: use compliance.model: exact (no C0 "
+      "block){}, or a mesh with fewer surface nodes",
+      surface_nodes, need / 1e9, 3 * surface_nodes, 3 * surface_nodes,
+      single ? "float" : "double", have / 1e9,
+      single ? "" : fmt::format(", compliance.c0_precision: float ({:.1f} GB)", need / 2e9)));
+}
 
 void computeRestBlock(FemBody &body, const ComplianceOptions &opt,
                       RestBlock &blk) {

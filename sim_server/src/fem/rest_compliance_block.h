@@ -61,6 +61,17 @@ private:
   std::size_t mapped_ = 0;
 };
 
+// Bytes the dense C0 block of `surface_nodes` nodes takes ((3s)^2 scalars).
+inline double restBlockBytes(std::size_t surface_nodes, bool single) {
+  const double d = 3.0 * static_cast<double>(surface_nodes);
+  return d * d * (single ? 4.0 : 8.0);
+}
+
+// Throws NumericalError with the size, what the machine has and what to do when the C0 block of
+// `surface_nodes` nodes needs more than the memory available now (MemAvailable), before
+// anything is allocated or factorised (it used to end in a bare std::bad_alloc after loading).
+void checkRestBlockFits(std::size_t surface_nodes, bool single);
+
 // Rest compliance block on the surface DOFs, with the surface numbering.
 struct RestBlock {
   std::vector<int> surface; // sorted surface node indices

@@ -2,6 +2,7 @@
 #include <fmt/format.h>
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <charconv>
 #include <cmath>
 #include <cstdint>
@@ -49,14 +50,27 @@ void finish(TriangleSurface& s, const std::vector<Eigen::Vector3d>& points,
   s.source = name;
   s.vertices.resize(3, static_cast<Eigen::Index>(points.size()));
   for (std::size_t i = 0; i < points.size(); ++i) s.vertices.col(static_cast<Eigen::Index>(i)) = points[i];
+  int overflowed = 0;   // triangles whose area is not finite: coordinates too large
   for (const auto& t : triangles) {
     const Eigen::Vector3d a = points[static_cast<std::size_t>(t[0])];
     const double area = (points[static_cast<std::size_t>(t[1])] - a)
                             .cross(points[static_cast<std::size_t>(t[2])] - a)
                             .norm();
     if (area > 0.0 && std::isfinite(area)) s.triangles.push_back(t);
+    if (!std::isfinite(area)) ++overflowed;
   }
-  if (s.triangles.empty()) fail(name, 0, "no (non-degenerate) triangle in the surface");
+  if (overflowed > 0) {
+    double largest = 0.0;
+    for (const Eigen::Vector3d& p : points) largest = std::max(largest, p.cwiseAbs().maxCoeff());
+    fail(name, 0, fmt::format("{} of {} triangles have no finite area: the coordinates are too "
+                              "large (the largest is {:g}); use smaller units in the file",
+                              overflowed, triangles.size(), largest));
+  }
+  if (s.triangles.empty()) {
+    fail(name, 0, triangles.empty() ? std::string("no triangle in the surface")
+                                    : fmt::format("all {} triangles are degenerate (zero area)",
+                                                  triangles.size()));
+  }
 }
 
 TriangleSurface parseObj(const std::string& content, const std::string& name) {

@@ -244,11 +244,13 @@ int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
   std::unique_ptr<shared::SnapshotFileWriter> recorder;
   shared::SnapshotLayout record_layout;
   std::vector<double> record_slot;  // doubles: 8-byte aligned for every array of the layout
+  bool record_full = false;         // the recording reached its cap and stopped
   if (!options.record_snapshots.empty()) {
     recorder = std::make_unique<shared::SnapshotFileWriter>(
         options.record_snapshots,
         shared::OutputOptions{.overwrite = options.overwrite,
-                              .overwrite_hint = "pass --overwrite to replace it"});
+                              .overwrite_hint = "pass --overwrite to replace it"},
+        static_cast<std::uint64_t>(options.record_snapshots_max_mb) << 20);
     const shared::SegmentCapacity cap = problemCapacity(spec);   // instruments' and obstacles'
     record_layout = shared::SnapshotLayout::forCapacity(cap.max_rows, cap.max_contacts);
     record_slot.assign(record_layout.total_bytes / sizeof(double) + 1, 0.0);
@@ -284,11 +286,18 @@ int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
       link->publish(sim);
     }
     if (display) display->publish(sim, report);
-    if (recorder && sim.hasInstrument()) {
+    if (recorder && !record_full && sim.hasInstrument()) {
       shared::SnapshotWriter slot(record_slot.data(), record_layout);
       writeSnapshot(sim, spec.instrument.max_opening_rad, static_cast<std::uint64_t>(k + 1),
                     std::llround(sim.time() * 1e9), 0, slot);
-      recorder->append(slot.view(), std::llround(sim.time() * 1e9));
+      if (!recorder->append(slot.view(), std::llround(sim.time() * 1e9))) {
+        // bounded: a daemon in contact writes tens of MB per simulated second
+        spdlog::warn("--record-snapshots reached its cap of {} MiB after {} snapshots ({:.2f} s "
+                     "simulated): recording stopped, the run goes on; the file keeps them "
+                     "(--record-snapshots-max-mb sets the cap)",
+                     options.record_snapshots_max_mb, recorder->count(), sim.time());
+        record_full = true;
+      }
     }
     // VTK output after the snapshot is published (the haptic side does not wait for it), timed
     // into the step's statistics outside total_s

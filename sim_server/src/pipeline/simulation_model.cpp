@@ -4,6 +4,7 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <iterator>
 
 #include "tactus/shared/error.h"
 #include "tactus/sim/fem.h"
@@ -40,6 +41,19 @@ TissueModel buildTissueModel(const SceneSpec& spec, const TissueSpec& ts) {
   }
   tissue.loads = buildTissueLoads(tissue.mesh, ts, scene_where);
   const std::vector<int> prescribed = prescribedNodes(tissue.loads);
+  // a node is either held at rest or moved along a path, not both
+  std::sort(fixed.begin(), fixed.end());
+  fixed.erase(std::unique(fixed.begin(), fixed.end()), fixed.end());
+  std::vector<int> both;
+  std::set_intersection(fixed.begin(), fixed.end(), prescribed.begin(), prescribed.end(),
+                        std::back_inserter(both));
+  if (!both.empty()) {
+    throw SceneError(fmt::format(
+        "{}: {} node(s) are both fixed and given a prescribed displacement (the first: node {}): "
+        "a node is either held at rest or moved along its path; take them out of the fixed "
+        "nodes/boxes/regions or out of the displacement load's region",
+        scene_where, both.size(), both.front()));
+  }
   fixed.insert(fixed.end(), prescribed.begin(), prescribed.end());
   std::sort(fixed.begin(), fixed.end());
   fixed.erase(std::unique(fixed.begin(), fixed.end()), fixed.end());
@@ -58,6 +72,26 @@ SimulationModel buildModel(const SceneSpec& spec) {
   model.spec = spec;
   model.h_s = spec.time_step_s;
   for (const TissueSpec& ts : spec.tissues) model.tissues.push_back(buildTissueModel(spec, ts));
+  // a box obstacle pushes out what enters it through its faces: a tissue that starts inside it
+  // entirely has nothing pushing it out and falls through
+  for (const ObstacleSpec& o : spec.obstacles) {
+    if (o.kind != ObstacleKind::kBox) continue;
+    for (const TissueModel& t : model.tissues) {
+      const Eigen::Matrix3Xd& x = t.mesh.nodes;
+      bool all_inside = x.cols() > 0;
+      for (Eigen::Index i = 0; i < x.cols() && all_inside; ++i) {
+        all_inside = (x.col(i).array() > o.min_m.array()).all() &&
+                     (x.col(i).array() < o.max_m.array()).all();
+      }
+      if (all_inside) {
+        throw SceneError(fmt::format(
+            "{}: the box encloses all of tissue '{}' at rest: a box obstacle pushes out only "
+            "what enters it through its faces, so the tissue would fall through it; place the "
+            "box beside or under the tissue",
+            o.where.empty() ? "obstacles '" + o.name + "'" : o.where, t.name));
+      }
+    }
+  }
   model.has_instrument = spec.instrument.present;
   model.instrument_count = instrumentCount(spec);
   model.has_contacts =

@@ -1,6 +1,10 @@
 // The tissue-against-tissue part of a step (tissue_contact_stage.h).
 #include "tissue_contact_stage.h"
 
+#include "tactus/shared/error.h"
+
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <limits>
 
@@ -14,7 +18,37 @@ std::unique_ptr<TissueContacts> makeTissueContacts(const SimulationModel& model)
     meshes.push_back(&t.mesh);
     surfaces.push_back(&t.surface);
   }
-  return std::make_unique<TissueContacts>(meshes, surfaces, model.spec.tissue_contacts);
+  auto pairs = std::make_unique<TissueContacts>(meshes, surfaces, model.spec.tissue_contacts);
+  // Self-contact finds a surface folding onto itself. In the rest shape nothing is folded: a
+  // contact found there means the alarm distance or the depth reaches across the tissue (a
+  // vertex "behind" another part of its own surface that is only the far side of the body), and
+  // every step would push those parts apart (a 7 cm cube inflated to 14 cm with depth 0.1 m).
+  std::vector<Eigen::VectorXd> rest(model.tissues.size());
+  std::vector<const Eigen::VectorXd*> q;
+  for (std::size_t t = 0; t < model.tissues.size(); ++t) {
+    const Eigen::Matrix3Xd& x = model.tissues[t].mesh.nodes;
+    rest[t] = Eigen::Map<const Eigen::VectorXd>(x.data(), x.size());
+    q.push_back(&rest[t]);
+  }
+  pairs->detect(q);
+  for (int k = 0; k < pairs->directionCount(); ++k) {
+    const TissueContacts::Direction& d = pairs->direction(k);
+    if (d.vertex_tissue != d.surface_tissue) continue;   // two bodies may well touch at rest
+    const std::vector<Contact>& found = pairs->contacts(k);
+    if (found.empty() && pairs->overflow(k) == 0) continue;
+    const TissueContactSpec& spec = pairs->spec(d.pair);
+    double deepest = 0.0;
+    for (const Contact& c : found) deepest = std::min(deepest, c.gap_m);
+    throw SceneError(fmt::format(
+        "{}: the self-contact of tissue '{}' finds {} contacts in its rest shape, where nothing "
+        "is folded (the deepest {:.3g} m behind its own surface): its alarm_distance ({} m) or "
+        "depth ({} m) reaches across the tissue, and every step would push its sides apart; "
+        "lower them below the tissue's thickness",
+        spec.where, model.tissues[static_cast<std::size_t>(d.vertex_tissue)].name,
+        found.size() + static_cast<std::size_t>(pairs->overflow(k)), -deepest,
+        spec.alarm_distance_m, spec.depth_m));
+  }
+  return pairs;
 }
 
 double tissueContactFriction(const SimulationState& state, const Contact& contact) {

@@ -91,9 +91,17 @@ void SceneParser::readObstacles(const YAML::Node& root, SceneSpec* spec) {
       if (string(n, sp, "file", &file)) {
         ob.mesh_path = resolve(file);
         std::error_code ec;
-        if (!std::filesystem::is_regular_file(ob.mesh_path, ec)) {
+        const auto status = std::filesystem::status(ob.mesh_path, ec);
+        const std::string shown = shared::printable(ob.mesh_path.string(), 256);
+        if (std::filesystem::is_directory(status)) {
+          error(n["file"], join(sp, "file"), "surface file " + shown + " is a directory");
+        } else if (std::filesystem::exists(status) &&
+                   !std::filesystem::is_regular_file(status)) {
           error(n["file"], join(sp, "file"),
-                "surface file not found: " + shared::printable(ob.mesh_path.string(), 256) +
+                "surface file " + shown + " is not a regular file (a FIFO, socket or device)");
+        } else if (!std::filesystem::is_regular_file(status)) {
+          error(n["file"], join(sp, "file"),
+                "surface file not found: " + shown +
                     " (relative paths are resolved against the scene file's folder)");
         }
       }
@@ -133,20 +141,42 @@ void SceneParser::checkObstacleCapacity(const YAML::Node& root, const SceneSpec&
   const std::string limit = fmt::format(
       "need more than the {} MiB the contact problem may take (W is rows x rows doubles, 3 rows "
       "per frictional contact): lower them (about 3000 in all)", kMaxContactProblemBytes >> 20);
-  if (spec.obstacles.empty()) {
-    error(root["tissue_contact"], "tissue_contact",
-          fmt::format("{} contacts in all ({} + {} between tissues) {}", total, instruments,
-                      between, limit));
-    return;
+  std::string parts = instruments;
+  if (per_tissue > 0) {
+    parts += fmt::format(" + obstacle_contact.max_contacts {} per tissue x {} tissues", per_tissue,
+                         spec.tissues.size());
   }
-  const YAML::Node c = root["obstacle_contact"];
-  const YAML::Node at = c.IsMap() && c["max_contacts"].IsDefined() ? c["max_contacts"] : root;
-  const std::string pairs =
-      between > 0 ? fmt::format(" + {} between tissues", between) : std::string();
-  error(at, "obstacle_contact.max_contacts",
-        fmt::format("{} contacts in all ({} + {} per tissue x {} tissues{}) {}", total,
-                    instruments, spec.obstacle_contact.max_contacts, spec.tissues.size(), pairs,
-                    limit));
+  if (between > 0) parts += fmt::format(" + {} between tissues (tissue_contact)", between);
+  const std::string what = fmt::format("{} contacts in all ({}) {}", total, parts, limit);
+  // the error goes where the largest part is set (a key absent from the file: its section)
+  const long long by_tools = problemContactCapacity(spec);
+  const long long by_obstacles = per_tissue * static_cast<long long>(spec.tissues.size());
+  auto child = [](const YAML::Node& map, const char* key) {
+    return map.IsDefined() && map.IsMap() && map[key].IsDefined() ? map[key] : map;
+  };
+  if (between >= by_obstacles && between >= by_tools) {
+    // the largest pair of tissue_contact
+    const YAML::Node list = root["tissue_contact"];
+    std::size_t largest = 0;
+    for (std::size_t k = 1; k < spec.tissue_contacts.size(); ++k) {
+      if (spec.tissue_contacts[k].max_contacts > spec.tissue_contacts[largest].max_contacts) {
+        largest = k;
+      }
+    }
+    if (list.IsDefined() && list.IsSequence() && list.size() == spec.tissue_contacts.size()) {
+      error(child(list[largest], "max_contacts"),
+            fmt::format("tissue_contact[{}].max_contacts", largest), what);
+    } else {
+      error(list.IsDefined() ? list : root, "tissue_contact", what);
+    }
+  } else if (by_obstacles >= by_tools) {
+    const YAML::Node c = root["obstacle_contact"];
+    error(c.IsDefined() ? child(c, "max_contacts") : root["obstacles"],
+          c.IsDefined() ? "obstacle_contact.max_contacts" : "obstacles", what);
+  } else {
+    const YAML::Node solver = root["solver"];
+    error(solver.IsDefined() ? child(solver, "max_contacts") : root, "solver.max_contacts", what);
+  }
 }
 
 }  // namespace tactus::sim::scene_detail

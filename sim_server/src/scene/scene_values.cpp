@@ -241,7 +241,10 @@ void SceneParser::orientation(const YAML::Node& map, const std::string& path,
     return;
   }
   Eigen::Vector3d deg;
-  if (vector<3>(map, path, "rotation_deg", &deg)) *out = eulerXyzDeg(deg);
+  // the same ranges as a transform's angles (1e300 degrees is no orientation)
+  if (vector<3>(map, path, "rotation_deg", &deg, kSymmetric(1e6), kSymmetric(360.0))) {
+    *out = eulerXyzDeg(deg);
+  }
   Eigen::Vector4d q;
   if (vector<4>(map, path, "quaternion", &q)) {
     const double norm = q.norm();

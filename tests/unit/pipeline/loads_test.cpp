@@ -166,6 +166,11 @@ TEST(LoadsTest, BadLoadsAreSceneErrorsWithTheirPlace) {
             "previous key's t");
   EXPECT_NE(error("      - {region: {highest: z}, pressure: .nan}\n").find("pressure: must be"),
             std::string::npos);
+  // the fixed base moved by a displacement load too: refused (it was accepted silently)
+  EXPECT_NE(error("      - region: {lowest: z}\n"
+                  "        displacement: [{t: 0, offset: [0, 0, 0]}, {t: 1, offset: [0, 0, 1e-3]}]\n")
+                .find("node(s) are both fixed and given a prescribed displacement"),
+            std::string::npos);
 }
 
 }  // namespace

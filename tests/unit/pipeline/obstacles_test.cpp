@@ -57,7 +57,15 @@ TEST(SurfaceReaderTest, ObjPolygonsAreFannedAndNegativeIndicesCount) {
   EXPECT_EQ(error([] { parseTriangleSurface("v 0 0 nan\n", "nan.obj"); }),
             "nan.obj:1: a coordinate is not finite");
   EXPECT_EQ(error([] { parseTriangleSurface("v 0 0 0\n", "empty.obj"); }),
-            "empty.obj: no (non-degenerate) triangle in the surface");
+            "empty.obj: no triangle in the surface");
+  EXPECT_EQ(error([] { parseTriangleSurface("v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n", "flat.obj"); }),
+            "flat.obj: all 1 triangles are degenerate (zero area)");
+  // coordinates of 1e300: the areas overflow; said so (it used to read "no triangle")
+  EXPECT_EQ(error([] {
+              parseTriangleSurface("v 0 0 0\nv 1e300 0 0\nv 0 1e300 0\nf 1 2 3\n", "huge.obj");
+            }),
+            "huge.obj: 1 of 1 triangles have no finite area: the coordinates are too large (the "
+            "largest is 1e+300); use smaller units in the file");
 }
 
 TEST(SurfaceReaderTest, AsciiAndBinaryStlMergeTheirRepeatedVertices) {
@@ -141,6 +149,25 @@ std::string sceneError(const std::string& yaml) {
   return error([&] { parseScene(yaml, "s.yaml", TACTUS_TEST_DATA_DIR); });
 }
 
+// A box that encloses a whole tissue at rest cannot push it out (the tissue fell through it):
+// refused when the simulation is built, naming the box and the tissue.
+TEST(ObstacleSceneTest, ABoxEnclosingAWholeTissueIsRefused) {
+  const std::string message = error([] {
+    Simulation sim(parseScene(kTissueHead + "obstacles: [{box: {min: [-1, -1, -1], max: [1, 1, 1]}}]\n",
+                              "s.yaml", TACTUS_TEST_DATA_DIR));
+  });
+  EXPECT_NE(message.find("s.yaml:5:13: obstacles[0]: the box encloses all of tissue 'tissue'"),
+            std::string::npos)
+      << message;
+  // a box under the tissue is fine
+  EXPECT_EQ(error([] {
+              Simulation sim(parseScene(
+                  kTissueHead + "obstacles: [{box: {min: [-1, -1, -1], max: [1, 1, -0.04]}}]\n",
+                  "s.yaml", TACTUS_TEST_DATA_DIR));
+            }),
+            "");
+}
+
 TEST(ObstacleSceneTest, TheSceneChecksEveryObstacle) {
   const SceneSpec spec = parseScene(kTissueHead +
                                         "obstacles:\n"
@@ -170,13 +197,29 @@ TEST(ObstacleSceneTest, TheSceneChecksEveryObstacle) {
   EXPECT_NE(sceneError(kTissueHead + "obstacles: [{mesh: {file: missing.obj}}]\n")
                 .find("s.yaml:5:27: obstacles[0].mesh.file: surface file not found"),
             std::string::npos);
+  // a directory is said to be one (it used to be "not found")
+  EXPECT_NE(sceneError(kTissueHead + "obstacles: [{mesh: {file: meshes}}]\n")
+                .find("s.yaml:5:27: obstacles[0].mesh.file: surface file "),
+            std::string::npos);
+  EXPECT_NE(sceneError(kTissueHead + "obstacles: [{mesh: {file: meshes}}]\n").find("is a directory"),
+            std::string::npos);
   EXPECT_EQ(sceneError(kTissueHead +
                        "obstacles: [{plane: {point: [0, 0, 0], normal: [0, 0, 1]}, friction: 1}]\n"
                        "obstacle_contact: {max_contacts: 5000}\n"),
             "s.yaml:6:34: obstacle_contact.max_contacts: 5300 contacts in all (solver.max_contacts "
-            "300 + 5000 per tissue x 1 tissues) need more than the 2048 MiB the contact problem "
-            "may take (W is rows x rows doubles, 3 rows per frictional contact): lower them "
-            "(about 3000 in all)");
+            "300 + obstacle_contact.max_contacts 5000 per tissue x 1 tissues) need more than the "
+            "2048 MiB the contact problem may take (W is rows x rows doubles, 3 rows per "
+            "frictional contact): lower them (about 3000 in all)");
+  // the error names the part that is too large: here tissue_contact's, not obstacle_contact's
+  // (which the file does not even set: that used to end in "invalid node; first invalid key")
+  EXPECT_EQ(sceneError(kTissueHead +
+                       "obstacles: [{plane: {point: [0, 0, 0], normal: [0, 0, 1]}}]\n"
+                       "tissue_contact: [{self: tissue, max_contacts: 12000}]\n"),
+            "s.yaml:6:47: tissue_contact[0].max_contacts: 12600 contacts in all "
+            "(solver.max_contacts 300 + obstacle_contact.max_contacts 300 per tissue x 1 tissues "
+            "+ 12000 between tissues (tissue_contact)) need more than the 2048 MiB the contact "
+            "problem may take (W is rows x rows doubles, 3 rows per frictional contact): lower "
+            "them (about 3000 in all)");
   EXPECT_NE(sceneError(kTissueHead + "obstacles: [{plane: {point: [0, 0, .inf], normal: [0, 0, 1]}}]\n")
                 .find("obstacles[0].plane.point[2]: must be"),
             std::string::npos);

@@ -248,6 +248,36 @@ double foldGap(bool self_contact, int* unconverged) {
   return worst;
 }
 
+// A self-contact whose alarm distance or depth reaches across the tissue finds contacts in the
+// rest shape, where nothing is folded: refused when the simulation is built (alarm 5 cm and
+// depth 10 cm inflated a 7 cm cube to 14 cm and sent it to z = 10 m in 2 s).
+TEST(TissueContactTest, ASelfContactThatReachesAcrossTheTissueIsRefused) {
+  const std::string yaml =
+      "time_step: 0.01\n"
+      "tissues:\n"
+      "  - name: cube\n"
+      "    mesh: meshes/cube_low_res.msh\n"
+      "    transform: {scale: 0.01}\n"
+      "tissue_contact: [{self: cube, alarm_distance: 0.05, depth: 0.1}]\n";
+  std::string message;
+  try {
+    Simulation sim(parseScene(yaml, "cube.yaml", TACTUS_TEST_DATA_DIR));
+  } catch (const SceneError& e) {
+    message = e.what();
+  }
+  EXPECT_NE(message.find("cube.yaml:6:18: tissue_contact[0]: the self-contact of tissue 'cube' "
+                         "finds"),
+            std::string::npos)
+      << message;
+  EXPECT_NE(message.find("reaches across the tissue"), std::string::npos) << message;
+  // the same cube with sane settings builds
+  Simulation fine(parseScene(
+      "time_step: 0.01\ntissues:\n  - name: cube\n    mesh: meshes/cube_low_res.msh\n"
+      "    transform: {scale: 0.01}\ntissue_contact: [{self: cube, alarm_distance: 0.001, "
+      "depth: 0.002}]\n",
+      "cube.yaml", TACTUS_TEST_DATA_DIR));
+}
+
 TEST(TissueContactTest, AFoldedStripRestsOnItselfWithSelfContact) {
   int unconverged = 0;
   EXPECT_LT(foldGap(false, &unconverged), -0.001) << "the arms must meet for the test to mean "

@@ -80,6 +80,10 @@ TEST(SceneWorkspace, OutOfRangeValuesAreErrorsWithTheirPosition) {
               StartsWith("s.yaml:4:35: haptics.workspace.offset[1]: must be in [-100, 100]"));
   EXPECT_THAT(error("haptics: {workspace: {quaternion: [1, 0, 0.5, 0]}}\n"),
               StartsWith("s.yaml:4:35: haptics.workspace.quaternion: must be a unit quaternion"));
+  // (1e300 degrees used to be accepted silently)
+  EXPECT_THAT(error("haptics: {workspace: {rotation_deg: [1e300, 0, 0]}}\n"),
+              StartsWith("s.yaml:4:38: haptics.workspace.rotation_deg[0]: must be in "
+                         "[-1000000, 1000000] (got 1e+300)"));
   EXPECT_THAT(error("haptics: {workspace: {clutch_button: 32}}\n"),
               StartsWith("s.yaml:4:38: haptics.workspace.clutch_button: must be in [-1, 31]"));
   EXPECT_THAT(error("haptics: {workspace: {gain: 2}}\n"),

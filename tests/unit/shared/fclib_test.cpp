@@ -92,7 +92,11 @@ TEST(FclibText, MalformedFilesNameFileAndLine) {
       {"nc0", "0\n", ":1: nc must be >= 1"},
       {"mu", "1\n-0.5\n", ":2: mu[0] is negative"},
       {"nan", "1\n0.5\n-1 nan 0\n", ":3: q[1] is not finite"},
-      {"nnz", "1\n0.5\n-1 0 0\n2.5\n", ":4: nnz (number of W entries) must be an integer"},
+      {"nnz", "1\n0.5\n-1 0 0\n2.5\n",
+       ":4: nnz (number of W entries) must be a whole number, got '2.5'"},
+      // too large for the reader: said as written (it used to read 999999999999.000000)
+      {"nnz_huge", "1\n0.5\n-1 0 0\n999999999999\n",
+       ":4: nnz (number of W entries) = 999999999999 is beyond 2e9"},
       {"empty", "# only a comment\n", ":1: unexpected end of file, expected nc"},
   };
   for (const Case& c : cases) {

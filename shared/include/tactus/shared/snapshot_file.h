@@ -55,21 +55,30 @@ struct RecordedSnapshot {
 
 /// Writes snapshots to a file through OutputFile (never replaces an existing file unless
 /// options.overwrite; the target is checked when the writer is made). Nothing is in place
-/// before commit(): a run that stops early without commit() leaves no file.
+/// before commit(): a run that stops early without commit() leaves no file. The file never
+/// grows beyond `max_bytes` (at most kMaxSnapshotFileBytes, what the reader accepts): a snapshot
+/// that would take it there is not written.
 class SnapshotFileWriter {
  public:
-  SnapshotFileWriter(const std::filesystem::path& path, OutputOptions options = {});
+  SnapshotFileWriter(const std::filesystem::path& path, OutputOptions options = {},
+                     std::uint64_t max_bytes = kMaxSnapshotFileBytes);
   /// Appends one snapshot read from a slot (arrays taken with the slot's ld); t_ns is the time on
-  /// the recording's timeline. Throws FileError when a write failed.
-  void append(const SnapshotView& snapshot, std::int64_t t_ns);
+  /// the recording's timeline. Returns false, writing nothing, when the snapshot would take the
+  /// file past its maximum size (the caller stops recording). Throws FileError when a write
+  /// failed.
+  [[nodiscard]] bool append(const SnapshotView& snapshot, std::int64_t t_ns);
   /// Snapshots appended so far.
   std::uint64_t count() const noexcept { return count_; }
+  /// Bytes of the file so far.
+  std::uint64_t bytes() const noexcept { return bytes_; }
   /// Writes the file into place. Throws FileError.
   void commit();
 
  private:
   OutputFile out_;
   std::uint64_t count_ = 0;
+  std::uint64_t bytes_ = 0;
+  std::uint64_t max_bytes_ = kMaxSnapshotFileBytes;
 };
 
 /// Reads and validates a whole snapshot file (see the header comment). Throws FileError.

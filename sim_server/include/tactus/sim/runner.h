@@ -30,6 +30,9 @@ struct RunOptions {
   /// Record every step's contact snapshot (shared/snapshot_file.h, stamped with the simulated
   /// time) to this file, for tactus-jitter --replay; written at the end of the run.
   std::string record_snapshots;
+  /// The recording stops (with a warning; the run goes on) before the file passes this size
+  /// [MiB]; at most 2048, what tactus-jitter --replay reads.
+  int record_snapshots_max_mb = 2048;
 };
 
 /// Writes the scene's instrument trajectory in the replay device's CSV format
