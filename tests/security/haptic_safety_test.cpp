@@ -222,10 +222,11 @@ TEST(HapticLoopProperty, EveryCommandIsFiniteAndWithinTheClampWhateverTheSetting
     t += 1'000'000;
     (void)loop.tick(t, t);
   }
-  // the runs did render forces (the property is not met by rendering nothing); about 5 % of the
-  // commands are non-zero (most random settings engage late or fade, and snapshots with an
-  // unusable W diagonal render nothing by design)
-  EXPECT_GT(nonzero, commands / 50);
+  // the runs did render forces (the property is not met by rendering nothing); about 1.6 % of
+  // the commands are non-zero: most random settings engage late or fade, snapshots with an
+  // unusable W diagonal render nothing by design, and the gate closes at every device fault
+  // (one tick in 20) and reopens only after the fade-out, below the engage threshold
+  EXPECT_GT(nonzero, commands / 100);
   ::testing::Test::RecordProperty("guard_interventions", static_cast<int>(interventions));
   link.reset();
   shared::Segment::remove(name);
