@@ -66,7 +66,16 @@ struct RawMesh {
 /// Throws MeshError "name:line: message".
 [[noreturn]] void fail(const std::string& name, int line, const std::string& message);
 
-/// Resolves ids, drops unreferenced nodes, rejects degenerate tets and flips inverted ones.
+/// At most this many problems of one mesh are listed in its MeshError (all are counted).
+inline constexpr int kListedMeshProblems = 20;
+/// Tetrahedra of a mean ratio below this are reported as near-degenerate (a warning).
+inline constexpr double kSliverMeanRatio = 1e-3;
+
+/// Resolves ids, drops unreferenced nodes, flips negatively oriented tets and checks the result:
+/// duplicate ids, unknown nodes, non-finite coordinates, repeated nodes, zero volumes, faces
+/// shared by more than two tets and tangles (two tets on the same side of their shared face) are
+/// errors, all reported together (MeshProblems in mesh_validate.cpp); near-degenerate tets are
+/// counted and the worst one named in a warning.
 TetMesh finalizeMesh(RawMesh&& raw, const std::string& name, MeshReport* report);
 
 /// The physical groups of `raw` on `mesh` (whose tets are raw.tets resolved, in the same order),

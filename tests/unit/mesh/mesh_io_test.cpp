@@ -5,6 +5,8 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
+#include <algorithm>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <random>
@@ -12,6 +14,7 @@
 
 #include "tactus/shared/error.h"
 #include "tactus/sim/mesh.h"
+#include "tactus/sim/mesh_gen.h"
 
 namespace tactus::sim {
 namespace {
@@ -147,9 +150,14 @@ TEST(MeshIo, VtkFixturesMatchTheGmshOriginal) {
 }
 
 TEST(MeshIo, SixTetraBadHasDuplicateElementIds) {
-  // all six elements of SOFA's 6_tetra_bad.msh carry the id 44 (and one is inverted)
-  EXPECT_EQ(loadError("6_tetra_bad.msh"),
-            meshPath("6_tetra_bad.msh") + ":27: element 44 is defined twice (first at line 26)");
+  // all six elements of SOFA's 6_tetra_bad.msh carry the id 44 (and one is inverted): every
+  // duplicate is listed, each with its line
+  const std::string m = meshPath("6_tetra_bad.msh");
+  std::string expected = m + ": 5 problems in the mesh:";
+  for (int line = 27; line <= 31; ++line)
+    expected += "\n" + m + ":" + std::to_string(line) +
+                ": element 44 is defined twice (first at line 26)";
+  EXPECT_EQ(loadError("6_tetra_bad.msh"), expected);
 }
 
 TEST(MeshIo, BadFixturesNameFileAndLine) {
@@ -198,9 +206,12 @@ TEST(MeshIo, InMemoryErrors) {
             "-save -format msh22 or msh41)");
   EXPECT_EQ(error("$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n2\n1 0 0 0\n1 1 0 0\n"
                   "$EndNodes\n$Elements\n0\n$EndElements\n"),
-            "mem.msh:7: node 1 is defined twice (first at line 6)");
+            "mem.msh: 2 problems in the mesh:\nmem.msh:7: node 1 is defined twice (first at line "
+            "6)\nmem.msh:11: no tetrahedra (4-node elements) in the file (0 other elements "
+            "ignored)");
   EXPECT_EQ(error("$NOD\n1\n1 0 0 nan\n$ENDNOD\n$ELM\n0\n$ENDELM\n"),
-            "mem.msh:3: node 1 has a non-finite coordinate");
+            "mem.msh: 2 problems in the mesh:\nmem.msh:3: node 1 has a non-finite coordinate\n"
+            "mem.msh:7: no tetrahedra (4-node elements) in the file (0 other elements ignored)");
   EXPECT_EQ(error("$NOD\n4\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n$ENDNOD\n$ELM\n1\n"
                   "1 4 1 1 4 1 2 3 x\n$ENDELM\n"),
             "mem.msh:10: expected an integer (node id), got 'x'");
@@ -214,6 +225,127 @@ TEST(MeshIo, InMemoryErrors) {
                   "1 4 1 1 4 1 2 3 4\n2 4 1 1 4 1 2 4 3\n$ENDELM\n"),
             "mem.msh:11: expected $ENDELM to close $ELM (started at line 8), got "
             "'2 4 1 1 4 1 2 4 3' (wrong count?)");
+}
+
+// A Gmsh 1.0 file of the given nodes ("id x y z") and tets ("id a b c d").
+std::string gmsh1(const std::vector<std::string>& nodes, const std::vector<std::string>& tets) {
+  std::string t = "$NOD\n" + std::to_string(nodes.size()) + "\n";
+  for (const auto& n : nodes) t += n + "\n";
+  t += "$ENDNOD\n$ELM\n" + std::to_string(tets.size()) + "\n";
+  for (const auto& e : tets) {
+    std::istringstream in(e);
+    std::string id, rest, word;
+    in >> id;
+    while (in >> word) rest += " " + word;
+    t += id + " 4 1 1 4" + rest + "\n";
+  }
+  return t + "$ENDELM\n";
+}
+
+TEST(MeshChecks, ANodePushedThroughAFaceIsATangleNamedWithItsElements) {
+  // the second tet's apex, node 5, beyond the plane x + y + z = 1 of the shared face (2, 3, 4):
+  // a valid mesh (its reversed node order repaired); pushed through the face to node 1's side,
+  // the two tets overlap
+  const std::string untangled =
+      gmsh1({"1 0 0 0", "2 1 0 0", "3 0 1 0", "4 0 0 1", "5 0.6 0.6 0.6"},
+            {"10 1 2 3 4", "11 5 2 3 4"});
+  MeshReport report;
+  EXPECT_EQ(parseTetMesh(untangled, "ok.msh", &report).tetCount(), 2);
+  EXPECT_EQ(report.flipped_tets, 1);   // a reversed tet of a valid mesh is repaired
+  const std::string tangled =
+      gmsh1({"1 0 0 0", "2 1 0 0", "3 0 1 0", "4 0 0 1", "5 0.2 0.2 0.2"},
+            {"10 1 2 3 4", "11 5 2 3 4"});
+  try {
+    parseTetMesh(tangled, "tangled.msh");
+    ADD_FAILURE() << "a tangled mesh loaded";
+  } catch (const MeshError& e) {
+    EXPECT_EQ(std::string(e.what()),
+              "tangled.msh:12: elements 10 and 11 overlap: both lie on the same side of their "
+              "shared face (the mesh is tangled, e.g. a node pushed through a face)");
+  }
+}
+
+// A mesh as Gmsh 1.0 text (ids from 1).
+std::string gmsh1(const TetMesh& m) {
+  std::vector<std::string> nodes, tets;
+  for (int i = 0; i < m.nodeCount(); ++i) {
+    std::ostringstream line;
+    line.precision(17);
+    line << i + 1 << " " << m.nodes(0, i) << " " << m.nodes(1, i) << " " << m.nodes(2, i);
+    nodes.push_back(line.str());
+  }
+  for (int t = 0; t < m.tetCount(); ++t) {
+    std::string line = std::to_string(t + 1);
+    for (int k : m.tets[static_cast<std::size_t>(t)]) line += " " + std::to_string(k + 1);
+    tets.push_back(line);
+  }
+  return gmsh1(nodes, tets);
+}
+
+std::string parseError(const std::string& text, const std::string& name) {
+  try {
+    parseTetMesh(text, name);
+  } catch (const MeshError& e) {
+    return e.what();
+  }
+  return "(no error)";
+}
+
+TEST(MeshChecks, ATangledBoxMeshIsReportedWithEveryFoldedFace) {
+  // a 3 x 3 x 3 box (162 tets); its interior node (1, 1, 1) pushed 1.5 cells along x, through
+  // the faces of its star
+  TetMesh box = makeBoxTetMesh(3, 3, 3, Eigen::Vector3d::Constant(3.0));
+  const int moved = 1 + 4 * (1 + 4 * 1);
+  ASSERT_TRUE(box.nodes.col(moved).isApprox(Eigen::Vector3d(1, 1, 1)));
+  EXPECT_EQ(parseTetMesh(gmsh1(box), "box.msh").tetCount(), 162);
+  box.nodes(0, moved) += 1.5;
+  const std::string message = parseError(gmsh1(box), "tangled.msh");
+  std::printf("[mesh] %s\n", message.c_str());
+  EXPECT_THAT(message, ::testing::StartsWith("tangled.msh: "));
+  EXPECT_THAT(message, ::testing::HasSubstr(" problems in the mesh"));
+  EXPECT_THAT(message, ::testing::HasSubstr("overlap: both lie on the same side of their shared "
+                                            "face (the mesh is tangled"));
+}
+
+TEST(MeshChecks, EveryProblemIsListedUpToTwentyAndAllAreCounted) {
+  // 30 tets, each referring to a node that does not exist, one zero-volume tet and a duplicate
+  std::vector<std::string> tets;
+  for (int t = 1; t <= 30; ++t) tets.push_back(std::to_string(t) + " 1 2 3 99");
+  const std::string text = gmsh1({"1 0 0 0", "2 1 0 0", "3 0 1 0", "4 0 0 1"}, tets);
+  const std::string message = parseError(text, "many.msh");
+  EXPECT_THAT(message,
+              ::testing::StartsWith("many.msh: 30 problems in the mesh (the first 20 listed):\n"
+                                    "many.msh:10: element 1 refers to node 99 which is not "
+                                    "defined\n"));
+  EXPECT_EQ(std::count(message.begin(), message.end(), '\n'), 20);
+  // several kinds at once: each one listed with its line
+  const std::string mixed = gmsh1({"1 0 0 0", "2 1 0 0", "3 0 1 0", "4 0 0 1", "5 1 1 0"},
+                                  {"7 1 2 3 4", "7 1 2 4 99", "8 1 2 3 5"});
+  EXPECT_EQ(parseError(mixed, "mixed.msh"),
+            "mixed.msh: 3 problems in the mesh:\n"
+            "mixed.msh:12: element 7 is defined twice (first at line 11)\n"
+            "mixed.msh:12: element 7 refers to node 99 which is not defined\n"
+            "mixed.msh:13: element 8 is degenerate: volume 0 is zero at the mesh size 1.73 (its "
+            "nodes are coplanar)");
+}
+
+TEST(MeshChecks, ANearSliverLoadsWithItsCountAndTheWorstQuality) {
+  // a sliver of height 1e-8 m over 1 cm edges beside a well-shaped tet
+  const std::string text =
+      gmsh1({"1 0 0 0", "2 0.01 0 0", "3 0 0.01 0", "4 0 0 0.01", "5 0.005 0.005 -1e-8"},
+            {"1 1 2 3 4", "2 1 3 2 5"});
+  MeshReport report;
+  const TetMesh m = parseTetMesh(text, "sliver.msh", &report);
+  EXPECT_EQ(m.tetCount(), 2);
+  EXPECT_EQ(report.sliver_tets, 1);
+  EXPECT_GT(report.worst_mean_ratio, 0.0);
+  EXPECT_LT(report.worst_mean_ratio, 1e-3);
+  EXPECT_EQ(report.worst_mean_ratio_line, 12);
+  MeshReport good;
+  parseTetMesh(gmsh1({"1 0 0 0", "2 1 0 0", "3 0 1 0", "4 0 0 1"}, {"1 1 2 3 4"}), "one.msh",
+               &good);
+  EXPECT_EQ(good.sliver_tets, 0);
+  EXPECT_GT(good.worst_mean_ratio, 0.8);   // the corner tet of a cube: 0.84
 }
 
 // Truncations at every byte and random byte corruption: a result or a MeshError, nothing else.

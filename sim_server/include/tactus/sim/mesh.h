@@ -56,12 +56,22 @@ struct MeshReport {
   int ignored_elements = 0;      ///< non-tetrahedral elements skipped
   int flipped_tets = 0;          ///< negatively oriented tets re-oriented (two nodes swapped)
   int dropped_nodes = 0;         ///< nodes referenced by no tetrahedron
+  /// tetrahedra whose mean ratio 12 (3 |V|)^(2/3) / (sum of squared edge lengths) is below 1e-3
+  /// (1: the regular tetrahedron; a sliver of height 1e-8 m across 1 cm edges: ~1e-4)
+  int sliver_tets = 0;
+  double worst_mean_ratio = 1.0; ///< the smallest mean ratio of the mesh
+  int worst_mean_ratio_line = 0; ///< the file line of that tetrahedron
 };
 
 /// Reads a tetrahedral mesh. Throws tactus::MeshError naming the file and line on malformed input:
-/// truncated file, missing section, an element referring to an unknown node, a degenerate
-/// (zero-volume, relative to the mesh size) tetrahedron, no tetrahedra at all. Negatively
-/// oriented tetrahedra are repaired (counted in `report`). Never crashes on bad input.
+/// truncated file, missing section, no tetrahedra at all; and, all of them in one error (the
+/// first 20 listed, each with its line, and their count), duplicate ids, non-finite
+/// coordinates, an element referring to an unknown node or using one twice, a degenerate
+/// (zero-volume, relative to the mesh size) tetrahedron, a face shared by more than two
+/// tetrahedra, a tangle (two tetrahedra on the same side of their shared face: a node pushed
+/// through a face). Negatively oriented tetrahedra of an untangled mesh are repaired (counted in
+/// `report`); near-degenerate ones (slivers, caps, needles) are counted and the worst named in a
+/// warning and in `report`. Never crashes on bad input.
 TetMesh loadTetMesh(const std::filesystem::path& path, MeshReport* report = nullptr);
 
 /// Same as loadTetMesh but from an in-memory buffer; `name` is used in messages and the format is
