@@ -1,4 +1,4 @@
-# tactus_add_fclib_hdf5(<target>): compiles FCLIB's HDF5 reader (shared/tools/fclib_hdf5.cpp) into
+# tactus_add_fclib_hdf5(<target>): compiles FCLIB's HDF5 reader (tools/common/fclib_hdf5.cpp) into
 # a tool when Debian's libhdf5 is present, and defines TACTUS_HAVE_HDF5=1 for it. HDF5 is optional
 # and only ever linked into tools, never into tactus_shared or the daemons. Sets
 # TACTUS_FCLIB_HDF5_FOUND in the caller's scope.
@@ -14,8 +14,8 @@ function(tactus_add_fclib_hdf5 target)
   if(NOT HDF5_FOUND)
     return()
   endif()
-  target_sources(${target} PRIVATE ${PROJECT_SOURCE_DIR}/shared/tools/fclib_hdf5.cpp)
-  target_include_directories(${target} PRIVATE ${PROJECT_SOURCE_DIR}/shared/tools)
+  target_sources(${target} PRIVATE ${PROJECT_SOURCE_DIR}/tools/common/fclib_hdf5.cpp)
+  target_include_directories(${target} PRIVATE ${PROJECT_SOURCE_DIR}/tools/common)
   target_include_directories(${target} SYSTEM PRIVATE ${HDF5_C_INCLUDE_DIRS} ${HDF5_INCLUDE_DIRS})
   target_link_libraries(${target} PRIVATE ${HDF5_C_LIBRARIES})
   target_compile_definitions(${target} PRIVATE TACTUS_HAVE_HDF5=1 ${HDF5_C_DEFINITIONS}

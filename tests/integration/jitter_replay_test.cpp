@@ -363,7 +363,7 @@ fs::path writePressScene(const TempDir& dir) {
 fs::path recordPressCube(const TempDir& dir) {
   const fs::path scene_file = writePressScene(dir);
   const fs::path snap = dir.path() / "press.snap";
-  const std::string cmd = std::string(TACTUS_BINARY_DIR) + "/sim_server/tools/tactus-bench '" +
+  const std::string cmd = std::string(TACTUS_BINARY_DIR) + "/tools/bench/tactus-bench '" +
                           scene_file.string() + "' --record-snapshots '" + snap.string() +
                           "' > '" + (dir.path() / "bench.log").string() + "' 2>&1";
   EXPECT_EQ(runBounded(cmd, 120), 0) << readAll(dir.path() / "bench.log");
@@ -466,7 +466,7 @@ TEST(JitterReplay, RecordedPressReplaysThroughTheHapticLoop) {
 
   // the tactus-jitter binary: --replay for a second, exit 0, the replay table printed
   const fs::path log = dir.path() / "jitter.log";
-  const std::string cmd = std::string(TACTUS_BINARY_DIR) + "/haptic_server/tactus-jitter --replay '" +
+  const std::string cmd = std::string(TACTUS_BINARY_DIR) + "/tools/jitter/tactus-jitter --replay '" +
                           snap.string() + "' --loop --duration 1 --quiet --priority 0 > '" +
                           log.string() + "' 2>&1";
   EXPECT_EQ(runBounded(cmd, 60), 0) << readAll(log);

@@ -505,7 +505,7 @@ TEST_F(FilesTest, EarlierVtkSeriesAndSolverOutputAreNotReplacedUnlessAsked) {
   EXPECT_EQ(r.code, 0) << r.output;
   EXPECT_THAT(readAll(pvd), HasSubstr("VTKFile"));
 
-  const std::string solver = std::string(TACTUS_BINARY_DIR) + "/shared/tools/tactus-fc3d-solve";
+  const std::string solver = std::string(TACTUS_BINARY_DIR) + "/tools/fc3d_solve/tactus-fc3d-solve";
   const std::string problem =
       std::string(TACTUS_TEST_DATA_DIR) + "/fclib/problems/Box_Stacks-i0122-82-5.local.fc3d.txt";
   const fs::path solution = write("solution.ref.txt", "precious");

@@ -70,7 +70,7 @@ inline double tetVolumeRatio(const sim::FemBody& body, const std::array<int, 4>&
 }
 
 /// The five perturbed approaches pad_grasp_test asserts (grasp point moved by up to 3 mm, jaw
-/// roll by up to 15 deg); tests/study/pad_grasp_study runs them after the nominal one.
+/// roll by up to 15 deg); tools/pad_grasp_study/pad_grasp_study runs them after the nominal one.
 inline std::vector<ApproachPerturbation> testApproaches() {
   return {{Eigen::Vector3d(0.0, 0.003, 0.0), 0.0},
           {Eigen::Vector3d(0.0, -0.003, 0.0), 15.0},

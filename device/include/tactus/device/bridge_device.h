@@ -1,6 +1,6 @@
 #pragma once
 // `bridge`: a device driven over the network by another process (a vendor SDK on this or another
-// machine; the reference client is device/bridge/). Protocol: tactus/device/bridge_protocol.h,
+// machine; the reference client is tools/bridge_client/). Protocol: tactus/device/bridge_protocol.h,
 // documented in device/README.md.
 //
 // Options (--device-option key=value):

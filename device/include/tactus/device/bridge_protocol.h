@@ -1,6 +1,6 @@
 #pragma once
 // The network device bridge protocol, version 1 (device/README.md, "Network device bridge"):
-// UDP datagrams between a device process (a vendor SDK, the reference client device/bridge/)
+// UDP datagrams between a device process (a vendor SDK, the reference client tools/bridge_client/)
 // and haptic_server's `bridge` backend. One message per datagram, little-endian, no padding:
 //
 //   header, 32 bytes

@@ -10,7 +10,7 @@
 //
 // Not real-time: these functions allocate and throw tactus::Error whose message names the file
 // and, for malformed content, the line. HDF5 input (FCLIB's native layout) lives in the
-// command-line tool (shared/tools/fclib_hdf5.h) so that tactus_shared never links HDF5.
+// command-line tool (tools/common/fclib_hdf5.h) so that tactus_shared never links HDF5.
 
 #include <filesystem>
 #include <string>

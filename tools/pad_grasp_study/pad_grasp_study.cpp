@@ -4,7 +4,7 @@
 // (--deeper-mm) and an optional grip stiffness. One line per approach: the held nodes' rise
 // against the tool's, the smallest tet volume ratio in the jaws, the solver's figures. The
 // README's "Flat jaw pads" section quotes its runs, e.g.
-//   build/tests/study/pad_grasp_study --yaw-deg 65 --grip 0.03 --deeper-mm 4
+//   build/tools/pad_grasp_study/pad_grasp_study --yaw-deg 65 --grip 0.03 --deeper-mm 4
 #include <CLI/CLI.hpp>
 #include <algorithm>
 #include <cmath>
@@ -12,7 +12,7 @@
 #include <string>
 #include <vector>
 
-#include "../support/pad_grasp.h"
+#include "support/pad_grasp.h"
 #include "tactus/shared/error.h"
 #include "tactus/sim/scene.h"
 

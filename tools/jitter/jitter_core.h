@@ -1,5 +1,5 @@
 #pragma once
-// The jitter tool's building blocks (tactus-jitter, haptic_server/tools/jitter.cpp), kept in a
+// The jitter tool's building blocks (tactus-jitter, tools/jitter/jitter.cpp), kept in a
 // library so the tests can check them on known inputs:
 //
 //  * Percentiles / summarize(): nearest-rank percentiles (p50, p90, p99, p99.9, max);
