@@ -1,5 +1,5 @@
 // Mesh loading, file to TetMesh (with the physical groups the Gmsh reader keeps): the shipped
-// meshes by size. Figures in README.md ("Organs touch").
+// meshes by size. Figures in docs/measurements.md ("Soft tissue").
 #include <benchmark/benchmark.h>
 #include <spdlog/spdlog.h>
 

@@ -1,6 +1,6 @@
 // NSGS relaxation rule against plain (sor 1) and fixed-relaxed (sor 0.7, 0.5) Gauss-Seidel on
 // the problem set of tests/support/nsgs_rule_set.h: sweeps to 1e-6 and 1e-9 (20000 at most).
-// Run: build/tests/bench/nsgs_rule_bench --table   (the README's table)
+// Run: build/tests/bench/nsgs_rule_bench --table   (docs/measurements.md's table)
 //      build/tests/bench/nsgs_rule_bench --holdout (other seeds and sizes, not in the tests)
 //      build/tests/bench/nsgs_rule_bench --trace NAME SOR TOL  (error after every sweep, rule off)
 //      build/tests/bench/nsgs_rule_bench --anderson (Anderson acceleration against the rule alone)

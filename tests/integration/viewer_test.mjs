@@ -55,7 +55,7 @@ function startSim() {
   return start('sim_server', path.join(build, 'sim_server/sim_server'), [scene, '--segment', segment]);
 }
 // --haptic 1: also a haptic_server whose simulated hand replays the scene's trajectory (fills the
-// haptic panels; used for the README screenshot)
+// haptic panels; used for the screenshot in scenes/screenshots)
 async function startHaptic() {
   const csv = path.join(out, 'trajectory.csv');
   await new Promise((resolve) => spawn(path.join(build, 'sim_server/sim_server'),

@@ -1,5 +1,4 @@
-// Haptic safety limits against nonsense (issue "Safe by construction", item 2, and the haptic
-// parts of item 8): settings, options and device limits are validated with clear messages, and
+// Haptic safety limits against nonsense: settings, options and device limits are validated with clear messages, and
 // whatever the settings, the snapshots or the device input, the loop writes only finite commands
 // within the clamp (property tests over random values including NaN, Inf, negative, huge and
 // denormal). Also: the simulation publishes an exactly symmetric W for a real scene and says so.

@@ -1,4 +1,4 @@
-// Numerics round (issue #18): the simulation's numeric libraries stay on one thread whatever the
+// Numerics: the simulation's numeric libraries stay on one thread whatever the
 // environment says (a multi-threaded OpenBLAS worker spinning in sched_yield took the haptic
 // loop's core), checked in-process and on the real sim_server.
 #include <gtest/gtest.h>

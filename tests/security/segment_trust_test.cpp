@@ -1,4 +1,4 @@
-// Segment trust and device-input sanity (issue "Safe by construction", items 4, 5, 7, 8):
+// Segment trust and device-input sanity:
 //  * a simulation whose owner is alive (even stopped, even silent past the stale threshold) is
 //    never replaced, and a simulation whose segment was removed and re-created while it was
 //    stopped notices on resume and stops with a message (real sim_server processes);
@@ -142,7 +142,7 @@ bool waitForSegment(const std::string& name, std::chrono::milliseconds timeout =
 }
 
 // ---------------------------------------------------------------------------------------------
-// Item 4: a live (stopped) owner is never replaced; a displaced simulation stops.
+// A live (stopped) owner is never replaced; a displaced simulation stops.
 
 TEST(SegmentOwnership, AStoppedSimulationIsNeverReplaced) {
   NameGuard g(uniqueName("stopped"));
@@ -200,7 +200,7 @@ TEST(SegmentOwnership, ADisplacedSimulationStopsWithAMessage) {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Item 7: owner and mode are checked before attaching.
+// Owner and mode are checked before attaching.
 
 int openShm(const std::string& name) { return ::shm_open(("/" + name).c_str(), O_RDWR, 0); }
 
@@ -381,7 +381,7 @@ TEST(SegmentTrust, AnotherUsersStaleSegmentIsNotReplaced) {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Item 8: the haptic claim (a lock the kernel drops with its holder).
+// The haptic claim (a lock the kernel drops with its holder).
 
 // What a racing child process uses to start with the others and to stay alive until all tried.
 struct ChildSync {
@@ -557,7 +557,7 @@ TEST(SegmentOwnership, TwoCreatorsReplacingAStaleSegmentNeverDisplaceEachOther) 
 }
 
 // ---------------------------------------------------------------------------------------------
-// Item 5: absurd but finite device poses.
+// Absurd but finite device poses.
 
 tactus::sim::SceneSpec pressCube() {
   return tactus::sim::loadScene(kData + "/scenes/press_cube.yaml");

@@ -29,7 +29,7 @@ class LiverLobe {
   std::vector<int> nodes_;
 };
 
-/// liver_grasp's grasper and approach as they were before the flat pads (issue 15): the tests
+/// liver_grasp's grasper and approach as they were before the flat pads: the tests
 /// of the contact passes, the grip DOF and the display were written for it.
 inline void useRoundKinematicJaws(sim::SceneSpec& spec) {
   sim::useFormerLiverGraspScript(spec);

@@ -1,7 +1,7 @@
 #pragma once
 // Test support for the flat-pad grasp (scenes/liver_grasp.yaml, liver_grasp_20k.yaml, _23k.yaml):
 // runs the scripted grasp (approach, close, lift 2 cm, hold) with an optional perturbation of
-// the approach and measures what issue 15 asks of it.
+// the approach and measures what pad_grasp_test asserts.
 //  * held nodes: the tissue nodes with a non-zero weight in some contact when the jaws have
 //    closed (t = 2.95 s, before the lift); their mean rise from then to the end of the hold
 //    (5.8 s) against the tool's rise.

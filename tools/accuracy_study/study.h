@@ -1,6 +1,6 @@
 #pragma once
 // tactus-accuracy: accuracy against computing time of the contact pipeline and of the haptic
-// local model (README "Accuracy against time"). Headless, deterministic, single-threaded; writes
+// local model (docs/measurements.md, "Accuracy against time"). Headless, deterministic, single-threaded; writes
 // CSV files that scripts/accuracy_report.py turns into a Markdown table and a Pareto plot.
 //
 // Part 1, the simulation step (sim_study.cpp). Every run follows the scene's scripted grasper

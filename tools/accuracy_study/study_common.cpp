@@ -57,10 +57,10 @@ sim::SceneSpec meshScene(const Options& o, const std::string& mesh) {
   spec.haptics.enabled = false;
   spec.output.enabled = false;
   if (!spec.instrument.present) throw Error(spec.source.string() + ": no instrument");
-  // The study keeps the grasp it was calibrated on (README.md "Accuracy against time"): the
+  // The study keeps the grasp it was calibrated on (docs/measurements.md, "Accuracy against time"): the
   // scenes' former round kinematic jaws closing to 0.25 at x = 0.107 m, not the flat pads. (With
   // the pads on the 596-tet liver, NSGS at 1e-6 leaves the exact model's force 1.3 % rms from its
-  // 1e-9 reference: README.md "Flat jaw pads and contact compliance".) On liver_grasp's meshes,
+  // 1e-9 reference: docs/measurements.md, "Accuracy against time".) On liver_grasp's meshes,
   // also its script before the approach turned toward the lobe's mass.
   if (mesh != "liver_23k") sim::useFormerLiverGraspScript(spec);
   sim::useFormerRoundJaws(spec);

@@ -3,7 +3,7 @@
 // world's vertical around the jaws' midpoint at the grasp (--yaw-deg), moved along the jaws
 // (--deeper-mm) and an optional grip stiffness. One line per approach: the held nodes' rise
 // against the tool's, the smallest tet volume ratio in the jaws, the solver's figures. The
-// README's "Flat jaw pads" section quotes its runs, e.g.
+// docs/measurements.md ("Grasps") quotes its runs, e.g.
 //   build/tools/pad_grasp_study/pad_grasp_study --yaw-deg 65 --grip 0.03 --deeper-mm 4
 #include <CLI/CLI.hpp>
 #include <algorithm>

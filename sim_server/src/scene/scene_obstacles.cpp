@@ -1,4 +1,4 @@
-// Scene parsing: the obstacles and obstacle_contact sections (static obstacles, issue 20).
+// Scene parsing: the obstacles and obstacle_contact sections (static obstacles).
 
 #include <spdlog/fmt/fmt.h>
 #include <yaml-cpp/yaml.h>

@@ -1,11 +1,11 @@
-// Several devices, one local model (issue 19 item 2): the real haptic loop serving two scripted
+// Several devices, one local model: the real haptic loop serving two scripted
 // devices on the contact problem of tests/data/scenes/press_cube_bimanual.yaml (two probes
 // pressing a soft cube from its -x and +x faces), published by the real simulation:
 //  * each hand feels the wrench on its own instrument (the simulation's, per instrument);
 //  * hand A pressing deeper changes hand B's force only through the tissue (W's coupling), with
 //    the sign and size of a full simulation step;
 //  * faulting or silencing one device fades only that device's force;
-//  * each device has its own workspace mapping (pose in, force back, clamp) (issue 19 item 3);
+//  * each device has its own workspace mapping (pose in, force back, clamp);
 //  * the two-device tick allocates nothing; the stats record carries each device's force;
 //  * sim_server's side reads each device's samples for its own instrument.
 #include <gtest/gtest.h>
@@ -276,7 +276,7 @@ TEST_F(BimanualHapticTest, FaultingOrSilencingOneDeviceFadesOnlyItsForce) {
   EXPECT_GT(vec(out.device[1].force_n).norm(), 0.5);
 }
 
-// Each device its own workspace mapping (issue 19 item 3): device 0 the identity, device 1 scale
+// Each device its own workspace mapping: device 0 the identity, device 1 scale
 // 2, a quarter turn about z and an offset. Hand 1 is held where its mapping puts the instrument
 // at its settled pose: the simulation sees both instruments where they were (each device's pose
 // mapped with its own mapping), hand 0 feels the scene force, hand 1 the scene force turned back

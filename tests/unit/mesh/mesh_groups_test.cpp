@@ -1,4 +1,4 @@
-// Gmsh physical groups (issue 20, item 3): the readers keep $PhysicalNames and the elements'
+// Gmsh physical groups: the readers keep $PhysicalNames and the elements'
 // physical tags (2.2: an element's first tag; 4.1: its entity's physical tags in $Entities) as
 // node sets in the mesh's numbering (after unreferenced nodes are dropped), and reject malformed
 // group sections with the line.

@@ -1,4 +1,4 @@
-// Several instruments in one simulation (issue 19 item 1): each god object has its own coupling,
+// Several instruments in one simulation: each god object has its own coupling,
 // friction and contacts, and all contacts form ONE contact problem whose W couples the
 // instruments through the tissue (tests/data/scenes/press_cube_bimanual.yaml: two probes press a
 // soft cube from its -x and +x faces).

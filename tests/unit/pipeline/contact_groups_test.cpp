@@ -1,4 +1,4 @@
-// The contact problem solved per group of coupled bodies (issue 20, item 6; contact_groups.h):
+// The contact problem solved per group of coupled bodies (contact_groups.h):
 // the solver on a block-diagonal problem whose groups interleave gives the whole problem's
 // solution, to the whole problem's tolerance; the simulation splits two blocks resting apart on a
 // table into two groups and follows the same motion as one solve over the whole W; a probe

@@ -1,4 +1,4 @@
-// Hertz contact between two soft domes (issue 20, item 5; README.md "Organs touch", docs/design.md
+// Hertz contact between two soft domes (docs/measurements.md "What the tests measure", docs/design.md
 // "Tissue against tissue"). Two equal hemispheres of radius R = 20 mm (tests/data/meshes/
 // hemisphere.geo: 596 nodes, 2453 tets, 0.4 mm at the apex), linear material (E = 10 kPa,
 // nu = 0.3), exact compliance, frictionless, no gravity, pressed apex to apex by a prescribed
@@ -282,7 +282,7 @@ double logLogSlope(const std::vector<double>& x, const std::vector<double>& y) {
 const std::vector<double> kAppliedM = {0.1e-3, 0.2e-3, 0.3e-3, 0.4e-3, 0.5e-3};
 
 // Every Hertz figure of one run, with the tolerances set from what the mesh gives (measured in
-// the comments; README.md "Organs touch").
+// the comments; docs/measurements.md "What the tests measure").
 void expectHertz(const DomesRun& run, Pair pair) {
   ASSERT_EQ(run.levels.size(), kAppliedM.size());
   std::vector<double> delta, force, patch;
@@ -303,7 +303,7 @@ void expectHertz(const DomesRun& run, Pair pair) {
     // the two depths agree (the dome's departure from a half-space between them): 0.6 %
     EXPECT_NEAR(l.delta_m[1] / l.delta_m[0], 1.0, 0.02);
     // the force against Hertz's at the measured approach: 6 to 13 % stiffer (linear tetrahedra;
-    // 4 to 10 % with 0.3 mm at the apex, README.md "Organs touch")
+    // 4 to 10 % with 0.3 mm at the apex, docs/measurements.md "What the tests measure")
     const double force_ratio = l.force_n / hertzForceN(l.delta_m[0]);
     EXPECT_GT(force_ratio, 0.95);
     EXPECT_LT(force_ratio, 1.20);

@@ -1,4 +1,4 @@
-// scenes/liver_bimanual.yaml (issue 19 item 5): the flat-pad grasper holds and lifts the right
+// scenes/liver_bimanual.yaml: the flat-pad grasper holds and lifts the right
 // lobe's tip while a probe presses on the lobe 2.5 cm beside it; both instruments' contacts are
 // one contact problem. The grasp holds through the lift (the lobe rises with the jaws, by more
 // than half of their rise: held down by the probe it slips partly; measured 12.5 of 19.4 mm, all

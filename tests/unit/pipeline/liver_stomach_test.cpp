@@ -1,4 +1,4 @@
-// scenes/liver_on_stomach.yaml (issue 20, item 5): the paper's liver settles with its right lobe
+// scenes/liver_on_stomach.yaml: the paper's liver settles with its right lobe
 // on a second, soft organ (an ellipsoidal stomach, free, lying on a rigid support) through
 // tissue_contact; the stomach carries part of the liver's weight and deforms under it, the
 // support carries the stomach, that share and part of the liver directly; the grasper lifts the
@@ -75,7 +75,7 @@ TEST(LiverStomachTest, TheLobeRestsOnTheStomachAndIsLiftedOffIt) {
   EXPECT_LT(stomach_resting, -0.1) << "the lobe presses on the stomach";
   // the support carries the stomach and the liver's push on it (measured 3.3 % more at t = 1 s:
   // the soft stomach still rocks on the support (+-0.15 N over 0.1 s), and the warped
-  // correction does not conserve momentum (README, Known limits)); and part of the liver itself
+  // correction does not conserve momentum (README.md, "Known limits")); and part of the liver itself
   EXPECT_NEAR(support_resting, stomach_weight - stomach_resting, 0.06 * stomach_weight);
   EXPECT_GT(support_total - support_resting, 0.05) << "the liver rests on the support too";
   EXPECT_GT(pair_contacts_resting, 3);
@@ -86,7 +86,7 @@ TEST(LiverStomachTest, TheLobeRestsOnTheStomachAndIsLiftedOffIt) {
   EXPECT_EQ(unconverged, 0);
 }
 
-// scenes/liver_stomach_two_hands.yaml (issue 20, item 6): a probe presses the stomach's side while
+// scenes/liver_stomach_two_hands.yaml: a probe presses the stomach's side while
 // the grasper lifts the lobe off it. While the lobe lies on the stomach everything is one group;
 // once it is lifted off, the grasper's contacts (liver) and the probe's (stomach) share no body
 // and are solved apart. The run follows the one that solves the whole W every step to the

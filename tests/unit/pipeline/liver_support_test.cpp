@@ -1,4 +1,4 @@
-// scenes/liver_on_support.yaml (issue 20, items 1 and 5 without the second organ): the paper's
+// scenes/liver_on_support.yaml (an obstacle under the lobe, no second organ): the paper's
 // liver settles onto a rigid support under its right lobe, the grasper lifts the lobe's tip and
 // the support's share of the weight drops; no liver vertex sinks into the support beyond the
 // penetration tolerance at any step.

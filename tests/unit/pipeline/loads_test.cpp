@@ -1,4 +1,4 @@
-// Loads (issue 20, item 3): a pressure on a block's top and a prescribed displacement of it give
+// Loads: a pressure on a block's top and a prescribed displacement of it give
 // the uniaxial static answer (exact for linear tetrahedra with Poisson's ratio 0), and a tip force
 // on a cantilever converges to beam theory with refinement. The scene checks the loads.
 #include <gtest/gtest.h>

@@ -1,5 +1,4 @@
-// The obstacles' edges against the tissues' faces (issue 20, item 1, "where it matters";
-// obstacles.h "Edges"): a coarse soft block (one cell, 2 cm) dropped onto a bar narrower than
+// The obstacles' edges against the tissues' faces (obstacles.h "Edges"): a coarse soft block (one cell, 2 cm) dropped onto a bar narrower than
 // the block's bottom face, under its middle: no vertex of the block is over the bar, so with
 // vertex contacts only the bar passes through the face and the block falls; with
 // obstacle_contact.edges the bar's top edges hold the face, the block rests on the bar, and

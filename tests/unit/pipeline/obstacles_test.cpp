@@ -1,4 +1,4 @@
-// Static obstacles (issue 20, item 1): OBJ/STL surfaces, the signed distance of each shape, the
+// Static obstacles: OBJ/STL surfaces, the signed distance of each shape, the
 // scene's checks, and the physics of tissue against an obstacle: a block on an inclined plane
 // slides with dv = h g (sin theta - mu cos theta) per step and sticks when mu > tan theta, and a
 // soft block resting on a plane, a box or a triangle surface does not sink into it.

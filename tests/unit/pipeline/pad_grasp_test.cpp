@@ -1,4 +1,4 @@
-// The flat-pad grasp of scenes/liver_grasp.yaml (issue 15): the jaws close on the right lobe
+// The flat-pad grasp of scenes/liver_grasp.yaml: the jaws close on the right lobe
 // with a finite grip, lift it 2 cm and hold it. Asserted on the nominal approach and on five
 // perturbed ones (grasp point moved by up to 3 mm, jaw roll by up to 15 deg):
 //  * the held nodes (in contact when the jaws have closed) rise at least 90 % of the tool's lift;
@@ -12,7 +12,7 @@
 // OPENBLAS_CORETYPE).
 //
 // The perturbed approaches hold since the scene's approach turned 60 deg toward the lobe's mass
-// (README.md, "Flat jaw pads"): measured rises 95-100 %, the closest 92.2 % (3 mm higher, rolled
+// (docs/design.md, "The grasp scenes"): measured rises 95-100 %, the closest 92.2 % (3 mm higher, rolled
 // -15 deg). Along the jaws' axis of the earlier approach the lobe's weight rolled it off the
 // 5.5 mm pads in four of the five.
 #include <gtest/gtest.h>
@@ -126,13 +126,13 @@ INSTANTIATE_TEST_SUITE_P(
 
 // liver_grasp_23k (SOFA's liver_23k with its caps peeled and its tets improved by TetGen: 7144
 // nodes, 28931 tets; its compliance is 1.6 GB, built once in about 40 s into
-// .cache/compliance-23k-repaired; the run takes 1-3 min). The nominal list of issue 15: the lobe
+// .cache/compliance-23k-repaired; the run takes 1-3 min). The nominal list: the lobe
 // rises with the tool, no tet in the jaws falls below 0.3 of its rest volume (0.327 measured),
 // every contact step's NSGS reaches its tolerance with median sweeps <= 50 (48), the forces stay
 // within the liver2 bound, no tissue point has two contacts from one jaw, and while the lobe is
 // lifted and held the pads touch 150 distinct tissue nodes or more (the paper's count on
-// distinct features). The crush bound holds at this grasp point, not 1 mm around it (README.md,
-// "The repaired mesh"): the perturbed approaches are liver2's test.
+// distinct features). The crush bound holds at this grasp point, not 1 mm around it (docs/measurements.md,
+// "Grasps"): the perturbed approaches are liver2's test.
 TEST(PadGrasp23kTest, NominalApproachLiftsTheLobeAndConverges) {
   SceneSpec spec = loadScene(std::string(TACTUS_SOURCE_DIR) + "/scenes/liver_grasp_23k.yaml");
   const PadGraspResult r = test_support::runPadGrasp(spec, {});
@@ -151,8 +151,8 @@ TEST(PadGrasp23kTest, NominalApproachLiftsTheLobeAndConverges) {
 }
 
 // On SOFA's liver_23k mesh as it is, slivers (quality 0.004) invert under gravity alone, so the
-// smallest tet volume in the jaws is no crush measure there (README.md, "liver_grasp_23k: why
-// NSGS stalled"). liver_grasp_20k (liver2.obj's surface remeshed without slivers, 19595 tets, its
+// smallest tet volume in the jaws is no crush measure there (docs/design.md, "The grasp
+// scenes"). liver_grasp_20k (liver2.obj's surface remeshed without slivers, 19595 tets, its
 // compliance 0.45 GB in .cache/compliance-20k; about 40 s) meets the nominal list: the lobe rises
 // with the tool, no tet in the jaws falls below 0.3 of its rest volume, every contact step
 // converges with median sweeps <= 50, the forces stay within the liver2 bound and no tissue point

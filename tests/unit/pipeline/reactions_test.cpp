@@ -1,4 +1,4 @@
-// Reaction forces (issue 20, item 4): a tissue at rest on fixed nodes, on an obstacle, and on
+// Reaction forces: a tissue at rest on fixed nodes, on an obstacle, and on
 // both, carries its weight: weight + reactions = 0 to 1e-6 relative. The VTU frames and the run's
 // statistics JSON carry the reactions.
 #include <gtest/gtest.h>

@@ -1,4 +1,4 @@
-// Regions by physical group (issue 20, item 3): `group: <name or tag>` fixes or loads exactly the
+// Regions by physical group: `group: <name or tag>` fixes or loads exactly the
 // nodes of a Gmsh physical group (compared with the face nodes found from the coordinates), and a
 // group the mesh does not have is an error naming the region, the group and the mesh's groups.
 #include <fmt/format.h>

@@ -1,4 +1,4 @@
-// Node regions (issue 20, item 3): each selector chooses the nodes it says on a structured box,
+// Node regions: each selector chooses the nodes it says on a structured box,
 // the scene parser reads them with file:line:col errors, and a fixed region that selects no node
 // stops the scene with an error naming the region.
 #include <gtest/gtest.h>

@@ -1,4 +1,4 @@
-// Contact between tissues (issue 20, item 2): the scene's tissue_contact section and its checks,
+// Contact between tissues: the scene's tissue_contact section and its checks,
 // and a stack of two soft blocks on a table: the upper block rests on the lower one (no
 // interpenetration beyond the tolerance; without tissue_contact it falls through), the table
 // carries both weights and the lower block carries the upper one's, to 1e-6 relative with the

@@ -1,4 +1,4 @@
-// The scene's `instruments:` list (several god objects, issue 19): values, the single
+// The scene's `instruments:` list (several god objects): values, the single
 // `instrument:` form as a list of one, and the errors with file:line:col.
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>

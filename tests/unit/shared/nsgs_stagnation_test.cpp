@@ -124,9 +124,9 @@ TEST(NsgsStagnation, TheRuleCostsNoSweepsWherePlainGaussSeidelConverges) {
   EXPECT_GE(slow_cases, 4);
 }
 
-// The relaxation rule's criterion (issue 15 item 8), on the whole measured set of
+// The relaxation rule's criterion, on the whole measured set of
 // tests/support/nsgs_rule_set.h (FCLIB, the mu = 2 cycle, sphere and capsule piles, redundant
-// patches; the README's table, `build/tests/bench/nsgs_rule_bench --table`), at 1e-6 and 1e-9:
+// patches; docs/measurements.md, "The relaxation rule": `build/tests/bench/nsgs_rule_bench --table`), at 1e-6 and 1e-9:
 // wherever plain Gauss-Seidel (sor 1) or the relaxed one (sor 0.7), both without the rule,
 // converges in 20000 sweeps, the default settings converge too, in at most 1.1 x the better of
 // the two + 2 sweeps (the 2 only matters on counts under 20, where 10 % is under two sweeps).

@@ -105,7 +105,7 @@ struct HapticSettings {
   LocalModelKind local_model = LocalModelKind::kAutomatic;
   /// Anderson acceleration of the tick's NSGS over this many past sweeps (0: off; at most
   /// shared::kMaxAndersonDepth; shared/nsgs.h). Mostly helps the first ticks on a new snapshot
-  /// (README.md, "Anderson acceleration")
+  /// (docs/measurements.md, "Anderson acceleration")
   int anderson_depth = 0;
   /// The tick's deadline, from the start of its work: the local model's re-solve stops at it
   /// (checked within sweeps). In (0, kMaxBudgetFraction x period_ns]; 0 (no clock) only with

@@ -146,7 +146,7 @@ struct NsgsSettings {
   /// Slow convergence, plateaus and transient excursions keep sor: lowering it on any
   /// stagnation cost 4-8x more sweeps on rigid piles, or never reached 1e-9; with 3 peaks in
   /// 50 sweeps the rule also fired on piles that plain Gauss-Seidel solves 1.9x faster than
-  /// sor 0.7. Measured (tests/bench/nsgs_rule_bench.cpp, README "Solve"): on 48 problems
+  /// sor 0.7. Measured (tests/bench/nsgs_rule_bench.cpp, docs/measurements.md, "The relaxation rule"): on 48 problems
   /// (FCLIB, the drag problem, sphere and capsule piles, redundant patches) at 1e-6 and 1e-9 the
   /// rule converges wherever plain or sor 0.7 does, in at most the better one's sweeps; on 40
   /// more (80 runs) it misses 3: plain converging after 3/4 of the budget (the late fallback
@@ -179,7 +179,7 @@ struct NsgsSettings {
   /// without a fall of the best error below kAndersonProgress x itself, it goes on as plain NSGS
   /// from the best iterate, with the relaxation rule above starting afresh (the rule does not
   /// act while the acceleration does).
-  /// Measured (README, "Anderson acceleration"): on the liver grasps (dense W from the FEM
+  /// Measured (docs/measurements.md, "Anderson acceleration"): on the liver grasps (dense W from the FEM
   /// compliance, friction-dominated) depth 8 needs 2-3x fewer sweeps (liver_grasp_23k median
   /// 134 -> 44); on the relaxation rule's problem sets fewer sweeps in 101 of 176 runs (FCLIB
   /// 1.2-2x, capsule piles 5-10x), more than 1.1x in 13 (rigid sphere piles, up to 2.7x) and no

@@ -7,7 +7,7 @@
 // step began (x_h*), so every tick solves f* moved by J (x_h - x_h*). That offset changes little
 // from one snapshot to the next, and so does the force correction it calls for; starting from f*
 // alone threw that correction away ten times a second. Measured on a recorded liver_grasp run
-// (a 0.2 mm device offset, README "Haptic tick on the recorded grasp"): sweeps of the first tick
+// (a 0.2 mm device offset, docs/measurements.md, "The first tick on a snapshot"): sweeps of the first tick
 // of a snapshot median 15 -> 6, p90 20 -> 14.
 //
 // Real-time safe: adopt() neither allocates nor blocks; everything is sized in the constructor.

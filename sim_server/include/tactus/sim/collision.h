@@ -57,7 +57,7 @@
 //     (within 1 nm): a vertex belongs to the pad's own query, so no tissue point gets two
 //     contacts.
 // Contact compliance (instrument.contact_compliance, the pipeline adds it to W's diagonal, see
-// README.md): a contact carrying f penetrates by c f_n; W + c I is positive definite even
+// docs/design.md, "Contact compliance"): a contact carrying f penetrates by c f_n; W + c I is positive definite even
 // where the pads' rows are linearly dependent (a face point under a flat pad is an affine
 // combination of its triangle's vertices, which the pad also holds).
 // Every contact gets a stable id: (kind << 56) | (feature id << 32) | (vertex or triangle

@@ -73,7 +73,7 @@ struct ComplianceOptions {
   /// Warped model's bound (0: off). Its W error grows like the squared spread of the element
   /// rotations between the contact nodes (FemBody::nodeRotations' coherence), which jaws that
   /// crush elements make large (liver2 pinch: W errors of 16-35 % where the nodes nearest the
-  /// jaws reach coherence 0.94-0.97 and det F 0.2-0.4, README "Accuracy against time"). The
+  /// jaws reach coherence 0.94-0.97 and det F 0.2-0.4, docs/measurements.md, "Accuracy against time"). The
   /// contact nodes themselves stay more coherent, so the bound is an empirical threshold on
   /// them: when some node the rows touch has a coherence below this value, that step's W and
   /// correction use the exact compliance instead (3|U| solves with the free motion's
@@ -87,7 +87,7 @@ struct ComplianceOptions {
   /// liver_grasp_23k (1.8 mm surface elements) that spurious strain
   /// inverted tets under the pads at every step although the free motion left them at 0.7-1.0 of
   /// their volume; with two passes (the rotation averaged over about four element layers) the
-  /// smallest tet in the jaws rose from -13.1 to -0.006 (README "Rotation smoothing"). W and the
+  /// smallest tet in the jaws rose from -13.1 to -0.006 (docs/measurements.md, "Grasps"). W and the
   /// correction use the same rotations.
   int rotation_smoothing_passes = 0;
 };
@@ -122,7 +122,7 @@ class TissueCompliance {
   /// dq = C H^T f (3n; fixed DOFs zero). `f` has rows.size() entries.
   virtual void correction(FemBody& body, std::span<const TissueRow> rows, const double* f,
                           Eigen::VectorXd& dq) = 0;
-  /// Bytes held by the model (C0 block etc.), for the log and the README.
+  /// Bytes held by the model (C0 block etc.), for the log.
   virtual std::size_t memoryBytes() const = 0;
   /// How the model was built; skipped_row_nodes is cumulative over addW/correction calls
   /// (warped/rest/uncoupled only know the surface nodes: a row node inside the volume contributes

@@ -58,7 +58,7 @@ enum class PcgPreconditioner {
 ///    warped, T A_f^-1 T^T with T the per-node rotations since A_f's step (node rotations as in
 ///    nodeRotations(), from the step's element rotations), so the factor follows the tissue's
 ///    rotations (the liver scenes' tissue settling under gravity: 14-21 % of the steps
-///    factorise instead of 47-57 % unwarped, README "Soft tissue"). The warm start is
+///    factorise instead of 47-57 % unwarped, docs/measurements.md, "Soft tissue"). The warm start is
 ///    extrapolated from the last two steps' dv. The factor is refreshed synchronously (the
 ///    current A is factorised and solved directly) when PCG does not reach cg_tolerance within
 ///    refactor_iterations iterations, when the previous step needed more than half of them,
@@ -185,7 +185,7 @@ class FemBody {
   /// `coherence` (optional): per node, |sum v_e R_e|_F / (sqrt(3) sum v_e) over the elements
   /// (group, smoothing passes) the average uses: 1 when they all rotate alike, smaller as their
   /// rotations spread (about 1 - theta^2/3 for a spread of theta rad). The warped compliance's
-  /// error grows like the spread squared (README "Accuracy against time": elements crushed by a
+  /// error grows like the spread squared (docs/measurements.md, "Accuracy against time": elements crushed by a
   /// grasp). Throws tactus::Error when smoothing_passes < 0.
   void nodeRotations(std::vector<Eigen::Matrix3d>& out,
                      std::vector<double>* coherence = nullptr, int smoothing_passes = 0) const;

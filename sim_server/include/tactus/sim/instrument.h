@@ -126,14 +126,14 @@ inline constexpr double kMaxTargetAngularSpeedRadps = 100.0;
 /// every trajectory key, grown by kWorkspaceMarginM on every side.
 BoxSpec instrumentWorkspace(const InstrumentSpec& spec, const Eigen::AlignedBox3d& scene_bounds);
 
-/// The liver scenes' grasper and approach before the flat pads (issue 15), for the tests and the
+/// The liver scenes' grasper and approach before the flat pads, for the tests and the
 /// accuracy study calibrated on it: round kinematic jaws of radius 2 mm with 8 samples each,
 /// closing to 0.25, no contact compliance, and the trajectory keys at x = 0.100 m (the pads'
 /// grasp point) moved back to the former 0.107 m.
 void useFormerRoundJaws(SceneSpec& spec);
 
 /// scenes/liver_grasp.yaml's script before its approach turned 60 deg toward the lobe's mass
-/// (issue 15; README.md "Flat jaw pads"): the tool's jaws along world -x at y = 10 mm, z = -4 mm,
+/// (docs/measurements.md, "Grasps"): the tool's jaws along world -x at y = 10 mm, z = -4 mm,
 /// the hinge from x = 135 mm to 100 mm, closing, a 2 cm lift, the hold, the release. For the
 /// tests and the accuracy study written for it (useFormerRoundJaws then moves its grasp to the
 /// round jaws' 107 mm).

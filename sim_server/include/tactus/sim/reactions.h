@@ -1,5 +1,5 @@
 #pragma once
-// Reaction forces (issue 20, item 4; docs/design.md, "Reaction forces"): what holds the tissues,
+// Reaction forces (docs/design.md, "Reaction forces"): what holds the tissues,
 // so equilibrium can be checked (weight = reactions) and a bench-top load read off.
 //
 // All forces are those applied TO the tissues [N]:

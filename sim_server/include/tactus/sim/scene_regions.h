@@ -1,5 +1,5 @@
 #pragma once
-// Scene description, the parts of issue 20 (organs touch): node regions (selectors for fixed
+// Scene description, organs touching: node regions (selectors for fixed
 // nodes and loads) and static obstacles. Included by scene.h; parsed by scene_regions.cpp and
 // scene_obstacles.cpp; documented in scenes/README.md ("Regions", "Obstacles").
 
