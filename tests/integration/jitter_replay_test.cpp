@@ -394,7 +394,7 @@ TEST(JitterReplay, TheBenchPublishesObstacleContactsBeyondTheInstrumentsCapacity
   writeAll(scene_file, scene);
   const fs::path snap = dir.path() / "side.snap";
   const fs::path log = dir.path() / "bench.log";
-  const std::string cmd = std::string(TACTUS_BINARY_DIR) + "/sim_server/tools/tactus-bench '" +
+  const std::string cmd = std::string(TACTUS_BINARY_DIR) + "/tools/bench/tactus-bench '" +
                           scene_file.string() + "' --steps 20 --record-snapshots '" +
                           snap.string() + "' > '" + log.string() + "' 2>&1";
   ASSERT_EQ(runBounded(cmd, 120), 0) << readAll(log);
