@@ -416,7 +416,7 @@ class HandBridgeFaultTest : public HandFaultTest {
     ::close(probe);
     startHaptic({"--device", "bridge", "--device-option", "port=" + std::to_string(port_)});
     std::this_thread::sleep_for(200ms);   // (it binds before the client sends)
-    client_.emplace(std::vector<std::string>{kBin + "/device/bridge/tactus-bridge-client",
+    client_.emplace(std::vector<std::string>{kBin + "/tools/bridge_client/tactus-bridge-client",
                                              "--port", std::to_string(port_), "--device-option",
                                              "trajectory=" + (dir_ / "path.csv").string(),
                                              "--device-option", "stiffness=2000"},
@@ -555,7 +555,7 @@ std::array<double, 3> lastPrintedForce(const std::string& out) {
 TEST(BridgeClientTimeout, TheReferenceClientRendersZeroOnceTheServerIsGone) {
   FakeBridgeServer server;
   const auto dir = std::filesystem::path(::testing::TempDir());
-  ChildProcess client({kBin + "/device/bridge/tactus-bridge-client", "--port",
+  ChildProcess client({kBin + "/tools/bridge_client/tactus-bridge-client", "--port",
                        std::to_string(server.port()), "--status", "--duration", "3"},
                       dir / "bridge_client.out", dir / "bridge_client.err");
   EXPECT_GT(server.answerUntil(shared::monotonicNs() + 1'200'000'000), 100);
