@@ -1,6 +1,7 @@
 #include "tactus/shared/nsgs.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <ctime>
 #include <limits>
@@ -8,6 +9,7 @@
 #include "nsgs_anderson.h"
 #include "nsgs_local.h"
 #include "nsgs_storage.h"
+#include "tactus/shared/nsgs_clock.h"
 
 namespace tactus::shared {
 namespace {
@@ -15,7 +17,14 @@ namespace {
 using detail::BlockW;
 using detail::DenseW;
 
+// The solve's clock (nsgs_clock.h): CLOCK_MONOTONIC unless a test has set a scripted one.
+std::atomic<NsgsClockFn> g_test_clock{nullptr};
+std::atomic<void*> g_test_clock_context{nullptr};
+
 std::int64_t nowNs() noexcept {
+  if (const NsgsClockFn clock = g_test_clock.load(std::memory_order_relaxed)) {
+    return clock(g_test_clock_context.load(std::memory_order_relaxed));
+  }
   timespec ts{};
   clock_gettime(CLOCK_MONOTONIC, &ts);
   return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
@@ -334,15 +343,19 @@ NsgsResult solveWith(const ContactProblemView& p, const Storage& w, const NsgsSe
                             workspace.anderson.data());
   std::int64_t sweep_start = nowNs();
   std::int64_t last_sweep_ns = 0;
+  std::int64_t last_anderson_ns = 0;   // duration of the last Anderson step
+  bool checked = false;                // result.error holds a check's error
   for (int sweep = 1; sweep <= max_sweeps; ++sweep) {
     anderson.keepInput(f);
     bool stopped_inside = false;
+    int visited = 0;
     for (int i = 0; i < nc; ++i) {
-      if (deadline > 0 && i % kDeadlineCheckContacts == kDeadlineCheckContacts - 1 &&
-          pastDeadline()) {
+      // a look at the clock before every block of contacts, the sweep's first included
+      if (deadline > 0 && i % kDeadlineCheckContacts == 0 && pastDeadline()) {
         stopped_inside = true;
         break;
       }
+      ++visited;
       const int r = p.row_offset[i];
       const int k = p.row_offset[i + 1] - r;
       double* fi = f + r;
@@ -367,7 +380,8 @@ NsgsResult solveWith(const ContactProblemView& p, const Storage& w, const NsgsSe
         w.addColumns(i, r, k, df, delta);
       }
     }
-    result.sweeps = sweep;
+    // a sweep stopped before its first contact is not counted
+    result.sweeps = stopped_inside && visited == 0 ? sweep - 1 : sweep;
     const std::int64_t sweep_end = nowNs();
     last_sweep_ns = sweep_end - sweep_start;
     sweep_start = sweep_end;
@@ -376,7 +390,13 @@ NsgsResult solveWith(const ContactProblemView& p, const Storage& w, const NsgsSe
         over_deadline || (settings.time_budget_ns > 0 && sweep_end - t0 >= settings.time_budget_ns);
     const bool last = sweep == max_sweeps || over_budget;
     if (sweep % check_every != 0 && !last) continue;
-    if (row_gather) w.computeDelta(f, delta);
+    if (row_gather) {
+      // the check's W pass is not started once the deadline has been seen passed: the error
+      // stays the last check's (+inf before any) and W f + q is not formed
+      if (over_deadline) return stopAtDeadline(checked ? result.error : kInf);
+      w.computeDelta(f, delta);
+    }
+    checked = true;
     result.error = normalisedError(errorParts(p, f, delta), q2);
     if (!std::isfinite(result.error)) return fail(NsgsStatus::kNonFinite);
     if (result.error <= settings.tolerance && !row_gather) {
@@ -400,8 +420,21 @@ NsgsResult solveWith(const ContactProblemView& p, const Storage& w, const NsgsSe
     }
     best_error = std::min(best_error, result.error);
     if (anderson.on()) {
+      // The step (O(depth m), not interruptible: f and delta move together) only when it fits
+      // before the deadline. Its cost is affine in the history's length, so at most about twice
+      // the last step's; a sweep bounds it too while the history is short. When it does not fit,
+      // the next sweep starts from this one's output (plain, stopped at its blocks' checks).
+      const std::int64_t step_start = deadline > 0 ? nowNs() : 0;
+      if (deadline > 0 &&
+          step_start + std::max(2 * last_anderson_ns, last_sweep_ns) >= deadline) {
+        continue;
+      }
       // the rule watches plain sweeps only; once the acceleration turns off it starts afresh
       if (!anderson.step(result.error, f, delta)) restartRule(sweep);
+      if (deadline > 0) {
+        sweep_start = nowNs();
+        last_anderson_ns = sweep_start - step_start;
+      }
       continue;
     }
     bool repeats = false;   // at a lag of 2..kCyclePeriods checks but not at a lag of 1
@@ -468,6 +501,11 @@ NsgsResult solveWith(const ContactProblemView& p, const Storage& w, const NsgsSe
 }
 
 }  // namespace
+
+void setNsgsClockForTesting(NsgsClockFn clock, void* context) noexcept {
+  g_test_clock_context.store(context, std::memory_order_relaxed);
+  g_test_clock.store(clock, std::memory_order_relaxed);
+}
 
 NsgsResult solveNsgs(const ContactProblemView& problem, const NsgsSettings& settings,
                      NsgsWorkspace& workspace, double* f) noexcept {

@@ -20,6 +20,7 @@
 
 #include "tactus/shared/fclib.h"
 #include "tactus/shared/nsgs.h"
+#include "tactus/shared/nsgs_clock.h"
 
 #include "../../support/fclib_set.h"
 #include "../../support/sphere_pile.h"
@@ -543,34 +544,183 @@ TEST(NsgsSettingsTest, ACurrentDeltaSkipsTheEntryPassAndGivesTheSameSolution) {
 }
 
 // An absolute deadline already past: no entry pass over W is started (kTimeBudget, f untouched);
-// with W f + q current the first sweep stops after its first look at the clock, every
-// kDeadlineCheckContacts contacts, leaving a consistent iterate (delta = W f + q).
-TEST(NsgsSettingsTest, ADeadlineIsCheckedWithinTheSweep) {
+// with W f + q current, no contact is visited either: the clock is looked at before every block
+// of kDeadlineCheckContacts contacts, the first one included. With and without Anderson
+// acceleration. (Before that look existed, a tick whose deadline had passed still solved 7
+// contacts of a 900-row problem.) Then a deadline inside the first sweep stops it there, leaving
+// a consistent iterate (delta = W f + q).
+TEST(NsgsSettingsTest, APastDeadlineVisitsNoContactWithOrWithoutAnderson) {
   const FclibProblem p = boxStacks();
   ASSERT_GT(p.contacts, 2 * kDeadlineCheckContacts);
-  NsgsWorkspace ws(p.rows(), p.contacts);
-  NsgsSettings s;
-  s.tolerance = 1e-12;
-  s.max_sweeps = 1000;
-  s.deadline_ns = 1;   // long past
-  std::vector<double> f(p.rows(), 0.0);
-  NsgsResult r = solveNsgs(p.view(), s, ws, f.data());
-  EXPECT_EQ(r.status, NsgsStatus::kTimeBudget);
-  EXPECT_EQ(r.sweeps, 0);
-  EXPECT_EQ(std::count(f.begin(), f.end(), 0.0), static_cast<long>(f.size()));
-  // delta = W f + q for f = 0 is q
-  std::copy(p.q.begin(), p.q.end(), ws.delta.begin());
-  s.delta_is_current = true;
-  r = solveNsgs(p.view(), s, ws, f.data());
-  EXPECT_EQ(r.status, NsgsStatus::kTimeBudget);
-  EXPECT_EQ(r.sweeps, 1);
-  int touched = 0;
-  for (int c = 0; c < p.contacts; ++c) touched += f[3 * c] != 0.0 ? 1 : 0;
-  EXPECT_GT(touched, 0);
-  EXPECT_LT(touched, kDeadlineCheckContacts);   // stopped inside the first sweep
-  std::vector<double> delta(p.rows());
-  (void)naturalMapError(p.view(), f.data(), delta.data());
-  for (int j = 0; j < p.rows(); ++j) EXPECT_NEAR(ws.delta[j], delta[j], 1e-12);
+  for (const int depth : {0, kMaxAndersonDepth}) {
+    SCOPED_TRACE(depth);
+    NsgsWorkspace ws(p.rows(), p.contacts);
+    NsgsSettings s;
+    s.tolerance = 1e-12;
+    s.max_sweeps = 1000;
+    s.anderson_depth = depth;
+    s.deadline_ns = 1;   // long past
+    std::vector<double> f(p.rows(), 0.0);
+    NsgsResult r = solveNsgs(p.view(), s, ws, f.data());
+    EXPECT_EQ(r.status, NsgsStatus::kTimeBudget);
+    EXPECT_EQ(r.sweeps, 0);
+    EXPECT_EQ(std::count(f.begin(), f.end(), 0.0), static_cast<long>(f.size()));
+    // delta = W f + q for f = 0 is q
+    std::copy(p.q.begin(), p.q.end(), ws.delta.begin());
+    s.delta_is_current = true;
+    r = solveNsgs(p.view(), s, ws, f.data());
+    EXPECT_EQ(r.status, NsgsStatus::kTimeBudget);
+    EXPECT_EQ(r.sweeps, 0);
+    EXPECT_EQ(std::count(f.begin(), f.end(), 0.0), static_cast<long>(f.size()));
+    for (int j = 0; j < p.rows(); ++j) EXPECT_EQ(ws.delta[j], p.q[j]);
+  }
+}
+
+// The clock solveNsgs reads (nsgs_clock.h) set to a scripted one for a scope.
+struct ScopedNsgsClock {
+  ScopedNsgsClock(NsgsClockFn clock, void* context) { setNsgsClockForTesting(clock, context); }
+  ~ScopedNsgsClock() { setNsgsClockForTesting(nullptr, nullptr); }
+  ScopedNsgsClock(const ScopedNsgsClock&) = delete;
+  ScopedNsgsClock& operator=(const ScopedNsgsClock&) = delete;
+};
+
+// A scripted clock for solveNsgs (nsgs_clock.h): each read advances it by kTickNs; at the first read
+// at or past `deadline_ns` it keeps a copy of f and delta, so a test can tell whether the solve
+// wrote anything after it saw the deadline pass. Allocation-free (the copies are sized first).
+struct ScriptedClock {
+  static constexpr std::int64_t kTickNs = 1000;
+  std::int64_t now_ns = 0;
+  std::int64_t deadline_ns = 0;
+  const double* f = nullptr;
+  const double* delta = nullptr;
+  std::vector<double> f_seen, delta_seen;
+  bool passed = false;
+  int reads = 0;
+  static std::int64_t read(void* context) noexcept {
+    auto& c = *static_cast<ScriptedClock*>(context);
+    c.now_ns += kTickNs;
+    ++c.reads;
+    if (!c.passed && c.now_ns >= c.deadline_ns) {
+      c.passed = true;
+      std::copy(c.f, c.f + c.f_seen.size(), c.f_seen.begin());
+      std::copy(c.delta, c.delta + c.delta_seen.size(), c.delta_seen.begin());
+    }
+    return c.now_ns;
+  }
+};
+
+// Wherever the deadline falls (at every clock read of the solve in turn: inside a sweep, at its
+// end, before an Anderson step or its restart, before the confirmation pass), once the solve has
+// seen it pass it writes nothing more: f and delta = W f + q are returned as they were then, with
+// kTimeBudget, and they are consistent. With and without Anderson acceleration, from zero and
+// with W f + q current. Counts work (what was written), not time.
+TEST(NsgsSettingsTest, NothingIsWrittenAfterTheDeadlineIsSeen) {
+  const FclibProblem p = boxStacks();
+  const int m = p.rows();
+  int stopped = 0, anderson_stops = 0;
+  for (const int depth : {0, kMaxAndersonDepth}) {
+    for (const bool current : {false, true}) {
+      for (int k = 1; k <= 100; ++k) {
+        SCOPED_TRACE(testing::Message() << "depth " << depth << " current " << current
+                                        << " deadline at read " << k);
+        NsgsWorkspace ws(m, p.contacts);
+        std::vector<double> f(static_cast<std::size_t>(m), 0.0);
+        std::copy(p.q.begin(), p.q.end(), ws.delta.begin());   // W f + q for f = 0
+        ScriptedClock clock;
+        clock.deadline_ns = k * ScriptedClock::kTickNs;
+        clock.f = f.data();
+        clock.delta = ws.delta.data();
+        clock.f_seen.assign(f.size(), 0.0);
+        clock.delta_seen.assign(f.size(), 0.0);
+        NsgsSettings s;
+        s.tolerance = 1e-12;
+        s.max_sweeps = 1000;
+        s.anderson_depth = depth;
+        s.delta_is_current = current;
+        s.deadline_ns = clock.deadline_ns;
+        const ScopedNsgsClock scripted(&ScriptedClock::read, &clock);
+        const NsgsResult r = solveNsgs(p.view(), s, ws, f.data());
+        ASSERT_TRUE(clock.passed);   // 1e-12 is not reached in 100 reads
+        EXPECT_EQ(r.status, NsgsStatus::kTimeBudget);
+        for (int j = 0; j < m; ++j) {
+          ASSERT_EQ(f[j], clock.f_seen[j]) << "row " << j;
+          ASSERT_EQ(ws.delta[j], clock.delta_seen[j]) << "row " << j;
+        }
+        std::vector<double> delta(f.size());
+        (void)naturalMapError(p.view(), f.data(), delta.data());
+        for (int j = 0; j < m; ++j) ASSERT_NEAR(ws.delta[j], delta[j], 1e-10) << "row " << j;
+        ++stopped;
+        anderson_stops += depth > 0 && r.sweeps > 2 ? 1 : 0;
+      }
+    }
+  }
+  EXPECT_EQ(stopped, 4 * 100);
+  EXPECT_GT(anderson_stops, 50);    // the deadlines fell among Anderson steps too
+}
+
+// A clock that stands for the work done: each read advances it by one unit for the read and one
+// per contact whose force changed since the previous read (an Anderson step that moves every
+// contact costs as much as a sweep; a block of contacts its size). The solve's last read (its
+// elapsed time, at every exit) therefore shows all the work it did.
+struct WorkClock {
+  std::int64_t now = 0;
+  const double* f = nullptr;
+  const int* row_offset = nullptr;
+  int contacts = 0;
+  std::vector<double> f_last;
+  static std::int64_t read(void* context) noexcept {
+    auto& c = *static_cast<WorkClock*>(context);
+    c.now += 1;
+    for (int i = 0; i < c.contacts; ++i) {
+      bool changed = false;
+      for (int r = c.row_offset[i]; r < c.row_offset[i + 1]; ++r) {
+        changed = changed || c.f[r] != c.f_last[static_cast<std::size_t>(r)];
+        c.f_last[static_cast<std::size_t>(r)] = c.f[r];
+      }
+      c.now += changed ? 1 : 0;
+    }
+    return c.now;
+  }
+};
+
+// Wherever the deadline falls in the first sweeps (every unit of the work clock in turn), the
+// work done past it is at most one block of kDeadlineCheckContacts contacts and the reads that
+// stop the solve: never an Anderson step nor the start of a sweep before a look at the clock.
+// With and without Anderson acceleration. (With Anderson depth 8 the tick's fallback used to mix
+// every contact and solve 7 more after its last look at the clock, the whole step past the
+// deadline when it fell just after a sweep's end.)
+TEST(NsgsSettingsTest, WorkPastTheDeadlineIsAtMostOneBlockOfContacts) {
+  const FclibProblem p = boxStacks();
+  const int m = p.rows();
+  constexpr std::int64_t kReads = 4;   // the stop's reads: sweep end, guard, elapsed (+1 spare)
+  for (const int depth : {0, kMaxAndersonDepth}) {
+    int anderson_steps_fitted = 0;
+    for (std::int64_t deadline = 2; deadline <= 4 * p.contacts; ++deadline) {
+      SCOPED_TRACE(testing::Message() << "depth " << depth << " deadline " << deadline);
+      NsgsWorkspace ws(m, p.contacts);
+      std::vector<double> f(static_cast<std::size_t>(m), 0.0);
+      std::copy(p.q.begin(), p.q.end(), ws.delta.begin());   // W f + q for f = 0
+      WorkClock clock;
+      clock.f = f.data();
+      clock.row_offset = p.row_offset.data();
+      clock.contacts = p.contacts;
+      clock.f_last.assign(f.size(), 0.0);
+      NsgsSettings s;
+      s.tolerance = 1e-14;
+      s.max_sweeps = 1000;
+      s.anderson_depth = depth;
+      s.delta_is_current = true;
+      s.deadline_ns = deadline;
+      const ScopedNsgsClock scripted(&WorkClock::read, &clock);
+      const NsgsResult r = solveNsgs(p.view(), s, ws, f.data());
+      ASSERT_EQ(r.status, NsgsStatus::kTimeBudget);
+      ASSERT_LE(clock.now - deadline, kDeadlineCheckContacts + kReads);
+      anderson_steps_fitted += depth > 0 && r.sweeps >= 3 ? 1 : 0;
+    }
+    if (depth > 0) {
+      EXPECT_GT(anderson_steps_fitted, 0);   // deadlines after mixed sweeps too
+    }
+  }
 }
 
 TEST(NsgsSettingsTest, MaxSweepsTimeBudgetAndCheckEvery) {
