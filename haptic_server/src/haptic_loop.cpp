@@ -86,6 +86,7 @@ LocalModelSettings HapticSettings::localModel() const noexcept {
   m.tolerance = tolerance;
   m.max_sweeps = max_sweeps;
   m.anderson_depth = anderson_depth;
+  m.reduced_fallback = reduced_fallback;
   return m;
 }
 

@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <string>
 
 #include "tactus/shared/clock.h"
@@ -57,6 +58,20 @@ void displacementsOf(const PreparedSnapshot& p, const shared::Pose* const* poses
     const shared::Vector6d d = shared::poseDifference(*poses[k], x_star[k]);
     for (int j = 0; j < 6; ++j) dx[6 * k + static_cast<std::size_t>(j)] = d[j];
   }
+}
+
+// NSGS settings of the tick's re-solve.
+shared::NsgsSettings tickNsgsSettings(const LocalModelSettings& settings,
+                                      shared::NsgsCoupling coupling, std::int64_t deadline_ns,
+                                      bool delta_current) noexcept {
+  shared::NsgsSettings ns;
+  ns.tolerance = settings.tolerance;
+  ns.max_sweeps = settings.max_sweeps;
+  ns.anderson_depth = settings.anderson_depth;
+  ns.coupling = coupling;
+  ns.deadline_ns = deadline_ns;
+  ns.delta_is_current = delta_current;
+  return ns;
 }
 
 void checkRange(const char* name, double v, double lo, bool lo_open, double hi) {
@@ -166,6 +181,12 @@ void PreparedSnapshot::resize(int max_rows, int max_contacts) {
   state_.assign(c, ContactState::kSeparated);
   F_.assign(r * kMaxCols, 0.0);
   G_.assign(r * kMaxCols, 0.0);
+  order_.assign(c, 0);
+  order_reach_.assign(c, 0.0);
+  ordered_row_offset_.assign(c + 1, 0);
+  ordered_row_.assign(r, 0);
+  ordered_mu_.assign(c, 0.0);
+  Wo_.assign(r * r, 0.0);
 }
 
 shared::ContactProblemView PreparedSnapshot::problem() const noexcept {
@@ -185,7 +206,8 @@ SnapshotPreparation::SnapshotPreparation(int max_rows, int max_contacts)
       reach_offset_(static_cast<std::size_t>(std::max(max_contacts, 0)) + 1, 0),
       dq_(static_cast<std::size_t>(std::max(max_rows, 0)), 0.0),
       active_(static_cast<std::size_t>(std::max(max_rows, 0)), 0),
-      pivots_(static_cast<std::size_t>(std::max(max_rows, 0)), 0) {}
+      pivots_(static_cast<std::size_t>(std::max(max_rows, 0)), 0),
+      sort_(static_cast<std::size_t>(std::max(max_contacts, 0))) {}
 
 void SnapshotPreparation::reset() noexcept {
   warm_start_.reset();
@@ -200,6 +222,7 @@ bool SnapshotPreparation::copyAndCheck(const shared::SnapshotView& snap,
   out.rows_ = 0;
   out.contacts_ = 0;
   out.linearized_ = false;
+  out.ordered_count_ = 0;
   out.prepared_converged_ = false;
   out.prepared_sweeps_ = 0;
   const bool usable = (hdr.flags & shared::kSnapshotValid) != 0 &&
@@ -390,6 +413,7 @@ PrepareStatus SnapshotPreparation::prepare(const shared::SnapshotView& snap,
                       (settings.kind == LocalModelKind::kAutomatic &&
                        m >= settings.automatic_min_rows);
   if (wanted && out.prepared_converged_) linearize(settings, out);
+  if (out.linearized_) orderForReducedFallback(settings, out);
   const std::int64_t t4 = shared::monotonicNs();
   out.linearize_ns_ = t4 - t3;
   out.prepare_ns_ = t4 - t0;
@@ -519,6 +543,59 @@ void SnapshotPreparation::linearize(const LocalModelSettings& settings,
   out.linearized_ = finiteAll(out.G_.data(), static_cast<std::size_t>(m) * kMaxCols);
 }
 
+// The reduced fallback's order (local_model.h): the reached contacts by the device displacement
+// at which each can first carry force, and W copied in that order.
+void SnapshotPreparation::orderForReducedFallback(const LocalModelSettings& settings,
+                                                  PreparedSnapshot& out) noexcept {
+  const int m = out.rows_;
+  const int c_begin = out.reach_only_ ? out.reach_begin_ : 0;
+  const int c_end = out.reach_only_ ? out.reach_end_ : out.contacts_;
+  const int n = c_end - c_begin;
+  const int* ro = out.row_offset_.data();
+  const double lever = settings.max_translation_m > 0.0 && settings.max_rotation_rad > 0.0
+                           ? settings.max_translation_m / settings.max_rotation_rad
+                           : 0.04;
+  out.ordered_lever_m_ = lever;
+  for (int c = c_begin; c < c_end; ++c) {
+    double reach = 0.0;
+    if (out.state_[static_cast<std::size_t>(c)] == ContactState::kSeparated) {
+      // the gap over its closing rate per metre of displacement (G's normal row)
+      const int r = ro[c];
+      const double gap = out.delta0_[static_cast<std::size_t>(r)];
+      const double* g = out.G_.data() + static_cast<std::ptrdiff_t>(r) * kMaxCols;
+      double rate = 0.0;
+      for (int t = 0; t < out.tools_; ++t) {
+        rate += std::hypot(g[6 * t], g[6 * t + 1], g[6 * t + 2]) +
+                std::hypot(g[6 * t + 3], g[6 * t + 4], g[6 * t + 5]) / lever;
+      }
+      reach = gap <= 0.0 ? 0.0
+              : rate > 0.0 ? gap / rate
+                           : std::numeric_limits<double>::infinity();
+    }
+    sort_[static_cast<std::size_t>(c - c_begin)] = {reach, c};
+  }
+  std::sort(sort_.begin(), sort_.begin() + n);
+  int rows = 0;
+  for (int i = 0; i < n; ++i) {
+    const int c = sort_[static_cast<std::size_t>(i)].second;
+    const auto k = static_cast<std::size_t>(i);
+    out.order_[k] = c;
+    out.order_reach_[k] = sort_[k].first;
+    out.ordered_mu_[k] = out.mu_[static_cast<std::size_t>(c)];
+    out.ordered_row_offset_[k] = rows;
+    for (int r = ro[c]; r < ro[c + 1]; ++r) out.ordered_row_[static_cast<std::size_t>(rows++)] = r;
+  }
+  out.ordered_row_offset_[static_cast<std::size_t>(n)] = rows;
+  const double* W = out.W_.data();
+  for (int i = 0; i < rows; ++i) {
+    const double* src = W + static_cast<std::ptrdiff_t>(out.ordered_row_[static_cast<std::size_t>(i)]) * m;
+    double* dst = out.Wo_.data() + static_cast<std::ptrdiff_t>(i) * rows;
+    for (int j = 0; j < rows; ++j) dst[j] = src[out.ordered_row_[static_cast<std::size_t>(j)]];
+  }
+  out.ordered_rows_ = rows;
+  out.ordered_count_ = n;
+}
+
 // ---------------------------------------------------------------------------------------------
 // LocalModel
 
@@ -528,7 +605,10 @@ LocalModel::LocalModel(int max_rows, int max_contacts)
       f_(static_cast<std::size_t>(std::max(max_rows, 0)), 0.0),
       delta_free_(static_cast<std::size_t>(std::max(max_rows, 0)), 0.0),
       last_delta_free_(static_cast<std::size_t>(std::max(max_rows, 0)), 0.0),
-      reach_offset_(static_cast<std::size_t>(std::max(max_contacts, 0)) + 1, 0) {}
+      reach_offset_(static_cast<std::size_t>(std::max(max_contacts, 0)) + 1, 0),
+      fo_(static_cast<std::size_t>(std::max(max_rows, 0)), 0.0),
+      qo_(static_cast<std::size_t>(std::max(max_rows, 0)), 0.0),
+      scratch_(static_cast<std::size_t>(std::max(max_rows, 0)), 0.0) {}
 
 void LocalModel::adopt(const PreparedSnapshot* prepared) noexcept {
   prepared_ = prepared;
@@ -684,14 +764,94 @@ shared::NsgsResult LocalModel::resolve(const LocalModelSettings& settings,
         shared::contiguousSubproblem(problem, p.reach_begin_, p.reach_end_, reach_offset_.data());
   }
   if (p.use_blocks_) problem.blocks = &p.blocks_;
-  shared::NsgsSettings ns;
-  ns.tolerance = settings.tolerance;
-  ns.max_sweeps = settings.max_sweeps;
-  ns.anderson_depth = settings.anderson_depth;
-  ns.coupling = p.coupling_;
-  ns.deadline_ns = deadline_ns;
-  ns.delta_is_current = delta_current;
+  const shared::NsgsSettings ns =
+      tickNsgsSettings(settings, p.coupling_, deadline_ns, delta_current);
   return shared::solveNsgs(problem, ns, workspace_, f_.data() + r_begin);
+}
+
+// The reduced fallback (local_model.h): from the linear prediction (f_, and W f + delta_free in
+// workspace_.delta), NSGS on the leading ordered contacts, then the check of the others.
+shared::NsgsResult LocalModel::resolveReduced(const LocalModelSettings& settings,
+                                              std::int64_t deadline_ns,
+                                              int& solved_contacts) noexcept {
+  const PreparedSnapshot& p = *prepared_;
+  const int n = p.ordered_count_;
+  const int rows = p.ordered_rows_;
+  const int* oro = p.ordered_row_offset_.data();
+  const int* orow = p.ordered_row_.data();
+  const double* Wo = p.Wo_.data();
+  const int r_begin = p.reach_only_ ? p.row_offset_[static_cast<std::size_t>(p.reach_begin_)] : 0;
+  // this tick's displacement from the linearisation point, as orderedReach() measures it
+  double reach = 0.0;
+  for (int t = 0; t < p.tools_; ++t) {
+    const auto a = static_cast<std::size_t>(6 * t);
+    const double tr = std::hypot(dx_[a] - p.dx0_[a], dx_[a + 1] - p.dx0_[a + 1],
+                                 dx_[a + 2] - p.dx0_[a + 2]);
+    const double rot = std::hypot(dx_[a + 3] - p.dx0_[a + 3], dx_[a + 4] - p.dx0_[a + 4],
+                                  dx_[a + 5] - p.dx0_[a + 5]);
+    reach = std::max({reach, tr, p.ordered_lever_m_ * rot});
+  }
+  reach *= kReducedReachFactor;
+  int k = 0;
+  while (k < n && p.order_reach_[static_cast<std::size_t>(k)] <= reach) ++k;
+  // the prediction in the order (delta through scratch_: workspace_.delta is overwritten)
+  double* delta = workspace_.delta.data();
+  for (int j = 0; j < rows; ++j) {
+    const auto row = static_cast<std::size_t>(orow[j]);
+    fo_[static_cast<std::size_t>(j)] = f_[row];
+    qo_[static_cast<std::size_t>(j)] = delta_free_[row];
+    scratch_[static_cast<std::size_t>(j)] = delta[orow[j] - r_begin];
+  }
+  std::copy_n(scratch_.data(), rows, delta);
+  shared::NsgsSettings ns = tickNsgsSettings(settings, p.coupling_, deadline_ns, true);
+  // (W f + q) on ordered row j, f on the first rk ordered rows
+  auto rowValue = [&](int j, int rk) {
+    const double* w = Wo + static_cast<std::ptrdiff_t>(j) * rows;
+    double d = qo_[static_cast<std::size_t>(j)];
+    for (int a = 0; a < rk; ++a) d += w[a] * fo_[static_cast<std::size_t>(a)];
+    return d;
+  };
+  shared::NsgsResult res;
+  res.status = shared::NsgsStatus::kConverged;
+  int sweeps = 0;
+  constexpr int kCheckClockEvery = 16;   // contacts of the check between looks at the clock
+  for (;;) {
+    const int rk = oro[k];
+    if (k > 0) {
+      const shared::ContactProblemView view = shared::denseProblemView(
+          k, rk, oro, Wo, rows, qo_.data(), p.ordered_mu_.data());
+      ns.max_sweeps = std::max(settings.max_sweeps - sweeps, 1);
+      res = shared::solveNsgs(view, ns, workspace_, fo_.data());
+      sweeps += res.sweeps;
+      if (res.status != shared::NsgsStatus::kConverged) break;
+    }
+    // the contacts left out: still open at this solution (then f = 0 is theirs)?
+    int closed = -1;
+    for (int i = k; i < n && closed < 0; ++i) {
+      if (deadline_ns > 0 && (i - k) % kCheckClockEvery == kCheckClockEvery - 1 &&
+          shared::monotonicNs() >= deadline_ns) {
+        res.status = shared::NsgsStatus::kTimeBudget;
+        break;
+      }
+      if (rowValue(oro[i], rk) < 0.0) closed = i;
+    }
+    if (closed < 0 || res.status != shared::NsgsStatus::kConverged) break;
+    // take in the contacts up to the closed one, at zero force: delta = W f + q on their rows
+    const int k2 = closed + 1;
+    for (int j = rk; j < oro[k2]; ++j) {
+      delta[j] = rowValue(j, rk);
+      fo_[static_cast<std::size_t>(j)] = 0.0;
+    }
+    k = k2;
+  }
+  // back to the rows (the contacts left out at zero)
+  const int rk = oro[k];
+  for (int j = 0; j < rows; ++j) {
+    f_[static_cast<std::size_t>(orow[j])] = j < rk ? fo_[static_cast<std::size_t>(j)] : 0.0;
+  }
+  res.sweeps = sweeps;
+  solved_contacts = k;
+  return res;
 }
 
 LocalModelResult LocalModel::solve(DevicePoses poses, const LocalModelSettings& settings,
@@ -714,6 +874,7 @@ LocalModelResult LocalModel::solve(DevicePoses poses, const LocalModelSettings& 
       p.reach_only_ ? p.row_offset_[static_cast<std::size_t>(p.reach_end_)] : p.rows_;
   const bool linear = p.linearized_ && settings.kind != LocalModelKind::kFull;
   bool delta_current = false;
+  bool reduced = false;
   if (!linear && settings.kind != LocalModelKind::kFull &&
       (settings.kind == LocalModelKind::kLinearized ||
        p.rows_ >= settings.automatic_min_rows)) {
@@ -734,6 +895,7 @@ LocalModelResult LocalModel::solve(DevicePoses poses, const LocalModelSettings& 
     // fall back: NSGS from the prediction, whose W f + delta_free is in workspace_.delta
     delta_current = true;
     out.used = LocalModelUsed::kFallback;
+    reduced = settings.reduced_fallback && p.ordered_count_ > 0;
   } else {
     out.used = out.fallback == FallbackReason::kNotLinearized ? LocalModelUsed::kFallback
                                                                : LocalModelUsed::kFull;
@@ -747,7 +909,12 @@ LocalModelResult LocalModel::solve(DevicePoses poses, const LocalModelSettings& 
       delta_current = true;
     }
   }
-  const shared::NsgsResult res = resolve(settings, deadline_ns, delta_current);
+  int solved_contacts =
+      p.reach_only_ ? p.reach_end_ - p.reach_begin_ : p.contacts_;
+  const shared::NsgsResult res = reduced
+                                     ? resolveReduced(settings, deadline_ns, solved_contacts)
+                                     : resolve(settings, deadline_ns, delta_current);
+  out.solved_contacts = solved_contacts;
   std::copy_n(delta_free_.data(), p.rows_, last_delta_free_.data());
   out.status = res.status;
   out.sweeps = res.sweeps;

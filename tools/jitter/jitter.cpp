@@ -71,6 +71,7 @@ struct Options {
   int anderson_depth = 0;
   double snapshot_blend_ms = 0.0;
   std::string local_model = "automatic";
+  bool full_fallback = false;
   bool offline = false;
   double offline_latency_ms = 10.0;
   double budget_fraction = 0.4;
@@ -165,6 +166,7 @@ int run(const Options& o) {
     oo.settings.kind = *haptic::parseLocalModelKind(o.local_model);
     oo.settings.max_sweeps = o.sweeps;
     oo.settings.anderson_depth = o.anderson_depth;
+    oo.settings.reduced_fallback = !o.full_fallback;
     const OfflineReplayReport r = replayOffline(snaps, oo);
     const double n = static_cast<double>(std::max<std::uint64_t>(r.ticks, 1));
     std::printf("offline replay of %s: %zu snapshots, %.0f Hz, snapshots adopted %.1f ms after "
@@ -205,6 +207,7 @@ int run(const Options& o) {
     ro.anderson_depth = o.anderson_depth;
     ro.snapshot_blend_ms = o.snapshot_blend_ms;
     ro.local_model = *haptic::parseLocalModelKind(o.local_model);
+    ro.reduced_fallback = !o.full_fallback;
     ro.solve_budget_fraction = o.budget_fraction;
     replay_rig = std::make_unique<ReplayRig>(std::move(snaps), ro);
     period_ns = replay_rig->periodNs();
@@ -212,13 +215,14 @@ int run(const Options& o) {
         "replay: %zu snapshots from %s (%.2f s per pass%s), up to %d rows (%d contacts), "
         "%d device(s); "
         "loop %.0f Hz on core %d, SCHED_FIFO %d, %d sweeps max, deadline %.0f us, local model "
-        "%s; reader: %s; NSGS kernel %s\n",
+        "%s (%s fallback); reader: %s; NSGS kernel %s\n",
         replay_rig->snapshotCount(), o.replay.c_str(), 1e-9 * static_cast<double>(replay_rig->passNs()),
         o.loop_replay ? ", looping" : "", replay_rig->maxRows(), replay_rig->maxContacts(),
         replay_rig->devices(),
         o.rate_hz, core, o.priority, o.sweeps,
         o.budget_fraction * 1e-3 * static_cast<double>(period_ns), o.local_model.c_str(),
-        o.reader.c_str(), shared::nsgsKernelName(shared::nsgsKernel()));
+        o.full_fallback ? "full" : "reduced", o.reader.c_str(),
+        shared::nsgsKernelName(shared::nsgsKernel()));
     if (!o.loop_replay && shared::secondsToNs(o.duration_s) > replay_rig->passNs()) {
       std::printf(
           "note: the recording is shorter than --duration: after it the snapshot goes stale "
@@ -236,6 +240,7 @@ int run(const Options& o) {
     so.anderson_depth = o.anderson_depth;
     so.snapshot_blend_ms = o.snapshot_blend_ms;
     so.local_model = *haptic::parseLocalModelKind(o.local_model);
+    so.reduced_fallback = !o.full_fallback;
     so.solve_budget_fraction = o.budget_fraction;
     rig = std::make_unique<SyntheticRig>(so);
     period_ns = rig->periodNs();
@@ -455,6 +460,9 @@ int main(int argc, char** argv) {
                  "Synthetic/replay: the local model (haptic_server --local-model)")
       ->check(CLI::IsMember({"full", "linearized", "automatic"}))
       ->capture_default_str();
+  app.add_flag("--full-fallback", o.full_fallback,
+               "Synthetic/replay: where the linearisation does not hold, re-solve every reached "
+               "contact instead of the reduced problem (local_model.h)");
   app.add_flag("--offline", o.offline,
                "Replay: no real-time loop; tick the recording's timeline and compare the local "
                "model's force with the full problem solved to 1e-9 at the same poses");

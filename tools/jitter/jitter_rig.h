@@ -61,6 +61,7 @@ struct LoopRunOptions {
   double snapshot_blend_ms = 0.0;      ///< HapticSettings::snapshot_blend_ms
   double solve_budget_fraction = 0.4;  ///< the tick's deadline as a fraction of the period
   LocalModelKind local_model = LocalModelKind::kAutomatic;   ///< HapticSettings::local_model
+  bool reduced_fallback = true;        ///< HapticSettings::reduced_fallback
 };
 
 /// The loop's settings in an in-process mode.

@@ -32,6 +32,29 @@ struct Slot {
   shared::SnapshotView view() { return writer().view(); }
 };
 
+// A snapshot of one instrument with rows m and contacts nc (valid, with J, W symmetric).
+void startSnapshot(shared::SnapshotWriter& w, int m, int nc) {
+  ASSERT_TRUE(w.setSize(m, nc));
+  auto& h = w.header();
+  h.seq = 1;
+  h.t_ns = 1;
+  h.instruments = 1;
+  h.flags = shared::kSnapshotValid | shared::kSnapshotHasJacobian | shared::kSnapshotSymmetricW;
+}
+
+// Contact c on instrument 0 at x = 1 mm x c: normal +z, tangents x and y.
+void setContact(shared::SnapshotWriter& w, int c, double mu) {
+  w.contactId()[c] = static_cast<std::uint64_t>(c + 1);
+  w.contactInstrument()[c] = 0;
+  w.mu()[c] = mu;
+  for (int k = 0; k < 3; ++k) {
+    w.contactPoint()[3 * c + k] = k == 0 ? 1e-3 * c : 0.0;
+    w.contactNormal()[3 * c + k] = k == 2 ? 1.0 : 0.0;
+    w.contactTangent()[6 * c + k] = k == 0 ? 1.0 : 0.0;
+    w.contactTangent()[6 * c + 3 + k] = k == 1 ? 1.0 : 0.0;
+  }
+}
+
 // nc frictional contacts under one tool, W = a smooth tissue compliance (positive definite);
 // contact c is pressed in by depth(c) [m] (negative: a gap), its tangential free velocity
 // slide(c). Normals +z, tangents x and y; the rows move with the device's translation.
@@ -39,25 +62,10 @@ template <class Depth, class Slide>
 void fillProblem(Slot& slot, int nc, double mu, Depth depth, Slide slide, double range = 4.0) {
   shared::SnapshotWriter w = slot.writer();
   const int m = 3 * nc;
-  ASSERT_TRUE(w.setSize(m, nc));
-  auto& h = w.header();
-  h.seq = 1;
-  h.t_ns = 1;
-  h.instruments = 1;
-  h.flags = shared::kSnapshotValid | shared::kSnapshotHasJacobian | shared::kSnapshotSymmetricW;
+  startSnapshot(w, m, nc);
   const int ld = w.ld();
   for (int c = 0; c <= nc; ++c) w.rowOffset()[c] = 3 * c;
-  for (int c = 0; c < nc; ++c) {
-    w.contactId()[c] = static_cast<std::uint64_t>(c + 1);
-    w.contactInstrument()[c] = 0;
-    w.mu()[c] = mu;
-    for (int k = 0; k < 3; ++k) {
-      w.contactPoint()[3 * c + k] = k == 0 ? 1e-3 * c : 0.0;
-      w.contactNormal()[3 * c + k] = k == 2 ? 1.0 : 0.0;
-      w.contactTangent()[6 * c + k] = k == 0 ? 1.0 : 0.0;
-      w.contactTangent()[6 * c + 3 + k] = k == 1 ? 1.0 : 0.0;
-    }
-  }
+  for (int c = 0; c < nc; ++c) setContact(w, c, mu);
   for (int i = 0; i < m; ++i) {
     for (int j = 0; j < m; ++j) {
       const int ci = i / 3, cj = j / 3;
@@ -193,6 +201,77 @@ TEST(LocalModelTest, ItFallsBackToTheReSolveWhenTheActiveSetChanges) {
   const shared::Pose far = at(2e-6, 0, 0);
   const shared::Pose* p3[] = {&far};
   EXPECT_EQ(lin.solve(p3).used, LocalModelUsed::kFallback);
+}
+
+// Two normal-only contacts under one tool (W in N^-1 m, rows moving with the device's z): L is
+// pressed in by 10 um and lifts as the device rises; S is open by 20 um, held open by L's force
+// (W_SL < 0), and closes at 1 m/m of rise once L has lifted, five times faster than while L
+// pushes on it (the linearisation's closing rate).
+void fillLiftAndClose(Slot& slot) {
+  shared::SnapshotWriter w = slot.writer();
+  startSnapshot(w, 2, 2);
+  const int ld = w.ld();
+  const double W[2][2] = {{1e-3, -0.8e-3}, {-0.8e-3, 1e-3}};
+  const double q[2] = {-1e-5, 2.8e-5};
+  const double dq_dz[2] = {1.0, -1.0};
+  for (int c = 0; c < 2; ++c) {
+    w.rowOffset()[c] = c;
+    setContact(w, c, 0.0);
+    for (int j = 0; j < 2; ++j) w.W()[c * ld + j] = W[c][j];
+    w.deltaFree()[c] = q[c];
+    w.f()[c] = 0.0;
+    for (int k = 0; k < 6; ++k) w.J()[6 * c + k] = k == 2 ? dq_dz[c] : 0.0;
+  }
+  w.rowOffset()[2] = 2;
+}
+
+// The reduced fallback solves the contacts the displacement can load; one left out that closes
+// all the same (faster than the linearisation says, once the active set has changed) is found by
+// the check and taken in. Either way the force is the full problem's.
+TEST(LocalModelTest, TheReducedFallbackTakesInAContactLeftOutThatCloses) {
+  Slot slot(2, 2);
+  fillLiftAndClose(slot);
+  OfflineLocalModel lin(2, 2, settingsFor(LocalModelKind::kLinearized));
+  const shared::Pose origin = at(0, 0, 0);
+  const shared::Pose* start[] = {&origin};
+  ASSERT_EQ(lin.adopt(slot.view(), start), PrepareStatus::kReady);
+  ASSERT_TRUE(lin.prepared().linearized());
+  ASSERT_EQ(lin.prepared().orderedCount(), 2);
+  EXPECT_EQ(lin.prepared().orderedContacts()[0], 0);   // L, loaded
+  EXPECT_EQ(lin.prepared().orderedReach()[0], 0.0);
+  // S: open by 2e-5 at the solution, closing at 1 - 0.8 = 0.2 m/m while L is loaded
+  EXPECT_NEAR(lin.prepared().orderedReach()[1], 1e-4, 1e-9);
+  struct Case {
+    double z_m;
+    int solved_contacts;
+    bool s_loaded;
+  };
+  // 15 um: L has lifted, S still open, left out; 35 um: S (2.8e-5 - z) has closed, taken in
+  for (const Case c : {Case{1.5e-5, 1, false}, Case{3.5e-5, 2, true}}) {
+    SCOPED_TRACE(c.z_m);
+    ASSERT_LT(kReducedReachFactor * c.z_m, lin.prepared().orderedReach()[1]);   // S left out
+    const shared::Pose p = at(0, 0, c.z_m);
+    const shared::Pose* poses[] = {&p};
+    const LocalModelResult r = lin.solve(poses);
+    EXPECT_EQ(r.used, LocalModelUsed::kFallback);
+    EXPECT_EQ(r.fallback, FallbackReason::kContactLifts);
+    ASSERT_TRUE(r.converged());
+    EXPECT_EQ(r.solved_contacts, c.solved_contacts);
+    EXPECT_EQ(lin.model().forces()[0], 0.0);
+    EXPECT_EQ(lin.model().forces()[1] > 0.0, c.s_loaded);
+    const LocalModelResult ref = reference(slot, p);
+    EXPECT_EQ(ref.force_n[0][2] > 0.0, c.s_loaded);
+    for (int k = 0; k < 3; ++k) {
+      EXPECT_NEAR(r.force_n[0][k], ref.force_n[0][k], 1e-9 * (1.0 + norm3(ref.force_n[0])));
+    }
+  }
+  // without the reduction the fallback solves both, to the same force
+  lin.settings().reduced_fallback = false;
+  const shared::Pose p = at(0, 0, 3.5e-5);
+  const shared::Pose* poses[] = {&p};
+  const LocalModelResult r = lin.solve(poses);
+  EXPECT_EQ(r.solved_contacts, 2);
+  EXPECT_NEAR(r.force_n[0][2], reference(slot, p).force_n[0][2], 1e-9);
 }
 
 // Work the contact force does on the instrument around a closed path of the device: a passive

@@ -107,6 +107,9 @@ struct HapticSettings {
   /// shared::kMaxAndersonDepth; shared/nsgs.h). Mostly helps the first ticks on a new snapshot
   /// (docs/measurements.md, "Anderson acceleration")
   int anderson_depth = 0;
+  /// The linearisation's fallback re-solves only the contacts that can carry force
+  /// (LocalModelSettings::reduced_fallback; tactus-jitter --full-fallback turns it off)
+  bool reduced_fallback = true;
   /// The tick's deadline, from the start of its work: the local model's re-solve stops at it
   /// (checked within sweeps). In (0, kMaxBudgetFraction x period_ns]; 0 (no clock) only with
   /// max_sweeps <= kMaxSweepsWithoutBudget.

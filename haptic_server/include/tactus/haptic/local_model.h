@@ -33,6 +33,14 @@
 //    falls back to the full re-solve, warm-started from the linear prediction (whose
 //    W f + delta_free is G's, so the entry pass over W is saved). Exact for a fixed active set of
 //    sticking and separated contacts (the problem is then linear), first order for sliding ones.
+//    The fallback's re-solve is reduced (LocalModelSettings::reduced_fallback): the preparation
+//    orders the reached contacts by the device displacement at which each can first carry force
+//    (the loaded ones first, at zero; a separated one at its gap over its linearised closing
+//    rate) and copies W in that order; the tick solves the leading contacts whose displacement
+//    is within kReducedReachFactor x its own, and then checks that every contact left out is
+//    still open at the solution (delta_n >= 0), taking in the first that is not and solving on.
+//    A contact left out and open has f = 0 and no natural-map residual, so a converged reduced
+//    solve is a converged solve of the whole problem.
 //  - kAutomatic: linearized for problems of at least LocalModelSettings::automatic_min_rows
 //    rows, full below (where a warm re-solve costs a few microseconds).
 //
@@ -44,6 +52,7 @@
 #include <optional>
 #include <span>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include "tactus/shared/delassus_blocks.h"
@@ -106,6 +115,9 @@ struct LocalModelSettings {
   /// The preparation's solve: tolerance x this factor, at most prepare_max_sweeps sweeps.
   double prepare_tolerance_factor = 0.1;
   int prepare_max_sweeps = 3000;
+  /// The linearisation's fallback re-solves only the contacts that can carry force (above);
+  /// false: all the reached contacts.
+  bool reduced_fallback = true;
   /// Throws tactus::Error naming the first setting that is not finite or out of range.
   void validate() const;
 };
@@ -113,6 +125,10 @@ struct LocalModelSettings {
 /// The devices' poses a problem is solved or linearised at: device i drives instrument i;
 /// nullptr (or past the span) means no pose, the device stays where the snapshot has it.
 using DevicePoses = std::span<const shared::Pose* const>;
+
+/// A reduced fallback solves the contacts that could carry force at kReducedReachFactor times
+/// the device's displacement from the linearisation point (local_model.h, top).
+inline constexpr double kReducedReachFactor = 2.0;
 
 /// Per contact of a prepared snapshot: its state in the linearised solution.
 enum class ContactState : std::uint8_t { kSeparated, kSticking, kSliding, kNormalOnly };
@@ -176,6 +192,13 @@ class PreparedSnapshot {
   const ContactState* contactStates() const noexcept { return state_.data(); }
   /// The problem with the snapshot's own delta_free (W dense, ld = rows()).
   shared::ContactProblemView problem() const noexcept;
+  /// The reduced fallback's order (with linearized()): the reached contacts, position i holding
+  /// contact orderedContacts()[i], which can first carry force at a device displacement of
+  /// orderedReach()[i] [m] (nondecreasing; 0 for the loaded ones; a rotation counts as its angle
+  /// times max_translation_m / max_rotation_rad).
+  int orderedCount() const noexcept { return ordered_count_; }
+  const int* orderedContacts() const noexcept { return order_.data(); }
+  const double* orderedReach() const noexcept { return order_reach_.data(); }
 
  private:
   friend class SnapshotPreparation;
@@ -217,6 +240,18 @@ class PreparedSnapshot {
   std::vector<double> F_;         ///< rows x 6 instruments, row-major: d f / d dx
   std::vector<double> G_;         ///< rows x 6 instruments, row-major: d delta / d dx
   int sliding_ = 0;
+  // the reduced fallback's order (valid with linearized_): ordered contact i is order_[i]; its
+  // rows are ordered_row_[ordered_row_offset_[i] ...]; Wo_ is W on the ordered rows
+  // (ordered_rows_ x ordered_rows_, ld = ordered_rows_)
+  int ordered_count_ = 0;
+  int ordered_rows_ = 0;
+  double ordered_lever_m_ = 0.0;   ///< a rotation's displacement per radian in orderedReach()
+  std::vector<int> order_;
+  std::vector<double> order_reach_;
+  std::vector<int> ordered_row_offset_;
+  std::vector<int> ordered_row_;
+  std::vector<double> ordered_mu_;
+  std::vector<double> Wo_;
   int active_rows_ = 0;
   std::int64_t prepare_ns_ = 0, copy_ns_ = 0, storage_ns_ = 0, solve_ns_ = 0, linearize_ns_ = 0;
 };
@@ -238,6 +273,7 @@ class SnapshotPreparation {
  private:
   bool copyAndCheck(const shared::SnapshotView& snap, PreparedSnapshot& out) noexcept;
   void linearize(const LocalModelSettings& settings, PreparedSnapshot& out) noexcept;
+  void orderForReducedFallback(const LocalModelSettings& settings, PreparedSnapshot& out) noexcept;
 
   int max_rows_ = 0;
   int max_contacts_ = 0;
@@ -252,6 +288,7 @@ class SnapshotPreparation {
   std::vector<int> active_;      ///< active row -> row
   std::vector<double> A_, B_;    ///< the linear system (column-major, active rows)
   std::vector<int> pivots_;
+  std::vector<std::pair<double, int>> sort_;   ///< (reach, contact) while ordering
 };
 
 /// What LocalModel::solve did, and the wrench on each instrument.
@@ -263,6 +300,8 @@ struct LocalModelResult {
   shared::NsgsStatus status = shared::NsgsStatus::kEmpty;
   int sweeps = 0;
   double error = 0.0;           ///< NSGS's natural-map error (the preparation's for kLinearized)
+  /// Contacts the re-solve solved: all reached ones, or fewer with a reduced fallback
+  int solved_contacts = 0;
   int rows = 0;
   int contacts = 0;
   int ill_posed_contacts = 0;
@@ -303,6 +342,8 @@ class LocalModel {
   FallbackReason evaluateLinearization(const LocalModelSettings& settings) noexcept;
   shared::NsgsResult resolve(const LocalModelSettings& settings, std::int64_t deadline_ns,
                              bool delta_current) noexcept;
+  shared::NsgsResult resolveReduced(const LocalModelSettings& settings, std::int64_t deadline_ns,
+                                    int& solved_contacts) noexcept;
   void wrenches(LocalModelResult& out) const noexcept;
 
   int max_rows_ = 0;
@@ -312,6 +353,7 @@ class LocalModel {
   std::vector<double> delta_free_;
   std::vector<double> last_delta_free_;
   std::vector<int> reach_offset_;
+  std::vector<double> fo_, qo_, scratch_;   ///< the reduced fallback's f, delta_free (ordered)
   std::array<double, 6 * shared::kMaxInstruments> dx_{};
   bool delta_valid_ = false;   ///< workspace_.delta holds W f + last_delta_free_
 };
