@@ -9,39 +9,36 @@ namespace tactus::sim {
 
 void FemBody::Impl::buildPattern() {
   const int ne = mesh.tetCount();
-  std::vector<Eigen::Triplet<double, int>> trip;
-  trip.reserve(static_cast<std::size_t>(ne) * kEntriesPerElement + n_free);
-  for (int d = 0; d < n_free; ++d) trip.emplace_back(d, d, 0.0);
-  auto forEntry = [&](int e, auto&& fn) {
-    const auto& t = mesh.tets[e];
-    for (int a = 0; a < 4; ++a)
-      for (int b = 0; b <= a; ++b)
-        for (int i = 0; i < 3; ++i)
-          for (int j = 0; j < (a == b ? i + 1 : 3); ++j) {
-            const int ra = dof_base[t[a]], cb = dof_base[t[b]];
-            if (ra < 0 || cb < 0) {
-              fn(-1, -1);
-            } else {
-              const int r = ra + i, c = cb + j;
-              fn(std::max(r, c), std::min(r, c));
+  if (!dom_vol.empty()) {
+    buildDomainPattern();  // edge-smoothed domains: their pattern holds every element's
+  } else {
+    std::vector<Eigen::Triplet<double, int>> trip;
+    trip.reserve(static_cast<std::size_t>(ne) * kEntriesPerElement + n_free);
+    for (int d = 0; d < n_free; ++d) trip.emplace_back(d, d, 0.0);
+    auto forEntry = [&](int e, auto&& fn) {
+      const auto& t = mesh.tets[e];
+      for (int a = 0; a < 4; ++a)
+        for (int b = 0; b <= a; ++b)
+          for (int i = 0; i < 3; ++i)
+            for (int j = 0; j < (a == b ? i + 1 : 3); ++j) {
+              const int ra = dof_base[t[a]], cb = dof_base[t[b]];
+              if (ra < 0 || cb < 0) {
+                fn(-1, -1);
+              } else {
+                const int r = ra + i, c = cb + j;
+                fn(std::max(r, c), std::min(r, c));
+              }
             }
-          }
-  };
-  for (int e = 0; e < ne; ++e)
-    forEntry(e, [&](int r, int c) {
-      if (r >= 0) trip.emplace_back(r, c, 0.0);
-    });
-  a.resize(n_free, n_free);
-  a.setFromTriplets(trip.begin(), trip.end());
-  a.makeCompressed();
-  const int* outer = a.outerIndexPtr();
-  const int* inner = a.innerIndexPtr();
-  auto offsetOf = [&](int r, int c) {
-    const int* lo = inner + outer[c];
-    const int* hi = inner + outer[c + 1];
-    const int* it = std::lower_bound(lo, hi, r);
-    return static_cast<int>(it - inner);
-  };
+    };
+    for (int e = 0; e < ne; ++e)
+      forEntry(e, [&](int r, int c) {
+        if (r >= 0) trip.emplace_back(r, c, 0.0);
+      });
+    a.resize(n_free, n_free);
+    a.setFromTriplets(trip.begin(), trip.end());
+    a.makeCompressed();
+  }
+  auto offsetOf = [&](int r, int c) { return valueOffset(r, c); };
   // assembly order: elements sorted by their nodes' reduced DOFs (lowest first, fixed last)
   std::vector<int> order(ne);
   std::vector<std::array<int, 4>> sorted_dofs(ne);
@@ -86,12 +83,17 @@ void FemBody::Impl::buildPattern() {
   }
   diag_offset.resize(n_free);
   for (int d = 0; d < n_free; ++d) diag_offset[d] = offsetOf(d, d);
+  if (!dom_vol.empty()) buildDomainOffsets();
   a_rest = a;
 }
 
 void FemBody::Impl::evaluate(const Eigen::VectorXd& q, const Eigen::VectorXd* v, double h,
                              double beta, Eigen::VectorXd* f_out, Sparse* target, double c_k,
                              double c_m, bool use_rest_frame, int* inverted_at_q) {
+  if (general_loop) {
+    evaluateGeneral(q, v, h, beta, f_out, target, c_k, c_m, use_rest_frame, inverted_at_q);
+    return;
+  }
   if (f_out) f_out->setZero(3 * n);
   double* vals = target ? target->valuePtr() : nullptr;
   if (target) std::fill(vals, vals + target->nonZeros(), 0.0);

@@ -42,7 +42,11 @@ void FemBody::Impl::init(const TetMesh& m, const FemMaterial& mat,
   options = opt;
   reuse = fem_detail::ReusedFactorSolver(
       {opt.cg_tolerance, opt.refactor_iterations, opt.refactor_every_steps});
-  corotational = mat.law == MaterialLaw::kCorotational;
+  corotational = mat.law != MaterialLaw::kLinear;
+  rotation_stiffness =
+      mat.law == MaterialLaw::kCorotational && mat.tangent == TangentKind::kConsistent;
+  general_loop = rotation_stiffness || mat.law == MaterialLaw::kInvertibleNeoHookean ||
+                 mat.element == ElementKind::kEdgeSmoothedTet;
   n = mesh.nodeCount();
   const std::string where = "FemBody(" + (mesh.source.empty() ? "mesh" : mesh.source) + "): ";
   if (n == 0 || mesh.tets.empty()) throw Error(where + "mesh has no nodes or no tetrahedra");
@@ -110,6 +114,7 @@ void FemBody::Impl::init(const TetMesh& m, const FemMaterial& mat,
     for (int k = 0; k < 4; ++k) mass.segment<3>(3 * t[k]).array() += m4;
   }
 
+  if (mat.element == ElementKind::kEdgeSmoothedTet) buildEdgeDomains();
   buildPattern();
   buildRotationGroups();
   f_int.resize(3 * n);
@@ -132,6 +137,12 @@ void FemBody::Impl::init(const TetMesh& m, const FemMaterial& mat,
   for (int i = 0; i < n; ++i)
     if (fixed[i]) fixed_sorted.push_back(i);
   hsh = fnv1a(fixed_sorted.data(), sizeof(int) * fixed_sorted.size(), hsh);
+  // the smoothed strain changes the rest stiffness (the law and its tangent do not: every law
+  // linearises to the same K0 at rest); linear tets keep the hash they always had
+  if (mat.element == ElementKind::kEdgeSmoothedTet) {
+    const char tag[] = "edge_smoothed_tet";
+    hsh = fnv1a(tag, sizeof(tag) - 1, hsh);
+  }
   hash = hsh;
 }
 

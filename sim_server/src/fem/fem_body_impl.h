@@ -68,6 +68,21 @@ struct FemModel {
   std::vector<int> block_offset;
   std::vector<int> diag_offset;  // per reduced DOF
 
+  // The general element loop (fem_domains.cpp) runs instead of the corotational one when the
+  // material asks for more: the consistent tangent, the invertible law or edge-smoothed strain.
+  bool general_loop = false;
+  bool rotation_stiffness = false;   // the tangent's rotation modes (B > 0) are kept
+  // Edge-smoothed strain: one integration domain per mesh edge (empty for linear tets). Domain d
+  // has the nodes dom_node[dom_start[d] .. dom_start[d + 1]) by ascending reduced DOF (fixed,
+  // DOF -1, first), their smoothed shape gradients (3 per node in dom_grad) and the volume
+  // dom_vol[d]; its blocks (a, b), a >= b, write into A at the three offsets per block from
+  // dom_offset[dom_offset_start[d]] on, laid out as block_offset (-1: a node is fixed).
+  std::vector<int> dom_start, dom_node;
+  std::vector<double> dom_grad, dom_vol;
+  std::vector<std::size_t> dom_offset_start;
+  std::vector<int> dom_offset;
+  int dom_max_nodes = 0;
+
   // rotation groups: nodes tied by short edges share one node rotation
   std::vector<int> rot_group;   // node -> group index (empty: every node on its own)
   int rot_group_count = 0;
@@ -109,6 +124,7 @@ struct FemState {
 };
 
 struct FemScratch {
+  std::vector<Eigen::Vector3d> dom_scratch;          // the general loop's rotated gradients
   // step buffers (reduced or full)
   Eigen::VectorXd f_int, rhs_full, rhs, dv;
   Eigen::VectorXd cg_t, jacobi_inv;
@@ -129,6 +145,27 @@ struct FemBody::Impl : FemModel, FemState, FemScratch {
   void init(const TetMesh& m, const FemMaterial& mat, const std::vector<int>& fixed_nodes,
             const Eigen::Vector3d* g, const FemSolverOptions& opt);
   void buildPattern();
+  // Position in A's values of entry (r, c), r >= c, of its fixed pattern.
+  int valueOffset(int r, int c) const;
+  // fem_domains.cpp: the edge-smoothed domains (before buildPattern, which then takes A's pattern
+  // from them: every pair of nodes in a domain), their offsets into A (after it).
+  void buildEdgeDomains();
+  void buildDomainPattern();
+  void buildDomainOffsets();
+  // The general element loop: evaluate()'s contract (fem_assembly.cpp calls it when
+  // general_loop is set).
+  void evaluateGeneral(const Eigen::VectorXd& q, const Eigen::VectorXd* v, double h, double beta,
+                       Eigen::VectorXd* f_out, Sparse* target, double c_k, double c_m,
+                       bool use_rest_frame, int* inverted_at_q);
+  // One integration domain of the general loop (k nodes, gradients 3 per node, volume vol,
+  // offsets off): adds its internal force into fd (if non-null) and c_k times its tangent into
+  // vals (if non-null); returns the rotation it used (identity without rotation).
+  Eigen::Matrix3d domainKernel(int k, const int* node, const double* grad, double vol,
+                               const int* off, const double* qd, const double* vd, double h,
+                               double beta, double* fd, double* vals, double c_k,
+                               bool rotate);
+  // Elastic energy of the general loop's domains at positions x.
+  double generalEnergy(const Eigen::VectorXd& x) const;
   // Element loop (fem_assembly.cpp) at positions x = q + h v (x = q when v is null):
   //  * f_out (3n, if non-null): internal force (+K u sense) f_el(x) + beta K(x) v, the elastic
   //    force plus the stiffness-proportional damping force (beta = 0 or v null: elastic only);

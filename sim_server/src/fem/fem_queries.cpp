@@ -2,6 +2,7 @@
 #include <cmath>
 
 #include "fem_body_impl.h"
+#include "fem_constitutive.h"
 #include "tactus/shared/error.h"
 
 namespace tactus::sim {
@@ -33,6 +34,16 @@ void FemBody::stresses(std::vector<Eigen::Matrix3d>& out) const {
     const Eigen::Matrix3d f = m.elementF(e, m.q);
     const Eigen::Matrix3d r =
         m.corotational ? fem_detail::polarRotation(f) : Eigen::Matrix3d::Identity();
+    if (m.material.law == MaterialLaw::kInvertibleNeoHookean) {
+      // P R^T = U diag(P^) U^T: the corotational law's R sigma R^T for any law
+      Eigen::Matrix3d u, vf;
+      Eigen::Vector3d st;
+      fem_detail::rotationSvd(f, r, u, st, vf);
+      fem_detail::PrincipalResponse resp;
+      fem_detail::principalResponse(m.material.law, m.lambda, m.mu, st, false, resp);
+      out[e] = u * resp.stress.asDiagonal() * u.transpose();
+      continue;
+    }
     const Eigen::Matrix3d fl = r.transpose() * f;
     const Eigen::Matrix3d s =
         m.sigma(0.5 * (fl + fl.transpose()) - Eigen::Matrix3d::Identity());
@@ -71,6 +82,7 @@ double FemBody::kineticEnergy() const {
 
 double FemBody::elasticEnergy() const {
   const Impl& m = *impl_;
+  if (m.general_loop) return m.generalEnergy(m.q);
   double energy = 0.0;
   for (int e = 0; e < m.mesh.tetCount(); ++e) {
     const Eigen::Matrix3d f = m.elementF(e, m.q);

@@ -11,6 +11,8 @@ namespace tactus::sim {
 FemMaterial femMaterial(const TissueSpec& tissue) {
   FemMaterial m;
   m.law = tissue.law;
+  m.tangent = tissue.tangent;
+  m.element = tissue.element;
   m.young_pa = tissue.young_pa;
   m.poisson = tissue.poisson;
   m.density_kgpm3 = tissue.density_kgpm3;

@@ -91,7 +91,7 @@ DisplayLink::DisplayLink(const std::string& segment_name, const Simulation& sim,
     }
     const auto& material = sim.spec().tissues[static_cast<std::size_t>(t)];
     map.mu = material.young_pa / (2.0 * (1.0 + material.poisson));
-    map.corotational = material.law == MaterialLaw::kCorotational;
+    map.corotational = material.law != MaterialLaw::kLinear;  // any law with rotations
     vertex_count_ += static_cast<int>(map.nodes.size());
     tissues_.push_back(std::move(map));
   }

@@ -116,7 +116,12 @@ std::vector<std::string> Simulation::stages() const {
   const SceneSpec& spec = impl_->model.spec;
   std::vector<std::string> out;
   for (const auto& ts : spec.tissues) {
-    std::string effects = ts.law == MaterialLaw::kCorotational ? "corotational" : "linear";
+    std::string effects = ts.law == MaterialLaw::kLinear         ? "linear"
+                          : ts.law == MaterialLaw::kCorotational ? "corotational"
+                                                                 : "invertible neo-Hookean";
+    if (ts.law == MaterialLaw::kCorotational && ts.tangent == TangentKind::kConsistent)
+      effects += ", consistent tangent";
+    if (ts.element == ElementKind::kEdgeSmoothedTet) effects += ", edge-smoothed tetrahedra";
     effects += ts.damping ? ", Rayleigh damping" : ", no damping";
     effects += spec.gravity_mps2 ? ", gravity" : ", no gravity";
     switch (spec.solver.linear) {

@@ -44,7 +44,7 @@ void SceneParser::readTissues(const YAML::Node& root, SceneSpec* spec) {
 }
 
 void SceneParser::readTissue(const YAML::Node& t, const std::string& path, TissueSpec* tissue) {
-  checkKeys(t, path, {"name", "mesh", "transform", "material", "damping", "fixed",
+  checkKeys(t, path, {"name", "mesh", "transform", "material", "element", "damping", "fixed",
                       "compliance", "loads"});
   if (t["loads"].IsDefined()) readLoads(t["loads"], join(path, "loads"), &tissue->loads);
   string(t, path, "name", &tissue->name);
@@ -76,13 +76,26 @@ void SceneParser::readTissue(const YAML::Node& t, const std::string& path, Tissu
   }
   if (section(t, path, "material", &n)) {
     const std::string p = join(path, "material");
-    checkKeys(n, p, {"law", "young_modulus", "poisson_ratio", "density"});
+    checkKeys(n, p, {"law", "tangent", "young_modulus", "poisson_ratio", "density"});
     choice(n, p, "law", &tissue->law,
-           {{"linear", MaterialLaw::kLinear}, {"corotational", MaterialLaw::kCorotational}});
+           {{"linear", MaterialLaw::kLinear}, {"corotational", MaterialLaw::kCorotational},
+            {"invertible_neo_hookean", MaterialLaw::kInvertibleNeoHookean}});
+    if (choice(n, p, "tangent", &tissue->tangent,
+               {{"corotated", TangentKind::kCorotated},
+                {"consistent", TangentKind::kConsistent}}) &&
+        tissue->tangent == TangentKind::kConsistent &&
+        tissue->law != MaterialLaw::kCorotational) {
+      error(n["tangent"], join(p, "tangent"),
+            "'consistent' is a linearisation of the corotational law only (the linear law's "
+            "tangent is exact, invertible_neo_hookean always uses its full tangent)");
+    }
     number(n, p, "young_modulus", &tissue->young_pa, kPositive, kAtMost(1e12), Range{10.0, 1e9});
     number(n, p, "poisson_ratio", &tissue->poisson, Range{-1.0, 0.5, true, true});
     number(n, p, "density", &tissue->density_kgpm3, kPositive, kAtMost(1e5), Range{100.0, 1e4});
   }
+  choice(t, path, "element", &tissue->element,
+         {{"linear_tet", ElementKind::kLinearTet},
+          {"edge_smoothed_tet", ElementKind::kEdgeSmoothedTet}});
   if (section(t, path, "damping", &n)) {
     const std::string p = join(path, "damping");
     checkKeys(n, p, {"rayleigh_mass", "rayleigh_stiffness"});

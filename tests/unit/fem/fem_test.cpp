@@ -355,6 +355,7 @@ TEST(Counters, AbsentEffectsAreNotComputed) {
   lin.nodeRotations(rot);
   EXPECT_EQ(lin.counters().rotation_extractions, 0);
   EXPECT_EQ(lin.counters().damping_evaluations, 0);
+  EXPECT_EQ(lin.counters().general_domain_evaluations, 0);
   EXPECT_EQ(lin.counters().factorisations, 3);
   for (const auto& r : rot) EXPECT_TRUE(r.isIdentity(0.0));
   EXPECT_LT(lin.gravityEnergy(), 1e300);
@@ -365,6 +366,7 @@ TEST(Counters, AbsentEffectsAreNotComputed) {
   ASSERT_TRUE(cor.freeMotion(0.01).ok);
   EXPECT_EQ(cor.counters().rotation_extractions, mesh.tetCount());
   EXPECT_EQ(cor.counters().damping_evaluations, 1);
+  EXPECT_EQ(cor.counters().general_domain_evaluations, 0);  // R K0 R^T: the corotational loop
 }
 
 TEST(Material, RejectsBadInput) {

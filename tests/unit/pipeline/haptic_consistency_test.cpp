@@ -18,10 +18,22 @@ namespace {
 
 const std::string kScene = std::string(TACTUS_TEST_DATA_DIR) + "/scenes/press_cube.yaml";
 
-SceneSpec pressScene(double mu) {
+// The friction coefficient, and the tissue's element and law: the local model must hold for every
+// element and law a scene can choose (the snapshot carries W, whatever built it).
+struct Variant {
+  double mu;
+  ElementKind element = ElementKind::kLinearTet;
+  MaterialLaw law = MaterialLaw::kCorotational;
+  TangentKind tangent = TangentKind::kCorotated;
+};
+
+SceneSpec pressScene(const Variant& variant) {
   SceneSpec spec = loadScene(kScene);
   spec.haptics.enabled = false;
-  spec.instrument.friction_mu = mu;
+  spec.instrument.friction_mu = variant.mu;
+  spec.tissues[0].element = variant.element;
+  spec.tissues[0].law = variant.law;
+  spec.tissues[0].tangent = variant.tangent;
   spec.solver.nsgs_tolerance = 1e-12;
   spec.solver.nsgs_max_sweeps = 5000;
   return spec;
@@ -62,7 +74,7 @@ Eigen::VectorXd predict(const ContactProblemData& p, const shared::Vector6d& dx)
   return f;
 }
 
-class HapticConsistencyTest : public ::testing::TestWithParam<double> {};
+class HapticConsistencyTest : public ::testing::TestWithParam<Variant> {};
 
 TEST_P(HapticConsistencyTest, AtTheSnapshotPoseTheLocalModelReproducesTheSimulation) {
   Simulation sim(pressScene(GetParam()));
@@ -89,12 +101,13 @@ TEST_P(HapticConsistencyTest, AtTheSnapshotPoseTheLocalModelReproducesTheSimulat
 
 TEST_P(HapticConsistencyTest, ForASmallDeviceMotionTheLocalModelMatchesAFullStepToFirstOrder) {
   // two identical simulations (deterministic), one step apart in their device target only
-  const double mu = GetParam();
+  const Variant variant = GetParam();
+  const double mu = variant.mu;
   std::vector<double> errors;
   std::vector<double> changes;
   for (double scale : {1.0, 0.5, 0.25}) {
-    Simulation a(pressScene(mu));
-    Simulation b(pressScene(mu));
+    Simulation a(pressScene(variant));
+    Simulation b(pressScene(variant));
     DeviceTarget ta, tb;
     settle(a, ta);
     settle(b, tb);
@@ -139,7 +152,13 @@ TEST_P(HapticConsistencyTest, ForASmallDeviceMotionTheLocalModelMatchesAFullStep
   }
 }
 
-INSTANTIATE_TEST_SUITE_P(Friction, HapticConsistencyTest, ::testing::Values(0.0, 0.5));
+INSTANTIATE_TEST_SUITE_P(
+    Friction, HapticConsistencyTest,
+    ::testing::Values(Variant{0.0}, Variant{0.5},
+                      Variant{0.5, ElementKind::kEdgeSmoothedTet},
+                      Variant{0.5, ElementKind::kLinearTet, MaterialLaw::kInvertibleNeoHookean},
+                      Variant{0.5, ElementKind::kLinearTet, MaterialLaw::kCorotational,
+                              TangentKind::kConsistent}));
 
 }  // namespace
 }  // namespace tactus::sim

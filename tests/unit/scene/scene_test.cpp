@@ -207,6 +207,32 @@ TEST(Scene, RotationSmoothing) {
   EXPECT_THROW(parse("{model: warped, rotation_smoothing: 1.5}"), SceneError);
 }
 
+TEST(Scene, LawTangentAndElement) {
+  const auto tissue = [](const std::string& lines) {
+    return parseScene(kHead + lines, "s.yaml", kScenes).tissues.at(0);
+  };
+  const TissueSpec def = tissue("");
+  EXPECT_EQ(def.law, MaterialLaw::kCorotational);
+  EXPECT_EQ(def.tangent, TangentKind::kCorotated);
+  EXPECT_EQ(def.element, ElementKind::kLinearTet);
+  const TissueSpec s = tissue("    material: {law: corotational, tangent: consistent}\n"
+                              "    element: edge_smoothed_tet\n");
+  EXPECT_EQ(s.tangent, TangentKind::kConsistent);
+  EXPECT_EQ(s.element, ElementKind::kEdgeSmoothedTet);
+  EXPECT_EQ(tissue("    material: {law: invertible_neo_hookean}\n").law,
+            MaterialLaw::kInvertibleNeoHookean);
+  EXPECT_EQ(sceneError(kHead + "    material: {law: linear, tangent: consistent}\n"),
+            "s.yaml:4:38: tissues[0].material.tangent: 'consistent' is a linearisation of the "
+            "corotational law only (the linear law's tangent is exact, invertible_neo_hookean "
+            "always uses its full tangent)");
+  EXPECT_EQ(sceneError(kHead + "    material: {tangent: exact}\n"),
+            "s.yaml:4:25: tissues[0].material.tangent: must be one of corotated, consistent (got "
+            "'exact')");
+  EXPECT_EQ(sceneError(kHead + "    element: quadratic_tet\n"),
+            "s.yaml:4:14: tissues[0].element: must be one of linear_tet, edge_smoothed_tet (got "
+            "'quadratic_tet')");
+}
+
 TEST(Scene, SplitContactGroups) {
   EXPECT_TRUE(parseScene(kHead, "s.yaml", kScenes).solver.split_contact_groups);
   EXPECT_FALSE(parseScene(kHead + "solver: {split_contact_groups: false}\n", "s.yaml", kScenes)
@@ -290,8 +316,8 @@ TEST(Scene, EachKindOfErrorHasItsExactMessage) {
   EXPECT_EQ(sceneError(kHead + "    material: {density: 0}\n"),
             "s.yaml:4:25: tissues[0].material.density: must be > 0 (got 0)");
   EXPECT_EQ(sceneError(kHead + "    material: {law: neo_hookean}\n"),
-            "s.yaml:4:21: tissues[0].material.law: must be one of linear, corotational (got "
-            "'neo_hookean')");
+            "s.yaml:4:21: tissues[0].material.law: must be one of linear, corotational, "
+            "invertible_neo_hookean (got 'neo_hookean')");
   EXPECT_EQ(sceneError(kHead + "    damping: {rayleigh_mass: -0.1}\n"),
             "s.yaml:4:30: tissues[0].damping.rayleigh_mass: must be >= 0 (got -0.1)");
   EXPECT_EQ(sceneError(kHead + "    fixed: {nodes: [1, x]}\n"),
@@ -366,7 +392,7 @@ TEST(Scene, AllProblemsAreReportedAtOnceInDocumentOrder) {
             "s.yaml:4:31: tissues[0].material.young_modulus: must be > 0 (got 0)\n"
             "s.yaml:4:49: tissues[0].material.poisson_ratio: must be in (-1, 0.5) (got 0.7)\n"
             "s.yaml:4:54: tissues[0].material.colour: unknown key (expected one of: law, "
-            "young_modulus, poisson_ratio, density)\n"
+            "tangent, young_modulus, poisson_ratio, density)\n"
             "s.yaml:5:24: instrument.friction: must be >= 0 (got -1)");
 }
 

@@ -7,7 +7,13 @@
 // with F the internal (elastic + damping) force, K its tangent, B = alpha M + beta K.
 // Corotational: per element R_e from the deformation gradient (SVD polar decomposition with sign
 // correction, robust to inverted elements), f_e = R_e K0_e (R_e^T x_e - X_e), tangent
-// R_e K0_e R_e^T. Linear: R_e = I (no rotation extraction at all).
+// R_e K0_e R_e^T (TangentKind::kConsistent: plus the rotation's own stiffness where positive).
+// Linear: R_e = I (no rotation extraction at all). Invertible neo-Hookean: the law in the
+// principal stretches of the rotation-valued SVD, with its full tangent projected positive
+// semi-definite (fem_constitutive.h). ElementKind::kEdgeSmoothedTet: the same laws on one
+// smoothed strain per mesh edge instead of one per tetrahedron (docs/design.md, "Element
+// choice"); the system matrix's pattern then couples every pair of nodes of the tetrahedra
+// around an edge.
 //
 // The system matrix keeps a fixed sparsity pattern; CHOLMOD's symbolic analysis runs once in the
 // constructor and every step refactorises numerically (LinearSolverKind::kCholmod), or a
@@ -33,6 +39,12 @@ namespace tactus::sim {
 
 struct FemMaterial {
   MaterialLaw law = MaterialLaw::kCorotational;
+  /// kConsistent: the corotational law's tangent with the rotation's own stiffness where it is
+  /// positive (corotational law only; the other laws ignore it)
+  TangentKind tangent = TangentKind::kCorotated;
+  /// kEdgeSmoothedTet: one strain per mesh edge instead of one per tetrahedron (bending without
+  /// the linear tetrahedron's locking; docs/design.md, "Element choice")
+  ElementKind element = ElementKind::kLinearTet;
   double young_pa = 3000.0;
   double poisson = 0.45;
   double density_kgpm3 = 1000.0;
@@ -199,9 +211,12 @@ class FemBody {
   /// Per-element von Mises stress [Pa] at the current positions.
   void vonMises(Eigen::VectorXd& out) const;
   /// Per-element stress tensor [Pa] at the current positions: the corotated linear stress
-  /// R sigma(eps) R^T with eps = sym(R^T F) - I (linear material: R = I, eps = sym(F) - I).
+  /// R sigma(eps) R^T with eps = sym(R^T F) - I (linear material: R = I, eps = sym(F) - I);
+  /// invertible neo-Hookean: P R^T = U diag(P^) U^T, the same measure for that law. From each
+  /// tetrahedron's own F, also for edge-smoothed strain (whose domains straddle elements).
   void stresses(std::vector<Eigen::Matrix3d>& out) const;
-  /// Kinetic energy 1/2 v^T M v and elastic energy (corotational strain energy) [J].
+  /// Kinetic energy 1/2 v^T M v and elastic energy (the law's strain energy over the
+  /// integration domains: tetrahedra or edge-smoothed domains) [J].
   double kineticEnergy() const;
   double elasticEnergy() const;
   /// Gravitational potential energy -sum m_i g . x_i (0 without gravity) [J].
@@ -212,6 +227,9 @@ class FemBody {
     long rotation_extractions = 0;              ///< element polar decompositions performed
     long damping_evaluations = 0;               ///< steps that built damping terms
     long factorisations = 0;
+    /// integration domains evaluated by the general element loop: 0 unless the material asks
+    /// for the consistent tangent, the invertible law or edge-smoothed strain
+    long general_domain_evaluations = 0;
   };
   const Counters& counters() const;
 

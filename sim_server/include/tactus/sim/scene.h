@@ -18,7 +18,30 @@
 
 namespace tactus::sim {
 
-enum class MaterialLaw { kLinear, kCorotational };
+/// The elastic law of a tissue (scenes/README.md, material.law; docs/design.md, "Free motion").
+enum class MaterialLaw {
+  kLinear,                ///< small-strain linear elasticity (no rotation extraction)
+  kCorotational,          ///< linear elasticity in each element's rotated frame (the paper's)
+  /// Neo-Hookean in principal stretches after Irving, Teran and Fedkiw (2004): inverted elements
+  /// keep a rotation and one negative stretch; below kInvertibleStretchFloor a stretch's stress is
+  /// extrapolated linearly, so the stress pushes harder the deeper an element is compressed or
+  /// inverted. Always linearised with the full tangent projected positive semi-definite.
+  kInvertibleNeoHookean,
+};
+/// How the corotational law is linearised in the implicit step (material.tangent).
+enum class TangentKind {
+  kCorotated,    ///< R K0 R^T: the rotation held fixed (the paper's; cheapest)
+  /// R K0 R^T plus the stiffness of the rotation itself where the element's stress makes it
+  /// positive (the corotational energy's Hessian with its negative part left out)
+  kConsistent,
+};
+/// How the strain of a tissue is sampled (tissues[i].element).
+enum class ElementKind {
+  kLinearTet,      ///< constant strain per tetrahedron
+  /// edge-based smoothed strain on the same tetrahedra: one strain per mesh edge, the volume
+  /// average of the strains of the tetrahedra around it (a sixth of each one's volume)
+  kEdgeSmoothedTet,
+};
 enum class ComplianceKind { kExact, kWarped, kRest, kUncoupled };
 /// How the implicit Euler step solves its linear system (FemSolverOptions, scenes/README.md).
 enum class LinearSolverKind {
@@ -57,6 +80,8 @@ struct TissueSpec {
   Eigen::Vector3d rotation_deg = Eigen::Vector3d::Zero();  ///< then rotation, XYZ Euler [deg]
   Eigen::Vector3d translation_m = Eigen::Vector3d::Zero(); ///< then translation [m]
   MaterialLaw law = MaterialLaw::kCorotational;
+  TangentKind tangent = TangentKind::kCorotated;  ///< material.tangent (corotational law only)
+  ElementKind element = ElementKind::kLinearTet;   ///< element
   double young_pa = 3000.0;
   double poisson = 0.45;
   double density_kgpm3 = 1000.0;
