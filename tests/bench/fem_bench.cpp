@@ -147,9 +147,17 @@ void BM_FemStep_Liver23k_PcgWarpedChol(benchmark::State& s) {
 // The scene's own tissue (material, damping, fixed box, gravity, h) settling from rest under
 // gravity: the first second of the liver_grasp scenes, 100 steps from the rest shape (each
 // repetition starts again from rest). The stages are averaged over the 100 steps.
-void runScene(benchmark::State& state, const char* scene, LinearSolverKind solver) {
-  const SceneSpec spec = loadScene(std::filesystem::path(TACTUS_SOURCE_DIR) / "scenes" / scene);
-  const TissueSpec& ts = spec.tissues.at(0);
+// The tissue's element and law as the scene chose them (kScene), or changed to one of the
+// alternatives a scene may choose (material.tangent, material.law, element).
+enum class TissueVariant { kScene, kConsistentTangent, kInvertibleLaw, kEdgeSmoothed };
+
+void runScene(benchmark::State& state, const char* scene, LinearSolverKind solver,
+              TissueVariant variant = TissueVariant::kScene) {
+  SceneSpec spec = loadScene(std::filesystem::path(TACTUS_SOURCE_DIR) / "scenes" / scene);
+  TissueSpec& ts = spec.tissues.at(0);
+  if (variant == TissueVariant::kConsistentTangent) ts.tangent = TangentKind::kConsistent;
+  if (variant == TissueVariant::kInvertibleLaw) ts.law = MaterialLaw::kInvertibleNeoHookean;
+  if (variant == TissueVariant::kEdgeSmoothed) ts.element = ElementKind::kEdgeSmoothedTet;
   TetMesh mesh = loadTetMesh(ts.mesh_path);
   transformMesh(mesh, ts.scale, ts.rotation_deg, ts.translation_m);
   const FemMaterial mat = femMaterial(ts);
@@ -196,6 +204,25 @@ BENCHMARK(BM_Settle_Liver2_Cholmod)->Unit(benchmark::kMillisecond)->Iterations(3
 BENCHMARK(BM_Settle_Liver2_CholmodReuse)->Unit(benchmark::kMillisecond)->Iterations(3);
 BENCHMARK(BM_Settle_Liver23k_Cholmod)->Unit(benchmark::kMillisecond)->Iterations(1);
 BENCHMARK(BM_Settle_Liver23k_CholmodReuse)->Unit(benchmark::kMillisecond)->Iterations(1);
+// The same settle with each tissue alternative, beside the scene's own choice in the same run
+// (Arg: 0 the scene's, 1 tangent consistent, 2 law invertible_neo_hookean, 3 edge_smoothed_tet):
+//   fem_bench --benchmark_filter=Settle.*Variant
+void BM_Settle_Liver2_Variant(benchmark::State& s) {
+  runScene(s, "liver_grasp.yaml", LinearSolverKind::kCholmodReuse,
+           static_cast<TissueVariant>(s.range(0)));
+}
+void BM_Settle_Liver23k_Variant(benchmark::State& s) {
+  runScene(s, "liver_grasp_23k.yaml", LinearSolverKind::kCholmodReuse,
+           static_cast<TissueVariant>(s.range(0)));
+}
+BENCHMARK(BM_Settle_Liver2_Variant)
+    ->DenseRange(0, 3)
+    ->Unit(benchmark::kMillisecond)
+    ->Iterations(3);
+BENCHMARK(BM_Settle_Liver23k_Variant)
+    ->DenseRange(0, 3)
+    ->Unit(benchmark::kMillisecond)
+    ->Iterations(1);
 
 BENCHMARK(BM_FemStep_Small)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_FemStep_Small_Pcg)->Unit(benchmark::kMillisecond);
