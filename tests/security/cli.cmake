@@ -1,3 +1,3 @@
-# cli_test starts tactus-monitor too (sim_server and haptic_server are dependencies of every
+# cli_test.cpp starts tactus-monitor too (sim_server and haptic_server are dependencies of every
 # security test).
-add_dependencies(cli_test tactus-monitor)
+add_dependencies(security_tests tactus-monitor)

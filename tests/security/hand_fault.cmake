@@ -1,5 +1,5 @@
 # The fault suite for the hand (hand_fault_test.cpp) drives haptic_server with the misbehaving
 # test plugin and the bridge's reference client: build them first.
-if(TARGET hand_fault_test)
-  add_dependencies(hand_fault_test tactus_test_plugin_fault tactus-bridge-client)
+if(TARGET security_tests)
+  add_dependencies(security_tests tactus_test_plugin_fault tactus-bridge-client)
 endif()

@@ -1,2 +1,2 @@
-# viewer_test starts the real tactus-viewer binary.
-add_dependencies(viewer_test tactus-viewer)
+# viewer_test.cpp starts the real tactus-viewer binary.
+add_dependencies(security_tests tactus-viewer)

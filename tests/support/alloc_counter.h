@@ -2,8 +2,8 @@
 // Counting replacement of the global operator new/delete, and (glibc) of malloc, calloc,
 // realloc, aligned_alloc, posix_memalign, memalign and free, for "zero allocations" tests.
 //
-// Include this header in exactly ONE translation unit of a test executable (it defines the
-// replaceable global allocation functions). Then:
+// The replaceable global allocation functions are defined in alloc_counter.cpp, which a test
+// executable that counts allocations links (tests/CMakeLists.txt). Then:
 //
 //   tactus::test::AllocScope scope;          // counts allocations made by this thread
 //   device->read(&state);
@@ -69,15 +69,17 @@ inline void* allocateAligned(std::size_t n, std::size_t align) {
 }
 }  // namespace detail
 
+// The readers are out of line (alloc_counter.cpp): the compiler takes malloc and free for
+// builtins that write no memory of the program, so an inline read of a counter could be moved
+// across them and miss the counts they made.
+
 /// C allocation calls (malloc family) made by the calling thread so far.
-inline std::int64_t threadCAllocations() noexcept { return detail::thread_c_allocations; }
+std::int64_t threadCAllocations() noexcept;
 
 /// Allocations (operator new and malloc-family calls) made by the calling thread so far.
-inline std::int64_t threadAllocations() noexcept { return detail::thread_allocations; }
+std::int64_t threadAllocations() noexcept;
 /// Allocations made by all threads so far.
-inline std::int64_t totalAllocations() noexcept {
-  return detail::total_allocations.load(std::memory_order_relaxed);
-}
+std::int64_t totalAllocations() noexcept;
 
 /// RAII: allocations made by this thread between construction and allocations().
 class AllocScope {
@@ -94,68 +96,3 @@ class AllocScope {
 };
 
 }  // namespace tactus::test
-
-// The C allocator, interposed (must not be inline; glibc only).
-extern "C" {
-void* malloc(std::size_t n) noexcept {
-  tactus::test::detail::countC();
-  return __libc_malloc(n);
-}
-void* calloc(std::size_t count, std::size_t n) noexcept {
-  tactus::test::detail::countC();
-  return __libc_calloc(count, n);
-}
-void* realloc(void* p, std::size_t n) noexcept {
-  tactus::test::detail::countC();
-  return __libc_realloc(p, n);
-}
-void* aligned_alloc(std::size_t align, std::size_t n) noexcept {
-  tactus::test::detail::countC();
-  return __libc_memalign(align, n);
-}
-void* memalign(std::size_t align, std::size_t n) noexcept {
-  tactus::test::detail::countC();
-  return __libc_memalign(align, n);
-}
-int posix_memalign(void** out, std::size_t align, std::size_t n) noexcept {
-  tactus::test::detail::countC();
-  if (align < sizeof(void*) || (align & (align - 1)) != 0) return 22;  // EINVAL
-  void* p = __libc_memalign(align, n);
-  if (p == nullptr) return 12;  // ENOMEM
-  *out = p;
-  return 0;
-}
-void free(void* p) noexcept { __libc_free(p); }
-}
-
-// Replaceable global allocation functions (must not be inline).
-void* operator new(std::size_t n) { return tactus::test::detail::allocate(n); }
-void* operator new[](std::size_t n) { return tactus::test::detail::allocate(n); }
-void* operator new(std::size_t n, const std::nothrow_t&) noexcept {
-  try {
-    return tactus::test::detail::allocate(n);
-  } catch (...) {
-    return nullptr;
-  }
-}
-void* operator new[](std::size_t n, const std::nothrow_t&) noexcept {
-  try {
-    return tactus::test::detail::allocate(n);
-  } catch (...) {
-    return nullptr;
-  }
-}
-void* operator new(std::size_t n, std::align_val_t a) {
-  return tactus::test::detail::allocateAligned(n, static_cast<std::size_t>(a));
-}
-void* operator new[](std::size_t n, std::align_val_t a) {
-  return tactus::test::detail::allocateAligned(n, static_cast<std::size_t>(a));
-}
-void operator delete(void* p) noexcept { __libc_free(p); }
-void operator delete[](void* p) noexcept { __libc_free(p); }
-void operator delete(void* p, std::size_t) noexcept { __libc_free(p); }
-void operator delete[](void* p, std::size_t) noexcept { __libc_free(p); }
-void operator delete(void* p, std::align_val_t) noexcept { __libc_free(p); }
-void operator delete[](void* p, std::align_val_t) noexcept { __libc_free(p); }
-void operator delete(void* p, std::size_t, std::align_val_t) noexcept { __libc_free(p); }
-void operator delete[](void* p, std::size_t, std::align_val_t) noexcept { __libc_free(p); }

@@ -22,38 +22,10 @@
 #include "tactus/shared/nsgs.h"
 #include "tactus/shared/nsgs_clock.h"
 
+#include "../../support/alloc_counter.h"
 #include "../../support/fclib_set.h"
 #include "../../support/sphere_pile.h"
 
-// Counting global allocator: every operator new in this executable bumps the counter.
-// (malloc/free behind new/delete: g++ flags the pairing once inlined, harmlessly.)
-#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
-namespace {
-std::atomic<long> g_allocations{0};
-}  // namespace
-
-void* operator new(std::size_t n) {
-  g_allocations.fetch_add(1, std::memory_order_relaxed);
-  if (void* p = std::malloc(n == 0 ? 1 : n)) return p;
-  throw std::bad_alloc();
-}
-void* operator new[](std::size_t n) {
-  g_allocations.fetch_add(1, std::memory_order_relaxed);
-  if (void* p = std::malloc(n == 0 ? 1 : n)) return p;
-  throw std::bad_alloc();
-}
-void* operator new(std::size_t n, const std::nothrow_t&) noexcept {
-  g_allocations.fetch_add(1, std::memory_order_relaxed);
-  return std::malloc(n == 0 ? 1 : n);
-}
-void* operator new[](std::size_t n, const std::nothrow_t&) noexcept {
-  g_allocations.fetch_add(1, std::memory_order_relaxed);
-  return std::malloc(n == 0 ? 1 : n);
-}
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete[](void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
 
 namespace tactus::shared {
 namespace {
@@ -970,12 +942,14 @@ TEST(NsgsRealtime, SolveAndErrorNeverAllocate) {
   s.time_budget_ns = 1'000'000'000;
 
   // the counter sees allocations (else the test below could not fail)
-  const long probe = g_allocations.load();
-  auto* v = new std::vector<double>(100);
-  delete v;
-  ASSERT_GE(g_allocations.load() - probe, 1);
+  {
+    const tactus::test::AllocScope probe;
+    auto* v = new std::vector<double>(100);
+    delete v;
+    ASSERT_GE(probe.allocations(), 1);
+  }
 
-  const long before = g_allocations.load();
+  const tactus::test::AllocScope scope;
   const NsgsResult cold = solveNsgs(p.view(), s, ws, f.data());
   const NsgsResult warm = solveNsgs(p.view(), s, ws, f.data());
   s.coupling = NsgsCoupling::kRowGather;
@@ -983,8 +957,7 @@ TEST(NsgsRealtime, SolveAndErrorNeverAllocate) {
   const NsgsResult other = solveNsgs(p.view(), s, ws, f.data());
   const double e1 = naturalMapError(p.view(), f.data());
   const double e2 = naturalMapError(p.view(), f.data(), delta.data());
-  const long after = g_allocations.load();
-  EXPECT_EQ(after - before, 0);
+  EXPECT_EQ(scope.allocations(), 0);
   EXPECT_EQ(cold.status, NsgsStatus::kConverged);
   EXPECT_EQ(warm.status, NsgsStatus::kConverged);
   EXPECT_EQ(other.status, NsgsStatus::kConverged);
