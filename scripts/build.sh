@@ -8,5 +8,7 @@ build="${TACTUS_BUILD_DIR:-$root/build}"
 if [[ ! -f "$build/build.ninja" ]]; then
   cmake -S "$root" -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=Release ${TACTUS_CMAKE_ARGS:-} >/dev/null
 fi
-jobs="${TACTUS_JOBS:-$(nproc)}"
+# One job per usable core. GNU nproc honours OMP_NUM_THREADS, which scripts/env.sh sets to 1 for
+# the solvers' determinism: without the env -u the build would run one job on any machine.
+jobs="${TACTUS_JOBS:-$(env -u OMP_NUM_THREADS -u OMP_THREAD_LIMIT nproc)}"
 ninja -C "$build" -j "$jobs" "$@"
