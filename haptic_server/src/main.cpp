@@ -43,6 +43,9 @@ void onSignal(int) {
 int main(int argc, char** argv) {
   using namespace tactus;
   CLI::App app{"Tactus haptic server: renders contact forces at 1 kHz or more"};
+  app.footer(
+      "Example:\n"
+      "  haptic_server --segment tactus   (after sim_server; scripts/start.sh starts both)");
   std::string segment = "tactus";
   std::vector<std::string> device_names;
   std::vector<std::string> device_options;

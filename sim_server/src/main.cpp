@@ -29,6 +29,9 @@ void onSignal(int signo) {
 
 int main(int argc, char** argv) {
   CLI::App app{"Tactus simulation server: FEM tissue, contact and friction, god-object instrument"};
+  app.footer(
+      "Example:\n"
+      "  sim_server scenes/liver_grasp.yaml   (scripts/start.sh starts it with haptic_server)");
   tactus::sim::RunOptions opt;
   std::string log_level = "info";
   app.add_option("scene", opt.scene_path, "Scene file (YAML)")->required()->check(CLI::ExistingFile);

@@ -285,6 +285,9 @@ int main(int argc, char** argv) {
                "model, NSGS tolerance and sweeps, time step, mesh) and of the haptic local model "
                "(rate, sweeps per tick), each against a reference computed in the same run. "
                "Writes sim_accuracy.csv, haptic_accuracy.csv, *_timeseries.csv and meta.csv."};
+  app.footer(
+      "Example:\n"
+      "  tactus-accuracy --out accuracy --quick");
   using tactus::study::Options;
   Options o;
   bool quick = false;

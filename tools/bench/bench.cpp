@@ -392,6 +392,9 @@ int main(int argc, char** argv) {
   CLI::App app{
       "tactus-bench: per-stage timing of a scene and the haptic tick's solve on its "
       "snapshots (headless, scripted instrument)"};
+  app.footer(
+      "Example:\n"
+      "  tactus-bench scenes/liver_grasp.yaml --json bench.json");
   BenchOptions o;
   app.add_option("scene", o.scene, "Scene YAML file")->required()->check(CLI::ExistingFile);
   app.add_option("--steps", o.steps, "Steps to run (default: the scene's duration / time step)");

@@ -337,6 +337,9 @@ int run(int argc, char** argv) {
       "evaluation (fc3d_compute_error) and tactus::shared::naturalMapError agree to rounding "
       "(the --csv file holds the error Siconos reported next to the one recomputed here, and "
       "the norms). The error columns score both final solutions with naturalMapError."};
+  app.footer(
+      "Example:\n"
+      "  tactus-bench-solver --reps 5   (scripts/bench-solver installs Siconos and runs it)");
   std::vector<std::string> inputs;
   Settings s;
   std::string csv_path;

@@ -33,6 +33,9 @@ int main(int argc, char** argv) {
   using namespace tactus;
   namespace bridge = device::bridge;
   CLI::App app{"Tactus bridge client: plays the simulated hand over the network device bridge"};
+  app.footer(
+      "Example (beside scripts/start.sh --device bridge):\n"
+      "  tactus-bridge-client --duration 20 --device-option trajectory=traj.csv");
   std::string server = "127.0.0.1";
   int port = bridge::kDefaultPort;
   double rate_hz = 1000.0;

@@ -43,6 +43,9 @@ int run(int argc, char** argv) {
       "Tactus' nonsmooth Gauss-Seidel. The error is Siconos' fc3d_compute_error: "
       "sqrt(sum_i ||r_i - P_K(r_i - u_hat_i)||^2) / max(||q||, ||r||, ||u||), "
       "u_hat = u + mu ||u_T|| n."};
+  app.footer(
+      "Example:\n"
+      "  tactus-fc3d-solve tests/data/fclib/problems/Box_Stacks-i0035-31-0.local.fc3d.txt --tol 1e-9");
   std::string problem_path;
   std::string output_path;
   tactus::shared::NsgsSettings settings;

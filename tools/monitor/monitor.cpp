@@ -43,6 +43,9 @@ double p99(std::vector<double>& v) {
 int main(int argc, char** argv) {
   using namespace tactus::shared;
   CLI::App app{"Tactus status monitor: one line per interval from a running segment"};
+  app.footer(
+      "Example:\n"
+      "  tactus-monitor --segment tactus --interval 1   (beside scripts/start.sh)");
   std::string name = "tactus";
   double interval_s = 1.0;
   double duration_s = 0.0;

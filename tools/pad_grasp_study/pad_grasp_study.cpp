@@ -20,6 +20,9 @@ using tactus::test_support::ApproachPerturbation;
 
 int main(int argc, char** argv) {
   CLI::App app{"pad_grasp_study: the pad grasp over the nominal and five perturbed approaches"};
+  app.footer(
+      "Example:\n"
+      "  pad_grasp_study --scene scenes/liver_grasp.yaml --nominal-only");
   std::string scene = std::string(TACTUS_SOURCE_DIR) + "/scenes/liver_grasp.yaml";
   double yaw_deg = 0.0, deeper_mm = 0.0, grip = -1.0;
   std::vector<double> offset_mm_arg{0.0, 0.0, 0.0};

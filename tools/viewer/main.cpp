@@ -411,6 +411,9 @@ int main(int argc, char** argv) {
   using namespace tactus::viewer;
   CLI::App app{"Tactus live view: serves a browser page showing the running simulation "
                "(read-only)"};
+  app.footer(
+      "Example:\n"
+      "  tactus-viewer --segment tactus --port 8090");
   std::string segment = "tactus";
   std::string bind = "127.0.0.1";
   int port = 8090;
