@@ -17,6 +17,7 @@
 
 #include "aabb_tree.h"
 #include "tactus/sim/collision.h"
+#include "tactus/sim/state_archive.h"
 
 namespace tactus::sim::collision_detail {
 
@@ -181,6 +182,10 @@ struct Collision::Impl {
   struct FeatureSide {
     int feature;
     Eigen::Vector3d n;
+    void transferState(StateArchive& ar) {
+      ar("feature", feature);
+      ar("n", n);
+    }
   };
   std::vector<FeatureSide> side_prev, side_next;
   // pad side memory, per (jaw part & 1, node): the side (+1: the face normal's side) of the

@@ -16,6 +16,7 @@
 #include "tactus/shared/clock.h"
 #include "tactus/shared/error.h"
 #include "tactus/shared/file_io.h"
+#include "tactus/sim/state_archive.h"
 
 namespace tactus::sim {
 
@@ -162,6 +163,15 @@ public:
   }
 
   ComplianceBuildInfo buildInfo() const override { return info_; }
+
+  // The state of the model (state_archive.h): the rotations and coherences of the last update()
+  // and the model it chose. update() recomputes them at every step before they are read; they
+  // are kept so that a restored state also answers addW / correction as the original did.
+  void transferState(StateArchive &ar) override {
+    ar("rotations", rot_);
+    ar.resizable("coherence", coherence_, rot_.size());
+    ar("active", active_);
+  }
 
 private:
   void buildRest() {

@@ -121,6 +121,9 @@ struct FemState {
   double last_h = 0.0;
   // the last two steps' dv (reduced): the iterative solvers' warm start
   Eigen::VectorXd dv_prev, dv_prev2;
+  // kCholmodReuse: the values of the A the factor of record was computed from (copied when the
+  // factor is refreshed; a restored state refactorises them, fem_state.cpp)
+  Eigen::VectorXd factor_values;
 };
 
 struct FemScratch {
@@ -213,6 +216,10 @@ struct FemBody::Impl : FemModel, FemState, FemScratch {
   // kCholmodReuse: the factor now holds this step's A; its node rotations are this step's.
   void keepFactorRotations();
   bool pcg(double tol, int max_iter, FemStepStats& stats);
+  // kCholmodReuse: the factor was just computed from `a` (keeps its values, factor_values).
+  void noteFactorSource();
+  // FemState through the archive, the factor of record rebuilt when reading (fem_state.cpp).
+  void transferState(StateArchive& ar);
 };
 
 }  // namespace tactus::sim

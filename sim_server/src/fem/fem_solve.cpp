@@ -41,6 +41,7 @@ void FemBody::Impl::ensureCurrentFactor() {
   if (a_is_step_matrix) {
     reuse.noteFactorised();
     keepFactorRotations();
+    noteFactorSource();
   }
 }
 
@@ -83,7 +84,10 @@ bool FemBody::Impl::solveStep(double h, FemStepStats& stats) {
       const double warp_s = shared::secondsSinceNs(t_warp);
       const fem_detail::ReuseSolveResult r =
           reuse.solve(chol, a, rhs, dv, corotational ? relative_rot.data() : nullptr);
-      if (r.refreshed) keepFactorRotations();
+      if (r.refreshed) {
+        keepFactorRotations();
+        noteFactorSource();
+      }
       stats.factorisation_s = r.factorisation_s;
       stats.solve_s = warp_s + r.solve_s;
       stats.cg_iterations = r.cg_iterations;

@@ -9,6 +9,8 @@
 #include <Eigen/SparseCore>
 #include <cstddef>
 
+#include "tactus/sim/state_archive.h"
+
 namespace tactus::sim::fem_detail {
 
 /// Sparse symmetric positive-definite factorisation through the CHOLMOD C API. The matrix is the
@@ -154,6 +156,12 @@ class ReusedFactorSolver {
   /// Steps since the factor was computed (-1: none yet).
   int ageSteps() const { return age_steps_; }
   long refreshes() const { return refreshes_; }
+  /// The factor's age and the last PCG's iterations (what decides the next refresh) are state;
+  /// refreshes_ counts, cg_ and warp_ are scratch.
+  void transferState(StateArchive& ar) {
+    ar("age_steps", age_steps_);
+    ar("last_iterations", last_iterations_);
+  }
 
  private:
   FactorReusePolicy policy_;

@@ -200,6 +200,12 @@ using scene_detail::SceneParser;
 SceneSpec parseScene(const std::string& yaml, const std::string& name,
                      const std::filesystem::path& base_dir) {
   SceneSpec spec = SceneParser(name, base_dir).parse(yaml);
+  std::uint64_t hash = 0xcbf29ce484222325ull;   // FNV-1a
+  for (const char c : yaml) {
+    hash ^= static_cast<unsigned char>(c);
+    hash *= 0x100000001b3ull;
+  }
+  spec.text_hash = hash;
   for (const std::string& w : spec.warnings) spdlog::warn("{}", w);
   return spec;
 }

@@ -49,4 +49,11 @@ class NumericalError : public Error {
   using Error::Error;
 };
 
+/// A saved simulation state cannot be restored: truncated or corrupt bytes, another format
+/// version, or a state of another model. The message names the state and the field.
+class StateError : public Error {
+ public:
+  using Error::Error;
+};
+
 }  // namespace tactus

@@ -80,6 +80,8 @@
 
 namespace tactus::sim {
 
+class StateArchive;
+
 /// kObstacleVertex: a tissue surface vertex against a static obstacle (obstacles.h);
 /// kTissueTissue: a tissue's surface vertex against a tissue's surface (tissue_contact.h).
 enum class ContactKind : std::uint8_t {
@@ -169,6 +171,11 @@ class Collision {
   const std::vector<Contact>& contacts() const;
   const CollisionStats& stats() const;
   const SurfaceMesh& surface() const;   ///< triangles as given; nodes = those they use
+
+  /// Writes or reads what one detect() leaves for the next (state_archive.h): the sphere
+  /// features' and the pads' side memory and the detect() count it is dated by. The trees,
+  /// normals and contacts are rebuilt by refit() and detect(). Throws StateError.
+  void transferState(StateArchive& ar);
 
  private:
   struct Impl;

@@ -37,6 +37,8 @@
 
 namespace tactus::sim {
 
+class StateArchive;
+
 /// One contact row on a tissue.
 struct TissueRow {
   std::array<int, 3> node{-1, -1, -1};   ///< node indices (unused: -1)
@@ -128,6 +130,8 @@ class TissueCompliance {
   /// (warped/rest/uncoupled only know the surface nodes: a row node inside the volume contributes
   /// zero compliance and is counted here).
   virtual ComplianceBuildInfo buildInfo() const { return {}; }
+  /// Writes or reads the model's state (state_archive.h; the rotations of the last update()).
+  virtual void transferState(StateArchive& ar) = 0;
 };
 
 /// Cache file used for `body` under `options` (empty path when options.cache_dir is empty).

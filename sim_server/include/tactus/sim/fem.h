@@ -37,6 +37,8 @@
 
 namespace tactus::sim {
 
+class StateArchive;
+
 struct FemMaterial {
   MaterialLaw law = MaterialLaw::kCorotational;
   /// kConsistent: the corotational law's tangent with the rotation's own stiffness where it is
@@ -242,6 +244,12 @@ class FemBody {
   /// Hash of everything the rest compliance depends on except h: node positions at rest, tets,
   /// material (law, E, nu, rho, damping) and fixed nodes.
   std::uint64_t restHash() const;
+
+  /// Writes or reads what a step changes and the next step reads (q, v, the element rotations,
+  /// A, the factor of record and what it was computed from, the warm starts; state_archive.h).
+  /// Reading rebuilds the factor from what it was computed from, so the next freeMotion gives
+  /// the same bits as it would have after the step that wrote the state. Throws StateError.
+  void transferState(StateArchive& ar);
 
  private:
   struct Impl;

@@ -78,6 +78,8 @@
 
 namespace tactus::sim {
 
+class StateArchive;
+
 using shared::Matrix6d;
 using shared::Vector6d;
 
@@ -218,6 +220,11 @@ class Instrument {
 
   /// World point -> tool frame.
   Eigen::Vector3d toLocal(const Eigen::Vector3d& point_m) const;
+
+  /// Writes or reads the god object's state (state_archive.h): pose, twist, target, opening,
+  /// grip rate and what the last free motion left for the correction; reading recomputes the
+  /// features. Throws StateError.
+  void transferState(StateArchive& ar);
 
  private:
   void updateFeatures();

@@ -16,6 +16,7 @@
 #include <memory>
 #include <span>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "tactus/shared/messages.h"
@@ -209,6 +210,22 @@ class Simulation {
   Eigen::Matrix<double, 6, 1> renderedWrench() const;
   Eigen::Matrix<double, 6, 1> renderedWrench(int i) const;
 
+  /// The state: everything a step changes and the next step reads (time, step index, device
+  /// targets, per tissue q, v, the element rotations, A, the factor of record and what it was
+  /// computed from, the warm starts of the linear solve, the compliance's rotations, the
+  /// collision memory; the god objects; the warm-start forces by contact id), as bytes with a
+  /// header tying them to this model (docs/design.md, "State: copy, save, restore").
+  std::string saveState() const;
+  /// Continues from a state saveState() returned for this model: the steps that follow give the
+  /// same bits as those that followed the save. The outputs of the last step (lastProblem(),
+  /// contacts(), the contact forces in reactions()) are cleared until the next step. Throws
+  /// StateError naming `source` (a state of another model, another format version, truncated
+  /// or corrupt bytes); the simulation is then left as it was.
+  void restoreState(std::string_view bytes, const std::string& source = "state");
+  /// What a model's state is tied to: the scene's text, the time step, each tissue's placed rest
+  /// mesh and fixed nodes (FNV-1a).
+  std::uint64_t modelIdentity() const;
+
   /// Writes the VTK frame of the current state if output is enabled and due (and the .pvd).
   void writeOutputIfDue();
   void finishOutput();
@@ -217,6 +234,24 @@ class Simulation {
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };
+
+/// Format of Simulation::saveState's bytes: "TACTSTAT", this version (u32), the model name's
+/// length (u32), the model identity (u64), the step index (i64), the time (f64), the model name,
+/// then the state's fields (state_archive.h). A state of another version is refused.
+inline constexpr std::uint32_t kStateFormatVersion = 1;
+
+/// The header of a saved state.
+struct StateHeader {
+  std::uint32_t version = 0;
+  std::uint64_t model_identity = 0;
+  long step = 0;
+  double t_s = 0.0;
+  std::string model_name;        ///< the scene it was saved from (its file, or the name given)
+  std::size_t body_offset = 0;   ///< where the fields start
+};
+
+/// Reads and checks the header (magic, version, sizes). Throws StateError naming `source`.
+StateHeader readStateHeader(std::string_view bytes, const std::string& source);
 
 /// The device-sample half of sim_server's haptic link (also used by tests that run the haptic
 /// loop beside an in-process simulation): a sample is fresh when it was published (seq != 0),

@@ -8,6 +8,7 @@
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
+#include <cstdint>
 #include <filesystem>
 #include <optional>
 #include <string>
@@ -251,6 +252,9 @@ struct OutputSpec {
 
 struct SceneSpec {
   std::filesystem::path source;                 ///< the YAML file (for messages)
+  /// FNV-1a of the YAML text it was parsed from (part of the model identity a saved state is
+  /// tied to; a program that edits the spec after parsing keeps it)
+  std::uint64_t text_hash = 0;
   double time_step_s = 0.01;
   std::optional<Eigen::Vector3d> gravity_mps2;  ///< absent: no gravity
   std::vector<TissueSpec> tissues;

@@ -1,0 +1,69 @@
+// FemBody's state through the state archive (state_archive.h; docs/design.md, "State: copy, save,
+// restore"): every FemState member is either written here or named with the reason it is not.
+#include "fem_body_impl.h"
+#include "tactus/shared/error.h"
+
+namespace tactus::sim {
+
+// A member added to FemState must be added below (or to the list of members rebuilt from
+// others): this stops the build until it is.
+static_assert(kAggregateFields<FemState> == 14,
+              "FemState gained or lost a member: walk it in FemBody::Impl::transferState "
+              "(fem_state.cpp) and update this count");
+
+void FemBody::Impl::noteFactorSource() {
+  if (options.linear != LinearSolverKind::kCholmodReuse) return;
+  factor_values = Eigen::Map<const Eigen::VectorXd>(a.valuePtr(), a.nonZeros());
+}
+
+void FemBody::Impl::transferState(StateArchive& ar) {
+  ar("q", q);
+  ar("v", v);
+  ar("rotation", rotation);
+  ar.block("a", a.valuePtr(), static_cast<std::size_t>(a.nonZeros()));
+  ar("chol_current", chol_current);
+  ar("a_is_step_matrix", a_is_step_matrix);
+  ar("reuse", reuse);
+  ar.resizable("factor_node_rot", factor_node_rot, static_cast<std::size_t>(n_free / 3));
+  ar("compliance_scale", compliance_scale);
+  ar("last_h", last_h);
+  ar("dv_prev", dv_prev);
+  ar("dv_prev2", dv_prev2);
+  // A scratch member that is state between steps: kCholmodReuse's node rotations of the last
+  // free motion, which a factorisation after the step (solveCompliance, the exact compliance)
+  // keeps as the factor's (keepFactorRotations).
+  ar.resizable("node_rot", node_rot, static_cast<std::size_t>(n));
+  // The factor of record (chol) is not bytes but what it was computed from: the current `a`
+  // when chol_current, else (kCholmodReuse, a factor some steps old preconditioning the PCG) the
+  // values kept by noteFactorSource. Only a factor a later step or query reads is rebuilt.
+  const bool reuse_mode = options.linear == LinearSolverKind::kCholmodReuse;
+  const bool old_factor_read = reuse_mode && reuse.ageSteps() >= 0 && !chol_current;
+  Eigen::VectorXd none;
+  ar.resizable("factor_values", old_factor_read ? factor_values : none,
+               static_cast<std::size_t>(a.nonZeros()));
+  if (!ar.loading()) return;
+  if (old_factor_read && factor_values.size() != a.nonZeros()) {
+    ar.fail("factor_values", "missing: the factor of record cannot be rebuilt");
+  }
+  if (chol_current || old_factor_read) {
+    if (!chol.analyzed()) chol.analyze(a);
+    bool ok = false;
+    if (chol_current) {
+      ok = chol.factorize(a);
+      if (reuse_mode && a_is_step_matrix) factor_values = Eigen::Map<const Eigen::VectorXd>(
+                                               a.valuePtr(), a.nonZeros());
+    } else {
+      Sparse source = a;
+      Eigen::Map<Eigen::VectorXd>(source.valuePtr(), source.nonZeros()) = factor_values;
+      ok = chol.factorize(source);
+    }
+    if (!ok) ar.fail("chol", "the factor of record could not be rebuilt (not positive definite)");
+  }
+  // Not state: the model (FemModel, with the rest factor built from it on demand), the step's
+  // buffers (FemScratch, written before they are read, but node_rot above) and the statistics
+  // (counters, inversion_warned).
+}
+
+void FemBody::transferState(StateArchive& ar) { impl_->transferState(ar); }
+
+}  // namespace tactus::sim

@@ -1,0 +1,203 @@
+// The simulation's state (Simulation::saveState / restoreState; docs/design.md, "State: copy,
+// save, restore"): a run restored from a saved state continues bit for bit as the run that saved
+// it, in the same simulation (rewound) and in a new one (through a file), on scenes that use
+// what a step carries to the next: the warm-started PCG on a reused CHOLMOD factor, the grasper's
+// finite grip, the pads' side memory and the warm-start forces (liver_grasp over 200 contact
+// steps), obstacles and contact between tissues (liver_on_stomach), and the other linear
+// solvers. A state of another model, another format or truncated is refused, and leaves the
+// simulation as it was.
+#include <gtest/gtest.h>
+
+#include <cstring>
+#include <string>
+#include <vector>
+
+#include "../../support/test_dir.h"
+#include "tactus/shared/error.h"
+#include "tactus/shared/file_io.h"
+#include "tactus/sim/fem.h"
+#include "tactus/sim/instrument.h"
+#include "tactus/sim/pipeline.h"
+
+namespace tactus::sim {
+namespace {
+
+const std::string kScenes = std::string(TACTUS_SOURCE_DIR) + "/scenes/";
+
+SceneSpec scene(const std::string& name) {
+  SceneSpec spec = loadScene(kScenes + name);
+  spec.haptics.enabled = false;
+  for (auto& t : spec.tissues) t.compliance_cache_dir.clear();
+  return spec;
+}
+
+// Everything a step leaves that a user reads, hashed bit for bit.
+struct StepPrint {
+  std::uint64_t hash = 0;
+  int contacts = 0;
+};
+
+void mix(std::uint64_t& h, const void* data, std::size_t n) {
+  const auto* p = static_cast<const unsigned char*>(data);
+  for (std::size_t i = 0; i < n; ++i) {
+    h ^= p[i];
+    h *= 0x100000001b3ull;
+  }
+}
+
+StepPrint print(const Simulation& sim, const StepReport& r) {
+  StepPrint out;
+  out.hash = 0xcbf29ce484222325ull;
+  out.contacts = r.contacts;
+  for (int t = 0; t < sim.tissueCount(); ++t) {
+    const FemBody& b = sim.tissue(t);
+    mix(out.hash, b.positions().data(), sizeof(double) * b.positions().size());
+    mix(out.hash, b.velocities().data(), sizeof(double) * b.velocities().size());
+  }
+  for (int i = 0; i < sim.instrumentCount(); ++i) {
+    const Instrument& tool = sim.instrument(i);
+    mix(out.hash, tool.pose().pos_m.data(), 3 * sizeof(double));
+    mix(out.hash, tool.pose().rot.coeffs().data(), 4 * sizeof(double));
+    mix(out.hash, tool.twist().data(), 6 * sizeof(double));
+    const double grip[2] = {tool.gripperOpening(), tool.gripRate()};
+    mix(out.hash, grip, sizeof grip);
+  }
+  const ContactProblemData& p = sim.lastProblem();
+  mix(out.hash, p.f.data(), sizeof(double) * p.f.size());
+  mix(out.hash, p.contact_id.data(), sizeof(std::uint64_t) * p.contact_id.size());
+  const double tim[2] = {sim.time(), static_cast<double>(sim.stepIndex())};
+  mix(out.hash, tim, sizeof tim);
+  return out;
+}
+
+std::vector<StepPrint> run(Simulation& sim, int steps) {
+  std::vector<StepPrint> out;
+  for (int k = 0; k < steps; ++k) {
+    for (int i = 0; i < sim.instrumentCount(); ++i) {
+      sim.setDeviceTarget(i, sim.scriptedTarget(i, sim.time()));
+    }
+    const StepReport r = sim.step();
+    EXPECT_TRUE(r.finite) << "step " << sim.stepIndex();
+    out.push_back(print(sim, r));
+  }
+  return out;
+}
+
+void expectSameRun(const std::vector<StepPrint>& a, const std::vector<StepPrint>& b,
+                   const std::string& what) {
+  ASSERT_EQ(a.size(), b.size());
+  for (std::size_t k = 0; k < a.size(); ++k) {
+    ASSERT_EQ(a[k].contacts, b[k].contacts) << what << ": step " << k << " after the restore";
+    ASSERT_EQ(a[k].hash, b[k].hash) << what << ": step " << k << " after the restore";
+  }
+}
+
+TEST(SimulationStateTest, LiverGraspContinuesBitForBitOver200ContactSteps) {
+  const SceneSpec spec = scene("liver_grasp.yaml");
+  ASSERT_EQ(spec.solver.linear, LinearSolverKind::kCholmodReuse);
+  ASSERT_GT(spec.instrument.grip_k_nmprad, 0.0);   // finite grip: the jaw angle is a DOF
+  Simulation sim(spec);
+  // into the grasp (the jaws pressing the lobe: warm-start forces that matter), then to a step
+  // whose factor of record is some steps old (the preconditioner a restore must rebuild from
+  // what it was computed from)
+  int pressed = 0;
+  for (int k = 0; k < 500 && pressed < 5; ++k) {
+    sim.setDeviceTarget(sim.scriptedTarget(sim.time()));
+    pressed = sim.step().total_normal_force_n > 0.5 ? pressed + 1 : 0;
+  }
+  ASSERT_EQ(pressed, 5) << "the grasper never pressed the lobe";
+  for (int k = 0;; ++k) {
+    ASSERT_LT(k, 50) << "no step without a refactorisation";
+    sim.setDeviceTarget(sim.scriptedTarget(sim.time()));
+    const StepReport r = sim.step();
+    ASSERT_GT(r.contacts, 0);
+    if (r.fem_factorisations == 0) break;
+  }
+  const std::string saved = sim.saveState();
+  test_support::TestDir dir("tactus_state");
+  shared::writeFileChecked(dir.path / "grasp.state", saved, "state");
+
+  const std::vector<StepPrint> original = run(sim, 200);
+  for (std::size_t k = 0; k < original.size(); ++k) {
+    ASSERT_GT(original[k].contacts, 0) << "step " << k << " after the save is not in contact";
+  }
+  const std::string end = sim.saveState();
+
+  // a new simulation, from the file
+  Simulation other(spec);
+  other.restoreState(shared::readFileChecked(dir.path / "grasp.state", "state", 1u << 30),
+                     "grasp.state");
+  EXPECT_EQ(other.stepIndex(), sim.stepIndex() - 200);
+  expectSameRun(original, run(other, 200), "a new simulation");
+  EXPECT_TRUE(other.saveState() == end) << "the states after the 200 steps differ";
+
+  // the same simulation, rewound
+  sim.restoreState(saved);
+  expectSameRun(original, run(sim, 200), "the simulation rewound");
+}
+
+TEST(SimulationStateTest, ObstaclesAndTissueContactContinueBitForBit) {
+  const SceneSpec spec = scene("liver_on_stomach.yaml");
+  ASSERT_FALSE(spec.obstacles.empty());
+  ASSERT_FALSE(spec.tissue_contacts.empty());
+  Simulation sim(spec);
+  run(sim, 20);
+  const std::string saved = sim.saveState();
+  const std::vector<StepPrint> original = run(sim, 30);
+  for (const StepPrint& p : original) ASSERT_GT(p.contacts, 0);
+  Simulation other(spec);
+  other.restoreState(saved);
+  expectSameRun(original, run(other, 30), "a new simulation");
+}
+
+// The other linear solves carry their own warm starts (PCG: the last dv) or none (CHOLMOD).
+TEST(SimulationStateTest, EveryLinearSolverContinuesBitForBit) {
+  for (const LinearSolverKind kind : {LinearSolverKind::kPcg, LinearSolverKind::kCholmod}) {
+    SceneSpec spec = scene("liver_grasp.yaml");
+    spec.solver.linear = kind;
+    Simulation sim(spec);
+    run(sim, 165);
+    const std::string saved = sim.saveState();
+    const std::vector<StepPrint> original = run(sim, 25);
+    Simulation other(spec);
+    other.restoreState(saved);
+    expectSameRun(original, run(other, 25),
+                  kind == LinearSolverKind::kPcg ? "pcg" : "cholmod");
+  }
+}
+
+TEST(SimulationStateTest, ForeignTruncatedOrCorruptStatesAreRefusedAndChangeNothing) {
+  Simulation grasp(scene("liver_grasp.yaml"));
+  run(grasp, 3);
+  const std::string before = grasp.saveState();
+  const auto refused = [&](const std::string& bytes, const std::string& expected) {
+    try {
+      grasp.restoreState(bytes, "bad.state");
+      ADD_FAILURE() << "accepted; expected '" << expected << "'";
+    } catch (const StateError& e) {
+      EXPECT_NE(std::string(e.what()).find(expected), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("bad.state"), std::string::npos) << e.what();
+    }
+    EXPECT_TRUE(grasp.saveState() == before) << "a refused state changed the simulation";
+  };
+  SceneSpec other_spec = scene("liver_grasp.yaml");
+  other_spec.time_step_s = 0.005;
+  Simulation other(other_spec);
+  refused(other.saveState(), "a state of another model");
+  refused(before.substr(0, before.size() / 2), "truncated");
+  refused("hello", "not a Tactus simulation state");
+  std::string version = before;
+  version[8] = 99;
+  refused(version, "format version 99");
+  // a field's tag or size overwritten: the first field after the header is the time, then the
+  // step index; break the first tissue's q count
+  const StateHeader h = readStateHeader(before, "x");
+  std::string corrupt = before;
+  corrupt[h.body_offset] ^= 0x5a;
+  refused(corrupt, "'t': not found where expected");
+  std::string longer = before + "x";
+  refused(longer, "bytes left after the last field");
+}
+
+}  // namespace
+}  // namespace tactus::sim
