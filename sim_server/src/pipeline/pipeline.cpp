@@ -13,11 +13,6 @@
 
 namespace tactus::sim {
 
-shared::ContactProblemView ContactProblemData::view() const {
-  return shared::denseProblemView(contacts, rows, row_offset.data(), W.data(), rows,
-                                  delta_free.data(), mu.data());
-}
-
 // One step, the paper's stages in order (docs/design.md section 2): the free motion, the contacts
 // and the compliance at the free state, W, NSGS and the constrained motion, repeated from the
 // free state while the contact passes (solver.contact_iterations) find the corrected state still
@@ -120,6 +115,12 @@ const SceneSpec& Simulation::spec() const { return impl_->model.spec; }
 bool Simulation::hasInstrument() const { return !impl_->state.instruments.empty(); }
 int Simulation::instrumentCount() const {
   return static_cast<int>(impl_->state.instruments.size());
+}
+const DeviceTarget& Simulation::deviceTarget(int i) const {
+  return impl_->state.targets.at(static_cast<std::size_t>(i));
+}
+shared::Vector6d Simulation::contactWrench(int i) const {
+  return impl_->scratch.wrench.at(static_cast<std::size_t>(i));
 }
 double Simulation::time() const { return impl_->state.t_s; }
 long Simulation::stepIndex() const { return impl_->state.step; }

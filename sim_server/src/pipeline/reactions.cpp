@@ -5,12 +5,6 @@
 
 namespace tactus::sim {
 
-Eigen::Vector3d ReactionForces::imbalance_n() const {
-  Eigen::Vector3d sum = weight_n + applied_load_n + fixed_total_n + instrument_force_n;
-  for (const Eigen::Vector3d& f : obstacle_force_n) sum += f;
-  return sum;
-}
-
 ReactionForces computeReactions(const SimulationModel& model, SimulationState& state,
                                 const StepScratch& scratch) {
   ReactionForces out;

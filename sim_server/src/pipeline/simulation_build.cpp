@@ -104,8 +104,11 @@ StepScratch buildScratch(const SimulationModel& model) {
   return scratch;
 }
 
-Simulation::Simulation(const SceneSpec& spec) : impl_(std::make_unique<Impl>()) {
-  impl_->model = buildModel(spec);
+Simulation::Simulation(const SceneSpec& spec)
+    : Simulation(std::make_shared<const SimulationModel>(buildModel(spec))) {}
+
+Simulation::Simulation(std::shared_ptr<const SimulationModel> model)
+    : impl_(std::make_unique<Impl>(std::move(model))) {
   impl_->state = buildState(impl_->model);
   impl_->scratch = buildScratch(impl_->model);
 }

@@ -3,6 +3,8 @@
 // the overview): the model a scene defines, the state a step advances, the scratch a step
 // reuses, and, outside the physics, the VTK output and the counters.
 
+#include <memory>
+
 #include "output_writer.h"
 #include "simulation_model.h"
 #include "simulation_state.h"
@@ -12,7 +14,10 @@
 namespace tactus::sim {
 
 struct Simulation::Impl {
-  SimulationModel model;      ///< immutable after the constructor
+  explicit Impl(std::shared_ptr<const SimulationModel> m)
+      : shared_model(std::move(m)), model(*shared_model) {}
+  std::shared_ptr<const SimulationModel> shared_model;   ///< shared with tactus::Model
+  const SimulationModel& model;   ///< immutable
   SimulationState state;
   StepScratch scratch;
   OutputWriter output;

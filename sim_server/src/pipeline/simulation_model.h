@@ -17,6 +17,7 @@
 // hold of the model is built from this one and not changed by a step either.
 
 #include <Eigen/Geometry>
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -54,5 +55,9 @@ struct SimulationModel {
 /// Loads and places the meshes, collects the fixed nodes and derives the solver settings.
 /// Throws SceneError / MeshError with the scene's file in the message.
 SimulationModel buildModel(const SceneSpec& spec);
+
+/// What a saved state is tied to (Simulation::modelIdentity): FNV-1a of the scene's text, the
+/// time step, each tissue's placed rest mesh and fixed nodes.
+std::uint64_t modelIdentity(const SimulationModel& model);
 
 }  // namespace tactus::sim

@@ -76,8 +76,9 @@ T get(std::string_view bytes, std::size_t at) {
 
 }  // namespace
 
-std::uint64_t Simulation::modelIdentity() const {
-  const SimulationModel& m = impl_->model;
+std::uint64_t Simulation::modelIdentity() const { return sim::modelIdentity(impl_->model); }
+
+std::uint64_t modelIdentity(const SimulationModel& m) {
   std::uint64_t h = 0xcbf29ce484222325ull;
   const auto mix = [&h](const void* data, std::size_t n) {
     const auto* p = static_cast<const unsigned char*>(data);

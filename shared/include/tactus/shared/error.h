@@ -49,6 +49,19 @@ class NumericalError : public Error {
   using Error::Error;
 };
 
+/// A file cannot be opened, is not a regular file, is too large, or a read or write failed
+/// (shared/file_io.h).
+class FileError : public Error {
+ public:
+  using Error::Error;
+};
+
+/// Work stopped because SIGINT/SIGTERM requested a stop (see shared::requestStop()).
+class Cancelled : public Error {
+ public:
+  using Error::Error;
+};
+
 /// A saved simulation state cannot be restored: truncated or corrupt bytes, another format
 /// version, or a state of another model. The message names the state and the field.
 class StateError : public Error {

@@ -21,22 +21,6 @@
 
 #include "tactus/shared/error.h"
 
-namespace tactus {
-
-/// A file cannot be opened, is not a regular file, is too large, or a read or write failed.
-class FileError : public Error {
- public:
-  using Error::Error;
-};
-
-/// Work stopped because SIGINT/SIGTERM requested a stop (see shared::requestStop()).
-class Cancelled : public Error {
- public:
-  using Error::Error;
-};
-
-}  // namespace tactus
-
 namespace tactus::shared {
 
 /// Size limits of the files the readers accept [bytes].

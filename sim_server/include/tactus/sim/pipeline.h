@@ -26,116 +26,22 @@
 #include "tactus/sim/collision.h"
 #include "tactus/sim/reactions.h"
 #include "tactus/sim/scene.h"
+#include "tactus/types.h"
 
 namespace tactus::sim {
 
 class FemBody;
 class TissueCompliance;
 class Instrument;
+struct SimulationModel;
 
-/// Wall time per stage of the last step [s], named after the functions of `Simulation::step()`
-/// (docs/design.md section 2). With contact passes (solver.contact_iterations) every pass adds to
-/// the stages it runs.
-struct StageTimes {
-  double free_motion_s = 0.0;          ///< freeMotion: tissues and god object, no contact force
-  double detect_collisions_s = 0.0;    ///< detectCollisions: BVH refit and proximity queries
-  double update_compliance_s = 0.0;    ///< updateCompliance: C ~ R C0 R^T (or the exact C)
-  double build_w_s = 0.0;              ///< buildW: contact rows H, delta_free, W = H C H^T
-  double solve_contacts_s = 0.0;       ///< solveContacts: warm start and NSGS
-  double constrained_motion_s = 0.0;   ///< constrainedMotion: dq = C H^T f, tool dx = C6 H^T f
-  /// VTK output: not part of step() nor of total_s (writeOutputIfDue); 0 unless the caller fills
-  /// it. sim_server's runner times its writeOutputIfDue call, made after the step's snapshot is
-  /// published, into its "output" row (the steps without a frame due read ~0); tactus-bench
-  /// writes no output.
-  double output_s = 0.0;
-  double total_s = 0.0;                ///< the whole step() call
-};
-
-/// What one step did.
-struct StepReport {
-  int contacts = 0;
-  int rows = 0;
-  int contacts_dropped = 0;          ///< over max_contacts (deepest kept)
-  shared::NsgsResult nsgs;
-  /// Groups of coupled bodies the last solve split the problem into (solver.split_contact_groups;
-  /// 1: solved whole, 0: no contact); nsgs then holds the largest sweep count over the groups
-  int contact_groups = 0;
-  /// Of those problems, how many NSGS swept on W's blocks (shared::chooseStorage's rule: at most
-  /// kBlockSparseMaxFill of their contact blocks non-zero; with solver.split_contact_groups)
-  int solved_on_blocks = 0;
-  double max_penetration_m = 0.0;    ///< max(-gap) after the constrained motion, >= 0
-  double complementarity = 0.0;      ///< max_i |f_n,i * delta_n,i| after the correction [N m]
-  int contact_passes = 0;            ///< contact passes run (solver.contact_iterations caps it)
-  /// max(-gap) by a fresh collision query at the corrected state, >= 0; measured only when
-  /// solver.contact_iterations > 1 (else 0)
-  double geometric_penetration_m = 0.0;
-  /// Tissue nodes with a non-zero weight in some contact (a vertex contact's node, a face
-  /// contact's triangle nodes), over all tissues, in the last assembled problem
-  int distinct_tissue_nodes = 0;
-  double total_normal_force_n = 0.0; ///< sum of the normal forces of the last solve [N]
-  /// Contact wrench on the tool of the last solve [force_n; torque_nm about the tool origin]
-  /// (the first instrument's)
-  Eigen::Matrix<double, 6, 1> tool_wrench = Eigen::Matrix<double, 6, 1>::Zero();
-  /// The same per instrument (empty without instrument)
-  std::vector<shared::Vector6d> tool_wrenches;
-  bool finite = true;                ///< every state value finite
-  /// Tetrahedra inverted (det F <= 0) at the start of the step, over all tissues
-  /// (FemStepStats::inverted_elements)
-  int inverted_elements = 0;
-  /// The free motions' linear solves, over all tissues: CHOLMOD factorisations of the step's
-  /// system matrix and PCG iterations (FemStepStats)
-  int fem_factorisations = 0;
-  int fem_cg_iterations = 0;
-  StageTimes times;
-};
-
-/// The device target driving the god object.
-struct DeviceTarget {
-  shared::Pose pose;
-  Eigen::Matrix<double, 6, 1> twist = Eigen::Matrix<double, 6, 1>::Zero();  ///< [v; w]
-  double gripper_opening = 1.0;      ///< 0 closed .. 1 open
-};
-
-/// One instrument's part of the last contact problem.
-struct InstrumentProblemData {
-  shared::Pose device_pose;                    ///< x_h* of this instrument's device
-  double device_gripper = 1.0;                 ///< opening (0..1) used for this step
-  shared::Pose tool_pose;                      ///< its god object after the step
-};
-
-/// The last contact problem, in the form the haptic loop needs (docs/design.md, "The haptic
-/// local model"). With several instruments, J's row r is d delta_free_r / d x_h of the device
-/// of instrument contact_instrument[c] (c the row's contact): each row moves with its own
-/// device only, and the wrench on instrument i is the sum over its own contacts.
-struct ContactProblemData {
-  int contacts = 0;
-  int rows = 0;
-  std::vector<int> row_offset;                 ///< contacts + 1
-  std::vector<std::uint64_t> contact_id;
-  std::vector<double> mu;
-  Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> W;
-  Eigen::VectorXd delta_free;
-  Eigen::VectorXd f;
-  Eigen::Matrix<double, Eigen::Dynamic, 6, Eigen::RowMajor> J;   ///< d delta_free / d x_h
-  /// d gap / d phi per row: the jaw angle's column of H (dynamic grip; zeros otherwise). The
-  /// contact torque on the jaw angle is grip . f.
-  Eigen::VectorXd grip;
-  std::vector<Eigen::Vector3d> point_m;        ///< per contact, on the tissue
-  std::vector<Eigen::Vector3d> normal;         ///< per contact (row n), tissue -> tool
-  std::vector<Eigen::Vector3d> tangent1;       ///< per contact (row t1)
-  std::vector<Eigen::Vector3d> tangent2;       ///< per contact (row t2)
-  std::vector<int> contact_instrument;         ///< per contact: its instrument (-1: none)
-  /// per contact: 1 when its group of coupled bodies has no instrument contact (no device can
-  /// change its force; published as shared::kContactUnreachable); filled by the solve
-  std::vector<std::uint8_t> unreachable;
-  std::vector<InstrumentProblemData> instruments;   ///< per instrument
-  shared::Pose device_pose;                    ///< x_h* used for this step (instrument 0)
-  double device_gripper = 1.0;                 ///< opening (0..1) used for this step (idem)
-  shared::Pose tool_pose;                      ///< god object after the step (idem)
-  shared::NsgsResult solve;                    ///< the step's NSGS result (kEmpty: no solve)
-  /// The solver's view of this problem (pointers into this object).
-  shared::ContactProblemView view() const;
-};
+// The step's plain data are the public API's (tactus/types.h): DeviceTarget, StageTimes,
+// StepReport, InstrumentProblemData, ContactProblem (here ContactProblemData).
+using tactus::DeviceTarget;
+using tactus::InstrumentProblemData;
+using tactus::StageTimes;
+using tactus::StepReport;
+using ContactProblemData = tactus::ContactProblem;
 
 /// Counters that prove absent effects cost nothing.
 struct PipelineCounters {
@@ -154,6 +60,9 @@ class Simulation {
   /// Builds everything the scene calls for (meshes, FEM, compliance precomputation, collision
   /// structures, instrument). Throws tactus::Error subclasses with clear messages.
   explicit Simulation(const SceneSpec& spec);
+  /// The same from a model built once (buildModel, simulation_model.h) and shared by several
+  /// simulations (tactus::Model).
+  explicit Simulation(std::shared_ptr<const SimulationModel> model);
   ~Simulation();
   Simulation(const Simulation&) = delete;
   Simulation& operator=(const Simulation&) = delete;
@@ -173,6 +82,11 @@ class Simulation {
   DeviceTarget scriptedTarget(int i, double t_s) const;
   bool hasInstrument() const;
   int instrumentCount() const;
+  /// The target instrument i follows (after setDeviceTarget's checks).
+  const DeviceTarget& deviceTarget(int i) const;
+  /// The contact wrench on instrument i of the last step [force_n; torque_nm] (zero before the
+  /// first step and after restoreState).
+  shared::Vector6d contactWrench(int i) const;
 
   /// Advances one time step.
   StepReport step();

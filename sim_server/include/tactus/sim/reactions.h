@@ -18,31 +18,12 @@
 //  * the applied loads: the sum of the last step's force and pressure loads.
 // At rest: weight + loads + sum of fixed reactions + obstacle forces + instrument force = 0.
 
-#include <Eigen/Core>
-#include <string>
-#include <vector>
+#include "tactus/types.h"
 
 namespace tactus::sim {
 
-struct TissueReactions {
-  Eigen::Matrix3Xd fixed_reaction_n;   ///< per node: R_i at fixed nodes, 0 elsewhere
-  Eigen::Matrix3Xd contact_force_n;    ///< per node: H^T f
-  Eigen::Vector3d fixed_total_n = Eigen::Vector3d::Zero();   ///< sum of R_i
-  Eigen::Vector3d weight_n = Eigen::Vector3d::Zero();        ///< sum of m_i g (all nodes)
-  /// From the other tissues (and itself, self-contact: 0 in sum) through tissue contacts
-  Eigen::Vector3d from_tissues_n = Eigen::Vector3d::Zero();
-};
-
-struct ReactionForces {
-  std::vector<TissueReactions> tissues;
-  std::vector<std::string> obstacle_names;
-  std::vector<Eigen::Vector3d> obstacle_force_n;            ///< per obstacle, on the tissues
-  Eigen::Vector3d instrument_force_n = Eigen::Vector3d::Zero();   ///< on the tissues
-  Eigen::Vector3d weight_n = Eigen::Vector3d::Zero();       ///< all tissues
-  Eigen::Vector3d applied_load_n = Eigen::Vector3d::Zero(); ///< force and pressure loads
-  Eigen::Vector3d fixed_total_n = Eigen::Vector3d::Zero();  ///< all tissues
-  /// weight + loads + fixed + obstacles + instrument: 0 at rest
-  Eigen::Vector3d imbalance_n() const;
-};
+// The result types are the public API's (tactus/types.h).
+using tactus::ReactionForces;
+using tactus::TissueReactions;
 
 }  // namespace tactus::sim

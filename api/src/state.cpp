@@ -1,0 +1,46 @@
+// tactus::State: a simulation state as a value, saved and read through checked files (state.h).
+#include "tactus/state.h"
+
+#include "tactus/shared/error.h"
+#include "tactus/shared/file_io.h"
+#include "tactus/sim/pipeline.h"
+
+namespace tactus {
+
+namespace {
+constexpr std::uint64_t kMaxStateFileBytes = std::uint64_t{2} << 30;   // 2 GiB
+}
+
+State State::fromBytes(std::string bytes) {
+  const sim::StateHeader h = sim::readStateHeader(bytes, "state");
+  State s;
+  s.bytes_ = std::move(bytes);
+  s.t_s_ = h.t_s;
+  s.step_ = h.step;
+  s.model_identity_ = h.model_identity;
+  s.model_name_ = h.model_name;
+  return s;
+}
+
+State State::load(const std::filesystem::path& path) {
+  std::string bytes = shared::readFileChecked(path, "state file", kMaxStateFileBytes);
+  const sim::StateHeader h = sim::readStateHeader(bytes, path.string());
+  State s;
+  s.bytes_ = std::move(bytes);
+  s.t_s_ = h.t_s;
+  s.step_ = h.step;
+  s.model_identity_ = h.model_identity;
+  s.model_name_ = h.model_name;
+  s.source_ = path.string();
+  return s;
+}
+
+void State::save(const std::filesystem::path& path, bool overwrite) const {
+  if (bytes_.empty()) throw StateError(path.string() + ": an empty State has nothing to save");
+  shared::OutputOptions options;
+  options.overwrite = overwrite;
+  options.overwrite_hint = "pass overwrite=true";
+  shared::writeFileChecked(path, bytes_, "state file", options);
+}
+
+}  // namespace tactus
