@@ -84,6 +84,8 @@ struct InstrumentProblemData {
   Pose device_pose;                  ///< x_h* of this instrument's device
   double device_gripper = 1.0;       ///< opening (0..1) used for this step
   Pose tool_pose;                    ///< its god object after the step
+  /// The jaw angle of a full opening [rad] (the scene's; a snapshot carries openings as angles)
+  double max_opening_rad = 1.0;
 };
 
 /// A frictional contact problem delta = W f + delta_free (shared/nsgs.h: Coulomb's law per
@@ -97,6 +99,8 @@ struct InstrumentProblemData {
 struct ContactProblem {
   int contacts = 0;
   int rows = 0;
+  std::int64_t step = 0;                       ///< the simulation step that made it (its index)
+  double h_s = 0.0;                            ///< that simulation's time step
   std::vector<int> row_offset;                 ///< contacts + 1
   std::vector<std::uint64_t> contact_id;       ///< stable across steps (warm starts)
   std::vector<double> mu;                      ///< per contact

@@ -58,6 +58,8 @@ StepReport Simulation::step() {
 
   s.t_s += m.h_s;
   ++s.step;
+  x.problem.step = s.step;
+  x.problem.h_s = m.h_s;
   ++counters.steps;
   counters.rotation_extractions = 0;
   counters.damping_evaluations = 0;

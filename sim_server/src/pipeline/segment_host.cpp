@@ -5,7 +5,10 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
+
+#include "tactus/contact.h"
 
 namespace tactus::sim {
 
@@ -212,88 +215,12 @@ std::string SegmentHost::displacedReason(std::int64_t now_ns) {
 
 bool writeSnapshot(const Simulation& sim, double max_opening_rad, std::uint64_t seq,
                    std::int64_t t_ns, std::uint64_t device_seq, shared::SnapshotWriter& slot) {
-  const ContactProblemData& p = sim.lastProblem();
-  auto& hdr = slot.header();
-  int contacts = p.contacts;
-  int rows = p.rows;
-  bool fits = slot.setSize(rows, contacts);
-  if (!fits) {
-    // publish an empty problem rather than a wrong one
-    contacts = 0;
-    rows = 0;
-    slot.setSize(0, 0);
+  std::array<double, shared::kMaxInstruments> full_rad{};
+  full_rad[0] = max_opening_rad;
+  for (int i = 1; i < std::min(sim.instrumentCount(), shared::kMaxInstruments); ++i) {
+    full_rad[static_cast<std::size_t>(i)] = instrumentSpec(sim.spec(), i).max_opening_rad;
   }
-  hdr.seq = seq;
-  hdr.t_ns = t_ns;
-  hdr.step = static_cast<std::uint64_t>(sim.stepIndex());
-  hdr.h_s = sim.spec().time_step_s;
-  hdr.device_seq = device_seq;
-  const bool solved = fits && rows > 0 && p.solve.status != shared::NsgsStatus::kEmpty;
-  hdr.solver_sweeps = solved ? p.solve.sweeps : 0;
-  hdr.solver_error = solved ? p.solve.error : 0.0;
-  // a problem that did not fit is not this step's problem: published empty and not valid, so
-  // the haptic side treats it as stale (fades out) instead of rendering no contact
-  hdr.flags = (fits ? shared::kSnapshotValid | shared::kSnapshotHasJacobian : 0u) |
-              (solved && p.solve.status == shared::NsgsStatus::kConverged
-                   ? shared::kSnapshotConverged
-                   : 0u);
-  auto put_pose = [](shared::PoseSample& out, const shared::Pose& pose, double gripper) {
-    for (int i = 0; i < 3; ++i) out.pos_m[i] = pose.pos_m[i];
-    out.quat_wxyz = {pose.rot.w(), pose.rot.x(), pose.rot.y(), pose.rot.z()};
-    out.gripper_rad = gripper;
-  };
-  put_pose(hdr.device_pose, p.device_pose, p.device_gripper * max_opening_rad);
-  put_pose(hdr.tool_pose, p.tool_pose, p.device_gripper * max_opening_rad);
-  // the per-instrument blocks (block 0 repeats the fields above)
-  const int tools = std::min<int>(static_cast<int>(p.instruments.size()), shared::kMaxInstruments);
-  hdr.instruments = tools;
-  for (int i = 0; i < tools; ++i) {
-    const InstrumentProblemData& in = p.instruments[static_cast<std::size_t>(i)];
-    shared::SnapshotInstrument& block = hdr.instrument[static_cast<std::size_t>(i)];
-    const double full_rad =
-        i == 0 ? max_opening_rad : instrumentSpec(sim.spec(), i).max_opening_rad;
-    block.device_seq = i == 0 ? device_seq : 0;
-    put_pose(block.device_pose, in.device_pose, in.device_gripper * full_rad);
-    put_pose(block.tool_pose, in.tool_pose, in.device_gripper * full_rad);
-  }
-  const int ld = slot.ld();
-  slot.rowOffset()[0] = 0;
-  for (int c = 0; c <= contacts; ++c) slot.rowOffset()[c] = p.row_offset[c];
-  for (int c = 0; c < contacts; ++c) {
-    slot.contactId()[c] = p.contact_id[c];
-    slot.mu()[c] = p.mu[c];
-    slot.contactInstrument()[c] =
-        c < static_cast<int>(p.contact_instrument.size()) ? p.contact_instrument[c] : 0;
-    if (c < static_cast<int>(p.unreachable.size()) && p.unreachable[c] != 0) {
-      slot.contactInstrument()[c] = shared::kContactUnreachable;
-    }
-    for (int k = 0; k < 3; ++k) {
-      slot.contactPoint()[3 * c + k] = p.point_m[c][k];
-      slot.contactNormal()[3 * c + k] = p.normal[c][k];
-      slot.contactTangent()[6 * c + k] = p.tangent1[c][k];
-      slot.contactTangent()[6 * c + 3 + k] = p.tangent2[c][k];
-    }
-  }
-  double* W = slot.W();
-  for (int i = 0; i < rows; ++i) {
-    std::copy_n(p.W.data() + static_cast<std::ptrdiff_t>(i) * rows, rows,
-                W + static_cast<std::ptrdiff_t>(i) * ld);
-    slot.deltaFree()[i] = p.delta_free[i];
-    slot.f()[i] = p.f[i];
-    for (int k = 0; k < 6; ++k) slot.J()[6 * i + k] = p.J(i, k);
-  }
-  // the haptic side's symmetric sweep needs W == W^T exactly: say so only when it holds
-  bool symmetric = true;
-  for (int i = 0; i < rows && symmetric; ++i) {
-    for (int j = i + 1; j < rows; ++j) {
-      if (!(W[static_cast<std::ptrdiff_t>(i) * ld + j] == W[static_cast<std::ptrdiff_t>(j) * ld + i])) {
-        symmetric = false;
-        break;
-      }
-    }
-  }
-  if (symmetric) hdr.flags |= shared::kSnapshotSymmetricW;
-  return fits;
+  return writeSnapshotSlot(sim.lastProblem(), seq, t_ns, device_seq, slot, full_rad);
 }
 
 void SegmentHost::publish(const Simulation& sim) {

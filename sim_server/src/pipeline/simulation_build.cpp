@@ -93,6 +93,10 @@ StepScratch buildScratch(const SimulationModel& model) {
   scratch.grip_torque.assign(n, 0.0);
   scratch.previous_grip_torque.assign(n, 0.0);
   scratch.problem.instruments.resize(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    scratch.problem.instruments[i].max_opening_rad =
+        instrumentSpec(model.spec, static_cast<int>(i)).max_opening_rad;
+  }
   if (model.has_contacts) {
     scratch.workspace.reserve(model.max_rows,
                               problemContactCapacity(model.spec) +
