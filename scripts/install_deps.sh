@@ -8,7 +8,7 @@ packages=(
   build-essential cmake ninja-build pkg-config
   libeigen3-dev libboost-dev libspdlog-dev libsuitesparse-dev libyaml-cpp-dev
   libcli11-dev libgtest-dev libgmock-dev libbenchmark-dev zlib1g-dev
-  python3 python3-matplotlib
+  python3 python3-matplotlib python3-dev python3-numpy python3-pytest pybind11-dev
   libhdf5-dev
   libopenblas0-serial
   chromium

@@ -19,6 +19,7 @@
 #include "hard_case_support.h"
 #include "tactus/haptic/haptic_loop.h"
 #include "tactus/shared/segment.h"
+#include "tactus/sim/haptic_link.h"
 
 namespace tactus::hard_cases {
 namespace {

@@ -22,6 +22,7 @@
 #include "tactus/sim/fem.h"
 #include "tactus/sim/instrument.h"
 #include "tactus/sim/mesh.h"
+#include "tactus/sim/vtk_writer.h"
 #include "tactus/sim/pipeline.h"
 #include "tactus/sim/scene.h"
 

@@ -22,7 +22,9 @@
 #include "tactus/shared/error.h"
 #include "tactus/sim/fem.h"
 #include "tactus/sim/mesh.h"
+#include "tactus/sim/vtk_writer.h"
 #include "tactus/sim/pipeline.h"
+#include "../../sim_server/src/app/output_writer.h"
 #include "tactus/sim/runner.h"
 #include "tactus/sim/scene.h"
 
@@ -167,8 +169,9 @@ TEST(InvertedElements, AreCountedInTheStepReportTheStatsJsonAndTheVtu) {
   const std::string js = stats.json("flipped");
   EXPECT_NE(js.find("\"inverted_elements_max\": " + std::to_string(inverted)), std::string::npos)
       << js;
-  sim.writeOutputIfDue();
-  sim.finishOutput();
+  OutputWriter output;
+  output.writeIfDue(sim);
+  output.finish(sim.spec());
   // the VTU of that step carries the per-cell fields, with as many 1s as inverted cells now
   std::string vtu;
   for (const auto& e : fs::directory_iterator(dir)) {

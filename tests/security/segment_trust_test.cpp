@@ -31,7 +31,7 @@
 #include <utility>
 #include <vector>
 
-#include "../../sim_server/src/pipeline/segment_host.h"
+#include "../../sim_server/src/app/segment_host.h"
 #include "tactus/shared/error.h"
 #include "tactus/shared/segment.h"
 #include "tactus/sim/instrument.h"

@@ -115,6 +115,7 @@ void Simulation::setDeviceTarget(int i, const DeviceTarget& target) {
 
 const SceneSpec& Simulation::spec() const { return impl_->model.spec; }
 bool Simulation::hasInstrument() const { return !impl_->state.instruments.empty(); }
+bool Simulation::hasContactProblem() const { return impl_->model.has_contacts; }
 int Simulation::instrumentCount() const {
   return static_cast<int>(impl_->state.instruments.size());
 }
@@ -175,13 +176,5 @@ Eigen::Matrix<double, 6, 1> Simulation::renderedWrench() const {
 Eigen::Matrix<double, 6, 1> Simulation::renderedWrench(int i) const {
   return instrument(i).couplingWrench();
 }
-
-void Simulation::writeOutputIfDue() {
-  if (impl_->output.writeIfDue(impl_->model, impl_->state, impl_->scratch)) {
-    ++impl_->counters.vtk_frames;
-  }
-}
-
-void Simulation::finishOutput() { impl_->output.finish(impl_->model); }
 
 }  // namespace tactus::sim

@@ -1,11 +1,10 @@
 #pragma once
 // What a Simulation holds, in the manner of MuJoCo's mjModel / mjData (simulation_model.h has
 // the overview): the model a scene defines, the state a step advances, the scratch a step
-// reuses, and, outside the physics, the VTK output and the counters.
+// reuses, and, outside the physics, the counters.
 
 #include <memory>
 
-#include "output_writer.h"
 #include "simulation_model.h"
 #include "simulation_state.h"
 #include "step_scratch.h"
@@ -20,7 +19,6 @@ struct Simulation::Impl {
   const SimulationModel& model;   ///< immutable
   SimulationState state;
   StepScratch scratch;
-  OutputWriter output;
   PipelineCounters counters;
 };
 

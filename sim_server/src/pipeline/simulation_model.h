@@ -7,7 +7,7 @@
 //                                       settings, the instrument's workspace
 //   SimulationState  (simulation_state.h)  what a step changes and the next step starts from
 //   StepScratch      (step_scratch.h)   what a step rebuilds and reuses: rows, W, free state
-//   OutputWriter, PipelineCounters      output and statistics, outside the physics
+//   PipelineCounters                    statistics, outside the physics
 //
 // The physics objects carry the same split inside them: FemBody's data is FemModel (rest shape,
 // material, element data, A's pattern, the rest factorisation), FemState (q, v, rotations, the

@@ -9,6 +9,7 @@
 
 #include "../../support/test_dir.h"
 #include "tactus/sim/mesh.h"
+#include "tactus/sim/vtk_writer.h"
 #include "tactus/sim/mesh_gen.h"
 #include "tactus/tactus.h"
 

@@ -21,7 +21,7 @@
 
 #include "../../support/alloc_counter.h"
 #include "../../support/scripted_device.h"
-#include "../../../sim_server/src/pipeline/segment_host.h"
+#include "../../../sim_server/src/app/segment_host.h"
 #include "tactus/haptic/haptic_loop.h"
 #include "tactus/shared/clock.h"
 #include "tactus/shared/workspace_mapping.h"

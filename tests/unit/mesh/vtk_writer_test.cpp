@@ -11,6 +11,7 @@
 
 #include "tactus/shared/error.h"
 #include "tactus/sim/mesh.h"
+#include "tactus/sim/vtk_writer.h"
 
 namespace tactus::sim {
 namespace {

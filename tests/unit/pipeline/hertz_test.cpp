@@ -19,6 +19,7 @@
 
 #include "tactus/sim/instrument.h"
 #include "tactus/sim/mesh.h"
+#include "tactus/sim/vtk_writer.h"
 #include "tactus/sim/pipeline.h"
 
 namespace tactus::sim {

@@ -12,7 +12,7 @@
 #include <cstdio>
 #include <vector>
 
-#include "../../../sim_server/src/pipeline/display_publisher.h"
+#include "../../../sim_server/src/app/display_publisher.h"
 #include "../../support/liver_lobe.h"
 #include "tactus/shared/segment.h"
 #include "tactus/sim/fem.h"

@@ -12,6 +12,7 @@
 #include "tactus/sim/fem.h"
 #include "tactus/sim/mesh_gen.h"
 #include "tactus/sim/pipeline.h"
+#include "tactus/sim/vtk_writer.h"
 #include "../../support/test_dir.h"
 
 namespace tactus::sim {

@@ -15,6 +15,7 @@
 #include "tactus/sim/mesh_gen.h"
 #include "tactus/sim/obstacles.h"
 #include "tactus/sim/pipeline.h"
+#include "tactus/sim/vtk_writer.h"
 #include "../../support/test_dir.h"
 
 namespace tactus::sim {

@@ -18,6 +18,7 @@
 #include "tactus/sim/pipeline.h"
 #include "../../support/test_dir.h"
 #include "tactus/sim/surface_io.h"
+#include "tactus/sim/vtk_writer.h"
 
 namespace tactus::sim {
 namespace {

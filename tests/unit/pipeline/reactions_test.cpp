@@ -12,7 +12,9 @@
 #include "tactus/sim/mesh_gen.h"
 #include "tactus/sim/pipeline.h"
 #include "../../support/test_dir.h"
+#include "../../../sim_server/src/app/output_writer.h"
 #include "tactus/sim/runner.h"
+#include "tactus/sim/vtk_writer.h"
 
 namespace tactus::sim {
 namespace {
@@ -114,7 +116,7 @@ TEST(ReactionsTest, TheVtuFramesAndTheStatisticsCarryTheReactions) {
                     "obstacles: [{name: table, plane: {point: [0, 0, -0.0005], normal: [0, 0, 1]}, "
                     "friction: 0.5}]\n",
                     20, "output: {vtk: " + (dir.path / "out").string() + ", every: 10}\n");
-  sim->writeOutputIfDue();
+  OutputWriter().writeIfDue(*sim);
   std::ifstream in(dir.path / "out" / "block_000000.vtu");
   std::stringstream text;
   text << in.rdbuf();

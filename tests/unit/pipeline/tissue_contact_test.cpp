@@ -14,6 +14,7 @@
 #include "tactus/shared/error.h"
 #include "tactus/sim/mesh_gen.h"
 #include "tactus/sim/pipeline.h"
+#include "tactus/sim/vtk_writer.h"
 #include "../../support/test_dir.h"
 
 namespace tactus::sim {

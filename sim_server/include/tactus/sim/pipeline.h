@@ -50,7 +50,6 @@ struct PipelineCounters {
   long w_builds = 0;
   long solves = 0;
   long tangential_rows = 0;
-  long vtk_frames = 0;
   long rotation_extractions = 0;     ///< summed over tissues
   long damping_evaluations = 0;      ///< summed over tissues
 };
@@ -82,6 +81,8 @@ class Simulation {
   DeviceTarget scriptedTarget(int i, double t_s) const;
   bool hasInstrument() const;
   int instrumentCount() const;
+  /// The scene has a contact problem each step (an instrument, obstacles or tissue contact).
+  bool hasContactProblem() const;
   /// The target instrument i follows (after setDeviceTarget's checks).
   const DeviceTarget& deviceTarget(int i) const;
   /// The contact wrench on instrument i of the last step [force_n; torque_nm] (zero before the
@@ -140,9 +141,6 @@ class Simulation {
   /// mesh and fixed nodes (FNV-1a).
   std::uint64_t modelIdentity() const;
 
-  /// Writes the VTK frame of the current state if output is enabled and due (and the .pvd).
-  void writeOutputIfDue();
-  void finishOutput();
 
  private:
   struct Impl;
@@ -166,22 +164,6 @@ struct StateHeader {
 
 /// Reads and checks the header (magic, version, sizes). Throws StateError naming `source`.
 StateHeader readStateHeader(std::string_view bytes, const std::string& source);
-
-/// The device-sample half of sim_server's haptic link (also used by tests that run the haptic
-/// loop beside an in-process simulation): a sample is fresh when it was published (seq != 0),
-/// is younger than watchdog_ns at now_ns, carries no device fault and carries a pose the device
-/// delivered (shared::kDevicePoseValid: before its first real sample the haptic side publishes
-/// a zero pose that must never move the instrument).
-/// With `faulted_too` a sample flagged kDeviceFault counts too (its held pose is still the
-/// device's last real one).
-bool deviceSampleFresh(const shared::DeviceSample& s, std::int64_t now_ns,
-                       std::int64_t watchdog_ns, bool faulted_too = false);
-/// Fills `target` from a sample (pose, twist, gripper opening = gripper_rad / max_opening_rad
-/// clamped to [0, 1]; max_opening_rad <= 0 counts as 1 rad); false, leaving `target` unchanged,
-/// when the pose is not finite or the orientation is zero. The quaternion is normalised without
-/// overflow and the twist bounded (segment_host.h); jumps and the workspace are the link's.
-bool deviceTargetFromSample(const shared::DeviceSample& s, double max_opening_rad,
-                            DeviceTarget& target);
 
 /// The capacity a published contact problem needs: max_contacts per instrument plus the
 /// obstacles' per tissue and the contacts between tissues, 3 rows per contact when an

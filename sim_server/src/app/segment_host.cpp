@@ -5,10 +5,8 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
-#include <array>
 #include <cmath>
 
-#include "tactus/contact.h"
 
 namespace tactus::sim {
 
@@ -211,16 +209,6 @@ std::string SegmentHost::displacedReason(std::int64_t now_ns) {
          std::to_string(segment_.generation()) + "): it was removed or replaced, e.g. while this "
          "process was stopped; the haptic side cannot see this simulation any more, so it stops. "
          "Restart it (or pass another --segment name)";
-}
-
-bool writeSnapshot(const Simulation& sim, double max_opening_rad, std::uint64_t seq,
-                   std::int64_t t_ns, std::uint64_t device_seq, shared::SnapshotWriter& slot) {
-  std::array<double, shared::kMaxInstruments> full_rad{};
-  full_rad[0] = max_opening_rad;
-  for (int i = 1; i < std::min(sim.instrumentCount(), shared::kMaxInstruments); ++i) {
-    full_rad[static_cast<std::size_t>(i)] = instrumentSpec(sim.spec(), i).max_opening_rad;
-  }
-  return writeSnapshotSlot(sim.lastProblem(), seq, t_ns, device_seq, slot, full_rad);
 }
 
 void SegmentHost::publish(const Simulation& sim) {

@@ -7,7 +7,7 @@
 
 #include "tactus/shared/error.h"
 #include "tactus/shared/file_io.h"
-#include "tactus/sim/mesh.h"
+#include "tactus/sim/vtk_writer.h"
 
 namespace tactus::sim {
 namespace {

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "display_publisher.h"
+#include "output_writer.h"
 #include "obstacle_stage.h"
 #include "segment_host.h"
 #include "tactus/sim/instrument.h"
@@ -225,6 +226,7 @@ int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
   if (offline || options.no_haptics) spec.haptics.enabled = false;
 
   Simulation sim(spec);
+  OutputWriter output;
   shared::throwIfStopRequested("loading the scene");
   spdlog::info("scene {}: stages:", spec.source.string());
   for (const auto& s : sim.stages()) spdlog::info("  - {}", s);
@@ -302,7 +304,7 @@ int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
     // VTK output after the snapshot is published (the haptic side does not wait for it), timed
     // into the step's statistics outside total_s
     const std::int64_t t_output = shared::monotonicNs();
-    sim.writeOutputIfDue();
+    output.writeIfDue(sim);
     report.times.output_s = shared::secondsSinceNs(t_output);
     stats.add(report);
     if (!report.finite) {
@@ -341,7 +343,7 @@ int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
       if (link) link->logStatus();
     }
   }
-  sim.finishOutput();
+  output.finish(spec);
   if (recorder) {
     recorder->commit();
     spdlog::info("{} snapshots recorded to {}", recorder->count(), options.record_snapshots);

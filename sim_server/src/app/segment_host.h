@@ -27,6 +27,7 @@
 #include <vector>
 
 #include "tactus/shared/segment.h"
+#include "tactus/sim/haptic_link.h"
 #include "tactus/sim/pipeline.h"
 
 namespace tactus::sim {
