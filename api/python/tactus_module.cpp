@@ -13,6 +13,7 @@
 
 #include <chrono>
 #include <string>
+#include <utility>
 
 #include "tactus/contact.h"
 #include "tactus/haptic_model.h"
@@ -639,7 +640,8 @@ PYBIND11_MODULE(tactus, m) {
         }
         const std::int64_t cpu = threadCpuNs() - cpu0;
         const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
-        return py::make_tuple(wall, 1e-9 * static_cast<double>(cpu));
+        // a C++ pair: converted to a tuple once the guard has taken the GIL back
+        return std::pair<double, double>(wall, 1e-9 * static_cast<double>(cpu));
       },
       "simulation"_a, "steps"_a, py::call_guard<py::gil_scoped_release>(),
       "steps x (follow_script, step) in a C++ loop; returns (wall s, thread CPU s)");

@@ -112,6 +112,20 @@ def test_a_state_restores_the_run_bit_for_bit(block_model, tmp_path):
         other.set_state(liver.state())
 
 
+def test_the_benchmark_steps_from_cpp_as_python_does(block_model):
+    """tools/python_step_bench's C++ loop: the same steps as the Python loop, timed."""
+    sim = tactus.Simulation(block_model)
+    start = sim.state()
+    for _ in range(5):
+        sim.follow_script()
+        sim.step()
+    by_python = sim.state()
+    sim.set_state(start)
+    wall_s, cpu_s = tactus.benchmark.cpp_steps(sim, 5)
+    assert wall_s >= 0.0 and cpu_s >= 0.0
+    assert sim.state() == by_python
+
+
 def test_contact_forces_and_reactions(block_model):
     sim = tactus.Simulation(block_model)
     for _ in range(60):
