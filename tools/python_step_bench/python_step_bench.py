@@ -19,8 +19,6 @@ import statistics
 import sys
 import time
 
-import tactus
-
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 
 
@@ -33,7 +31,10 @@ def python_steps(sim, steps):
 
 
 def main():
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser = argparse.ArgumentParser(
+        description=__doc__.split("\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog="the module: export PYTHONPATH=$PWD/build/python (docs/api.md)\n\n"
+               "Example:\n  python_step_bench.py --scene scenes/liver_grasp.yaml --steps 100 --reps 9")
     parser.add_argument("--scene", default=str(ROOT / "scenes" / "liver_grasp.yaml"))
     parser.add_argument("--start-step", type=int, default=250,
                         help="steps under the script before the measured ones (liver_grasp: "
@@ -42,6 +43,7 @@ def main():
     parser.add_argument("--reps", type=int, default=9, help="measurements of each")
     parser.add_argument("--json", help="write the figures to this new file")
     args = parser.parse_args()
+    import tactus  # after the arguments: --help works without the module built
 
     sim = tactus.Simulation(tactus.Model.from_file(args.scene))
     for _ in range(args.start_step):
