@@ -319,8 +319,13 @@ void writeSnapshots(const std::filesystem::path& path, std::span<const ContactPr
     checkContactProblem(p);
     SnapshotBuffer slot(p.rows, p.contacts);
     shared::SnapshotWriter w = slot.writer();
-    writeSnapshotSlot(p, seq + 1, 0, 0, w);
-    file.append(slot.view(), static_cast<std::int64_t>(seq) * 1'000'000);
+    if (!writeSnapshotSlot(p, seq + 1, 0, 0, w)) {
+      throw Error(fmt::format("{}: problem {} does not fit a snapshot slot", path.string(), seq));
+    }
+    if (!file.append(slot.view(), static_cast<std::int64_t>(seq) * 1'000'000)) {
+      throw FileError(fmt::format("{}: problem {} would take the file past a snapshot file's "
+                                  "maximum size; nothing written", path.string(), seq));
+    }
     ++seq;
   }
   file.commit();

@@ -11,28 +11,22 @@ namespace {
 constexpr std::uint64_t kMaxStateFileBytes = std::uint64_t{2} << 30;   // 2 GiB
 }
 
-State State::fromBytes(std::string bytes) {
-  const sim::StateHeader h = sim::readStateHeader(bytes, "state");
+State State::fromBytes(std::string bytes, std::string source) {
+  const sim::StateHeader h = sim::readStateHeader(bytes, source);
   State s;
   s.bytes_ = std::move(bytes);
   s.t_s_ = h.t_s;
   s.step_ = h.step;
   s.model_identity_ = h.model_identity;
   s.model_name_ = h.model_name;
+  s.source_ = std::move(source);
   return s;
 }
 
+State State::fromBytes(std::string bytes) { return fromBytes(std::move(bytes), "state"); }
+
 State State::load(const std::filesystem::path& path) {
-  std::string bytes = shared::readFileChecked(path, "state file", kMaxStateFileBytes);
-  const sim::StateHeader h = sim::readStateHeader(bytes, path.string());
-  State s;
-  s.bytes_ = std::move(bytes);
-  s.t_s_ = h.t_s;
-  s.step_ = h.step;
-  s.model_identity_ = h.model_identity;
-  s.model_name_ = h.model_name;
-  s.source_ = path.string();
-  return s;
+  return fromBytes(shared::readFileChecked(path, "state file", kMaxStateFileBytes), path.string());
 }
 
 void State::save(const std::filesystem::path& path, bool overwrite) const {

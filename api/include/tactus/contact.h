@@ -49,7 +49,9 @@ void writeFclib(const std::filesystem::path& path, const ContactProblem& problem
 /// The problems of a snapshot file, in order (their contact frames, J, f and device poses; a
 /// gripper opening is read back as an angle: device_gripper in radians, max_opening_rad 1).
 std::vector<ContactProblem> readSnapshots(const std::filesystem::path& path);
-/// Writes problems to a snapshot file (stamped 0, 1, 2 ... ms on its timeline).
+/// Writes problems to a snapshot file (stamped 0, 1, 2 ... ms on its timeline). Throws FileError
+/// (the file exists and not `overwrite`, a write failed, or the problems would take it past a
+/// snapshot file's maximum size: then no file is left).
 void writeSnapshots(const std::filesystem::path& path, std::span<const ContactProblem> problems,
                     bool overwrite = false);
 

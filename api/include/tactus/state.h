@@ -46,6 +46,8 @@ class State {
   std::uint64_t model_identity_ = 0;
   std::string model_name_;
   std::string source_ = "state";   ///< names the state in messages (its file, once loaded)
+  /// from bytes named `source` in messages (a file's path, or "state")
+  static State fromBytes(std::string bytes, std::string source);
   friend class Simulation;
 };
 
