@@ -126,6 +126,28 @@ def test_the_benchmark_steps_from_cpp_as_python_does(block_model):
     assert sim.state() == by_python
 
 
+def test_device_targets_drive_the_instrument():
+    sim = tactus.Simulation(tactus.Model.from_file(SCENES / "liver_grasp.yaml"))
+    start = sim.instrument(0).pose.position
+    goal = sim.scripted_target(0, 2.0)               # where the script grasps
+    assert np.linalg.norm(goal.pose.position - start) > 1e-2
+    sim.set_device_target(0, goal)
+    for _ in range(40):
+        sim.step()
+    assert np.array_equal(sim.instrument(0).target.pose.position, goal.pose.position)
+    assert np.linalg.norm(sim.instrument(0).pose.position - goal.pose.position) < 0.1 * np.linalg.norm(
+        goal.pose.position - start)                  # the god object followed the target
+    # a pose from arrays, jaws closing
+    sim.set_device_pose(0, goal.pose.position, goal.pose.quaternion, gripper_opening=0.0)
+    for _ in range(20):
+        sim.step()
+    assert sim.instrument(0).gripper_opening < 0.5
+    # a non-finite target is not taken: the last valid one is held
+    sim.set_device_pose(0, [math.nan, 0.0, 0.0], goal.pose.quaternion)
+    assert np.array_equal(sim.instrument(0).target.pose.position, goal.pose.position)
+    assert sim.step().finite
+
+
 def test_contact_forces_and_reactions(block_model):
     sim = tactus.Simulation(block_model)
     for _ in range(60):
