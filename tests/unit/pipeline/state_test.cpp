@@ -145,6 +145,11 @@ TEST(SimulationStateTest, ObstaclesAndTissueContactContinueBitForBit) {
   const std::string saved = sim.saveState();
   const std::vector<StepPrint> original = run(sim, 30);
   for (const StepPrint& p : original) ASSERT_GT(p.contacts, 0);
+  // the run compared holds both kinds: the support carries the stomach, the organs press
+  const ReactionForces r = sim.reactions();
+  ASSERT_EQ(r.obstacle_force_n.size(), 1u);
+  EXPECT_GT(r.obstacle_force_n[0].z(), 1.0) << "the support carries no weight";
+  EXPECT_GT(r.tissues[1].from_tissues_n.norm(), 0.01) << "the liver does not press the stomach";
   Simulation other(spec);
   other.restoreState(saved);
   expectSameRun(original, run(other, 30), "a new simulation");
