@@ -87,6 +87,7 @@ LocalModelSettings HapticSettings::localModel() const noexcept {
   m.max_sweeps = max_sweeps;
   m.anderson_depth = anderson_depth;
   m.reduced_fallback = reduced_fallback;
+  m.active_set_correction = active_set_correction;
   return m;
 }
 
@@ -458,6 +459,10 @@ bool HapticLoop::solveLocalModel(
   if (!res.solved()) return false;
   if (res.used == LocalModelUsed::kLinearized) {
     counters_.linearized_ticks.fetch_add(1, std::memory_order_relaxed);
+  } else if (res.used == LocalModelUsed::kCorrected) {
+    // rendered from the linearisation, which no longer holds here: prepare it again
+    counters_.corrected_ticks.fetch_add(1, std::memory_order_relaxed);
+    link.preparer.requestRelinearization();
   } else if (res.used == LocalModelUsed::kFallback) {
     counters_.model_fallbacks.fetch_add(1, std::memory_order_relaxed);
     out.flags |= shared::kStatsModelFallback;

@@ -15,7 +15,6 @@
 namespace tactus::haptic {
 namespace {
 
-using RowMajor = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
 constexpr int kNoTool = -1;
 constexpr int kMaxCols = 6 * shared::kMaxInstruments;
 
@@ -74,6 +73,43 @@ shared::NsgsSettings tickNsgsSettings(const LocalModelSettings& settings,
   return ns;
 }
 
+// In-place inverse of the n x n row-major matrix a (Gauss-Jordan with row pivoting; swap: n
+// ints). False when a pivot is zero or not finite.
+bool invertInPlace(double* a, int n, int* swap) noexcept {
+  const auto N = static_cast<std::ptrdiff_t>(n);
+  for (int k = 0; k < n; ++k) {
+    int piv = k;
+    double best = std::abs(a[k * N + k]);
+    for (int i = k + 1; i < n; ++i) {
+      const double v = std::abs(a[i * N + k]);
+      if (v > best) {
+        best = v;
+        piv = i;
+      }
+    }
+    if (!(best > 0.0) || !std::isfinite(best)) return false;
+    swap[k] = piv;
+    if (piv != k) std::swap_ranges(a + k * N, a + (k + 1) * N, a + piv * N);
+    double* rk = a + k * N;
+    const double d = 1.0 / rk[k];
+    rk[k] = 1.0;
+    for (int j = 0; j < n; ++j) rk[j] *= d;
+    for (int i = 0; i < n; ++i) {
+      if (i == k) continue;
+      double* ri = a + i * N;
+      const double t = ri[k];
+      if (t == 0.0) continue;
+      ri[k] = 0.0;
+      for (int j = 0; j < n; ++j) ri[j] -= t * rk[j];
+    }
+  }
+  for (int k = n - 1; k >= 0; --k) {
+    if (swap[k] == k) continue;
+    for (int i = 0; i < n; ++i) std::swap(a[i * N + k], a[i * N + swap[k]]);
+  }
+  return true;
+}
+
 void checkRange(const char* name, double v, double lo, bool lo_open, double hi) {
   const bool ok = std::isfinite(v) && (lo_open ? v > lo : v >= lo) && v <= hi;
   if (ok) return;
@@ -106,6 +142,7 @@ std::string_view toString(LocalModelUsed used) noexcept {
     case LocalModelUsed::kFull: return "full";
     case LocalModelUsed::kLinearized: return "linearized";
     case LocalModelUsed::kFallback: return "fallback";
+    case LocalModelUsed::kCorrected: return "corrected";
   }
   return "unknown";
 }
@@ -187,6 +224,10 @@ void PreparedSnapshot::resize(int max_rows, int max_contacts) {
   ordered_row_.assign(r, 0);
   ordered_mu_.assign(c, 0.0);
   Wo_.assign(r * r, 0.0);
+  active_row_.assign(r, 0);
+  active_pos_.assign(r, -1);
+  Ainv_.assign(r * r, 0.0);
+  WA_.assign(r * r, 0.0);
 }
 
 shared::ContactProblemView PreparedSnapshot::problem() const noexcept {
@@ -205,8 +246,10 @@ SnapshotPreparation::SnapshotPreparation(int max_rows, int max_contacts)
       workspace_(max_rows, max_contacts),
       reach_offset_(static_cast<std::size_t>(std::max(max_contacts, 0)) + 1, 0),
       dq_(static_cast<std::size_t>(std::max(max_rows, 0)), 0.0),
-      active_(static_cast<std::size_t>(std::max(max_rows, 0)), 0),
-      pivots_(static_cast<std::size_t>(std::max(max_rows, 0)), 0),
+      A_(static_cast<std::size_t>(std::max(max_rows, 0)) * static_cast<std::size_t>(std::max(max_rows, 0)), 0.0),
+      B_(static_cast<std::size_t>(std::max(max_rows, 0)) * kMaxCols, 0.0),
+      X_(static_cast<std::size_t>(std::max(max_rows, 0)) * kMaxCols, 0.0),
+      swap_(static_cast<std::size_t>(std::max(max_rows, 0)), 0),
       sort_(static_cast<std::size_t>(std::max(max_contacts, 0))) {}
 
 void SnapshotPreparation::reset() noexcept {
@@ -421,7 +464,8 @@ PrepareStatus SnapshotPreparation::prepare(const shared::SnapshotView& snap,
 }
 
 // The active-set linearisation (local_model.h): A df = B dx over the active rows of the reached
-// contacts, then F = df/dx and G = W F + J.
+// contacts, A inverted (kept for the tick's active-set correction), F = A^-1 B and G = W F + J.
+// Allocation-free: everything lives in storage sized for the capacity.
 void SnapshotPreparation::linearize(const LocalModelSettings& settings,
                                     PreparedSnapshot& out) noexcept {
   (void)settings;
@@ -439,6 +483,7 @@ void SnapshotPreparation::linearize(const LocalModelSettings& settings,
   int na = 0;
   out.sliding_ = 0;
   std::fill_n(out.state_.data(), nc, ContactState::kSeparated);
+  int* act = out.active_row_.data();
   for (int c = c_begin; c < c_end; ++c) {
     const int r = ro[c];
     const int k = ro[c + 1] - r;
@@ -458,26 +503,32 @@ void SnapshotPreparation::linearize(const LocalModelSettings& settings,
     if (s == ContactState::kSeparated) continue;
     if (s == ContactState::kSliding) ++out.sliding_;
     const int unknowns = s == ContactState::kNormalOnly ? 1 : 3;
-    for (int a = 0; a < unknowns; ++a) active_[static_cast<std::size_t>(na++)] = r + a;
+    for (int a = 0; a < unknowns; ++a) act[na++] = r + a;
   }
   out.active_rows_ = na;
+  int* pos = out.active_pos_.data();   // position of each row among the active ones (-1: not)
+  std::fill_n(pos, m, -1);
+  for (int i = 0; i < na; ++i) pos[act[i]] = i;
   std::fill(out.F_.begin(), out.F_.begin() + static_cast<std::ptrdiff_t>(m) * kMaxCols, 0.0);
   std::fill(out.G_.begin(), out.G_.begin() + static_cast<std::ptrdiff_t>(m) * kMaxCols, 0.0);
+  const auto NA = static_cast<std::ptrdiff_t>(na);
+  double* A = A_.data();   // na x na, row-major: row eq is equation eq
+  double* B = B_.data();   // na x kMaxCols, row-major
+  double* X = X_.data();   // na x kMaxCols: df/dx on the active rows
   if (na > 0) {
-    // position of each row among the active ones (-1: not active)
-    std::vector<int>& pos = pivots_;
-    std::fill_n(pos.data(), m, -1);
-    for (int i = 0; i < na; ++i) pos[static_cast<std::size_t>(active_[static_cast<std::size_t>(i)])] = i;
-    Eigen::MatrixXd A = Eigen::MatrixXd::Zero(na, na);
-    Eigen::MatrixXd B = Eigen::MatrixXd::Zero(na, cols);
+    std::fill_n(A, NA * NA, 0.0);
+    std::fill_n(B, NA * kMaxCols, 0.0);
     auto jrow = [&](int row, double scale, int eq) {   // B(eq, :) += -scale * J(row) dq/dx
       const int t = out.row_tool_[static_cast<std::size_t>(row)];
       if (t == kNoTool) return;
-      for (int k = 0; k < 6; ++k) B(eq, 6 * t + k) -= scale * out.J_[static_cast<std::size_t>(6 * row + k)];
+      for (int k = 0; k < 6; ++k) {
+        B[eq * kMaxCols + 6 * t + k] -= scale * out.J_[static_cast<std::size_t>(6 * row + k)];
+      }
     };
     auto wrow = [&](int row, double scale, int eq) {   // A(eq, :) += scale * W(row, active)
       const double* wr = W + static_cast<std::ptrdiff_t>(row) * m;
-      for (int j = 0; j < na; ++j) A(eq, j) += scale * wr[active_[static_cast<std::size_t>(j)]];
+      double* ar = A + eq * NA;
+      for (int j = 0; j < na; ++j) ar[j] += scale * wr[act[j]];
     };
     for (int c = c_begin; c < c_end; ++c) {
       const ContactState s = out.state_[static_cast<std::size_t>(c)];
@@ -486,7 +537,7 @@ void SnapshotPreparation::linearize(const LocalModelSettings& settings,
       if (s == ContactState::kSticking || s == ContactState::kNormalOnly) {
         const int unknowns = s == ContactState::kNormalOnly ? 1 : 3;
         for (int a = 0; a < unknowns; ++a) {
-          const int eq = pos[static_cast<std::size_t>(r + a)];
+          const int eq = pos[r + a];
           wrow(r + a, 1.0, eq);
           jrow(r + a, 1.0, eq);
         }
@@ -494,7 +545,7 @@ void SnapshotPreparation::linearize(const LocalModelSettings& settings,
       }
       // sliding: delta_n = 0; df_t - mu u df_n + P d delta_t = 0, P = mu f_n / s (I - u u^T)
       const double mu = out.mu_[static_cast<std::size_t>(c)];
-      const int en = pos[static_cast<std::size_t>(r)];
+      const int en = pos[r];
       wrow(r, 1.0, en);
       jrow(r, 1.0, en);
       const double ft = std::hypot(f0[r + 1], f0[r + 2]);
@@ -502,9 +553,9 @@ void SnapshotPreparation::linearize(const LocalModelSettings& settings,
       const double st = std::hypot(d0[r + 1], d0[r + 2]);
       const double a = mu * f0[r] / st;
       for (int t = 0; t < 2; ++t) {
-        const int eq = pos[static_cast<std::size_t>(r + 1 + t)];
-        A(eq, eq) += 1.0;
-        A(eq, en) -= mu * u[t];
+        const int eq = pos[r + 1 + t];
+        A[eq * NA + eq] += 1.0;
+        A[eq * NA + en] -= mu * u[t];
         for (int t2 = 0; t2 < 2; ++t2) {
           const double P = a * ((t == t2 ? 1.0 : 0.0) - u[t] * u[t2]);
           if (P == 0.0) continue;
@@ -513,32 +564,57 @@ void SnapshotPreparation::linearize(const LocalModelSettings& settings,
         }
       }
     }
-    const Eigen::PartialPivLU<Eigen::MatrixXd> lu(A);
-    const Eigen::MatrixXd X = lu.solve(B);
-    if (!X.allFinite() || !((A * X - B).norm() <= 1e-6 * (B.norm() + 1e-300))) return;
+    // A^-1, column-major (column p contiguous): the row-major inverse of A^T
+    double* Ainv = out.Ainv_.data();
     for (int i = 0; i < na; ++i) {
-      const auto row = static_cast<std::size_t>(active_[static_cast<std::size_t>(i)]);
-      for (int k = 0; k < cols; ++k) out.F_[row * kMaxCols + static_cast<std::size_t>(k)] = X(i, k);
+      for (int j = 0; j < na; ++j) Ainv[j * NA + i] = A[i * NA + j];
+    }
+    if (!invertInPlace(Ainv, na, swap_.data())) return;
+    // X = A^-1 B, checked against A X = B
+    std::fill_n(X, NA * kMaxCols, 0.0);
+    for (int p = 0; p < na; ++p) {
+      const double* col = Ainv + p * NA;
+      const double* bp = B + p * kMaxCols;
+      for (int i = 0; i < na; ++i) {
+        double* xi = X + i * kMaxCols;
+        for (int k = 0; k < cols; ++k) xi[k] += col[i] * bp[k];
+      }
+    }
+    double r2 = 0.0, b2 = 0.0;
+    for (int i = 0; i < na; ++i) {
+      const double* ai = A + i * NA;
+      for (int k = 0; k < cols; ++k) {
+        double v = -B[i * kMaxCols + k];
+        for (int j = 0; j < na; ++j) v += ai[j] * X[j * kMaxCols + k];
+        r2 += v * v;
+        b2 += B[i * kMaxCols + k] * B[i * kMaxCols + k];
+      }
+    }
+    if (!finiteAll(X, static_cast<std::size_t>(NA * kMaxCols)) ||
+        !(std::sqrt(r2) <= 1e-6 * (std::sqrt(b2) + 1e-300))) {
+      return;
+    }
+    for (int i = 0; i < na; ++i) {
+      std::copy_n(X + i * kMaxCols, cols, out.F_.data() + static_cast<std::ptrdiff_t>(act[i]) * kMaxCols);
     }
   }
-  // G = W F + J over the reached rows
+  // W on the reached rows and the active columns; G = W F + J over the reached rows
   const int r_begin = ro[c_begin];
   const int r_end = ro[c_end];
-  const int mr = r_end - r_begin;
-  const Eigen::Map<const RowMajor, 0, Eigen::OuterStride<>> Wr(
-      W + static_cast<std::ptrdiff_t>(r_begin) * m + r_begin, mr, mr, Eigen::OuterStride<>(m));
-  const Eigen::Map<const RowMajor> Fr(out.F_.data() + static_cast<std::ptrdiff_t>(r_begin) * kMaxCols,
-                                      mr, kMaxCols);
-  Eigen::Map<RowMajor> Gr(out.G_.data() + static_cast<std::ptrdiff_t>(r_begin) * kMaxCols, mr,
-                          kMaxCols);
-  Gr.leftCols(cols).noalias() = Wr * Fr.leftCols(cols);
+  double* WA = out.WA_.data();
   for (int r = r_begin; r < r_end; ++r) {
+    const double* wr = W + static_cast<std::ptrdiff_t>(r) * m;
+    double* dst = WA + static_cast<std::ptrdiff_t>(r - r_begin) * NA;
+    for (int p = 0; p < na; ++p) dst[p] = wr[act[p]];
+    double* g = out.G_.data() + static_cast<std::ptrdiff_t>(r) * kMaxCols;
+    for (int p = 0; p < na; ++p) {
+      const double w = dst[p];
+      const double* xp = X + p * kMaxCols;
+      for (int k = 0; k < cols; ++k) g[k] += w * xp[k];
+    }
     const int t = out.row_tool_[static_cast<std::size_t>(r)];
     if (t == kNoTool) continue;
-    for (int k = 0; k < 6; ++k) {
-      out.G_[static_cast<std::size_t>(r) * kMaxCols + static_cast<std::size_t>(6 * t + k)] +=
-          out.J_[static_cast<std::size_t>(6 * r + k)];
-    }
+    for (int k = 0; k < 6; ++k) g[6 * t + k] += out.J_[static_cast<std::size_t>(6 * r + k)];
   }
   out.linearized_ = finiteAll(out.G_.data(), static_cast<std::size_t>(m) * kMaxCols);
 }
@@ -608,7 +684,27 @@ LocalModel::LocalModel(int max_rows, int max_contacts)
       reach_offset_(static_cast<std::size_t>(std::max(max_contacts, 0)) + 1, 0),
       fo_(static_cast<std::size_t>(std::max(max_rows, 0)), 0.0),
       qo_(static_cast<std::size_t>(std::max(max_rows, 0)), 0.0),
-      scratch_(static_cast<std::size_t>(std::max(max_rows, 0)), 0.0) {}
+      scratch_(static_cast<std::size_t>(std::max(max_rows, 0)), 0.0) {
+  const auto r = static_cast<std::size_t>(std::max(max_rows, 0));
+  const auto c = static_cast<std::size_t>(std::max(max_contacts, 0));
+  constexpr auto e = static_cast<std::size_t>(3 * kMaxCorrectedContacts);
+  mode_.assign(c, 0);
+  tried_.assign(c, 0);
+  slide_u_.assign(2 * c, 0.0);
+  new_row_.assign(e, 0);
+  new_index_.assign(r, -1);
+  eq_index_.assign(e, 0);
+  eq_kind_.assign(e, 0);
+  eq_row_.assign(e, 0);
+  eq_contact_.assign(e, 0);
+  Z_.assign((r + e) * e, 0.0);
+  RZ_.assign(e * e, 0.0);
+  rhs_.assign(e, 0.0);
+  dy_.assign(r + e, 0.0);
+  col_.assign(r, 0.0);
+  fc_.assign(r, 0.0);
+  dc_.assign(r, 0.0);
+}
 
 void LocalModel::adopt(const PreparedSnapshot* prepared) noexcept {
   prepared_ = prepared;
@@ -700,6 +796,7 @@ FallbackReason LocalModel::evaluateLinearization(const LocalModelSettings& setti
   }
   const double slack = 0.5 * settings.tolerance * std::sqrt(std::max({q2, f2, d2})) /
                        std::sqrt(static_cast<double>(std::max(c_end - c_begin, 1)));
+  slack_ = slack;
   for (int c = c_begin; c < c_end; ++c) {
     const int r = ro[c];
     double* fc = f_.data() + r;
@@ -854,6 +951,406 @@ shared::NsgsResult LocalModel::resolveReduced(const LocalModelSettings& settings
   return res;
 }
 
+// ---------------------------------------------------------------------------------------------
+// The active-set correction (local_model.h, top)
+
+namespace {
+
+// A contact's state in the correction: the linearisation's, or switched.
+enum CorrectionMode : std::uint8_t {
+  kModeOpen,         // separated: f = 0
+  kModeStick,        // delta = 0
+  kModeNormal,       // normal-only: delta_n = 0
+  kModeSlide,        // sliding as linearised (the prepared equations)
+  kModeSlideFixed,   // sliding in the fixed direction slide_u_: delta_n = 0, f_t = mu f_n u
+};
+// The equation that replaces a prepared one (or the "f = 0" of a new unknown).
+enum EquationKind : int { kEqStick, kEqZero, kEqSlide };
+constexpr int kMaxCorrectionEquations = 3 * kMaxCorrectedContacts;
+
+CorrectionMode modeOf(ContactState s) noexcept {
+  switch (s) {
+    case ContactState::kSeparated: return kModeOpen;
+    case ContactState::kSticking: return kModeStick;
+    case ContactState::kSliding: return kModeSlide;
+    case ContactState::kNormalOnly: return kModeNormal;
+  }
+  return kModeOpen;
+}
+
+// sum a[k] b[k] over n: eight partial sums, so that the additions do not wait on each other
+double dotProduct(const double* a, const double* b, int n) noexcept {
+  double s[8] = {};
+  int k = 0;
+  for (; k + 8 <= n; k += 8) {
+    for (int j = 0; j < 8; ++j) s[j] += a[k + j] * b[k + j];
+  }
+  for (; k < n; ++k) s[0] += a[k] * b[k];
+  return ((s[0] + s[1]) + (s[2] + s[3])) + ((s[4] + s[5]) + (s[6] + s[7]));
+}
+
+// Solves the s x s row-major system a x = b in place (x in b), partial pivoting. False when a
+// pivot is below 1e-12 of the largest entry.
+bool solveSmall(double* a, double* b, int s) noexcept {
+  double scale = 0.0;
+  for (int i = 0; i < s * s; ++i) scale = std::max(scale, std::abs(a[i]));
+  if (!(scale > 0.0) || !std::isfinite(scale)) return false;
+  for (int k = 0; k < s; ++k) {
+    int piv = k;
+    for (int i = k + 1; i < s; ++i) {
+      if (std::abs(a[i * s + k]) > std::abs(a[piv * s + k])) piv = i;
+    }
+    if (!(std::abs(a[piv * s + k]) > 1e-12 * scale)) return false;
+    if (piv != k) {
+      std::swap_ranges(a + k * s, a + (k + 1) * s, a + piv * s);
+      std::swap(b[k], b[piv]);
+    }
+    for (int i = k + 1; i < s; ++i) {
+      const double t = a[i * s + k] / a[k * s + k];
+      if (t == 0.0) continue;
+      for (int j = k; j < s; ++j) a[i * s + j] -= t * a[k * s + j];
+      b[i] -= t * b[k];
+    }
+  }
+  for (int k = s - 1; k >= 0; --k) {
+    double v = b[k];
+    for (int j = k + 1; j < s; ++j) v -= a[k * s + j] * b[j];
+    b[k] = v / a[k * s + k];
+  }
+  for (int k = 0; k < s; ++k) {
+    if (!std::isfinite(b[k])) return false;
+  }
+  return true;
+}
+
+}  // namespace
+
+// One round: fc_ and dc_ = the prediction corrected for the contacts whose mode_ differs from
+// the linearisation's (dc_ on the rows correctionCheck() reads). Returns the contacts changed,
+// or -1 when the corrected system is singular.
+int LocalModel::correctionSolve() noexcept {
+  const PreparedSnapshot& p = *prepared_;
+  const int m = p.rows_;
+  const int na = p.active_rows_;
+  const int c_begin = p.reach_only_ ? p.reach_begin_ : 0;
+  const int c_end = p.reach_only_ ? p.reach_end_ : p.contacts_;
+  const int* ro = p.row_offset_.data();
+  const int r_begin = ro[c_begin];
+  const int r_end = ro[c_end];
+  const int* pos = p.active_pos_.data();
+  const int* act = p.active_row_.data();
+  const double* W = p.W_.data();
+  const double* Ainv = p.Ainv_.data();
+  const double* WA = p.WA_.data();
+  const double* delta = workspace_.delta.data();
+  for (int r = r_begin; r < r_end; ++r) {
+    fc_[static_cast<std::size_t>(r)] = f_[static_cast<std::size_t>(r)];
+    dc_[static_cast<std::size_t>(r)] = delta[r - r_begin];
+  }
+  // the new unknowns (rows of contacts that close) and the replaced equations
+  int nn = 0, s = 0, changed = 0;
+  auto equation = [&](int index, int kind, int row, int c) {
+    const auto i = static_cast<std::size_t>(s++);
+    eq_index_[i] = index;
+    eq_kind_[i] = kind;
+    eq_row_[i] = row;
+    eq_contact_[i] = c;
+  };
+  for (int c = c_begin; c < c_end; ++c) {
+    const CorrectionMode base = modeOf(p.state_[static_cast<std::size_t>(c)]);
+    const auto mode = static_cast<CorrectionMode>(mode_[static_cast<std::size_t>(c)]);
+    if (mode == base && mode != kModeSlideFixed) continue;
+    ++changed;
+    const int r = ro[c];
+    if (base == kModeOpen) {
+      const int rows = mode == kModeNormal ? 1 : 3;
+      for (int a = 0; a < rows; ++a) {
+        new_index_[static_cast<std::size_t>(r + a)] = na + nn;
+        new_row_[static_cast<std::size_t>(nn++)] = r + a;
+        equation(na + nn - 1, a == 0 || mode == kModeStick ? kEqStick : kEqSlide, r + a, c);
+      }
+    } else if (mode == kModeOpen) {
+      for (int row = r; row < ro[c + 1]; ++row) {
+        if (pos[row] >= 0) equation(pos[row], kEqZero, row, c);
+      }
+    } else {   // the tangential equations: sticking <-> sliding
+      for (int t = 1; t <= 2; ++t) {
+        equation(pos[r + t], mode == kModeStick ? kEqStick : kEqSlide, r + t, c);
+      }
+    }
+  }
+  if (changed == 0) return 0;
+  const int D = na + nn;
+  const auto DD = static_cast<std::ptrdiff_t>(D);
+  const auto NA = static_cast<std::ptrdiff_t>(na);
+  auto index = [&](int row) { return pos[row] >= 0 ? pos[row] : new_index_[static_cast<std::size_t>(row)]; };
+  // Z: the prepared system's inverse on the replaced equations' columns (a new unknown j:
+  // [-A^-1 C_j; e_j], C_j its coefficients in the prepared equations)
+  for (int i = 0; i < s; ++i) {
+    double* z = Z_.data() + i * DD;
+    const int q = eq_index_[static_cast<std::size_t>(i)];
+    std::fill_n(z, DD, 0.0);
+    if (q < na) {
+      std::copy_n(Ainv + q * NA, na, z);
+      continue;
+    }
+    const int j = new_row_[static_cast<std::size_t>(q - na)];
+    for (int e = 0; e < na; ++e) col_[static_cast<std::size_t>(e)] = W[static_cast<std::ptrdiff_t>(act[e]) * m + j];
+    for (int c = c_begin; c < c_end; ++c) {   // sliding equations: P (W_t df)
+      if (p.state_[static_cast<std::size_t>(c)] != ContactState::kSliding) continue;
+      const int r = ro[c];
+      const double* f0 = p.f0_.data() + r;
+      const double* d0 = p.delta0_.data() + r;
+      const double ft = std::hypot(f0[1], f0[2]);
+      const double u[2] = {f0[1] / ft, f0[2] / ft};
+      const double a = p.mu_[static_cast<std::size_t>(c)] * f0[0] / std::hypot(d0[1], d0[2]);
+      const double w1 = W[static_cast<std::ptrdiff_t>(r + 1) * m + j];
+      const double w2 = W[static_cast<std::ptrdiff_t>(r + 2) * m + j];
+      col_[static_cast<std::size_t>(pos[r + 1])] = a * ((1.0 - u[0] * u[0]) * w1 - u[0] * u[1] * w2);
+      col_[static_cast<std::size_t>(pos[r + 2])] = a * (-u[1] * u[0] * w1 + (1.0 - u[1] * u[1]) * w2);
+    }
+    for (int e = 0; e < na; ++e) {
+      const double cj = col_[static_cast<std::size_t>(e)];
+      if (cj == 0.0) continue;
+      const double* ae = Ainv + e * NA;
+      for (int k = 0; k < na; ++k) z[k] -= cj * ae[k];
+    }
+    z[q] = 1.0;
+  }
+  // R Z, and the right-hand side: minus the new equations' residuals at the prediction
+  double* RZ = RZ_.data();
+  for (int i = 0; i < s; ++i) {
+    const int row = eq_row_[static_cast<std::size_t>(i)];
+    const int kind = eq_kind_[static_cast<std::size_t>(i)];
+    if (kind == kEqStick) {
+      const double* wa = WA + static_cast<std::ptrdiff_t>(row - r_begin) * NA;
+      const double* wr = W + static_cast<std::ptrdiff_t>(row) * m;
+      rhs_[static_cast<std::size_t>(i)] = -dc_[static_cast<std::size_t>(row)];
+      for (int j = 0; j < s; ++j) {
+        const double* z = Z_.data() + j * DD;
+        double v = dotProduct(wa, z, na);
+        for (int k = 0; k < nn; ++k) v += wr[new_row_[static_cast<std::size_t>(k)]] * z[na + k];
+        RZ[i * s + j] = v;
+      }
+    } else if (kind == kEqZero) {
+      rhs_[static_cast<std::size_t>(i)] = -fc_[static_cast<std::size_t>(row)];
+      for (int j = 0; j < s; ++j) RZ[i * s + j] = Z_[static_cast<std::size_t>(j * DD + index(row))];
+    } else {
+      const int c = eq_contact_[static_cast<std::size_t>(i)];
+      const int rn = ro[c];
+      const double mu_u = p.mu_[static_cast<std::size_t>(c)] *
+                          slide_u_[static_cast<std::size_t>(2 * c + (row - rn - 1))];
+      rhs_[static_cast<std::size_t>(i)] =
+          mu_u * fc_[static_cast<std::size_t>(rn)] - fc_[static_cast<std::size_t>(row)];
+      const int it = index(row), in = index(rn);
+      for (int j = 0; j < s; ++j) {
+        const double* z = Z_.data() + j * DD;
+        RZ[i * s + j] = z[it] - mu_u * z[in];
+      }
+    }
+  }
+  const bool solved = solveSmall(RZ, rhs_.data(), s);
+  if (solved) {
+    // dy = Z w: the forces on the unknowns' rows, and delta on the rows the check reads
+    std::fill_n(dy_.data(), DD, 0.0);
+    for (int i = 0; i < s; ++i) {
+      const double w = rhs_[static_cast<std::size_t>(i)];
+      const double* z = Z_.data() + i * DD;
+      for (int k = 0; k < D; ++k) dy_[static_cast<std::size_t>(k)] += w * z[k];
+    }
+    for (int e = 0; e < na; ++e) fc_[static_cast<std::size_t>(act[e])] += dy_[static_cast<std::size_t>(e)];
+    for (int k = 0; k < nn; ++k) {
+      fc_[static_cast<std::size_t>(new_row_[static_cast<std::size_t>(k)])] += dy_[static_cast<std::size_t>(na + k)];
+    }
+    auto moveDelta = [&](int row) {
+      const double* wa = WA + static_cast<std::ptrdiff_t>(row - r_begin) * NA;
+      const double* wr = W + static_cast<std::ptrdiff_t>(row) * m;
+      double v = dotProduct(wa, dy_.data(), na);
+      for (int k = 0; k < nn; ++k) v += wr[new_row_[static_cast<std::size_t>(k)]] * dy_[static_cast<std::size_t>(na + k)];
+      dc_[static_cast<std::size_t>(row)] += v;
+    };
+    for (int c = c_begin; c < c_end; ++c) {
+      const auto mode = static_cast<CorrectionMode>(mode_[static_cast<std::size_t>(c)]);
+      const int r = ro[c];
+      if (mode == kModeOpen) moveDelta(r);
+      if (mode == kModeSlide || mode == kModeSlideFixed) {
+        moveDelta(r + 1);
+        moveDelta(r + 2);
+      }
+    }
+  }
+  for (int k = 0; k < nn; ++k) new_index_[static_cast<std::size_t>(new_row_[static_cast<std::size_t>(k)])] = -1;
+  return solved ? changed : -1;
+}
+
+// Checks fc_ and dc_ as evaluateLinearization() checks the prediction, and switches the state of
+// every contact that fails: a contact that closes sticks (slides against its slip if sticking
+// was tried), one whose normal force turns negative separates (slides if that was tried), one
+// that leaves its cone slides along its tangential force, a sliding one whose slip turns sticks
+// (slides against the slip if that was tried). Returns how many failed, or -1 when a contact would return to a state tried before
+// in this tick (cycling) or more than kMaxCorrectedContacts would differ from the linearisation.
+int LocalModel::correctionCheck() noexcept {
+  const PreparedSnapshot& p = *prepared_;
+  const int c_begin = p.reach_only_ ? p.reach_begin_ : 0;
+  const int c_end = p.reach_only_ ? p.reach_end_ : p.contacts_;
+  const int* ro = p.row_offset_.data();
+  const double slack = slack_;
+  int failed = 0, changed = 0;
+  for (int c = c_begin; c < c_end; ++c) {
+    const auto k = static_cast<std::size_t>(c);
+    const int r = ro[c];
+    const double* fc = fc_.data() + r;
+    const double* dc = dc_.data() + r;
+    const double mu = p.mu_[k];
+    const bool frictional = ro[c + 1] - r == 3 && mu > 0.0;
+    const auto before = static_cast<CorrectionMode>(mode_[k]);
+    CorrectionMode mode = before;
+    bool aim = false;          // set slide_u_ to (u1, u2)
+    double u1 = 0.0, u2 = 0.0;
+    auto along = [&](double a, double b) {   // slide along (a, b); false when it is zero
+      const double n = std::hypot(a, b);
+      if (!(n > 0.0)) return false;
+      mode = kModeSlideFixed;
+      aim = true;
+      u1 = a / n;
+      u2 = b / n;
+      return true;
+    };
+    auto tried = [&](CorrectionMode m) { return (tried_[k] & (1u << m)) != 0; };
+    bool cycle = false;
+    switch (before) {
+      case kModeOpen:
+        if (dc[0] < -slack) {
+          const CorrectionMode closed = frictional ? kModeStick : kModeNormal;
+          if (!tried(closed)) {
+            mode = closed;
+          } else if (!frictional || tried(kModeSlideFixed) || !along(-dc[1], -dc[2])) {
+            cycle = true;
+          }
+        }
+        break;
+      case kModeNormal:
+        if (fc[0] < -slack) {
+          mode = kModeOpen;
+          cycle = tried(kModeOpen);
+        }
+        break;
+      case kModeStick: {
+        const double ft = std::hypot(fc[1], fc[2]);
+        if (fc[0] < -slack) {
+          if (!tried(kModeOpen)) {
+            mode = kModeOpen;
+          } else if (tried(kModeSlideFixed) ||
+                     (!along(-dc[1], -dc[2]) && !along(fc[1], fc[2]))) {
+            cycle = true;   // (a contact that closed slides against its slip while open)
+          }
+        } else if (ft > mu * fc[0] + slack) {
+          (void)along(fc[1], fc[2]);
+        }
+        break;
+      }
+      case kModeSlide: {
+        const double ft = std::hypot(fc[1], fc[2]);
+        const double st = std::hypot(dc[1], dc[2]);
+        if (fc[0] < -slack) {
+          mode = kModeOpen;
+        } else if (st <= slack) {
+          // on the cone's boundary without slip (within the tolerance): sticking and sliding
+        } else if (!(ft > 0.0) || -(fc[1] * dc[1] + fc[2] * dc[2]) < 0.95 * ft * st) {
+          if (!tried(kModeStick)) {
+            mode = kModeStick;
+          } else if (!along(-dc[1], -dc[2])) {
+            cycle = true;
+          }
+        }
+        break;
+      }
+      case kModeSlideFixed: {
+        const double st = std::hypot(dc[1], dc[2]);
+        const double a = -(slide_u_[2 * k] * dc[1] + slide_u_[2 * k + 1] * dc[2]);
+        if (fc[0] < -slack) {
+          mode = kModeOpen;
+          cycle = tried(kModeOpen);
+        } else if (st <= slack) {
+          // on the cone's boundary without slip (within the tolerance): sticking and sliding
+        } else if (a <= 0.0 && !tried(kModeStick)) {
+          mode = kModeStick;
+        } else if (a < 0.95 * st) {   // slipping elsewhere: slide against the slip
+          (void)along(-dc[1], -dc[2]);
+          ++failed;
+        }
+        break;
+      }
+    }
+    if (cycle) return -1;
+    if (aim) {
+      slide_u_[2 * k] = u1;
+      slide_u_[2 * k + 1] = u2;
+    }
+    if (mode != before) {
+      mode_[k] = mode;
+      tried_[k] = static_cast<std::uint8_t>(tried_[k] | (1u << mode));
+      ++failed;
+    }
+    const CorrectionMode base = modeOf(p.state_[k]);
+    if (mode != base || mode == kModeSlideFixed) ++changed;
+  }
+  return changed > kMaxCorrectedContacts ? -1 : failed;
+}
+
+// Called where the prediction failed within the range: f_ and workspace_.delta hold it
+// (unprojected). True when a corrected active set passes every check; f_ then holds its forces,
+// projected as a valid linearisation's are.
+bool LocalModel::correctActiveSet(std::int64_t deadline_ns, LocalModelResult& out) noexcept {
+  const PreparedSnapshot& p = *prepared_;
+  const int c_begin = p.reach_only_ ? p.reach_begin_ : 0;
+  const int c_end = p.reach_only_ ? p.reach_end_ : p.contacts_;
+  const int* ro = p.row_offset_.data();
+  for (int c = c_begin; c < c_end; ++c) {
+    const CorrectionMode base = modeOf(p.state_[static_cast<std::size_t>(c)]);
+    mode_[static_cast<std::size_t>(c)] = base;
+    tried_[static_cast<std::size_t>(c)] = static_cast<std::uint8_t>(1u << base);
+  }
+  // round 0 checks the prediction itself (every contact that fails, not only the first)
+  bool valid = false;
+  for (int round = 0; round <= kMaxCorrectionRounds; ++round) {
+    if (round > 0 && deadline_ns > 0 && shared::monotonicNs() >= deadline_ns) return false;
+    const int changed = correctionSolve();
+    if (changed < 0) return false;
+    out.corrected_contacts = changed;
+    out.correction_rounds = round;
+    const int failed = correctionCheck();
+    if (failed < 0) return false;
+    if (failed == 0) {
+      valid = round > 0;
+      break;
+    }
+  }
+  if (!valid) return false;
+  for (int c = c_begin; c < c_end; ++c) {
+    const int r = ro[c];
+    const int k = ro[c + 1] - r;
+    double* fc = fc_.data() + r;
+    const double mu = p.mu_[static_cast<std::size_t>(c)];
+    const auto mode = static_cast<CorrectionMode>(mode_[static_cast<std::size_t>(c)]);
+    fc[0] = mode == kModeOpen ? 0.0 : std::max(fc[0], 0.0);
+    if (k == 3) {
+      const double ft = std::hypot(fc[1], fc[2]);
+      if (mode == kModeOpen || mu == 0.0) {
+        fc[1] = fc[2] = 0.0;
+      } else if (mode == kModeSlideFixed) {
+        fc[1] = mu * fc[0] * slide_u_[2 * static_cast<std::size_t>(c)];
+        fc[2] = mu * fc[0] * slide_u_[2 * static_cast<std::size_t>(c) + 1];
+      } else if (ft > 0.0 && (mode == kModeSlide || ft > mu * fc[0])) {
+        fc[1] *= mu * fc[0] / ft;
+        fc[2] *= mu * fc[0] / ft;
+      }
+    }
+    std::copy_n(fc, k, f_.data() + r);
+  }
+  return true;
+}
+
 LocalModelResult LocalModel::solve(DevicePoses poses, const LocalModelSettings& settings,
                                    std::int64_t deadline_ns) noexcept {
   const std::int64_t t0 = shared::monotonicNs();
@@ -885,6 +1382,18 @@ LocalModelResult LocalModel::solve(DevicePoses poses, const LocalModelSettings& 
     if (out.fallback == FallbackReason::kNone) {
       delta_valid_ = false;
       out.used = LocalModelUsed::kLinearized;
+      out.status = shared::NsgsStatus::kConverged;
+      out.error = 0.0;
+      std::copy_n(delta_free_.data(), p.rows_, last_delta_free_.data());
+      wrenches(out);
+      out.elapsed_ns = shared::monotonicNs() - t0;
+      return out;
+    }
+    // a few contacts changed state: the linearisation with its active set corrected
+    if (settings.active_set_correction && out.fallback != FallbackReason::kOutOfRange &&
+        correctActiveSet(deadline_ns, out)) {
+      delta_valid_ = false;
+      out.used = LocalModelUsed::kCorrected;
       out.status = shared::NsgsStatus::kConverged;
       out.error = 0.0;
       std::copy_n(delta_free_.data(), p.rows_, last_delta_free_.data());

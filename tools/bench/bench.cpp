@@ -154,7 +154,7 @@ int run(const BenchOptions& o) {
   const Eigen::Vector3d dx = 1e-3 * o.displacement_mm * direction;
   const Eigen::Vector3d tick_step = 5e-6 * direction;
   std::vector<double> prepare_ms;
-  long tick_linearized = 0, tick_fallbacks = 0;
+  long tick_linearized = 0, tick_corrected = 0, tick_fallbacks = 0;
 
   // total: the step and the publish
   std::vector<Series> stages = {{"free_motion", {}},       {"detect_collisions", {}},
@@ -269,6 +269,7 @@ int run(const BenchOptions& o) {
     tick_err.push_back(res.error);
     if (res.converged()) ++tick_converged;
     if (res.used == haptic::LocalModelUsed::kLinearized) ++tick_linearized;
+    if (res.used == haptic::LocalModelUsed::kCorrected) ++tick_corrected;
     if (res.used == haptic::LocalModelUsed::kFallback) ++tick_fallbacks;
     if (trace != nullptr) {
       std::fprintf(trace, "%ld,%.4f,%d,%d,%d,%.4f,%.3f,%d,%d,%.4f\n", k, sim.time(),
@@ -336,13 +337,14 @@ int run(const BenchOptions& o) {
       "haptic local model (%s; each snapshot prepared %.2f mm from x_h*, the tick 5 um further; "
       "<= %d sweeps, deadline %.0f us): tick wall median %.1f us, p99 %.1f us, max %.1f us; "
       "thread CPU median %.1f us, p99 %.1f us; sweeps median %.0f, p99 %.0f; error median "
-      "%.2e; converged %ld / %zu; linearized %ld, fallback %ld; preparation median %.2f ms, "
+      "%.2e; converged %ld / %zu; linearized %ld, corrected %ld, fallback %ld; preparation "
+      "median %.2f ms, "
       "p99 %.2f ms\n",
       std::string(haptic::toString(model_settings.kind)).c_str(), o.displacement_mm, tick_sweeps,
       budget_us, pct(tick_us, 0.5), pct(tick_us, 0.99), pct(tick_us, 1.0), pct(tick_cpu_us, 0.5),
       pct(tick_cpu_us, 0.99), pct(tick_sweeps_v, 0.5), pct(tick_sweeps_v, 0.99),
-      pct(tick_err, 0.5), tick_converged, tick_us.size(), tick_linearized, tick_fallbacks,
-      pct(prepare_ms, 0.5), pct(prepare_ms, 0.99));
+      pct(tick_err, 0.5), tick_converged, tick_us.size(), tick_linearized, tick_corrected,
+      tick_fallbacks, pct(prepare_ms, 0.5), pct(prepare_ms, 0.99));
 
   if (!o.json.empty()) {
     std::string js = fmt::format(
@@ -368,15 +370,15 @@ int run(const BenchOptions& o) {
         "\"cpu_us_median\": {:.3f}, \"cpu_us_p99\": {:.3f}, "
         "\"sweeps_median\": {}, \"sweeps_p99\": {}, \"error_median\": {:.3e}, "
         "\"converged\": {}, \"solves\": {}, \"local_model\": \"{}\", \"linearized\": {}, "
-        "\"fallbacks\": {}, \"prepare_ms_median\": {:.3f}, \"prepare_ms_p99\": {:.3f}}}\n}}\n",
+        "\"corrected\": {}, \"fallbacks\": {}, \"prepare_ms_median\": {:.3f}, \"prepare_ms_p99\": {:.3f}}}\n}}\n",
         contacts.size(), pct(contacts, 0.5), pct(contacts, 1.0), pct(rows, 0.5), pct(rows, 1.0),
         pct(sim_sweeps, 0.5), pct(groups, 0.5), pct(groups, 1.0), split_steps, pct(passes, 0.5),
         pct(passes, 1.0), pct(geometric_pen_mm, 1.0),
         o.displacement_mm, tick_sweeps, budget_us, pct(tick_us, 0.5),
         pct(tick_us, 0.99), pct(tick_us, 1.0), pct(tick_cpu_us, 0.5), pct(tick_cpu_us, 0.99),
         pct(tick_sweeps_v, 0.5), pct(tick_sweeps_v, 0.99), pct(tick_err, 0.5), tick_converged,
-        tick_us.size(), haptic::toString(model_settings.kind), tick_linearized, tick_fallbacks,
-        pct(prepare_ms, 0.5), pct(prepare_ms, 0.99));
+        tick_us.size(), haptic::toString(model_settings.kind), tick_linearized, tick_corrected,
+        tick_fallbacks, pct(prepare_ms, 0.5), pct(prepare_ms, 0.99));
     std::FILE* fj = std::fopen(o.json.c_str(), "w");
     if (fj == nullptr) throw Error("cannot write " + o.json);
     std::fwrite(js.data(), 1, js.size(), fj);

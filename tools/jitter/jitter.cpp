@@ -72,8 +72,10 @@ struct Options {
   double snapshot_blend_ms = 0.0;
   std::string local_model = "automatic";
   bool full_fallback = false;
+  bool no_correction = false;
   bool offline = false;
   double offline_latency_ms = 10.0;
+  bool offline_device_leads = false;
   double budget_fraction = 0.4;
   double period_us = 0.0;
   std::string reader = "live";
@@ -141,6 +143,7 @@ int run(const Options& o) {
   const bool replay = !o.replay.empty();
   if (replay && o.synthetic_rows > 0) throw Error("--replay and --synthetic exclude each other");
   if (!replay && o.loop_replay) throw Error("--loop needs --replay FILE");
+  if (o.offline_device_leads && !o.offline) throw Error("--offline-device-leads needs --offline");
   // synthetic or replay: the haptic loop runs in-process
   const bool synthetic = o.synthetic_rows > 0 || replay;
   const int core = o.core >= 0 ? o.core : shared::availableCpuCount() - 1;
@@ -163,19 +166,22 @@ int run(const Options& o) {
     OfflineReplayOptions oo;
     oo.rate_hz = o.rate_hz;
     oo.latency_ms = o.offline_latency_ms;
+    oo.device_leads = o.offline_device_leads;
     oo.settings.kind = *haptic::parseLocalModelKind(o.local_model);
     oo.settings.max_sweeps = o.sweeps;
     oo.settings.anderson_depth = o.anderson_depth;
     oo.settings.reduced_fallback = !o.full_fallback;
+    oo.settings.active_set_correction = !o.no_correction;
     const OfflineReplayReport r = replayOffline(snaps, oo);
     const double n = static_cast<double>(std::max<std::uint64_t>(r.ticks, 1));
     std::printf("offline replay of %s: %zu snapshots, %.0f Hz, snapshots adopted %.1f ms after "
                 "their time; local model %s\n",
                 o.replay.c_str(), snaps.size(), o.rate_hz, o.offline_latency_ms,
                 o.local_model.c_str());
-    std::printf("ticks %llu: linearized %.2f %%, fallback %.2f %%, full %.2f %%; converged %.2f %% "
+    std::printf("ticks %llu: linearized %.2f %%, corrected %.2f %%, fallback %.2f %%, full %.2f %%; converged %.2f %% "
                 "(reference not converged: %llu)\n",
                 static_cast<unsigned long long>(r.ticks), 100.0 * r.linearized / n,
+                100.0 * r.corrected / n,
                 100.0 * r.fallbacks / n, 100.0 * r.full / n, 100.0 * r.converged / n,
                 static_cast<unsigned long long>(r.reference_not_converged));
     std::printf("fallback reasons:");
@@ -208,6 +214,7 @@ int run(const Options& o) {
     ro.snapshot_blend_ms = o.snapshot_blend_ms;
     ro.local_model = *haptic::parseLocalModelKind(o.local_model);
     ro.reduced_fallback = !o.full_fallback;
+    ro.active_set_correction = !o.no_correction;
     ro.solve_budget_fraction = o.budget_fraction;
     replay_rig = std::make_unique<ReplayRig>(std::move(snaps), ro);
     period_ns = replay_rig->periodNs();
@@ -215,13 +222,14 @@ int run(const Options& o) {
         "replay: %zu snapshots from %s (%.2f s per pass%s), up to %d rows (%d contacts), "
         "%d device(s); "
         "loop %.0f Hz on core %d, SCHED_FIFO %d, %d sweeps max, deadline %.0f us, local model "
-        "%s (%s fallback); reader: %s; NSGS kernel %s\n",
+        "%s (%s%s fallback); reader: %s; NSGS kernel %s\n",
         replay_rig->snapshotCount(), o.replay.c_str(), 1e-9 * static_cast<double>(replay_rig->passNs()),
         o.loop_replay ? ", looping" : "", replay_rig->maxRows(), replay_rig->maxContacts(),
         replay_rig->devices(),
         o.rate_hz, core, o.priority, o.sweeps,
         o.budget_fraction * 1e-3 * static_cast<double>(period_ns), o.local_model.c_str(),
-        o.full_fallback ? "full" : "reduced", o.reader.c_str(),
+        o.no_correction ? "" : "active-set correction, ", o.full_fallback ? "full" : "reduced",
+        o.reader.c_str(),
         shared::nsgsKernelName(shared::nsgsKernel()));
     if (!o.loop_replay && shared::secondsToNs(o.duration_s) > replay_rig->passNs()) {
       std::printf(
@@ -241,6 +249,7 @@ int run(const Options& o) {
     so.snapshot_blend_ms = o.snapshot_blend_ms;
     so.local_model = *haptic::parseLocalModelKind(o.local_model);
     so.reduced_fallback = !o.full_fallback;
+    so.active_set_correction = !o.no_correction;
     so.solve_budget_fraction = o.budget_fraction;
     rig = std::make_unique<SyntheticRig>(so);
     period_ns = rig->periodNs();
@@ -463,6 +472,9 @@ int main(int argc, char** argv) {
   app.add_flag("--full-fallback", o.full_fallback,
                "Synthetic/replay: where the linearisation does not hold, re-solve every reached "
                "contact instead of the reduced problem (local_model.h)");
+  app.add_flag("--no-correction", o.no_correction,
+               "Synthetic/replay: where the linearisation does not hold, fall back at once "
+               "instead of first correcting its active set (local_model.h)");
   app.add_flag("--offline", o.offline,
                "Replay: no real-time loop; tick the recording's timeline and compare the local "
                "model's force with the full problem solved to 1e-9 at the same poses");
@@ -470,6 +482,9 @@ int main(int argc, char** argv) {
                  "Offline replay: time from a snapshot to the tick adopting it [ms]")
       ->check(CLI::Range(0.0, 1000.0))
       ->capture_default_str();
+  app.add_flag("--offline-device-leads", o.offline_device_leads,
+               "Offline replay: the device follows the newest published snapshot's pose, as in "
+               "the loop, while the model adopts each snapshot --offline-latency-ms later");
   app.add_option("--budget-fraction", o.budget_fraction,
                  "Synthetic/replay: the tick's deadline as a fraction of the period "
                  "(haptic_server uses 0.4)")

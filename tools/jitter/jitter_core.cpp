@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstring>
 
+#include "tactus/haptic/local_model.h"
 #include "tactus/shared/clock.h"
 #include "tactus/shared/error.h"
 #include "tactus/shared/rt.h"
@@ -53,7 +54,7 @@ void JitterCollector::add(const shared::StatsRecord& r) {
     } else {
       ++non_finite_;
     }
-    if (r.model >= 0 && r.model < 4) ++model_counts_[r.model];
+    if (r.model >= 0 && r.model < 5) ++model_counts_[r.model];
     if (r.model == shared::kStatsModelFallbackSolve) {
       fallback_us_.push_back(1e-3 * static_cast<double>(r.solve_ns));
     }
@@ -114,6 +115,9 @@ JitterReport JitterCollector::report() const {
   rep.model_full = model_counts_[shared::kStatsModelFull];
   rep.model_linearized = model_counts_[shared::kStatsModelLinearized];
   rep.model_fallback = model_counts_[shared::kStatsModelFallbackSolve];
+  // (StatsRecord::model holds LocalModelUsed's values; the corrected linearisation has no name
+  // among StatsModel's)
+  rep.model_corrected = model_counts_[static_cast<int>(haptic::LocalModelUsed::kCorrected)];
   rep.deadline_missed = deadline_missed_;
   rep.contacts_p50 = summarize(contacts_).p50;
   rep.residual_p50 = summarize(residuals_).p50;
@@ -173,10 +177,12 @@ std::string formatTable(const JitterReport& r, const Percentiles* bare,
         r.solved, r.contacts_p50, r.residual_p50, r.not_converged, r.non_finite_residuals);
     const double solved = static_cast<double>(r.solved);
     out += fmt::format(
-        "local model: full {} ({:.2f} %), linearized {} ({:.2f} %), fallback re-solve {} "
-        "({:.2f} %); converged {:.2f} %; deadline {:.1f} us after the start, missed {}\n",
+        "local model: full {} ({:.2f} %), linearized {} ({:.2f} %), corrected {} ({:.2f} %), "
+        "fallback re-solve {} ({:.2f} %); converged {:.2f} %; deadline {:.1f} us after the "
+        "start, missed {}\n",
         r.model_full, 100.0 * static_cast<double>(r.model_full) / solved, r.model_linearized,
-        100.0 * static_cast<double>(r.model_linearized) / solved, r.model_fallback,
+        100.0 * static_cast<double>(r.model_linearized) / solved, r.model_corrected,
+        100.0 * static_cast<double>(r.model_corrected) / solved, r.model_fallback,
         100.0 * static_cast<double>(r.model_fallback) / solved,
         100.0 * (solved - static_cast<double>(r.not_converged)) / solved, r.deadline_us_p50,
         r.deadline_missed);

@@ -55,8 +55,9 @@ struct JitterReport {
   std::uint64_t stale = 0;
   std::uint64_t not_converged = 0;  ///< records flagged kStatsSolverNotConverged
   /// the local model each solving tick used (StatsRecord::model): full re-solve, the
-  /// linearisation, a re-solve where the linearisation did not hold
-  std::uint64_t model_full = 0, model_linearized = 0, model_fallback = 0;
+  /// linearisation, the linearisation with its active set corrected, a re-solve where neither
+  /// held
+  std::uint64_t model_full = 0, model_linearized = 0, model_corrected = 0, model_fallback = 0;
   std::uint64_t deadline_missed = 0;  ///< records flagged kStatsDeadlineMissed
   double deadline_us_p50 = 0.0;     ///< the tick's budget (deadline - start), median
   std::uint64_t non_finite_residuals = 0;
@@ -99,7 +100,7 @@ class JitterCollector {
   std::vector<std::int64_t> steps_ns_;
   std::uint64_t overrun_flags_ = 0;
   std::uint64_t not_converged_ = 0;
-  std::uint64_t model_counts_[4] = {};
+  std::uint64_t model_counts_[5] = {};
   std::uint64_t deadline_missed_ = 0;
   std::vector<double> work_us_, model_us_, fallback_us_, deadline_us_;
   std::uint64_t stale_ = 0;

@@ -149,7 +149,12 @@ OfflineReplayReport replayOffline(const std::vector<shared::RecordedSnapshot>& s
       while (next < snapshots.size() && snapshots[next].t_ns - t_first + latency <= t) ++next;
       if (next == 0) continue;
       const std::size_t i = next - 1;
-      device.follow(i);
+      std::size_t shown = i;   // the snapshot whose pose the device follows
+      while (options.device_leads && shown + 1 < snapshots.size() &&
+             snapshots[shown + 1].t_ns - t_first <= t) {
+        ++shown;
+      }
+      device.follow(shown);
       device::DeviceState st;
       (void)device.readAt(t, &st);
       shared::Pose pose;
@@ -171,6 +176,7 @@ OfflineReplayReport replayOffline(const std::vector<shared::RecordedSnapshot>& s
       ++rep.ticks;
       rep.converged += r.converged() ? 1 : 0;
       rep.linearized += r.used == LocalModelUsed::kLinearized ? 1 : 0;
+      rep.corrected += r.used == LocalModelUsed::kCorrected ? 1 : 0;
       rep.fallbacks += r.used == LocalModelUsed::kFallback ? 1 : 0;
       rep.full += r.used == LocalModelUsed::kFull ? 1 : 0;
       ++rep.fallback_reasons[static_cast<std::size_t>(r.fallback)];

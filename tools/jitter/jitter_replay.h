@@ -79,10 +79,13 @@ struct OfflineReplayOptions {
   double latency_ms = 10.0;            ///< from a snapshot's time to the tick adopting it
   LocalModelSettings settings;         ///< the model the loop renders
   double reference_tolerance = 1e-9;   ///< the full problem's
+  /// The device follows the newest published snapshot's pose (as in the loop, where it moves on
+  /// while the new snapshot is prepared) instead of the adopted one's.
+  bool device_leads = false;
   int passes = 1;
 };
 struct OfflineReplayReport {
-  std::uint64_t ticks = 0, linearized = 0, fallbacks = 0, full = 0, converged = 0;
+  std::uint64_t ticks = 0, linearized = 0, corrected = 0, fallbacks = 0, full = 0, converged = 0;
   std::uint64_t reference_not_converged = 0;
   /// |F_model - F_full| / held force (the median |F_full| over the ticks), per tick
   std::vector<double> force_error;

@@ -96,6 +96,7 @@ LoopRig::LoopRig(const std::string& segment_name, shared::SegmentCapacity capaci
   settings_.local_model = options.local_model;
   settings_.anderson_depth = options.anderson_depth;
   settings_.reduced_fallback = options.reduced_fallback;
+  settings_.active_set_correction = options.active_set_correction;
   settings_.snapshot_blend_ms = options.snapshot_blend_ms;
   settings_.engage_threshold_n = 1e9;
   settings_.watchdog_ms = options.watchdog_ms;

@@ -62,6 +62,7 @@ struct LoopRunOptions {
   double solve_budget_fraction = 0.4;  ///< the tick's deadline as a fraction of the period
   LocalModelKind local_model = LocalModelKind::kAutomatic;   ///< HapticSettings::local_model
   bool reduced_fallback = true;        ///< HapticSettings::reduced_fallback
+  bool active_set_correction = true;   ///< HapticSettings::active_set_correction
 };
 
 /// The loop's settings in an in-process mode.

@@ -1,6 +1,7 @@
 // The local model (haptic_server/include/tactus/haptic/local_model.h): the linearised model
-// against the full re-solve, its fallback when the active set changes, passivity on a closed
-// path, the preparation's checks of untrusted snapshots, and recorded problems of a real grasp.
+// against the full re-solve, its active-set correction and fallback when the active set changes,
+// passivity on a closed path, the preparation's checks of untrusted snapshots, and recorded problems
+// of a real grasp.
 #include "tactus/haptic/local_model.h"
 
 #include <gtest/gtest.h>
@@ -11,6 +12,7 @@
 #include <filesystem>
 #include <vector>
 
+#include "../../support/alloc_counter.h"
 #include "tactus/shared/error.h"
 #include "tactus/shared/snapshot_file.h"
 
@@ -188,10 +190,23 @@ TEST(LocalModelTest, ItFallsBackToTheReSolveWhenTheActiveSetChanges) {
   EXPECT_EQ(lin.solve(p1).used, LocalModelUsed::kLinearized);
   const shared::Pose lifted = at(0, 0, -3e-5);
   const shared::Pose* p2[] = {&lifted};
+  const LocalModelResult ref = reference(slot, lifted);
+  // the active-set correction: contact 9 separates, the others stay; the linear system of that
+  // active set is the full problem's
+  const LocalModelResult c = lin.solve(p2);
+  EXPECT_EQ(c.used, LocalModelUsed::kCorrected);
+  EXPECT_EQ(c.fallback, FallbackReason::kContactLifts);
+  EXPECT_EQ(c.corrected_contacts, 1);
+  ASSERT_TRUE(c.converged());
+  EXPECT_EQ(lin.model().forces()[27], 0.0);
+  for (int k = 0; k < 3; ++k) {
+    EXPECT_NEAR(c.force_n[0][k], ref.force_n[0][k], 1e-6 * norm3(ref.force_n[0]));
+  }
+  // without it, the re-solve
+  lin.settings().active_set_correction = false;
   const LocalModelResult r = lin.solve(p2);
   EXPECT_EQ(r.used, LocalModelUsed::kFallback);
   ASSERT_TRUE(r.converged());
-  const LocalModelResult ref = reference(slot, lifted);
   EXPECT_EQ(lin.model().forces()[27], 0.0);   // contact 9 separated
   for (int k = 0; k < 3; ++k) {
     EXPECT_NEAR(r.force_n[0][k], ref.force_n[0][k], 1e-6 * norm3(ref.force_n[0]));
@@ -201,6 +216,27 @@ TEST(LocalModelTest, ItFallsBackToTheReSolveWhenTheActiveSetChanges) {
   const shared::Pose far = at(2e-6, 0, 0);
   const shared::Pose* p3[] = {&far};
   EXPECT_EQ(lin.solve(p3).used, LocalModelUsed::kFallback);
+}
+
+// Every contact lifts at once, more than the active-set correction changes: the tick falls back
+// to the re-solve, which finds no force.
+TEST(LocalModelTest, TheCorrectionFallsBackWhenTooManyContactsChange) {
+  constexpr int kContacts = kMaxCorrectedContacts + 4;
+  Slot slot(3 * kContacts, kContacts);
+  fillProblem(slot, kContacts, 1.0, [](int) { return 1e-4; }, [](int) { return 0.0; }, 0.3);
+  OfflineLocalModel lin(3 * kContacts, kContacts, settingsFor(LocalModelKind::kLinearized));
+  const shared::Pose origin = at(0, 0, 0);
+  const shared::Pose* start[] = {&origin};
+  ASSERT_EQ(lin.adopt(slot.view(), start), PrepareStatus::kReady);
+  ASSERT_TRUE(lin.prepared().linearized());
+  EXPECT_EQ(lin.prepared().activeRows(), 3 * kContacts);
+  const shared::Pose off = at(0, 0, -3e-4);
+  const shared::Pose* poses[] = {&off};
+  const LocalModelResult r = lin.solve(poses);
+  EXPECT_EQ(r.used, LocalModelUsed::kFallback);
+  EXPECT_EQ(r.fallback, FallbackReason::kContactLifts);
+  ASSERT_TRUE(r.converged());
+  EXPECT_EQ(norm3(r.force_n[0]), 0.0);
 }
 
 // Two normal-only contacts under one tool (W in N^-1 m, rows moving with the device's z): L is
@@ -232,6 +268,7 @@ TEST(LocalModelTest, TheReducedFallbackTakesInAContactLeftOutThatCloses) {
   Slot slot(2, 2);
   fillLiftAndClose(slot);
   OfflineLocalModel lin(2, 2, settingsFor(LocalModelKind::kLinearized));
+  lin.settings().active_set_correction = false;
   const shared::Pose origin = at(0, 0, 0);
   const shared::Pose* start[] = {&origin};
   ASSERT_EQ(lin.adopt(slot.view(), start), PrepareStatus::kReady);
@@ -272,6 +309,77 @@ TEST(LocalModelTest, TheReducedFallbackTakesInAContactLeftOutThatCloses) {
   const LocalModelResult r = lin.solve(poses);
   EXPECT_EQ(r.solved_contacts, 2);
   EXPECT_NEAR(r.force_n[0][2], reference(slot, p).force_n[0][2], 1e-9);
+}
+
+// The same two contacts with the active-set correction: L lifts (one contact changed), then S
+// closes once L has lifted (two), found in the correction's second round. Both active sets are
+// linear problems: the corrected force is the full problem's.
+TEST(LocalModelTest, TheActiveSetCorrectionFollowsAContactThatLiftsAndOneThatCloses) {
+  Slot slot(2, 2);
+  fillLiftAndClose(slot);
+  OfflineLocalModel lin(2, 2, settingsFor(LocalModelKind::kLinearized));
+  const shared::Pose origin = at(0, 0, 0);
+  const shared::Pose* start[] = {&origin};
+  ASSERT_EQ(lin.adopt(slot.view(), start), PrepareStatus::kReady);
+  ASSERT_TRUE(lin.prepared().linearized());
+  struct Case {
+    double z_m;
+    int changed;
+    int rounds;
+  };
+  for (const Case c : {Case{1.5e-5, 1, 1}, Case{3.5e-5, 2, 2}}) {
+    SCOPED_TRACE(c.z_m);
+    const shared::Pose p = at(0, 0, c.z_m);
+    const shared::Pose* poses[] = {&p};
+    const LocalModelResult r = lin.solve(poses);
+    EXPECT_EQ(r.used, LocalModelUsed::kCorrected);
+    EXPECT_EQ(r.fallback, FallbackReason::kContactLifts);
+    EXPECT_EQ(r.corrected_contacts, c.changed);
+    EXPECT_EQ(r.correction_rounds, c.rounds);
+    ASSERT_TRUE(r.converged());
+    EXPECT_EQ(lin.model().forces()[0], 0.0);
+    EXPECT_EQ(lin.model().forces()[1] > 0.0, c.changed == 2);
+    const LocalModelResult ref = reference(slot, p);
+    for (int k = 0; k < 3; ++k) {
+      EXPECT_NEAR(r.force_n[0][k], ref.force_n[0][k], 1e-9 * (1.0 + norm3(ref.force_n[0])));
+    }
+  }
+}
+
+// 300 frictional contacts (900 rows, 100 of them loaded): the preparation (solve, inversion of the
+// active rows' system, reduced fallback's order) allocates nothing, nor does a tick whose active
+// set the correction changes in three contacts (they lift), whose force is the full problem's.
+TEST(LocalModelTest, ThePreparationAndACorrectedTickOf900RowsAllocateNothing) {
+  Slot slot(900, 300);
+  // every third contact pressed in (three of them by 30 um only), the others open by 0.1 mm
+  fillProblem(slot, 300, 0.5,
+              [](int c) { return c % 3 != 0 ? -1e-4 : c % 99 == 9 ? 3e-5 : 2e-4; },
+              [](int) { return 0.0; }, 0.3);
+  OfflineLocalModel lin(900, 300, settingsFor(LocalModelKind::kLinearized));
+  lin.settings().tolerance = 1e-7;
+  const shared::Pose origin = at(0, 0, 0);
+  const shared::Pose* start[] = {&origin};
+  {
+    test::AllocScope scope;
+    ASSERT_EQ(lin.adopt(slot.view(), start), PrepareStatus::kReady);
+    EXPECT_EQ(scope.allocations(), 0);
+  }
+  ASSERT_TRUE(lin.prepared().linearized());
+  EXPECT_EQ(lin.prepared().activeRows(), 300);
+  const shared::Pose lifted = at(0, 0, -4e-5);
+  const shared::Pose* poses[] = {&lifted};
+  LocalModelResult r;
+  {
+    test::AllocScope scope;
+    r = lin.solve(poses);
+    EXPECT_EQ(scope.allocations(), 0);
+  }
+  EXPECT_EQ(r.used, LocalModelUsed::kCorrected);
+  EXPECT_EQ(r.corrected_contacts, 3);
+  const LocalModelResult ref = reference(slot, lifted);
+  for (int k = 0; k < 3; ++k) {
+    EXPECT_NEAR(r.force_n[0][k], ref.force_n[0][k], 1e-5 * norm3(ref.force_n[0]));
+  }
 }
 
 // Work the contact force does on the instrument around a closed path of the device: a passive
@@ -387,8 +495,9 @@ TEST(LocalModelTest, SettingsAreValidated) {
 }
 
 // Recorded problems of liver_grasp's hold (tests/data/haptic): the device displaced by up to
-// 0.2 mm about each snapshot's pose in a small circle, as the replay's device moves. The model
-// the tick renders (linearised, re-solve where it does not hold) against the full problem
+// 0.2 mm about each snapshot's pose in a small circle, as the replay's device moves, and by up to
+// 0.5 mm in a larger one, where contacts close and start to slide. The model the tick renders
+// (linearised, its active set corrected, re-solve where neither holds) against the full problem
 // solved to 1e-9: within 2 % of the held force everywhere.
 TEST(LocalModelTest, OnRecordedGraspProblemsTheRenderedForceIsTheFullProblemsWithin2Percent) {
   const std::filesystem::path file =
@@ -408,8 +517,8 @@ TEST(LocalModelTest, OnRecordedGraspProblemsTheRenderedForceIsTheFullProblemsWit
   fast.max_sweeps = 500;
   OfflineLocalModel model(max_rows, max_contacts, fast);
   OfflineLocalModel full(max_rows, max_contacts, settingsFor(LocalModelKind::kFull));
-  int linearized = 0, ticks = 0;
-  double worst = 0.0;
+  int linearized = 0, corrected = 0, ticks = 0;
+  double worst = 0.0, worst_corrected = 0.0;
   for (std::size_t i = 0; i < snaps.size(); ++i) {
     shared::SnapshotWriter slot(base, layout);
     ASSERT_TRUE(snaps[i].writeTo(slot, i + 1, 1));
@@ -422,10 +531,12 @@ TEST(LocalModelTest, OnRecordedGraspProblemsTheRenderedForceIsTheFullProblemsWit
     const shared::Pose* hint[] = {&centre};
     ASSERT_EQ(model.adopt(view, hint), PrepareStatus::kReady);
     ASSERT_EQ(full.adopt(view, hint), PrepareStatus::kReady);
-    for (int k = 0; k < 10; ++k) {
+    for (int k = 0; k < 20; ++k) {
       const double a = 0.6 * k;
+      const double radius = k < 10 ? 2e-4 : 5e-4;
       shared::Pose p = centre;
-      p.pos_m += Eigen::Vector3d(2e-4 * (std::cos(a) - 1.0), 2e-4 * std::sin(a), -1e-4 * (1.0 - std::cos(a)));
+      p.pos_m += Eigen::Vector3d(radius * (std::cos(a) - 1.0), radius * std::sin(a),
+                                 -0.5 * radius * (1.0 - std::cos(a)));
       const shared::Pose* poses[] = {&p};
       const LocalModelResult r = model.solve(poses);
       const LocalModelResult ref = full.solve(poses);
@@ -435,13 +546,20 @@ TEST(LocalModelTest, OnRecordedGraspProblemsTheRenderedForceIsTheFullProblemsWit
       if (r.used == LocalModelUsed::kLinearized) ++linearized;
       double d2 = 0.0;
       for (int j = 0; j < 3; ++j) d2 += std::pow(r.force_n[0][j] - ref.force_n[0][j], 2);
-      worst = std::max(worst, std::sqrt(d2) / std::max(norm3(ref.force_n[0]), 1e-3));
+      const double error = std::sqrt(d2) / std::max(norm3(ref.force_n[0]), 1e-3);
+      worst = std::max(worst, error);
+      if (r.used == LocalModelUsed::kCorrected) {
+        ++corrected;
+        worst_corrected = std::max(worst_corrected, error);
+      }
     }
   }
   EXPECT_LT(worst, 0.02);
   EXPECT_GT(linearized, 0);
-  std::printf("recorded grasp: %d of %d evaluations linearised, worst force error %.3g %%\n",
-              linearized, ticks, 100.0 * worst);
+  EXPECT_GT(corrected, 0);   // the active-set correction is exercised on real problems
+  std::printf("recorded grasp: %d of %d evaluations linearised, %d corrected; worst force error "
+              "%.3g %% (corrected %.3g %%)\n",
+              linearized, ticks, corrected, 100.0 * worst, 100.0 * worst_corrected);
 }
 
 }  // namespace

@@ -110,6 +110,9 @@ struct HapticSettings {
   /// The linearisation's fallback re-solves only the contacts that can carry force
   /// (LocalModelSettings::reduced_fallback; tactus-jitter --full-fallback turns it off)
   bool reduced_fallback = true;
+  /// Before the fallback, correct the linearisation's active set in a few contacts
+  /// (LocalModelSettings::active_set_correction; tactus-jitter --no-correction turns it off)
+  bool active_set_correction = true;
   /// The tick's deadline, from the start of its work: the local model's re-solve stops at it
   /// (checked within sweeps). In (0, kMaxBudgetFraction x period_ns]; 0 (no clock) only with
   /// max_sweeps <= kMaxSweepsWithoutBudget.
@@ -163,8 +166,10 @@ struct HapticCounters {
   std::atomic<std::uint64_t> overruns{0};            ///< ticks flagged shared::kStatsOverrun
   /// ticks where the final guard had to change the command (never with valid settings)
   std::atomic<std::uint64_t> guard_interventions{0};
-  /// ticks the linearised local model held, and ticks it did not (full re-solve instead)
+  /// ticks the linearised local model held, ticks it held with its active set corrected, and
+  /// ticks it did not (re-solve instead)
   std::atomic<std::uint64_t> linearized_ticks{0};
+  std::atomic<std::uint64_t> corrected_ticks{0};
   std::atomic<std::uint64_t> model_fallbacks{0};
   /// snapshots the preparation refused (too large, inconsistent, non-finite, ill-posed)
   std::atomic<std::uint64_t> rejected_snapshots{0};

@@ -41,6 +41,19 @@
 //    still open at the solution (delta_n >= 0), taking in the first that is not and solving on.
 //    A contact left out and open has f = 0 and no natural-map residual, so a converged reduced
 //    solve is a converged solve of the whole problem.
+//    Before falling back, the tick corrects the active set (LocalModelSettings::
+//    active_set_correction): where a few contacts change state (a separated one closes, an
+//    active one lifts, a sticking one starts to slide, a sliding one sticks), the linear system
+//    of the new active set differs from the prepared one in those contacts' equations only, and
+//    its solution is the prediction plus a correction through the prepared inverse A^-1
+//    (Sherman-Morrison-Woodbury: with Z the columns of the prepared system's inverse for the
+//    replaced equations and R their new rows, df = df_pred + Z (R Z)^-1 (residual of the new
+//    equations at the prediction); a contact that closes adds its rows as unknowns, whose
+//    columns cost one product with A^-1). A contact that starts to slide slides in the direction
+//    of its predicted tangential force (re-aimed along its slip when that disagrees). The
+//    corrected solution is checked as the linearisation is, and states are switched again for
+//    up to kMaxCorrectionRounds rounds and kMaxCorrectedContacts contacts; it is rendered when
+//    every check holds (LocalModelUsed::kCorrected), else the tick falls back as above.
 //  - kAutomatic: linearized for problems of at least LocalModelSettings::automatic_min_rows
 //    rows, full below (where a warm re-solve costs a few microseconds).
 //
@@ -76,6 +89,7 @@ enum class LocalModelUsed : std::uint8_t {
   kFull,        ///< the full re-solve (kFull, or kAutomatic on a small problem)
   kLinearized,  ///< the linearisation, valid at this pose
   kFallback,    ///< the linearisation was not valid here (or not available): full re-solve
+  kCorrected,   ///< the linearisation with its active set corrected in a few contacts
 };
 std::string_view toString(LocalModelUsed used) noexcept;
 
@@ -118,6 +132,9 @@ struct LocalModelSettings {
   /// The linearisation's fallback re-solves only the contacts that can carry force (above);
   /// false: all the reached contacts.
   bool reduced_fallback = true;
+  /// Where the linearisation does not hold, first correct its active set in a few contacts
+  /// (above); false: fall back at once.
+  bool active_set_correction = true;
   /// Throws tactus::Error naming the first setting that is not finite or out of range.
   void validate() const;
 };
@@ -129,6 +146,10 @@ using DevicePoses = std::span<const shared::Pose* const>;
 /// A reduced fallback solves the contacts that could carry force at kReducedReachFactor times
 /// the device's displacement from the linearisation point (local_model.h, top).
 inline constexpr double kReducedReachFactor = 2.0;
+/// The active-set correction (top) changes the state of at most this many contacts, in at most
+/// this many rounds of solve and check.
+inline constexpr int kMaxCorrectedContacts = 16;
+inline constexpr int kMaxCorrectionRounds = 6;
 
 /// Per contact of a prepared snapshot: its state in the linearised solution.
 enum class ContactState : std::uint8_t { kSeparated, kSticking, kSliding, kNormalOnly };
@@ -253,6 +274,14 @@ class PreparedSnapshot {
   std::vector<double> ordered_mu_;
   std::vector<double> Wo_;
   int active_rows_ = 0;
+  // the tick's active-set correction (valid with linearized_): the active rows (position ->
+  // row), each row's position among them (-1: not active), the linear system's inverse A^-1
+  // (active_rows_ x active_rows_, column-major) and W on the reached rows and the active columns
+  // (row r_begin + i at WA_[i * active_rows_])
+  std::vector<int> active_row_;
+  std::vector<int> active_pos_;
+  std::vector<double> Ainv_;
+  std::vector<double> WA_;
   std::int64_t prepare_ns_ = 0, copy_ns_ = 0, storage_ns_ = 0, solve_ns_ = 0, linearize_ns_ = 0;
 };
 
@@ -264,7 +293,7 @@ class SnapshotPreparation {
   SnapshotPreparation(int max_rows, int max_contacts);   ///< allocates
   /// Copies and checks `snap` into `out` (sized for at least the capacity given here) and, when
   /// it is solvable, solves it at `poses` and linearises it (settings.kind != kFull). Returns
-  /// out.status(). Allocation-free; not real-time (a dense LU of the active rows).
+  /// out.status(). Allocation-free; not real-time (a dense inversion of the active rows' system).
   PrepareStatus prepare(const shared::SnapshotView& snap, const LocalModelSettings& settings,
                         DevicePoses poses, PreparedSnapshot& out) noexcept;
   /// Forgets the carried solution (a new segment, a restarted simulation).
@@ -285,9 +314,9 @@ class SnapshotPreparation {
   shared::NsgsWorkspace workspace_;
   std::vector<int> reach_offset_;
   std::vector<double> dq_;       ///< moved delta_free
-  std::vector<int> active_;      ///< active row -> row
-  std::vector<double> A_, B_;    ///< the linear system (column-major, active rows)
-  std::vector<int> pivots_;
+  std::vector<double> A_, B_;    ///< the linear system A df = B dx (row-major, active rows)
+  std::vector<double> X_;        ///< its solution df/dx (active rows x 6 instruments)
+  std::vector<int> swap_;        ///< the inversion's row swaps
   std::vector<std::pair<double, int>> sort_;   ///< (reach, contact) while ordering
 };
 
@@ -302,6 +331,10 @@ struct LocalModelResult {
   double error = 0.0;           ///< NSGS's natural-map error (the preparation's for kLinearized)
   /// Contacts the re-solve solved: all reached ones, or fewer with a reduced fallback
   int solved_contacts = 0;
+  /// Contacts whose state the active-set correction changed (kCorrected; or when it was tried
+  /// and gave up, before the fallback), and its rounds
+  int corrected_contacts = 0;
+  int correction_rounds = 0;
   int rows = 0;
   int contacts = 0;
   int ill_posed_contacts = 0;
@@ -340,6 +373,9 @@ class LocalModel {
   void displacements(DevicePoses poses) noexcept;
   void moveDeltaFree() noexcept;
   FallbackReason evaluateLinearization(const LocalModelSettings& settings) noexcept;
+  bool correctActiveSet(std::int64_t deadline_ns, LocalModelResult& out) noexcept;
+  int correctionSolve() noexcept;
+  int correctionCheck() noexcept;
   shared::NsgsResult resolve(const LocalModelSettings& settings, std::int64_t deadline_ns,
                              bool delta_current) noexcept;
   shared::NsgsResult resolveReduced(const LocalModelSettings& settings, std::int64_t deadline_ns,
@@ -356,6 +392,18 @@ class LocalModel {
   std::vector<double> fo_, qo_, scratch_;   ///< the reduced fallback's f, delta_free (ordered)
   std::array<double, 6 * shared::kMaxInstruments> dx_{};
   bool delta_valid_ = false;   ///< workspace_.delta holds W f + last_delta_free_
+  double slack_ = 0.0;         ///< the last evaluation's slack (evaluateLinearization)
+  // the active-set correction (local_model.cpp): each contact's state in it (CorrectionMode),
+  // the direction a contact that started to slide slides in (2 per contact), the new unknowns
+  // (rows of contacts that close: row and index), the replaced equations, and its scratch
+  std::vector<std::uint8_t> mode_;
+  std::vector<std::uint8_t> tried_;   ///< per contact: the modes tried in this tick (bits)
+  std::vector<double> slide_u_;
+  std::vector<int> new_row_;
+  std::vector<int> new_index_;
+  std::vector<int> eq_index_, eq_kind_, eq_row_, eq_contact_;
+  std::vector<double> Z_, RZ_, rhs_, dy_, col_;
+  std::vector<double> fc_, dc_;   ///< the corrected f and delta on the reached rows
 };
 
 /// Prepares and solves in one object, for tools and offline studies (not real-time): what the
