@@ -44,7 +44,7 @@ class CacheDir {
   fs::path path;
 };
 
-std::string readAll(const fs::path& file) {
+std::string readCacheFile(const fs::path& file) {
   std::ifstream in(file, std::ios::binary);
   return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
 }
@@ -133,7 +133,7 @@ TEST_P(CacheReject, TruncatedPaddedCorruptOrOldFilesAreRejectedAndRebuilt) {
     auto built = makeCompliance(ComplianceKind::kWarped, *body_, opt_);
     w_ref = w(*built);
   }
-  const std::string valid = readAll(file());
+  const std::string valid = readCacheFile(file());
   ASSERT_GT(valid.size(), kHeaderBytes + 8);
 
   struct Case {
@@ -175,7 +175,7 @@ TEST_P(CacheReject, TruncatedPaddedCorruptOrOldFilesAreRejectedAndRebuilt) {
     EXPECT_FALSE(info.loaded_from_cache);
     EXPECT_NE(info.cache_message.find(c.reason), std::string::npos) << info.cache_message;
     EXPECT_TRUE(bitIdentical(w(*model), w_ref));  // rebuilt, not the damaged values
-    EXPECT_EQ(readAll(file()), valid);            // and the file rewritten
+    EXPECT_EQ(readCacheFile(file()), valid);      // and the file rewritten
     auto again = makeCompliance(ComplianceKind::kWarped, *body_, opt_);
     EXPECT_TRUE(again->buildInfo().loaded_from_cache) << again->buildInfo().cache_message;
   }

@@ -37,8 +37,8 @@ using ::testing::Not;
 
 namespace {
 
-const std::string kSim = std::string(TACTUS_BINARY_DIR) + "/sim_server/sim_server";
-const std::string kHaptic = std::string(TACTUS_BINARY_DIR) + "/haptic_server/haptic_server";
+const std::string kSimServer = std::string(TACTUS_BINARY_DIR) + "/sim_server/sim_server";
+const std::string kHapticServer = std::string(TACTUS_BINARY_DIR) + "/haptic_server/haptic_server";
 const std::string kMeshes = std::string(TACTUS_TEST_DATA_DIR) + "/meshes";
 
 struct RunResult {
@@ -219,7 +219,7 @@ class FilesTest : public ::testing::Test {
 // Reading
 
 TEST_F(FilesTest, SimServerOnDevZeroIsRefusedBeforeReading) {
-  const RunResult r = run({kSim, "/dev/zero"});
+  const RunResult r = run({kSimServer, "/dev/zero"});
   ASSERT_FALSE(r.timed_out) << r.output;
   ASSERT_TRUE(r.exited) << "signal " << r.signal << ": " << r.output;
   EXPECT_NE(r.code, 0);
@@ -230,7 +230,7 @@ TEST_F(FilesTest, SimServerOnDevZeroIsRefusedBeforeReading) {
 TEST_F(FilesTest, FifoSceneFailsFastInsteadOfBlocking) {
   const fs::path fifo = dir_ / "scene.yaml";
   ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
-  const RunResult r = run({kSim, fifo.string()}, std::chrono::seconds(20));
+  const RunResult r = run({kSimServer, fifo.string()}, std::chrono::seconds(20));
   ASSERT_FALSE(r.timed_out) << "sim_server blocked on a FIFO scene";
   ASSERT_TRUE(r.exited) << r.output;
   EXPECT_NE(r.code, 0);
@@ -258,7 +258,7 @@ TEST_F(FilesTest, FifoComplianceCacheIsRejectedAndRebuilt) {
   ASSERT_EQ(::mkfifo((cache / "organ.c0.bin").c_str(), 0600), 0);
   const fs::path scene =
       cubeScene("scene.yaml", "    compliance: {model: warped, cache_dir: " + cache.string() + "}\n");
-  const RunResult r = run({kSim, scene.string(), "--steps", "2"}, std::chrono::seconds(60));
+  const RunResult r = run({kSimServer, scene.string(), "--steps", "2"}, std::chrono::seconds(60));
   ASSERT_FALSE(r.timed_out) << "sim_server blocked on a FIFO compliance cache";
   ASSERT_TRUE(r.exited) << r.output;
   EXPECT_EQ(r.code, 0) << r.output;
@@ -344,7 +344,7 @@ TEST_F(FilesTest, ReplayOfDevZeroIsRefusedAtOnce) {
   rusage after{};
   ::getrusage(RUSAGE_SELF, &after);
   EXPECT_LT(after.ru_maxrss - before.ru_maxrss, 64 * 1024);  // [KiB]: not read whole
-  const RunResult r = run({kHaptic, "--device", "replay", "--device-option", "file=/dev/zero",
+  const RunResult r = run({kHapticServer, "--device", "replay", "--device-option", "file=/dev/zero",
                            "--segment", "tactus_files_test_" + std::to_string(::getpid())},
                           std::chrono::seconds(20));
   ASSERT_FALSE(r.timed_out) << "haptic_server kept reading /dev/zero";
@@ -356,7 +356,7 @@ TEST_F(FilesTest, ReplayOfDevZeroIsRefusedAtOnce) {
 TEST_F(FilesTest, SigtermDuringC0PrecomputationExitsWithAMessage) {
   const fs::path liver =
       scene("liver.yaml", "liver_23k.msh", 0.01, "    compliance: {model: warped}\n");
-  Child c({kSim, liver.string(), "--steps", "1"});
+  Child c({kSimServer, liver.string(), "--steps", "1"});
   ASSERT_TRUE(c.waitForOutput("C0 precompute", std::chrono::seconds(120))) << c.output();
   ::kill(c.pid(), SIGTERM);
   const RunResult r = c.wait(std::chrono::seconds(30));
@@ -372,7 +372,8 @@ TEST_F(FilesTest, SigtermDuringC0PrecomputationExitsWithAMessage) {
 
 TEST_F(FilesTest, StatsJsonOnAFullDiskExitsNonZero) {
   const fs::path scene = cubeScene();
-  const RunResult r = run({kSim, scene.string(), "--steps", "2", "--stats-json", "/dev/full"});
+  const RunResult r =
+      run({kSimServer, scene.string(), "--steps", "2", "--stats-json", "/dev/full"});
   ASSERT_FALSE(r.timed_out);
   ASSERT_TRUE(r.exited) << r.output;
   EXPECT_NE(r.code, 0);
@@ -384,7 +385,7 @@ TEST_F(FilesTest, StatsJsonWriteFailureLeavesNoFile) {
   const fs::path stats = dir_ / "stats.json";
   // the file size limit makes the temporary file's write fail (EFBIG), as a full disk would
   const RunResult r =
-      run({kSim, scene.string(), "--steps", "2", "--stats-json", stats.string()},
+      run({kSimServer, scene.string(), "--steps", "2", "--stats-json", stats.string()},
           std::chrono::seconds(30), 100);
   ASSERT_FALSE(r.timed_out);
   ASSERT_TRUE(r.exited) << r.output;
@@ -397,14 +398,15 @@ TEST_F(FilesTest, StatsJsonWriteFailureLeavesNoFile) {
 TEST_F(FilesTest, StatsJsonIsNotOverwrittenUnlessAsked) {
   const fs::path scene = cubeScene();
   const fs::path stats = write("stats.json", "precious");
-  RunResult r = run({kSim, scene.string(), "--steps", "2", "--stats-json", stats.string()});
+  RunResult r = run({kSimServer, scene.string(), "--steps", "2", "--stats-json", stats.string()});
   ASSERT_TRUE(r.exited) << r.output;
   EXPECT_NE(r.code, 0);
   EXPECT_THAT(r.output, HasSubstr("exists"));
   EXPECT_THAT(r.output, HasSubstr("--overwrite"));
   EXPECT_THAT(r.output, Not(HasSubstr("steps, simulated")));  // refused before running
   EXPECT_EQ(readAll(stats), "precious");
-  r = run({kSim, scene.string(), "--steps", "2", "--stats-json", stats.string(), "--overwrite"});
+  r = run(
+      {kSimServer, scene.string(), "--steps", "2", "--stats-json", stats.string(), "--overwrite"});
   ASSERT_TRUE(r.exited) << r.output;
   EXPECT_EQ(r.code, 0) << r.output;
   EXPECT_THAT(readAll(stats), HasSubstr("\"stages_ms\""));
@@ -417,7 +419,7 @@ TEST_F(FilesTest, StatsJsonReportsTheVtkOutputTime) {
   const fs::path scene = cubeScene();
   const fs::path stats = dir_ / "stats.json";
   const fs::path out_dir = dir_ / "vtk";
-  const RunResult r = run({kSim, scene.string(), "--steps", "3", "--output", out_dir.string(),
+  const RunResult r = run({kSimServer, scene.string(), "--steps", "3", "--output", out_dir.string(),
                            "--output-every", "1", "--stats-json", stats.string()});
   ASSERT_TRUE(r.exited) << r.output;
   ASSERT_EQ(r.code, 0) << r.output;
@@ -437,8 +439,8 @@ TEST_F(FilesTest, StatsJsonReportsTheVtkOutputTime) {
 TEST_F(FilesTest, RecordSnapshotsStopsAtItsCapAndTheFileStaysReadable) {
   const fs::path snaps = dir_ / "run.snap";
   const RunResult r =
-      run({kSim, std::string(TACTUS_TEST_DATA_DIR) + "/scenes/press_cube.yaml", "--steps", "5000",
-           "--record-snapshots", snaps.string(), "--record-snapshots-max-mb", "1"});
+      run({kSimServer, std::string(TACTUS_TEST_DATA_DIR) + "/scenes/press_cube.yaml", "--steps",
+           "5000", "--record-snapshots", snaps.string(), "--record-snapshots-max-mb", "1"});
   ASSERT_TRUE(r.exited) << r.output;
   EXPECT_EQ(r.code, 0) << r.output;
   EXPECT_THAT(r.output, HasSubstr("reached its cap of 1 MiB"));
@@ -447,9 +449,9 @@ TEST_F(FilesTest, RecordSnapshotsStopsAtItsCapAndTheFileStaysReadable) {
   const auto recorded = tactus::shared::readSnapshotFile(snaps);
   EXPECT_GT(recorded.size(), 1000u);
   EXPECT_LT(recorded.size(), 5000u);
-  const RunResult big =
-      run({kSim, std::string(TACTUS_TEST_DATA_DIR) + "/scenes/press_cube.yaml", "--steps", "1",
-           "--record-snapshots", (dir_ / "b.snap").string(), "--record-snapshots-max-mb", "4096"});
+  const RunResult big = run(
+      {kSimServer, std::string(TACTUS_TEST_DATA_DIR) + "/scenes/press_cube.yaml", "--steps", "1",
+       "--record-snapshots", (dir_ / "b.snap").string(), "--record-snapshots-max-mb", "4096"});
   EXPECT_NE(big.code, 0) << "a cap beyond what the replay reads is refused";
   EXPECT_THAT(big.output, HasSubstr("--record-snapshots-max-mb"));
 }
@@ -459,8 +461,8 @@ TEST_F(FilesTest, RecordSnapshotsStopsAtItsCapAndTheFileStaysReadable) {
 // failed). liver_23k's C0 is 1.66 GB; the process may have 1.2 GB here (ulimit -v).
 TEST_F(FilesTest, AComplianceBlockBeyondTheMemoryIsRefusedWithItsSize) {
   const fs::path scene = this->scene("big.yaml", "liver_23k.msh", 1.0);
-  const RunResult r = run({kSim, scene.string(), "--steps", "1"}, std::chrono::seconds(60), -1,
-                          1200L << 20);
+  const RunResult r =
+      run({kSimServer, scene.string(), "--steps", "1"}, std::chrono::seconds(60), -1, 1200L << 20);
   ASSERT_TRUE(r.exited) << r.output;
   EXPECT_EQ(r.code, 1) << r.output;
   EXPECT_THAT(r.output, HasSubstr("rest compliance block C0"));
@@ -471,16 +473,16 @@ TEST_F(FilesTest, AComplianceBlockBeyondTheMemoryIsRefusedWithItsSize) {
 
 TEST_F(FilesTest, ExportTrajectoryChecksWritesAndRefusesOverwrite) {
   const fs::path scene = cubeScene();
-  RunResult r = run({kSim, scene.string(), "--export-trajectory", "/dev/full"});
+  RunResult r = run({kSimServer, scene.string(), "--export-trajectory", "/dev/full"});
   ASSERT_TRUE(r.exited) << r.output;
   EXPECT_NE(r.code, 0);
   EXPECT_THAT(r.output, HasSubstr("No space left on device"));
   const fs::path csv = write("traj.csv", "precious");
-  r = run({kSim, scene.string(), "--export-trajectory", csv.string()});
+  r = run({kSimServer, scene.string(), "--export-trajectory", csv.string()});
   ASSERT_TRUE(r.exited) << r.output;
   EXPECT_NE(r.code, 0);
   EXPECT_EQ(readAll(csv), "precious");
-  r = run({kSim, scene.string(), "--export-trajectory", csv.string(), "--overwrite"});
+  r = run({kSimServer, scene.string(), "--export-trajectory", csv.string(), "--overwrite"});
   ASSERT_TRUE(r.exited) << r.output;
   EXPECT_EQ(r.code, 0) << r.output;
   EXPECT_THAT(readAll(csv), HasSubstr("t_s,x,y,z"));
@@ -494,13 +496,14 @@ TEST_F(FilesTest, EarlierVtkSeriesAndSolverOutputAreNotReplacedUnlessAsked) {
   fs::create_directories(out_dir);
   const fs::path pvd = out_dir / "series.pvd";
   { std::ofstream(pvd) << "precious"; }
-  RunResult r = run({kSim, scene.string(), "--steps", "2", "--output", out_dir.string()});
+  RunResult r = run({kSimServer, scene.string(), "--steps", "2", "--output", out_dir.string()});
   ASSERT_TRUE(r.exited) << r.output;
   EXPECT_NE(r.code, 0);
   EXPECT_THAT(r.output, HasSubstr("earlier run"));
   EXPECT_THAT(r.output, HasSubstr("--overwrite"));
   EXPECT_EQ(readAll(pvd), "precious");
-  r = run({kSim, scene.string(), "--steps", "2", "--output", out_dir.string(), "--overwrite"});
+  r = run(
+      {kSimServer, scene.string(), "--steps", "2", "--output", out_dir.string(), "--overwrite"});
   ASSERT_TRUE(r.exited) << r.output;
   EXPECT_EQ(r.code, 0) << r.output;
   EXPECT_THAT(readAll(pvd), HasSubstr("VTKFile"));
@@ -563,10 +566,10 @@ TEST_F(FilesTest, RecordingWriteFailureIsReported) {
   ASSERT_NE(rec, nullptr);
   EXPECT_THAT(rec->writeError(), HasSubstr("No space left on device"));
   // the daemon reports it and exits non-zero
-  const RunResult r = run({kHaptic, "--device", "simulated", "--device-option", "record=/dev/full",
-                           "--duration", "0.2", "--segment",
-                           "tactus_files_test_" + std::to_string(::getpid())},
-                          std::chrono::seconds(20));
+  const RunResult r =
+      run({kHapticServer, "--device", "simulated", "--device-option", "record=/dev/full",
+           "--duration", "0.2", "--segment", "tactus_files_test_" + std::to_string(::getpid())},
+          std::chrono::seconds(20));
   ASSERT_FALSE(r.timed_out);
   ASSERT_TRUE(r.exited) << r.output;
   EXPECT_NE(r.code, 0);

@@ -78,11 +78,11 @@ struct NameGuard {
 bool exited(pid_t pid, int* status) { return ::waitpid(pid, status, WNOHANG) == pid; }
 
 // A child process that is always reaped (SIGCONT + SIGKILL first if still there).
-struct Child {
+struct SegmentChild {
   pid_t pid = -1;
   bool reaped = false;
   int status = 0;
-  ~Child() {
+  ~SegmentChild() {
     if (pid <= 0 || reaped) return;
     ::kill(pid, SIGCONT);
     ::kill(pid, SIGKILL);
@@ -102,8 +102,8 @@ struct Child {
   }
 };
 
-Child spawn(const std::vector<std::string>& args, const std::string& log) {
-  Child c;
+SegmentChild spawn(const std::vector<std::string>& args, const std::string& log) {
+  SegmentChild c;
   c.pid = ::fork();
   if (c.pid == 0) {
     std::FILE* f = std::freopen(log.c_str(), "w", stdout);
@@ -125,7 +125,7 @@ std::string slurp(const std::string& path) {
   return ss.str();
 }
 
-Child startSim(const std::string& name, const char* log_tag) {
+SegmentChild startSim(const std::string& name, const char* log_tag) {
   return spawn({kBin + "/sim_server/sim_server", kData + "/scenes/press_cube.yaml", "--segment",
                 name},
                logPath(name, log_tag));
@@ -146,7 +146,7 @@ bool waitForSegment(const std::string& name, std::chrono::milliseconds timeout =
 
 TEST(SegmentOwnership, AStoppedSimulationIsNeverReplaced) {
   NameGuard g(uniqueName("stopped"));
-  Child first = startSim(g.name, "first");
+  SegmentChild first = startSim(g.name, "first");
   ASSERT_TRUE(waitForSegment(g.name)) << slurp(logPath(g.name, "first"));
   ASSERT_EQ(::kill(first.pid, SIGSTOP), 0);
   // silent for longer than an (impatient) stale threshold: still alive, still refused
@@ -163,7 +163,7 @@ TEST(SegmentOwnership, AStoppedSimulationIsNeverReplaced) {
     EXPECT_THAT(e.what(), HasSubstr("never replaced"));
   }
   // a second sim_server is refused too, with the message, and the first keeps its segment
-  Child second = startSim(g.name, "second");
+  SegmentChild second = startSim(g.name, "second");
   ASSERT_TRUE(second.waitExit(20000ms)) << "second sim_server did not exit";
   ASSERT_TRUE(WIFEXITED(second.status));
   EXPECT_NE(WEXITSTATUS(second.status), 0);
@@ -182,7 +182,7 @@ TEST(SegmentOwnership, AStoppedSimulationIsNeverReplaced) {
 
 TEST(SegmentOwnership, ADisplacedSimulationStopsWithAMessage) {
   NameGuard g(uniqueName("displaced"));
-  Child sim = startSim(g.name, "displaced");
+  SegmentChild sim = startSim(g.name, "displaced");
   ASSERT_TRUE(waitForSegment(g.name)) << slurp(logPath(g.name, "displaced"));
   ASSERT_EQ(::kill(sim.pid, SIGSTOP), 0);
   // someone removes the name by hand and another segment takes it while the sim is stopped
@@ -337,9 +337,9 @@ TEST(SegmentTrust, HapticServerDoesNotAttachToAWorldWritableSegment) {
   ASSERT_GE(fd, 0);
   ASSERT_EQ(::fchmod(fd, 0666), 0);
   ::close(fd);
-  Child haptic = spawn({kBin + "/haptic_server/haptic_server", "--segment", g.name, "--device",
-                        "simulated", "--priority", "0"},
-                       logPath(g.name, "haptic"));
+  SegmentChild haptic = spawn({kBin + "/haptic_server/haptic_server", "--segment", g.name,
+                               "--device", "simulated", "--priority", "0"},
+                              logPath(g.name, "haptic"));
   // bounded wait for the refusal in its log, beating meanwhile so the segment looks alive
   const auto end = std::chrono::steady_clock::now() + 20s;
   std::string log;

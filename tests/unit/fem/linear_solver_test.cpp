@@ -14,7 +14,7 @@
 namespace tactus::sim {
 namespace {
 
-constexpr double kH = 0.01;
+constexpr double kSolverTimeStep = 0.01;
 
 FemMaterial softMaterial() {
   FemMaterial m;
@@ -73,8 +73,8 @@ TEST(CholmodReuse, MatchesTheExactSolveThroughLargeRotations) {
     exact.positions() = reuse.positions();
     exact.velocities() = reuse.velocities();
     const Eigen::VectorXd v0 = reuse.velocities();
-    const FemStepStats sr = reuse.freeMotion(kH);
-    const FemStepStats se = exact.freeMotion(kH);
+    const FemStepStats sr = reuse.freeMotion(kSolverTimeStep);
+    const FemStepStats se = exact.freeMotion(kSolverTimeStep);
     ASSERT_TRUE(sr.ok) << "step " << s;
     ASSERT_TRUE(se.ok) << "step " << s;
     if (!sr.factor_refreshed) {
@@ -104,7 +104,7 @@ TEST(CholmodReuse, RefreshesTheFactorOnlyWhenTheMatrixDrifts) {
   tumble(moving, 4.0);
   int refreshed_after_first = 0, max_iterations = 0;
   for (int s = 0; s < 200; ++s) {
-    const FemStepStats st = moving.freeMotion(kH);
+    const FemStepStats st = moving.freeMotion(kSolverTimeStep);
     ASSERT_TRUE(st.ok);
     if (s == 0) {
       EXPECT_TRUE(st.factor_refreshed);  // no factor yet
@@ -127,7 +127,7 @@ TEST(CholmodReuse, RefreshesTheFactorOnlyWhenTheMatrixDrifts) {
   still.solveStatic();
   const long before = still.counters().factorisations;
   for (int s = 0; s < 40; ++s) {
-    const FemStepStats st = still.freeMotion(kH);
+    const FemStepStats st = still.freeMotion(kSolverTimeStep);
     ASSERT_TRUE(st.ok);
     EXPECT_EQ(st.factor_refreshed, s == 0) << "step " << s;
   }
@@ -140,7 +140,7 @@ TEST(CholmodReuse, RefreshesTheFactorOnlyWhenTheMatrixDrifts) {
   scheduled.solveStatic();
   const long before4 = scheduled.counters().factorisations;
   for (int s = 0; s < 20; ++s) {
-    const FemStepStats st = scheduled.freeMotion(kH);
+    const FemStepStats st = scheduled.freeMotion(kSolverTimeStep);
     ASSERT_TRUE(st.ok);
     EXPECT_EQ(st.factor_refreshed, s % 4 == 0) << "step " << s;
   }
@@ -158,8 +158,8 @@ TEST(CholmodReuse, ComplianceStaysExact) {
   for (int s = 0; s < 5 || st.factor_refreshed; ++s) {
     exact.positions() = reuse.positions();
     exact.velocities() = reuse.velocities();
-    st = reuse.freeMotion(kH);
-    exact.freeMotion(kH);
+    st = reuse.freeMotion(kSolverTimeStep);
+    exact.freeMotion(kSolverTimeStep);
     ASSERT_TRUE(st.ok);
     ASSERT_LT(s, 100) << "no step reused the factor";
   }
@@ -172,7 +172,7 @@ TEST(CholmodReuse, ComplianceStaysExact) {
   EXPECT_EQ(reuse.counters().factorisations, before + 1);
   EXPECT_LT((x_reuse - x_exact).norm(), 1e-10 * x_exact.norm());
   // the factor is now of the current A: the next step reuses it
-  const FemStepStats next = reuse.freeMotion(kH);
+  const FemStepStats next = reuse.freeMotion(kSolverTimeStep);
   ASSERT_TRUE(next.ok);
   EXPECT_FALSE(next.factor_refreshed);
 }

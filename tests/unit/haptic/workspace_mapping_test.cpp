@@ -24,7 +24,7 @@ using shared::WorkspaceMappingParams;
 // 90 degrees about x: device +y -> scene +z, device +z -> scene -y
 const std::array<double, 4> kQuarterTurnX{std::sqrt(0.5), std::sqrt(0.5), 0.0, 0.0};
 
-double norm3(const std::array<double, 3>& v) {
+double mappingNorm3(const std::array<double, 3>& v) {
   return std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
 }
 
@@ -162,7 +162,7 @@ TEST_F(MappedLoopTest, ForceGoesBackRotatedAndScaledAndIsClampedAfterTheMapping)
     EXPECT_NEAR(out.force_n[2], 0.0, 1e-12);
     device_.state.pos_m = {0.0, -0.02, 0.0};        // 20 mm: 20 N at the hand before the clamp
     out = tick(3);
-    EXPECT_LE(norm3(out.force_n), settings_.max_force_n);
+    EXPECT_LE(mappingNorm3(out.force_n), settings_.max_force_n);
     EXPECT_NEAR(out.force_n[1], settings_.max_force_n, 1e-9);
     EXPECT_TRUE(out.flags & shared::kStatsForceClamped);
     EXPECT_NEAR(device_.last.force_n[1], out.force_n[1], 0.0);   // what the device received
@@ -185,7 +185,7 @@ TEST_F(MappedLoopTest, TheClutchHoldsTheInstrumentAndReleasesWithoutAJump) {
     const shared::DeviceSample s = sample();
     for (int k = 0; k < 3; ++k) EXPECT_DOUBLE_EQ(s.pos_m[k], before.pos_m[k]);
     for (int k = 0; k < 4; ++k) EXPECT_DOUBLE_EQ(s.quat_wxyz[k], before.quat_wxyz[k]);
-    EXPECT_EQ(norm3(out.force_n), 0.0);      // no force while clutched
+    EXPECT_EQ(mappingNorm3(out.force_n), 0.0);  // no force while clutched
   }
   EXPECT_TRUE(loop_->workspaceMapping().clutched());
 

@@ -19,9 +19,9 @@
 namespace tactus::sim {
 namespace {
 
-const std::filesystem::path kMeshes = std::filesystem::path(TACTUS_TEST_DATA_DIR) / "meshes";
+const std::filesystem::path kIoMeshes = std::filesystem::path(TACTUS_TEST_DATA_DIR) / "meshes";
 
-std::string meshPath(const std::string& file) { return (kMeshes / file).string(); }
+std::string meshPath(const std::string& file) { return (kIoMeshes / file).string(); }
 
 std::string readFile(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
@@ -276,7 +276,10 @@ std::string gmsh1(const TetMesh& m) {
   }
   for (int t = 0; t < m.tetCount(); ++t) {
     std::string line = std::to_string(t + 1);
-    for (int k : m.tets[static_cast<std::size_t>(t)]) line += " " + std::to_string(k + 1);
+    for (int k : m.tets[static_cast<std::size_t>(t)]) {
+      line += ' ';   // not " " + std::to_string(): GCC 12 warns falsely (-Wrestrict) on it at -O3
+      line += std::to_string(k + 1);
+    }
     tets.push_back(line);
   }
   return gmsh1(nodes, tets);

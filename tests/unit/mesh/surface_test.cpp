@@ -13,12 +13,12 @@
 namespace tactus::sim {
 namespace {
 
-const std::filesystem::path kMeshes = std::filesystem::path(TACTUS_TEST_DATA_DIR) / "meshes";
+const std::filesystem::path kSurfaceMeshes = std::filesystem::path(TACTUS_TEST_DATA_DIR) / "meshes";
 
 class SurfaceOf : public ::testing::TestWithParam<const char*> {};
 
 TEST_P(SurfaceOf, IsClosedOutwardAndBoundsTheVolume) {
-  const TetMesh mesh = loadTetMesh(kMeshes / GetParam());
+  const TetMesh mesh = loadTetMesh(kSurfaceMeshes / GetParam());
   const SurfaceMesh s = extractSurface(mesh);
   ASSERT_FALSE(s.triangles.empty());
   ASSERT_EQ(s.triangle_tet.size(), s.triangles.size());
@@ -83,7 +83,7 @@ INSTANTIATE_TEST_SUITE_P(Livers, SurfaceOf,
                          });
 
 TEST(Surface, SingleTetHasItsFourFaces) {
-  const TetMesh mesh = loadTetMesh(kMeshes / "single_tetra.msh");
+  const TetMesh mesh = loadTetMesh(kSurfaceMeshes / "single_tetra.msh");
   const SurfaceMesh s = extractSurface(mesh);
   EXPECT_EQ(s.triangles.size(), 4u);
   EXPECT_EQ(s.nodes, (std::vector<int>{0, 1, 2, 3}));

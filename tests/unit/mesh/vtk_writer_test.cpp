@@ -16,7 +16,7 @@
 namespace tactus::sim {
 namespace {
 
-const std::filesystem::path kMeshes = std::filesystem::path(TACTUS_TEST_DATA_DIR) / "meshes";
+const std::filesystem::path kVtkMeshes = std::filesystem::path(TACTUS_TEST_DATA_DIR) / "meshes";
 
 std::filesystem::path tempDir() {
   const auto dir = std::filesystem::temp_directory_path() /
@@ -33,7 +33,7 @@ std::string readFile(const std::filesystem::path& path) {
 }
 
 TEST(VtkWriter, VtuRoundTripIsExact) {
-  const TetMesh mesh = loadTetMesh(kMeshes / "liver2.msh");
+  const TetMesh mesh = loadTetMesh(kVtkMeshes / "liver2.msh");
   Eigen::Matrix3Xd displacement = Eigen::Matrix3Xd::Random(3, mesh.nodeCount()) * 1e-3;
   const Eigen::Matrix3Xd positions = mesh.nodes + displacement;
   const Eigen::VectorXd von_mises = Eigen::VectorXd::LinSpaced(mesh.tetCount(), 0.0, 1234.5);
@@ -53,7 +53,7 @@ TEST(VtkWriter, VtuRoundTripIsExact) {
 }
 
 TEST(VtkWriter, OptionalFieldsMayBeEmpty) {
-  const TetMesh mesh = loadTetMesh(kMeshes / "single_tetra.msh");
+  const TetMesh mesh = loadTetMesh(kVtkMeshes / "single_tetra.msh");
   const auto path = tempDir() / "single.vtu";
   writeVtu(path, mesh, mesh.nodes, Eigen::Matrix3Xd(3, 0), Eigen::VectorXd());
   const std::string text = readFile(path);
@@ -64,7 +64,7 @@ TEST(VtkWriter, OptionalFieldsMayBeEmpty) {
 }
 
 TEST(VtkWriter, SizeMismatchAndUnwritablePathThrow) {
-  const TetMesh mesh = loadTetMesh(kMeshes / "single_tetra.msh");
+  const TetMesh mesh = loadTetMesh(kVtkMeshes / "single_tetra.msh");
   const auto dir = tempDir();
   EXPECT_THROW(writeVtu(dir / "a.vtu", mesh, Eigen::Matrix3Xd(3, 3), Eigen::Matrix3Xd(3, 0),
                         Eigen::VectorXd()),

@@ -16,7 +16,7 @@
 namespace tactus::sim {
 namespace {
 
-const std::filesystem::path kScene =
+const std::filesystem::path kBimanualScene =
     std::filesystem::path(TACTUS_TEST_DATA_DIR) / "scenes" / "press_cube_bimanual.yaml";
 
 // Runs `steps` steps, each instrument following its script (an instrument whose script is
@@ -49,7 +49,7 @@ SceneSpec withdraw(SceneSpec spec, int i) {
 }
 
 TEST(Bimanual, BothInstrumentsContactsFormOneCoupledProblem) {
-  const SceneSpec spec = loadScene(kScene);
+  const SceneSpec spec = loadScene(kBimanualScene);
   ASSERT_EQ(instrumentCount(spec), 2);
   Simulation sim(spec);
   ASSERT_EQ(sim.instrumentCount(), 2);
@@ -98,7 +98,7 @@ TEST(Bimanual, BothInstrumentsContactsFormOneCoupledProblem) {
 TEST(Bimanual, AnInstrumentOutOfReachChangesNothingForTheOther) {
   // the right probe withdrawn: the left one's contacts, forces and motion are those of the scene
   // with the left probe alone, bit for bit (the merge tags, it does not reorder or mix)
-  const SceneSpec both = withdraw(loadScene(kScene), 1);
+  const SceneSpec both = withdraw(loadScene(kBimanualScene), 1);
   SceneSpec alone = both;
   alone.additional_instruments.clear();
   Simulation a(both);
@@ -124,7 +124,7 @@ TEST(Bimanual, AnInstrumentOutOfReachChangesNothingForTheOther) {
 TEST(Bimanual, PushingWithOneHandLoadsTheOtherThroughTheTissue) {
   // the right probe holds the same target in both runs; the left one presses 3 mm deeper in the
   // second: the cube, pushed toward +x, presses harder on the right probe (larger +x force)
-  const SceneSpec spec = loadScene(kScene);
+  const SceneSpec spec = loadScene(kBimanualScene);
   Simulation shallow(spec);
   Simulation deep(pressDeeper(spec, 0, 0.003));
   run(shallow, 60);

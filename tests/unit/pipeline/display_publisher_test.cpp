@@ -22,10 +22,10 @@
 namespace tactus::sim {
 namespace {
 
-const std::string kScene = std::string(TACTUS_SOURCE_DIR) + "/scenes/liver_grasp.yaml";
+const std::string kPublisherScene = std::string(TACTUS_SOURCE_DIR) + "/scenes/liver_grasp.yaml";
 
 TEST(DisplayLink, FramesMatchTheSimulation) {
-  SceneSpec spec = loadScene(kScene);
+  SceneSpec spec = loadScene(kPublisherScene);
   spec.haptics.enabled = false;
   test_support::useRoundKinematicJaws(spec);   // one drawn primitive per round-jaw feature
   for (auto& t : spec.tissues) t.compliance_cache_dir.clear();

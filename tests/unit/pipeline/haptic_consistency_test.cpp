@@ -16,7 +16,7 @@
 namespace tactus::sim {
 namespace {
 
-const std::string kScene = std::string(TACTUS_TEST_DATA_DIR) + "/scenes/press_cube.yaml";
+const std::string kPressCubeScene = std::string(TACTUS_TEST_DATA_DIR) + "/scenes/press_cube.yaml";
 
 // The friction coefficient, and the tissue's element and law: the local model must hold for every
 // element and law a scene can choose (the snapshot carries W, whatever built it).
@@ -28,7 +28,7 @@ struct Variant {
 };
 
 SceneSpec pressScene(const Variant& variant) {
-  SceneSpec spec = loadScene(kScene);
+  SceneSpec spec = loadScene(kPressCubeScene);
   spec.haptics.enabled = false;
   spec.instrument.friction_mu = variant.mu;
   spec.tissues[0].element = variant.element;

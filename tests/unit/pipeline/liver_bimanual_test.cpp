@@ -22,10 +22,11 @@
 namespace tactus::sim {
 namespace {
 
-const std::string kScene = std::string(TACTUS_SOURCE_DIR) + "/scenes/liver_bimanual.yaml";
+const std::string kLiverBimanualScene =
+    std::string(TACTUS_SOURCE_DIR) + "/scenes/liver_bimanual.yaml";
 
 TEST(LiverBimanualTest, TheGraspLiftsTheLobeWhileTheProbePressesBesideIt) {
-  SceneSpec spec = loadScene(kScene);
+  SceneSpec spec = loadScene(kLiverBimanualScene);
   spec.haptics.enabled = false;
   for (auto& t : spec.tissues) t.compliance_cache_dir.clear();
   ASSERT_EQ(instrumentCount(spec), 2);

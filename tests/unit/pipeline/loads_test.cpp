@@ -18,15 +18,15 @@
 namespace tactus::sim {
 namespace {
 
-struct TempDir : test_support::TestDir {
-  TempDir() : TestDir("tactus_loads") {}
+struct LoadsDir : test_support::TestDir {
+  LoadsDir() : TestDir("tactus_loads") {}
 };
 
 constexpr double kSide = 0.02;    // block edge [m]
-constexpr double kE = 1e4;        // [Pa]
+constexpr double kLoadsE = 1e4;   // [Pa]
 
 // A kSide cube (3 x 3 x 3 cells), linear material, Poisson 0, fixed at its base, with `loads`.
-std::unique_ptr<Simulation> block(const TempDir& dir, const std::string& loads) {
+std::unique_ptr<Simulation> block(const LoadsDir& dir, const std::string& loads) {
   const TetMesh mesh = makeBoxTetMesh(3, 3, 3, Eigen::Vector3d::Constant(kSide));
   writeVtu(dir.path / "block.vtu", mesh, mesh.nodes, Eigen::Matrix3Xd(), Eigen::VectorXd());
   const std::string yaml = "time_step: 0.01\n"
@@ -42,12 +42,12 @@ std::unique_ptr<Simulation> block(const TempDir& dir, const std::string& loads) 
 }
 
 TEST(LoadsTest, APressureOnTheTopCompressesABlockBy_pH_over_E) {
-  TempDir dir;
+  LoadsDir dir;
   const double p = 100.0;
   auto sim = block(dir, "      - {region: {highest: z}, pressure: 100, ramp: 0.2}\n");
   for (int k = 0; k < 300; ++k) ASSERT_TRUE(sim->step().finite);
   const FemBody& b = sim->tissue(0);
-  const double expected = -p * kSide / kE;   // uniform strain: exact for linear tets, nu = 0
+  const double expected = -p * kSide / kLoadsE;  // uniform strain: exact for linear tets, nu = 0
   double worst = 0.0;
   for (int i = 0; i < b.nodeCount(); ++i) {
     const double z0 = b.restPositions()[3 * i + 2];
@@ -65,7 +65,7 @@ TEST(LoadsTest, APressureOnTheTopCompressesABlockBy_pH_over_E) {
 }
 
 TEST(LoadsTest, APrescribedDisplacementLoadsTheSupportWith_EA_delta_over_H) {
-  TempDir dir;
+  LoadsDir dir;
   const double delta = -2e-4;
   auto sim = block(dir, "      - region: {highest: z}\n"
                         "        displacement: [{t: 0, offset: [0, 0, 0]}, "
@@ -83,7 +83,8 @@ TEST(LoadsTest, APrescribedDisplacementLoadsTheSupportWith_EA_delta_over_H) {
     if (z0 < 1e-9) base += r.tissues[0].fixed_reaction_n(2, i);
     if (z0 > kSide - 1e-9) top += r.tissues[0].fixed_reaction_n(2, i);
   }
-  const double expected = kE * kSide * kSide * -delta / kSide;   // compression: the base pushes up
+  const double expected =
+      kLoadsE * kSide * kSide * -delta / kSide;  // compression: the base pushes up
   std::printf("[loads] displacement: base reaction %.6g N, top %.6g N (E A d / H = %.6g N)\n",
               base, top, expected);
   EXPECT_NEAR(base, expected, 1e-4 * expected);
@@ -93,7 +94,7 @@ TEST(LoadsTest, APrescribedDisplacementLoadsTheSupportWith_EA_delta_over_H) {
 // A cantilever L x b x b fixed at x = 0, total tip force P (down) spread over the end face's
 // nodes; tip deflection against Timoshenko's P L^3 / (3 E I) + P L / (k G A).
 double cantileverTip(int cells_along, int cells_across) {
-  TempDir dir;
+  LoadsDir dir;
   const double L = 0.1, b = 0.01;
   const TetMesh mesh = makeBoxTetMesh(cells_along, cells_across, cells_across,
                                       Eigen::Vector3d(L, b, b), Eigen::Vector3d(0, -b / 2, -b / 2));
@@ -140,7 +141,7 @@ TEST(LoadsTest, ATipForceBendsACantileverAsBeamTheorySaysWithinTheDiscretisation
 }
 
 TEST(LoadsTest, BadLoadsAreSceneErrorsWithTheirPlace) {
-  TempDir dir;
+  LoadsDir dir;
   auto error = [&](const std::string& loads) {
     try {
       block(dir, loads);

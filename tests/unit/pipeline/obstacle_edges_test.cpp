@@ -21,8 +21,8 @@
 namespace tactus::sim {
 namespace {
 
-struct TempDir : test_support::TestDir {
-  TempDir() : TestDir("tactus_obstacle_edges") {}
+struct EdgesDir : test_support::TestDir {
+  EdgesDir() : TestDir("tactus_obstacle_edges") {}
 };
 
 // A bar 6 cm long (x), 8 mm wide (y), top at z = 0, as an OBJ: a box whose top face is split
@@ -49,7 +49,7 @@ struct DropRun {
 };
 
 DropRun dropOnBar(const std::string& bar, bool edges) {
-  TempDir dir;
+  EdgesDir dir;
   dir.write("bar.obj", kBarObj);
   // one 2 cm cell, its bottom face 1 mm above the bar; its bottom vertices at y = +-1 cm, beside
   // the 8 mm bar
@@ -118,7 +118,7 @@ TEST(ObstacleEdgesTest, TheBarsEdgesHoldTheFaceAndCarryTheWeight) {
 }
 
 TEST(ObstacleEdgesTest, EdgePointsAreTheCornersAndTheSharpEdges) {
-  TempDir dir;
+  EdgesDir dir;
   dir.write("bar.obj", kBarObj);
   ObstacleContactSpec options;
   options.edges = true;
@@ -151,7 +151,7 @@ TEST(ObstacleEdgesTest, EdgePointsAreTheCornersAndTheSharpEdges) {
 }
 
 TEST(ObstacleEdgesTest, TheSceneChecksTheEdgeOptions) {
-  TempDir dir;
+  EdgesDir dir;
   const TetMesh block = makeBoxTetMesh(1, 1, 1, Eigen::Vector3d(0.02, 0.02, 0.02),
                                        Eigen::Vector3d::Zero());
   writeVtu(dir.path / "block.vtu", block, block.nodes, Eigen::Matrix3Xd(), Eigen::VectorXd());

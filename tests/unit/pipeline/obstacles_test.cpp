@@ -26,8 +26,8 @@ namespace {
 constexpr double kPi = 3.14159265358979323846;
 
 // A temporary folder for the test's meshes, removed at the end.
-struct TempDir : test_support::TestDir {
-  TempDir() : TestDir("tactus_obstacles") {}
+struct ObstaclesDir : test_support::TestDir {
+  ObstaclesDir() : TestDir("tactus_obstacles") {}
 };
 
 std::string error(const std::function<void()>& f) {
@@ -97,7 +97,7 @@ TEST(SurfaceReaderTest, AsciiAndBinaryStlMergeTheirRepeatedVertices) {
 }
 
 TEST(ObstacleGeometryTest, SignedDistancesOfPlaneBoxAndSurface) {
-  TempDir dir;
+  ObstaclesDir dir;
   dir.write("cube.obj", kCubeObj);
   std::vector<ObstacleSpec> specs(3);
   specs[0].kind = ObstacleKind::kPlane;
@@ -235,7 +235,7 @@ struct InclineRun {
 };
 
 InclineRun slideOnIncline(double theta_deg, double mu, int steps) {
-  TempDir dir;
+  ObstaclesDir dir;
   const double side = 0.02;
   const TetMesh mesh =
       makeBoxTetMesh(4, 4, 2, Eigen::Vector3d(side, side, side / 2),
@@ -324,7 +324,7 @@ struct RestRun {
 
 RestRun restOn(const std::string& obstacle_yaml, const std::string& extra = "",
                const std::string& compliance = "warped") {
-  TempDir dir;
+  ObstaclesDir dir;
   dir.write("plate.obj",   // a 20 cm square plate at z = 0, normal +z (two triangles)
             "v -0.1 -0.1 0\nv 0.1 -0.1 0\nv 0.1 0.1 0\nv -0.1 0.1 0\nf 1 2 3 4\n");
   const TetMesh mesh = makeBoxTetMesh(4, 4, 3, Eigen::Vector3d(0.04, 0.04, 0.03),

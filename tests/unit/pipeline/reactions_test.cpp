@@ -19,8 +19,8 @@
 namespace tactus::sim {
 namespace {
 
-struct TempDir : test_support::TestDir {
-  TempDir() : TestDir("tactus_reactions") {}
+struct ReactionsDir : test_support::TestDir {
+  ReactionsDir() : TestDir("tactus_reactions") {}
 };
 
 // A 4 x 4 x 3 cm block (E = 30 kPa) under gravity, settled for `steps` steps with strong mass
@@ -28,7 +28,7 @@ struct TempDir : test_support::TestDir {
 // the correction is exactly the implicit Euler step under f, so the contact forces are the
 // impulses per step the tissue receives (the warped model's R C0 R^T with per-node rotations is
 // not, to ~1e-4 relative: see WarpedContactForcesBalanceTheWeightToTheWarpingError).
-std::unique_ptr<Simulation> settle(const TempDir& dir, const std::string& fixed,
+std::unique_ptr<Simulation> settle(const ReactionsDir& dir, const std::string& fixed,
                                    const std::string& obstacles, int steps,
                                    const std::string& extra = "",
                                    const std::string& compliance = "exact") {
@@ -55,7 +55,7 @@ double relativeImbalance(const ReactionForces& r) {
 }
 
 TEST(ReactionsTest, FixedNodesCarryTheWeightOfATissueAtRest) {
-  TempDir dir;
+  ReactionsDir dir;
   auto sim = settle(dir, "    fixed: {regions: [{lowest: z}]}\n", "", 400);
   const ReactionForces r = sim->reactions();
   std::printf("[reactions] fixed base: weight %.9g N, fixed %.9g N, imbalance %.3g\n",
@@ -66,7 +66,7 @@ TEST(ReactionsTest, FixedNodesCarryTheWeightOfATissueAtRest) {
 }
 
 TEST(ReactionsTest, AnObstacleCarriesTheWeightOfATissueRestingOnIt) {
-  TempDir dir;
+  ReactionsDir dir;
   auto sim = settle(dir, "",
                     "obstacles: [{name: table, plane: {point: [0, 0, -0.0005], normal: [0, 0, 1]}, "
                     "friction: 0.5}]\n",
@@ -82,7 +82,7 @@ TEST(ReactionsTest, AnObstacleCarriesTheWeightOfATissueRestingOnIt) {
 
 TEST(ReactionsTest, FixedNodesAndAnObstacleShareTheWeight) {
   // fixed along one side (x = -0.02), resting on a table: both carry a part
-  TempDir dir;
+  ReactionsDir dir;
   auto sim = settle(dir, "    fixed: {regions: [{lowest: x}]}\n",
                     "obstacles: [{name: table, plane: {point: [0, 0, -0.0005], normal: [0, 0, 1]}, "
                     "friction: 0.5}]\n",
@@ -98,7 +98,7 @@ TEST(ReactionsTest, FixedNodesAndAnObstacleShareTheWeight) {
 
 TEST(ReactionsTest, WarpedContactForcesBalanceTheWeightToTheWarpingError) {
   // the default compliance model: f solves the warped problem, the tissue moves by R C0 R^T H^T f
-  TempDir dir;
+  ReactionsDir dir;
   auto sim = settle(dir, "",
                     "obstacles: [{name: table, plane: {point: [0, 0, -0.0005], normal: [0, 0, 1]}, "
                     "friction: 0.5}]\n",
@@ -111,7 +111,7 @@ TEST(ReactionsTest, WarpedContactForcesBalanceTheWeightToTheWarpingError) {
 }
 
 TEST(ReactionsTest, TheVtuFramesAndTheStatisticsCarryTheReactions) {
-  TempDir dir;
+  ReactionsDir dir;
   auto sim = settle(dir, "    fixed: {regions: [{lowest: x}]}\n",
                     "obstacles: [{name: table, plane: {point: [0, 0, -0.0005], normal: [0, 0, 1]}, "
                     "friction: 0.5}]\n",

@@ -21,23 +21,23 @@
 namespace tactus::sim {
 namespace {
 
-const std::filesystem::path kData = TACTUS_TEST_DATA_DIR;
+const std::filesystem::path kGroupsData = TACTUS_TEST_DATA_DIR;
 
 // The 4 x 3 x 2 cm box Gmsh wrote with the groups base (z = 0), top (z = 0.02), 7 (unnamed,
 // x = 0) and body (tests/data/README.md)
-const std::string kHead =
+const std::string kGroupsHead =
     "time_step: 0.01\n"
     "tissues:\n"
     "  - name: box\n"
     "    mesh: meshes/box_groups.msh\n"
     "    material: {law: linear, young_modulus: 10000, poisson_ratio: 0.3, density: 1000}\n";
 
-SceneSpec parse(const std::string& yaml) { return parseScene(yaml, "g.yaml", kData); }
+SceneSpec parseGroups(const std::string& yaml) { return parseScene(yaml, "g.yaml", kGroupsData); }
 
 // The nodes of the box (as loaded) whose coordinate `axis` is `value`: the group's nodes found
 // without the group.
 std::vector<int> nodesOn(int axis, double value) {
-  const TetMesh mesh = loadTetMesh(kData / "meshes" / "box_groups.msh");
+  const TetMesh mesh = loadTetMesh(kGroupsData / "meshes" / "box_groups.msh");
   std::vector<int> out;
   for (int i = 0; i < mesh.nodeCount(); ++i) {
     if (std::abs(mesh.nodes(axis, i) - value) < 1e-12) out.push_back(i);
@@ -55,14 +55,14 @@ std::string errorOf(const std::function<void()>& f) {
   return "(no error)";
 }
 
-std::string sceneError(const std::string& yaml) {
-  return errorOf([&yaml] { Simulation sim(parse(yaml)); });
+std::string groupsSceneError(const std::string& yaml) {
+  return errorOf([&yaml] { Simulation sim(parseGroups(yaml)); });
 }
 
 TEST(RegionGroupsTest, AFixedGroupPinsExactlyItsNodes) {
   const std::vector<int> base = nodesOn(2, 0.0);
   ASSERT_GE(base.size(), 6u);
-  Simulation sim(parse(kHead + "    fixed: {regions: [{group: base}]}\n"));
+  Simulation sim(parseGroups(kGroupsHead + "    fixed: {regions: [{group: base}]}\n"));
   const FemBody& body = sim.tissue(0);
   std::vector<int> fixed;
   for (int i = 0; i < body.nodeCount(); ++i) {
@@ -84,12 +84,12 @@ TEST(RegionGroupsTest, AFixedGroupPinsExactlyItsNodes) {
 }
 
 TEST(RegionGroupsTest, LoadRegionsSelectGroupsByNameOrTag) {
-  const SceneSpec spec = parse(kHead +
-                               "    fixed: {regions: [{group: base}]}\n"
-                               "    loads:\n"
-                               "      - {region: {group: top}, force: [0, 0, -0.01]}\n"
-                               "      - {region: {group: 7}, pressure: 10}\n"
-                               "      - {region: {group: '2'}, force: [0.01, 0, 0]}\n");
+  const SceneSpec spec = parseGroups(kGroupsHead +
+                                     "    fixed: {regions: [{group: base}]}\n"
+                                     "    loads:\n"
+                                     "      - {region: {group: top}, force: [0, 0, -0.01]}\n"
+                                     "      - {region: {group: 7}, pressure: 10}\n"
+                                     "      - {region: {group: '2'}, force: [0.01, 0, 0]}\n");
   ASSERT_EQ(spec.tissues[0].loads.size(), 3u);
   EXPECT_EQ(spec.tissues[0].loads[0].region.kind, RegionKind::kGroup);
   EXPECT_EQ(spec.tissues[0].loads[0].region.group, "top");
@@ -106,12 +106,11 @@ TEST(RegionGroupsTest, LoadRegionsSelectGroupsByNameOrTag) {
 }
 
 TEST(RegionGroupsTest, ADisplacedGroupFollowsItsPath) {
-  Simulation sim(parse(kHead +
-                       "    fixed: {regions: [{group: base}]}\n"
-                       "    loads:\n"
-                       "      - region: {group: top}\n"
-                       "        displacement: [{t: 0, offset: [0, 0, 0]}, "
-                       "{t: 0.1, offset: [0, 0, -0.001]}]\n"));
+  Simulation sim(parseGroups(kGroupsHead + "    fixed: {regions: [{group: base}]}\n"
+                                           "    loads:\n"
+                                           "      - region: {group: top}\n"
+                                           "        displacement: [{t: 0, offset: [0, 0, 0]}, "
+                                           "{t: 0.1, offset: [0, 0, -0.001]}]\n"));
   for (int k = 0; k < 20; ++k) ASSERT_TRUE(sim.step().finite);
   const FemBody& body = sim.tissue(0);
   const std::vector<int> top = nodesOn(2, 0.02);
@@ -129,24 +128,25 @@ TEST(RegionGroupsTest, ADisplacedGroupFollowsItsPath) {
 }
 
 TEST(RegionGroupsTest, AnUnknownGroupNamesTheRegionTheGroupAndTheMeshsGroups) {
-  const std::string yaml = kHead + "    fixed: {regions: [{group: bottom}]}\n";
-  const std::string mesh = parse(yaml).tissues[0].mesh_path.string();
-  EXPECT_EQ(sceneError(yaml),
-            "g.yaml:6:23: tissues[0].fixed.regions[0]: the group 'bottom' is not a physical group "
-            "of the mesh of tissue 'box' (" + mesh + "): its groups are " +
-                fmt::format("'base' (surface 1, {} nodes), 'top' (surface 2, {} nodes), '7' "
-                            "(surface 7, {} nodes), 'body' (volume 8, 78 nodes)",
-                            nodesOn(2, 0.0).size(), nodesOn(2, 0.02).size(),
-                            nodesOn(0, 0.0).size()));
+  const std::string yaml = kGroupsHead + "    fixed: {regions: [{group: bottom}]}\n";
+  const std::string mesh = parseGroups(yaml).tissues[0].mesh_path.string();
+  EXPECT_EQ(
+      groupsSceneError(yaml),
+      "g.yaml:6:23: tissues[0].fixed.regions[0]: the group 'bottom' is not a physical group "
+      "of the mesh of tissue 'box' (" +
+          mesh + "): its groups are " +
+          fmt::format("'base' (surface 1, {} nodes), 'top' (surface 2, {} nodes), '7' "
+                      "(surface 7, {} nodes), 'body' (volume 8, 78 nodes)",
+                      nodesOn(2, 0.0).size(), nodesOn(2, 0.02).size(), nodesOn(0, 0.0).size()));
   // in a load's region, and a mesh without groups says so
-  EXPECT_NE(sceneError(kHead + "    loads: [{region: {group: 3}, force: [0, 0, 1]}]\n")
+  EXPECT_NE(groupsSceneError(kGroupsHead + "    loads: [{region: {group: 3}, force: [0, 0, 1]}]\n")
                 .find("g.yaml:6:22: tissues[0].loads[0].region: the group '3' is not a physical "
                       "group of the mesh of tissue 'box'"),
             std::string::npos);
   const std::string vtk =
       "time_step: 0.01\ntissues:\n  - mesh: meshes/cube_low_res_ascii.vtu\n"
       "    fixed: {regions: [{group: base}]}\n";
-  const std::string none = sceneError(vtk);
+  const std::string none = groupsSceneError(vtk);
   EXPECT_NE(none.find("g.yaml:4:23: tissues[0].fixed.regions[0]: the group 'base' is not a "
                       "physical group"),
             std::string::npos)
@@ -155,17 +155,19 @@ TEST(RegionGroupsTest, AnUnknownGroupNamesTheRegionTheGroupAndTheMeshsGroups) {
 }
 
 TEST(RegionGroupsTest, GroupRegionGrammar) {
-  const auto error = [](const std::string& yaml) { return errorOf([&yaml] { parse(yaml); }); };
-  EXPECT_EQ(error(kHead + "    fixed: {regions: [{group: base, lowest: z}]}\n"),
+  const auto error = [](const std::string& yaml) {
+    return errorOf([&yaml] { parseGroups(yaml); });
+  };
+  EXPECT_EQ(error(kGroupsHead + "    fixed: {regions: [{group: base, lowest: z}]}\n"),
             "g.yaml:6:23: tissues[0].fixed.regions[0]: must have exactly one selector of box, "
             "plane, lowest, highest, group (got 2)");
-  EXPECT_EQ(error(kHead + "    fixed: {regions: [{group: base, tolerance: 0.001}]}\n"),
+  EXPECT_EQ(error(kGroupsHead + "    fixed: {regions: [{group: base, tolerance: 0.001}]}\n"),
             "g.yaml:6:48: tissues[0].fixed.regions[0].tolerance: has no meaning for a group "
             "region");
-  EXPECT_EQ(error(kHead + "    fixed: {regions: [{group: [base]}]}\n"),
+  EXPECT_EQ(error(kGroupsHead + "    fixed: {regions: [{group: [base]}]}\n"),
             "g.yaml:6:31: tissues[0].fixed.regions[0].group: must be a non-empty string (got a "
             "list)");
-  EXPECT_EQ(error(kHead + "    fixed: {regions: [{group: ''}]}\n"),
+  EXPECT_EQ(error(kGroupsHead + "    fixed: {regions: [{group: ''}]}\n"),
             "g.yaml:6:31: tissues[0].fixed.regions[0].group: must be a non-empty string (got "
             "'')");
 }

@@ -17,7 +17,7 @@
 namespace tactus::sim {
 namespace {
 
-const std::filesystem::path kData = TACTUS_TEST_DATA_DIR;
+const std::filesystem::path kRegionsData = TACTUS_TEST_DATA_DIR;
 
 // 4 x 3 x 2 cells over [0, 0.04] x [0, 0.03] x [0, 0.02]: node (i, j, k) at 1 cm spacing
 const TetMesh& grid() {
@@ -78,11 +78,11 @@ const std::string kHead =
     "  - mesh: meshes/cube_low_res.msh\n"
     "    transform: {scale: 0.01}\n";
 
-SceneSpec parse(const std::string& yaml) { return parseScene(yaml, "s.yaml", kData); }
+SceneSpec parseRegions(const std::string& yaml) { return parseScene(yaml, "s.yaml", kRegionsData); }
 
-std::string sceneError(const std::string& yaml) {
+std::string regionsSceneError(const std::string& yaml) {
   try {
-    Simulation sim(parse(yaml));
+    Simulation sim(parseRegions(yaml));
   } catch (const SceneError& e) {
     return e.what();
   }
@@ -90,13 +90,14 @@ std::string sceneError(const std::string& yaml) {
 }
 
 TEST(RegionsTest, TheSceneReadsEverySelector) {
-  const SceneSpec spec = parse(kHead +
-                               "    fixed:\n"
-                               "      regions:\n"
-                               "        - {box: {min: [-1, -1, -1], max: [1, 1, -0.03]}}\n"
-                               "        - {plane: {point: [0, 0, 0.03], normal: [0, 0, 2]}}\n"
-                               "        - {lowest: x, tolerance: 0.001}\n"
-                               "        - {highest: y}\n");
+  const SceneSpec spec =
+      parseRegions(kHead +
+                   "    fixed:\n"
+                   "      regions:\n"
+                   "        - {box: {min: [-1, -1, -1], max: [1, 1, -0.03]}}\n"
+                   "        - {plane: {point: [0, 0, 0.03], normal: [0, 0, 2]}}\n"
+                   "        - {lowest: x, tolerance: 0.001}\n"
+                   "        - {highest: y}\n");
   const std::vector<RegionSpec>& r = spec.tissues[0].fixed_regions;
   ASSERT_EQ(r.size(), 4u);
   EXPECT_EQ(r[0].kind, RegionKind::kBox);
@@ -114,7 +115,7 @@ TEST(RegionsTest, TheSceneReadsEverySelector) {
 TEST(RegionsTest, BadRegionsAreSceneErrorsWithTheirPlace) {
   auto error = [](const std::string& yaml) {
     try {
-      parse(yaml);
+      parseRegions(yaml);
     } catch (const SceneError& e) {
       return std::string(e.what());
     }
@@ -136,18 +137,21 @@ TEST(RegionsTest, BadRegionsAreSceneErrorsWithTheirPlace) {
 
 TEST(RegionsTest, AFixedRegionThatSelectsNoNodeIsAnErrorNamingIt) {
   // a box given in centimetres instead of metres: nowhere near the 7 cm cube
-  EXPECT_EQ(sceneError(kHead + "    fixed: {boxes: [{min: [-1, -1, -1], max: [1, 1, 1]},\n"
-                               "                    {min: [-5, -5, -5], max: [5, 5, -4]}]}\n"),
-            "s.yaml:6:21: tissues[0].fixed.boxes[1]: the fixed region, the box [-5, -5, -5].."
-            "[5, 5, -4] m, selects no node of tissue 'tissue' (its placed mesh spans "
-            "[-0.035, -0.035, -0.035]..[0.035, 0.035, 0.035] m)");
-  EXPECT_EQ(sceneError(kHead + "    fixed: {regions: [{plane: {point: [0, 0, 0.5], normal: [0, 0, 1]}}]}\n"),
-            "s.yaml:5:23: tissues[0].fixed.regions[0]: the fixed region, the side of the plane "
-            "through [0, 0, 0.5] m along normal [0, 0, 1] (tolerance 0 m), selects no node of "
-            "tissue 'tissue' (its placed mesh spans [-0.035, -0.035, -0.035]..[0.035, 0.035, "
-            "0.035] m)");
+  EXPECT_EQ(
+      regionsSceneError(kHead + "    fixed: {boxes: [{min: [-1, -1, -1], max: [1, 1, 1]},\n"
+                                "                    {min: [-5, -5, -5], max: [5, 5, -4]}]}\n"),
+      "s.yaml:6:21: tissues[0].fixed.boxes[1]: the fixed region, the box [-5, -5, -5].."
+      "[5, 5, -4] m, selects no node of tissue 'tissue' (its placed mesh spans "
+      "[-0.035, -0.035, -0.035]..[0.035, 0.035, 0.035] m)");
+  EXPECT_EQ(
+      regionsSceneError(
+          kHead + "    fixed: {regions: [{plane: {point: [0, 0, 0.5], normal: [0, 0, 1]}}]}\n"),
+      "s.yaml:5:23: tissues[0].fixed.regions[0]: the fixed region, the side of the plane "
+      "through [0, 0, 0.5] m along normal [0, 0, 1] (tolerance 0 m), selects no node of "
+      "tissue 'tissue' (its placed mesh spans [-0.035, -0.035, -0.035]..[0.035, 0.035, "
+      "0.035] m)");
   // and the regions that select nodes fix exactly those
-  Simulation sim(parse(kHead + "    fixed: {regions: [{lowest: z, tolerance: 1e-4}]}\n"));
+  Simulation sim(parseRegions(kHead + "    fixed: {regions: [{lowest: z, tolerance: 1e-4}]}\n"));
   const FemBody& body = sim.tissue(0);
   int fixed = 0;
   for (int i = 0; i < body.nodeCount(); ++i) {

@@ -20,8 +20,8 @@
 namespace tactus::sim {
 namespace {
 
-struct TempDir : test_support::TestDir {
-  TempDir() : TestDir("tactus_tissue_contact") {}
+struct TissueContactDir : test_support::TestDir {
+  TissueContactDir() : TestDir("tactus_tissue_contact") {}
 };
 
 const std::string kTwoTissues =
@@ -30,7 +30,7 @@ const std::string kTwoTissues =
     "  - {name: lower, mesh: lower.vtu}\n"
     "  - {name: upper, mesh: upper.vtu}\n";
 
-void writeBlocks(const TempDir& dir) {
+void writeTissueBlocks(const TissueContactDir& dir) {
   // lower: 4 x 4 x 3 cm on z = 0; upper: 2 x 2 x 2 cm, 0.5 mm above it, its nodes over the
   // lower block's (1 cm grids, both centred on the z axis)
   const TetMesh lower = makeBoxTetMesh(4, 4, 3, Eigen::Vector3d(0.04, 0.04, 0.03),
@@ -41,9 +41,9 @@ void writeBlocks(const TempDir& dir) {
   writeVtu(dir.path / "upper.vtu", upper, upper.nodes, Eigen::Matrix3Xd(), Eigen::VectorXd());
 }
 
-std::string sceneError(const std::string& yaml) {
-  TempDir dir;
-  writeBlocks(dir);
+std::string tissueSceneError(const std::string& yaml) {
+  TissueContactDir dir;
+  writeTissueBlocks(dir);
   try {
     parseScene(yaml, "s.yaml", dir.path);
   } catch (const SceneError& e) {
@@ -53,8 +53,8 @@ std::string sceneError(const std::string& yaml) {
 }
 
 TEST(TissueContactSceneTest, PairsNameTheirTissuesAndAreChecked) {
-  TempDir dir;
-  writeBlocks(dir);
+  TissueContactDir dir;
+  writeTissueBlocks(dir);
   const SceneSpec spec = parseScene(
       kTwoTissues +
           "tissue_contact:\n"
@@ -73,27 +73,29 @@ TEST(TissueContactSceneTest, PairsNameTheirTissuesAndAreChecked) {
   EXPECT_EQ(spec.tissue_contacts[1].depth_m, 0.002);
   EXPECT_EQ(spec.tissue_contacts[1].contact_compliance_mpn, 1e-4);
 
-  EXPECT_NE(sceneError(kTwoTissues + "tissue_contact: [{between: [lower, stomach]}]\n")
+  EXPECT_NE(tissueSceneError(kTwoTissues + "tissue_contact: [{between: [lower, stomach]}]\n")
                 .find("s.yaml:5:36: tissue_contact[0].between[1]: no tissue named 'stomach' (the "
                       "tissues: lower, upper)"),
             std::string::npos);
-  EXPECT_NE(sceneError(kTwoTissues + "tissue_contact: [{between: [lower, lower]}]\n")
+  EXPECT_NE(tissueSceneError(kTwoTissues + "tissue_contact: [{between: [lower, lower]}]\n")
                 .find("use `self: lower` for self-contact"),
             std::string::npos);
-  EXPECT_NE(sceneError(kTwoTissues + "tissue_contact: [{self: lower, between: [lower, upper]}]\n")
-                .find("must have exactly one of `between: [a, b]`"),
-            std::string::npos);
-  EXPECT_NE(sceneError(kTwoTissues +
+  EXPECT_NE(
+      tissueSceneError(kTwoTissues + "tissue_contact: [{self: lower, between: [lower, upper]}]\n")
+          .find("must have exactly one of `between: [a, b]`"),
+      std::string::npos);
+  EXPECT_NE(
+      tissueSceneError(kTwoTissues +
                        "tissue_contact: [{between: [lower, upper]}, {between: [upper, lower]}]\n")
-                .find("tissue_contact[1]: the same pair of tissues twice"),
-            std::string::npos);
-  EXPECT_NE(sceneError(kTwoTissues + "tissue_contact: [{self: upper, friction: -1}]\n")
+          .find("tissue_contact[1]: the same pair of tissues twice"),
+      std::string::npos);
+  EXPECT_NE(tissueSceneError(kTwoTissues + "tissue_contact: [{self: upper, friction: -1}]\n")
                 .find("tissue_contact[0].friction"),
             std::string::npos);
-  EXPECT_NE(sceneError(kTwoTissues + "tissue_contact: [{self: upper, depth: .nan}]\n")
+  EXPECT_NE(tissueSceneError(kTwoTissues + "tissue_contact: [{self: upper, depth: .nan}]\n")
                 .find("tissue_contact[0].depth"),
             std::string::npos);
-  EXPECT_NE(sceneError(kTwoTissues + "tissue_contact: {self: upper}\n")
+  EXPECT_NE(tissueSceneError(kTwoTissues + "tissue_contact: {self: upper}\n")
                 .find("tissue_contact: must be a list of pairs"),
             std::string::npos);
 }
@@ -111,8 +113,8 @@ struct StackRun {
 
 // The two blocks under gravity on a table (plane z = -0.5 mm), settled for 300 steps.
 StackRun settleStack(bool tissue_contact, const std::string& compliance) {
-  TempDir dir;
-  writeBlocks(dir);
+  TissueContactDir dir;
+  writeTissueBlocks(dir);
   const std::string material =
       "    material: {young_modulus: 30000, poisson_ratio: 0.4}\n"
       "    damping: {rayleigh_mass: 8, rayleigh_stiffness: 0.005}\n"
@@ -207,7 +209,7 @@ TEST(TissueContactTest, WithoutTissueContactTheUpperBlockFallsThrough) {
 // it, without it passes through. Returns the smallest vertical gap between the arms' facing
 // nodes (x < 40 mm) over the run.
 double foldGap(bool self_contact, int* unconverged) {
-  TempDir dir;
+  TissueContactDir dir;
   TetMesh box = makeBoxTetMesh(12, 2, 5, Eigen::Vector3d(0.048, 0.008, 0.010));
   std::vector<std::array<int, 4>> kept;
   for (const auto& tet : box.tets) {

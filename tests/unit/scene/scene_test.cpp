@@ -15,7 +15,7 @@ namespace tactus::sim {
 namespace {
 
 const std::filesystem::path kData = TACTUS_TEST_DATA_DIR;
-const std::filesystem::path kScenes = kData / "scenes";
+const std::filesystem::path kSceneFiles = kData / "scenes";
 
 std::filesystem::path normal(const std::filesystem::path& p) {
   return std::filesystem::absolute(p).lexically_normal();
@@ -24,7 +24,7 @@ std::filesystem::path normal(const std::filesystem::path& p) {
 // Parses `yaml` as "s.yaml" located in tests/data/scenes; returns the error message.
 std::string sceneError(const std::string& yaml) {
   try {
-    parseScene(yaml, "s.yaml", kScenes);
+    parseScene(yaml, "s.yaml", kSceneFiles);
   } catch (const SceneError& e) {
     return e.what();
   }
@@ -32,14 +32,14 @@ std::string sceneError(const std::string& yaml) {
 }
 
 // A valid prefix: errors below are in the lines that follow it.
-const std::string kHead =
+const std::string kFullHead =
     "time_step: 0.01\n"
     "tissues:\n"
     "  - mesh: ../meshes/liver.msh\n";
 
 TEST(Scene, FullSceneParsesToTheExpectedValues) {
-  const SceneSpec s = loadScene(kScenes / "full_scene.yaml");
-  EXPECT_EQ(s.source, kScenes / "full_scene.yaml");
+  const SceneSpec s = loadScene(kSceneFiles / "full_scene.yaml");
+  EXPECT_EQ(s.source, kSceneFiles / "full_scene.yaml");
   EXPECT_DOUBLE_EQ(s.time_step_s, 0.01);
   EXPECT_DOUBLE_EQ(s.duration_s, 10.0);
   ASSERT_TRUE(s.gravity_mps2.has_value());
@@ -65,7 +65,7 @@ TEST(Scene, FullSceneParsesToTheExpectedValues) {
   EXPECT_EQ(liver.fixed_boxes[0].min_m, Eigen::Vector3d(-1, -1, -1));
   EXPECT_EQ(liver.fixed_boxes[0].max_m, Eigen::Vector3d(1, 1, -0.5));
   EXPECT_EQ(liver.compliance, ComplianceKind::kExact);
-  EXPECT_EQ(liver.compliance_cache_dir, normal(kScenes / "cache"));
+  EXPECT_EQ(liver.compliance_cache_dir, normal(kSceneFiles / "cache"));
 
   const TissueSpec& cube = s.tissues[1];
   EXPECT_EQ(cube.name, "cube");
@@ -129,7 +129,7 @@ TEST(Scene, FullSceneParsesToTheExpectedValues) {
 }
 
 TEST(Scene, MinimalSceneTakesDefaultsAndLeavesEffectsAbsent) {
-  const SceneSpec s = loadScene(kScenes / "minimal_scene.yaml");
+  const SceneSpec s = loadScene(kSceneFiles / "minimal_scene.yaml");
   const SceneSpec def;
   const TissueSpec tdef;
   EXPECT_DOUBLE_EQ(s.time_step_s, 0.005);
@@ -161,11 +161,11 @@ TEST(Scene, MinimalSceneTakesDefaultsAndLeavesEffectsAbsent) {
 }
 
 TEST(Scene, SectionsPresentWithDefaults) {
-  const SceneSpec s = parseScene(kHead +
+  const SceneSpec s = parseScene(kFullHead +
                                      "    damping: {}\n"
                                      "instrument: {}\n"
                                      "haptics: {rate: 500}\n",
-                                 "s.yaml", kScenes);
+                                 "s.yaml", kSceneFiles);
   ASSERT_TRUE(s.tissues[0].damping.has_value());
   EXPECT_EQ(s.tissues[0].damping->mass_alpha_per_s, 0.0);
   EXPECT_TRUE(s.instrument.present);
@@ -173,31 +173,32 @@ TEST(Scene, SectionsPresentWithDefaults) {
   EXPECT_EQ(s.instrument.friction_mu, 0.0);
   EXPECT_TRUE(s.haptics.enabled);  // a haptics section turns haptics on
   EXPECT_EQ(s.haptics.rate_hz, 500);
-  EXPECT_FALSE(parseScene(kHead + "haptics: {enabled: false}\n", "s.yaml", kScenes)
-                   .haptics.enabled);
+  EXPECT_FALSE(
+      parseScene(kFullHead + "haptics: {enabled: false}\n", "s.yaml", kSceneFiles).haptics.enabled);
 }
 
 TEST(Scene, ContactDetectionAndFaceContacts) {
-  const SceneSpec def = parseScene(kHead + "instrument: {}\n", "s.yaml", kScenes);
+  const SceneSpec def = parseScene(kFullHead + "instrument: {}\n", "s.yaml", kSceneFiles);
   EXPECT_EQ(def.solver.contact_detection, ContactDetection::kFreeState);
   EXPECT_TRUE(def.instrument.face_contacts);
-  const SceneSpec s = parseScene(kHead +
+  const SceneSpec s = parseScene(kFullHead +
                                      "instrument: {face_contacts: false}\n"
                                      "solver: {contact_detection: step_start}\n",
-                                 "s.yaml", kScenes);
+                                 "s.yaml", kSceneFiles);
   EXPECT_EQ(s.solver.contact_detection, ContactDetection::kStepStart);
   EXPECT_FALSE(s.instrument.face_contacts);
-  EXPECT_EQ(parseScene(kHead + "solver: {contact_detection: free_state}\n", "s.yaml", kScenes)
-                .solver.contact_detection,
-            ContactDetection::kFreeState);
-  EXPECT_EQ(sceneError(kHead + "solver: {contact_detection: later}\n"),
+  EXPECT_EQ(
+      parseScene(kFullHead + "solver: {contact_detection: free_state}\n", "s.yaml", kSceneFiles)
+          .solver.contact_detection,
+      ContactDetection::kFreeState);
+  EXPECT_EQ(sceneError(kFullHead + "solver: {contact_detection: later}\n"),
             "s.yaml:4:29: solver.contact_detection: must be one of free_state, step_start (got "
             "'later')");
 }
 
 TEST(Scene, RotationSmoothing) {
   const auto parse = [](const std::string& compliance) {
-    return parseScene(kHead + "    compliance: " + compliance + "\n", "s.yaml", kScenes);
+    return parseScene(kFullHead + "    compliance: " + compliance + "\n", "s.yaml", kSceneFiles);
   };
   EXPECT_EQ(parse("{model: warped}").tissues.at(0).rotation_smoothing_passes, 0);
   EXPECT_EQ(
@@ -209,7 +210,7 @@ TEST(Scene, RotationSmoothing) {
 
 TEST(Scene, LawTangentAndElement) {
   const auto tissue = [](const std::string& lines) {
-    return parseScene(kHead + lines, "s.yaml", kScenes).tissues.at(0);
+    return parseScene(kFullHead + lines, "s.yaml", kSceneFiles).tissues.at(0);
   };
   const TissueSpec def = tissue("");
   EXPECT_EQ(def.law, MaterialLaw::kCorotational);
@@ -221,53 +222,55 @@ TEST(Scene, LawTangentAndElement) {
   EXPECT_EQ(s.element, ElementKind::kEdgeSmoothedTet);
   EXPECT_EQ(tissue("    material: {law: invertible_neo_hookean}\n").law,
             MaterialLaw::kInvertibleNeoHookean);
-  EXPECT_EQ(sceneError(kHead + "    material: {law: linear, tangent: consistent}\n"),
+  EXPECT_EQ(sceneError(kFullHead + "    material: {law: linear, tangent: consistent}\n"),
             "s.yaml:4:38: tissues[0].material.tangent: 'consistent' is a linearisation of the "
             "corotational law only (the linear law's tangent is exact, invertible_neo_hookean "
             "always uses its full tangent)");
-  EXPECT_EQ(sceneError(kHead + "    material: {tangent: exact}\n"),
+  EXPECT_EQ(sceneError(kFullHead + "    material: {tangent: exact}\n"),
             "s.yaml:4:25: tissues[0].material.tangent: must be one of corotated, consistent (got "
             "'exact')");
-  EXPECT_EQ(sceneError(kHead + "    element: quadratic_tet\n"),
+  EXPECT_EQ(sceneError(kFullHead + "    element: quadratic_tet\n"),
             "s.yaml:4:14: tissues[0].element: must be one of linear_tet, edge_smoothed_tet (got "
             "'quadratic_tet')");
 }
 
 TEST(Scene, SplitContactGroups) {
-  EXPECT_TRUE(parseScene(kHead, "s.yaml", kScenes).solver.split_contact_groups);
-  EXPECT_FALSE(parseScene(kHead + "solver: {split_contact_groups: false}\n", "s.yaml", kScenes)
-                   .solver.split_contact_groups);
-  EXPECT_NE(sceneError(kHead + "solver: {split_contact_groups: 3}\n")
+  EXPECT_TRUE(parseScene(kFullHead, "s.yaml", kSceneFiles).solver.split_contact_groups);
+  EXPECT_FALSE(
+      parseScene(kFullHead + "solver: {split_contact_groups: false}\n", "s.yaml", kSceneFiles)
+          .solver.split_contact_groups);
+  EXPECT_NE(sceneError(kFullHead + "solver: {split_contact_groups: 3}\n")
                 .find("solver.split_contact_groups"),
             std::string::npos);
 }
 
 TEST(Scene, LinearSolverStrategies) {
-  const SceneSpec def = parseScene(kHead, "s.yaml", kScenes);
+  const SceneSpec def = parseScene(kFullHead, "s.yaml", kSceneFiles);
   EXPECT_EQ(def.solver.linear, LinearSolverKind::kCholmod);
   EXPECT_EQ(def.solver.refactor_iterations, 8);
   EXPECT_EQ(def.solver.refactor_every_steps, 0);
   const SceneSpec s = parseScene(
-      kHead + "solver: {linear: cholmod_reuse, refactor_iterations: 12, refactor_every_steps: 50}\n",
-      "s.yaml", kScenes);
+      kFullHead +
+          "solver: {linear: cholmod_reuse, refactor_iterations: 12, refactor_every_steps: 50}\n",
+      "s.yaml", kSceneFiles);
   EXPECT_EQ(s.solver.linear, LinearSolverKind::kCholmodReuse);
   EXPECT_EQ(s.solver.refactor_iterations, 12);
   EXPECT_EQ(s.solver.refactor_every_steps, 50);
-  EXPECT_EQ(sceneError(kHead + "solver: {linear: lu}\n"),
+  EXPECT_EQ(sceneError(kFullHead + "solver: {linear: lu}\n"),
             "s.yaml:4:18: solver.linear: must be one of cholmod, pcg, cholmod_reuse (got 'lu')");
-  EXPECT_EQ(sceneError(kHead + "solver: {refactor_iterations: 0}\n"),
+  EXPECT_EQ(sceneError(kFullHead + "solver: {refactor_iterations: 0}\n"),
             "s.yaml:4:31: solver.refactor_iterations: must be >= 1 (got 0)");
-  EXPECT_EQ(sceneError(kHead + "solver: {refactor_every_steps: -1}\n"),
+  EXPECT_EQ(sceneError(kFullHead + "solver: {refactor_every_steps: -1}\n"),
             "s.yaml:4:32: solver.refactor_every_steps: must be >= 0 (got -1)");
-  EXPECT_EQ(sceneError(kHead + "solver: {refactor_iterations: 20000}\n"),
+  EXPECT_EQ(sceneError(kFullHead + "solver: {refactor_iterations: 20000}\n"),
             "s.yaml:4:31: solver.refactor_iterations: must be in [1, 10000] (got 20000)");
 }
 
 TEST(Scene, EulerAnglesApplyXThenYThenZ) {
-  const SceneSpec s = parseScene(kHead +
+  const SceneSpec s = parseScene(kFullHead +
                                      "instrument:\n"
                                      "  initial_pose: {rotation_deg: [90, 0, 90]}\n",
-                                 "s.yaml", kScenes);
+                                 "s.yaml", kSceneFiles);
   const Eigen::Quaterniond q = s.instrument.initial_pose.orientation;
   // R = Rz(90) Rx(90): x -> x -> y, y -> z -> z
   EXPECT_TRUE((q * Eigen::Vector3d::UnitX()).isApprox(Eigen::Vector3d::UnitY(), 1e-12));
@@ -275,13 +278,13 @@ TEST(Scene, EulerAnglesApplyXThenYThenZ) {
 }
 
 TEST(Scene, RelativeMeshPathResolvedAgainstTheSceneFolder) {
-  const SceneSpec s = parseScene(kHead, "s.yaml", kScenes);
+  const SceneSpec s = parseScene(kFullHead, "s.yaml", kSceneFiles);
   EXPECT_EQ(s.tissues[0].mesh_path, normal(kData / "meshes" / "liver.msh"));
   // the same text seen from another folder does not find the mesh
   EXPECT_EQ(
       [&] {
         try {
-          parseScene(kHead, "s.yaml", kData);
+          parseScene(kFullHead, "s.yaml", kData);
         } catch (const SceneError& e) {
           return std::string(e.what());
         }
@@ -301,78 +304,79 @@ TEST(Scene, EachKindOfErrorHasItsExactMessage) {
             "s.yaml:1:1: tissues: is required (a list with at least one tissue)");
   EXPECT_EQ(sceneError("time_step: 0.01\ntissues: []\n"),
             "s.yaml:2:10: tissues: must be a list with at least one tissue (got an empty list)");
-  EXPECT_EQ(sceneError(kHead + "timestep: 0.01\n"),
-            "s.yaml:4:1: timestep: unknown key (expected one of: time_step, duration, gravity, "
-            "tissues, instrument, instruments, solver, haptics, output, obstacles, obstacle_contact, "
-            "tissue_contact)");
-  EXPECT_EQ(sceneError(kHead + "duration: ten\n"),
+  EXPECT_EQ(
+      sceneError(kFullHead + "timestep: 0.01\n"),
+      "s.yaml:4:1: timestep: unknown key (expected one of: time_step, duration, gravity, "
+      "tissues, instrument, instruments, solver, haptics, output, obstacles, obstacle_contact, "
+      "tissue_contact)");
+  EXPECT_EQ(sceneError(kFullHead + "duration: ten\n"),
             "s.yaml:4:11: duration: must be a number (got 'ten')");
-  EXPECT_EQ(sceneError(kHead + "gravity: [0, -9.81]\n"),
+  EXPECT_EQ(sceneError(kFullHead + "gravity: [0, -9.81]\n"),
             "s.yaml:4:10: gravity: must be a list of 3 numbers (got 2 items)");
-  EXPECT_EQ(sceneError(kHead + "    material: {young_modulus: -3000}\n"),
+  EXPECT_EQ(sceneError(kFullHead + "    material: {young_modulus: -3000}\n"),
             "s.yaml:4:31: tissues[0].material.young_modulus: must be > 0 (got -3000)");
-  EXPECT_EQ(sceneError(kHead + "    material: {poisson_ratio: 0.5}\n"),
+  EXPECT_EQ(sceneError(kFullHead + "    material: {poisson_ratio: 0.5}\n"),
             "s.yaml:4:31: tissues[0].material.poisson_ratio: must be in (-1, 0.5) (got 0.5)");
-  EXPECT_EQ(sceneError(kHead + "    material: {density: 0}\n"),
+  EXPECT_EQ(sceneError(kFullHead + "    material: {density: 0}\n"),
             "s.yaml:4:25: tissues[0].material.density: must be > 0 (got 0)");
-  EXPECT_EQ(sceneError(kHead + "    material: {law: neo_hookean}\n"),
+  EXPECT_EQ(sceneError(kFullHead + "    material: {law: neo_hookean}\n"),
             "s.yaml:4:21: tissues[0].material.law: must be one of linear, corotational, "
             "invertible_neo_hookean (got 'neo_hookean')");
-  EXPECT_EQ(sceneError(kHead + "    damping: {rayleigh_mass: -0.1}\n"),
+  EXPECT_EQ(sceneError(kFullHead + "    damping: {rayleigh_mass: -0.1}\n"),
             "s.yaml:4:30: tissues[0].damping.rayleigh_mass: must be >= 0 (got -0.1)");
-  EXPECT_EQ(sceneError(kHead + "    fixed: {nodes: [1, x]}\n"),
+  EXPECT_EQ(sceneError(kFullHead + "    fixed: {nodes: [1, x]}\n"),
             "s.yaml:4:24: tissues[0].fixed.nodes[1]: must be an integer node index (got 'x')");
-  EXPECT_EQ(sceneError(kHead + "    fixed: {boxes: [{min: [0, 0, 1], max: [1, 1, 0]}]}\n"),
+  EXPECT_EQ(sceneError(kFullHead + "    fixed: {boxes: [{min: [0, 0, 1], max: [1, 1, 0]}]}\n"),
             "s.yaml:4:43: tissues[0].fixed.boxes[0].max: must be >= min in every coordinate");
-  EXPECT_EQ(sceneError(kHead + "    compliance: {model: fast}\n"),
+  EXPECT_EQ(sceneError(kFullHead + "    compliance: {model: fast}\n"),
             "s.yaml:4:25: tissues[0].compliance.model: must be one of exact, warped, rest, "
             "uncoupled (got 'fast')");
-  EXPECT_EQ(sceneError(kHead + "    compliance: {correction: fast}\n"),
+  EXPECT_EQ(sceneError(kFullHead + "    compliance: {correction: fast}\n"),
             "s.yaml:4:30: tissues[0].compliance.correction: must be one of model, exact (got "
             "'fast')");
-  EXPECT_EQ(sceneError(kHead + "    transform: 0.1\n"),
+  EXPECT_EQ(sceneError(kFullHead + "    transform: 0.1\n"),
             "s.yaml:4:16: tissues[0].transform: must be a map (got '0.1')");
-  EXPECT_EQ(sceneError(kHead + "instrument: {friction: -0.5}\n"),
+  EXPECT_EQ(sceneError(kFullHead + "instrument: {friction: -0.5}\n"),
             "s.yaml:4:24: instrument.friction: must be >= 0 (got -0.5)");
-  EXPECT_EQ(sceneError(kHead + "instrument: {type: scalpel}\n"),
+  EXPECT_EQ(sceneError(kFullHead + "instrument: {type: scalpel}\n"),
             "s.yaml:4:20: instrument.type: must be one of probe, grasper (got 'scalpel')");
-  EXPECT_EQ(sceneError(kHead + "instrument: {grasper: {samples: 2.5}}\n"),
+  EXPECT_EQ(sceneError(kFullHead + "instrument: {grasper: {samples: 2.5}}\n"),
             "s.yaml:4:33: instrument.grasper.samples: must be an integer (got '2.5')");
-  EXPECT_EQ(sceneError(kHead + "instrument: {grasper: {width: -0.001}}\n"),
+  EXPECT_EQ(sceneError(kFullHead + "instrument: {grasper: {width: -0.001}}\n"),
             "s.yaml:4:31: instrument.grasper.width: must be >= 0 (got -0.001)");
-  EXPECT_EQ(sceneError(kHead + "instrument: {grasper: {grip_stiffness: -1}}\n"),
+  EXPECT_EQ(sceneError(kFullHead + "instrument: {grasper: {grip_stiffness: -1}}\n"),
             "s.yaml:4:40: instrument.grasper.grip_stiffness: must be >= 0 (got -1)");
-  EXPECT_EQ(sceneError(kHead + "instrument: {grasper: {width_samples: 0}}\n"),
+  EXPECT_EQ(sceneError(kFullHead + "instrument: {grasper: {width_samples: 0}}\n"),
             "s.yaml:4:39: instrument.grasper.width_samples: must be >= 1 (got 0)");
-  EXPECT_EQ(sceneError(kHead + "instrument: {initial_pose: {quaternion: [2, 0, 0, 0]}}\n"),
+  EXPECT_EQ(sceneError(kFullHead + "instrument: {initial_pose: {quaternion: [2, 0, 0, 0]}}\n"),
             "s.yaml:4:41: instrument.initial_pose.quaternion: must be a unit quaternion "
             "[w, x, y, z] (norm is 2)");
-  EXPECT_EQ(sceneError(kHead + "instrument:\n  trajectory:\n"
-                               "    - {t: 1.0, position: [0, 0, 0]}\n"
-                               "    - {t: 1.0, position: [0, 0, 0], gripper: 1.5}\n"),
+  EXPECT_EQ(sceneError(kFullHead + "instrument:\n  trajectory:\n"
+                                   "    - {t: 1.0, position: [0, 0, 0]}\n"
+                                   "    - {t: 1.0, position: [0, 0, 0], gripper: 1.5}\n"),
             "s.yaml:7:11: instrument.trajectory[1].t: must be greater than the previous key's t "
             "(1)\n"
             "s.yaml:7:46: instrument.trajectory[1].gripper: must be in [0, 1] (got 1.5)");
-  EXPECT_EQ(sceneError(kHead + "instrument:\n  trajectory:\n    - {position: [0, 0, 0]}\n"),
+  EXPECT_EQ(sceneError(kFullHead + "instrument:\n  trajectory:\n    - {position: [0, 0, 0]}\n"),
             "s.yaml:6:7: instrument.trajectory[0].t: is required");
-  EXPECT_EQ(sceneError(kHead + "solver: {nsgs_sor: 2}\n"),
+  EXPECT_EQ(sceneError(kFullHead + "solver: {nsgs_sor: 2}\n"),
             "s.yaml:4:20: solver.nsgs_sor: must be in (0, 2) (got 2)");
-  EXPECT_EQ(sceneError(kHead + "solver: {nsgs_anderson_depth: 9}\n"),
+  EXPECT_EQ(sceneError(kFullHead + "solver: {nsgs_anderson_depth: 9}\n"),
             "s.yaml:4:31: solver.nsgs_anderson_depth: must be in [0, 8] (got 9)");
-  EXPECT_EQ(sceneError(kHead + "haptics: {nsgs_anderson_depth: -1}\n"),
+  EXPECT_EQ(sceneError(kFullHead + "haptics: {nsgs_anderson_depth: -1}\n"),
             "s.yaml:4:32: haptics.nsgs_anderson_depth: must be >= 0 (got -1)");
-  EXPECT_EQ(sceneError(kHead + "haptics: {local_model: reduced}\n"),
+  EXPECT_EQ(sceneError(kFullHead + "haptics: {local_model: reduced}\n"),
             "s.yaml:4:24: haptics.local_model: must be one of automatic, full, linearized (got "
             "'reduced')");
-  EXPECT_EQ(sceneError(kHead + "haptics: {snapshot_blend_ms: 200}\n"),
+  EXPECT_EQ(sceneError(kFullHead + "haptics: {snapshot_blend_ms: 200}\n"),
             "s.yaml:4:30: haptics.snapshot_blend_ms: must be <= 100 (got 200): not a physically "
             "sensible value");
-  EXPECT_EQ(sceneError(kHead + "solver: {max_contacts: 0}\n"),
+  EXPECT_EQ(sceneError(kFullHead + "solver: {max_contacts: 0}\n"),
             "s.yaml:4:24: solver.max_contacts: must be >= 1 (got 0)");
-  EXPECT_EQ(sceneError(kHead + "haptics: {enabled: maybe}\n"),
+  EXPECT_EQ(sceneError(kFullHead + "haptics: {enabled: maybe}\n"),
             "s.yaml:4:20: haptics.enabled: must be true or false (got 'maybe')");
-  EXPECT_EQ(sceneError(kHead + "output: {every: 10}\n"), "s.yaml:4:9: output.vtk: is required");
-  EXPECT_EQ(sceneError(kHead + "duration: 1\nduration: 2\n"),
+  EXPECT_EQ(sceneError(kFullHead + "output: {every: 10}\n"), "s.yaml:4:9: output.vtk: is required");
+  EXPECT_EQ(sceneError(kFullHead + "duration: 1\nduration: 2\n"),
             "s.yaml:5:1: duration: duplicate key");
   EXPECT_EQ(sceneError("time_step: 0.01\ntissues:\n  - mesh: ../meshes/nowhere.msh\n"),
             "s.yaml:3:11: tissues[0].mesh: mesh file not found: " +
@@ -425,7 +429,7 @@ TEST(Scene, ReadmeExampleIsValid) {
 
 // Random corruption of a valid scene: a SceneSpec or a SceneError, never anything else.
 TEST(Scene, CorruptedInputGivesSceneErrorOnly) {
-  std::ifstream in(kScenes / "full_scene.yaml");
+  std::ifstream in(kSceneFiles / "full_scene.yaml");
   std::stringstream text;
   text << in.rdbuf();
   const std::string good = text.str();
@@ -439,7 +443,7 @@ TEST(Scene, CorruptedInputGivesSceneErrorOnly) {
       bad[rng() % bad.size()] = alphabet[rng() % alphabet.size()];
     }
     try {
-      parseScene(bad, "fuzz.yaml", kScenes);
+      parseScene(bad, "fuzz.yaml", kSceneFiles);
     } catch (const SceneError& e) {
       ++rejected;
       EXPECT_THAT(e.what(), ::testing::StartsWith("fuzz.yaml:"));
@@ -451,49 +455,51 @@ TEST(Scene, CorruptedInputGivesSceneErrorOnly) {
 // Physical sanity: impossible or memory-exhausting values are errors naming file:line:col and the
 // field; merely unusual ones are warnings in the same form.
 std::vector<std::string> sceneWarnings(const std::string& yaml) {
-  return parseScene(yaml, "s.yaml", kScenes).warnings;
+  return parseScene(yaml, "s.yaml", kSceneFiles).warnings;
 }
 
 TEST(Scene, AbsurdValuesAreErrorsWithFileLineColumnAndField) {
   using ::testing::HasSubstr;
   using ::testing::StartsWith;
-  EXPECT_THAT(sceneError(kHead + "solver: {max_contacts: 2000000000}\n"),
+  EXPECT_THAT(sceneError(kFullHead + "solver: {max_contacts: 2000000000}\n"),
               StartsWith("s.yaml:4:24: solver.max_contacts: 2000000000 contacts need too many MiB "
                          "for the contact problem"));
-  EXPECT_THAT(sceneError(kHead + "solver: {max_contacts: 5000}\n"),
+  EXPECT_THAT(sceneError(kFullHead + "solver: {max_contacts: 5000}\n"),
               StartsWith("s.yaml:4:24: solver.max_contacts: 5000 contacts need "));
-  EXPECT_THAT(sceneError(kHead + "gravity: [0, 0, -1e300]\n"),
+  EXPECT_THAT(sceneError(kFullHead + "gravity: [0, 0, -1e300]\n"),
               StartsWith("s.yaml:4:17: gravity[2]: must be in [-1000, 1000] (got -1e+300): not a "
                          "physically sensible value"));
-  EXPECT_THAT(sceneError(kHead + "instrument: {probe: {tip_radius: 1e6}}\n"),
+  EXPECT_THAT(sceneError(kFullHead + "instrument: {probe: {tip_radius: 1e6}}\n"),
               StartsWith("s.yaml:4:34: instrument.probe.tip_radius: must be <= 1 (got"));
   EXPECT_THAT(sceneError("time_step: 1e9\ntissues:\n  - mesh: ../meshes/liver.msh\n"),
               StartsWith("s.yaml:1:12: time_step: must be <= 1 (got"));
-  EXPECT_THAT(sceneError(kHead + "instrument: {initial_pose: {position: [0, 1e300, 0]}}\n"),
+  EXPECT_THAT(sceneError(kFullHead + "instrument: {initial_pose: {position: [0, 1e300, 0]}}\n"),
               StartsWith("s.yaml:4:43: instrument.initial_pose.position[1]: must be in [-1000, "
                          "1000]"));
-  EXPECT_THAT(sceneError(kHead + "    material: {young_modulus: 1e20, density: 1e9}\n"),
+  EXPECT_THAT(sceneError(kFullHead + "    material: {young_modulus: 1e20, density: 1e9}\n"),
               HasSubstr("tissues[0].material.young_modulus: must be <= 1000000000000 (got"));
-  EXPECT_THAT(sceneError(kHead + "    material: {young_modulus: 1e20, density: 1e9}\n"),
+  EXPECT_THAT(sceneError(kFullHead + "    material: {young_modulus: 1e20, density: 1e9}\n"),
               HasSubstr("tissues[0].material.density: must be <= 100000 (got"));
-  EXPECT_THAT(sceneError(kHead + "instrument: {grasper: {samples: 1000000}}\n"),
+  EXPECT_THAT(sceneError(kFullHead + "instrument: {grasper: {samples: 1000000}}\n"),
               StartsWith("s.yaml:4:33: instrument.grasper.samples: must be in [1, 10000] (got "
                          "1000000)"));
-  EXPECT_THAT(sceneError(kHead + "instrument: {mass: 1e30}\n"),
+  EXPECT_THAT(sceneError(kFullHead + "instrument: {mass: 1e30}\n"),
               StartsWith("s.yaml:4:20: instrument.mass: must be <= 1000"));
-  EXPECT_THAT(sceneError(kHead + "haptics: {max_force: 1e9}\n"),
+  EXPECT_THAT(sceneError(kFullHead + "haptics: {max_force: 1e9}\n"),
               StartsWith("s.yaml:4:22: haptics.max_force: must be <= 50"));
-  EXPECT_THAT(sceneError(kHead + "haptics: {rate: 1e12}\n"),
+  EXPECT_THAT(sceneError(kFullHead + "haptics: {rate: 1e12}\n"),
               StartsWith("s.yaml:4:17: haptics.rate: must be in [50, 4000]"));
-  EXPECT_THAT(sceneError(kHead + "duration: 1e300\n"),
+  EXPECT_THAT(sceneError(kFullHead + "duration: 1e300\n"),
               StartsWith("s.yaml:4:11: duration: must be <= 10000000"));
-  EXPECT_THAT(sceneError(kHead + "solver: {nsgs_max_sweeps: 2000000000}\n"),
+  EXPECT_THAT(sceneError(kFullHead + "solver: {nsgs_max_sweeps: 2000000000}\n"),
               StartsWith("s.yaml:4:27: solver.nsgs_max_sweeps: must be in [1, 10000000]"));
-  EXPECT_THAT(sceneError(kHead + "instrument: {workspace: {min: [0, 0, 0], max: [1, 1e9, 1]}}\n"),
-              StartsWith("s.yaml:4:51: instrument.workspace.max[1]: must be in [-1000, 1000]"));
-  EXPECT_THAT(sceneError(kHead + "instrument: {workspace: {min: [0, 0, 0], max: [1, -1, 1]}}\n"),
-              StartsWith("s.yaml:4:47: instrument.workspace.max: must be >= min in every "
-                         "coordinate"));
+  EXPECT_THAT(
+      sceneError(kFullHead + "instrument: {workspace: {min: [0, 0, 0], max: [1, 1e9, 1]}}\n"),
+      StartsWith("s.yaml:4:51: instrument.workspace.max[1]: must be in [-1000, 1000]"));
+  EXPECT_THAT(
+      sceneError(kFullHead + "instrument: {workspace: {min: [0, 0, 0], max: [1, -1, 1]}}\n"),
+      StartsWith("s.yaml:4:47: instrument.workspace.max: must be >= min in every "
+                 "coordinate"));
 }
 
 TEST(Scene, UnusualValuesAreWarningsWithFileLineColumnAndField) {
@@ -503,31 +509,31 @@ TEST(Scene, UnusualValuesAreWarningsWithFileLineColumnAndField) {
   EXPECT_THAT(sceneWarnings("time_step: 0.5\ntissues:\n  - mesh: ../meshes/liver.msh\n"),
               ElementsAre(StartsWith("s.yaml:1:12: time_step: unusual value 0.5 (plausible: in "
                                      "[1e-05, 0.05])")));
-  EXPECT_THAT(sceneWarnings(kHead + "gravity: [0, 0, -98.1]\n"),
+  EXPECT_THAT(sceneWarnings(kFullHead + "gravity: [0, 0, -98.1]\n"),
               ElementsAre(StartsWith("s.yaml:4:17: gravity[2]: unusual value -98.1")));
-  EXPECT_THAT(sceneWarnings(kHead + "instrument: {probe: {tip_radius: 0.3}}\n"),
+  EXPECT_THAT(sceneWarnings(kFullHead + "instrument: {probe: {tip_radius: 0.3}}\n"),
               ElementsAre(StartsWith("s.yaml:4:34: instrument.probe.tip_radius: unusual value "
                                      "0.3")));
-  EXPECT_THAT(sceneWarnings(kHead + "solver: {max_contacts: 3000}\n"),
+  EXPECT_THAT(sceneWarnings(kFullHead + "solver: {max_contacts: 3000}\n"),
               ElementsAre(StartsWith("s.yaml:4:24: solver.max_contacts: unusual value 3000")));
-  EXPECT_THAT(sceneWarnings(kHead + "haptics: {max_force: 45}\n"),
+  EXPECT_THAT(sceneWarnings(kFullHead + "haptics: {max_force: 45}\n"),
               ElementsAre(HasSubstr("haptics.max_force: unusual value 45")));
   // warnings come in document order, and a usual scene has none
-  EXPECT_THAT(sceneWarnings(kHead + "    material: {young_modulus: 2, density: 50000}\n"),
+  EXPECT_THAT(sceneWarnings(kFullHead + "    material: {young_modulus: 2, density: 50000}\n"),
               ElementsAre(StartsWith("s.yaml:4:31: tissues[0].material.young_modulus"),
                           StartsWith("s.yaml:4:43: tissues[0].material.density")));
-  EXPECT_TRUE(sceneWarnings(kHead).empty());
-  EXPECT_TRUE(loadScene(kScenes / "full_scene.yaml").warnings.empty());
+  EXPECT_TRUE(sceneWarnings(kFullHead).empty());
+  EXPECT_TRUE(loadScene(kSceneFiles / "full_scene.yaml").warnings.empty());
 }
 
 TEST(Scene, InstrumentWorkspace) {
   const SceneSpec s = parseScene(
-      kHead + "instrument: {workspace: {min: [-0.1, -0.2, -0.3], max: [0.1, 0.2, 0.3]}}\n",
-      "s.yaml", kScenes);
+      kFullHead + "instrument: {workspace: {min: [-0.1, -0.2, -0.3], max: [0.1, 0.2, 0.3]}}\n",
+      "s.yaml", kSceneFiles);
   ASSERT_TRUE(s.instrument.workspace.has_value());
   EXPECT_EQ(s.instrument.workspace->min_m, Eigen::Vector3d(-0.1, -0.2, -0.3));
   EXPECT_EQ(s.instrument.workspace->max_m, Eigen::Vector3d(0.1, 0.2, 0.3));
-  EXPECT_FALSE(parseScene(kHead + "instrument: {}\n", "s.yaml", kScenes)
+  EXPECT_FALSE(parseScene(kFullHead + "instrument: {}\n", "s.yaml", kSceneFiles)
                    .instrument.workspace.has_value());
 }
 
@@ -546,7 +552,7 @@ TEST(Scene, ShippedScenesLoad) {
 }
 
 TEST(Scene, MissingSceneFile) {
-  EXPECT_THROW(loadScene(kScenes / "no_such_scene.yaml"), SceneError);
+  EXPECT_THROW(loadScene(kSceneFiles / "no_such_scene.yaml"), SceneError);
 }
 
 }  // namespace

@@ -23,14 +23,14 @@
 namespace tactus::shared {
 namespace {
 
-std::string uniqueName(const char* tag) {
+std::string uniqueDisplayName(const char* tag) {
   return "tactus_test_" + std::to_string(::getpid()) + "_display_" + tag;
 }
 
-struct NameGuard {
+struct DisplayNameGuard {
   std::string name;
-  explicit NameGuard(std::string n) : name(std::move(n)) { Segment::remove(name); }
-  ~NameGuard() { Segment::remove(name); }
+  explicit DisplayNameGuard(std::string n) : name(std::move(n)) { Segment::remove(name); }
+  ~DisplayNameGuard() { Segment::remove(name); }
 };
 
 SegmentCapacity smallCapacity() {
@@ -66,7 +66,7 @@ TEST(Display, LayoutIsPaddedAndGrowsWithCapacity) {
 }
 
 TEST(Display, TopologyAndFrameRoundTripToReadOnlySubscriber) {
-  NameGuard g(uniqueName("rt"));
+  DisplayNameGuard g(uniqueDisplayName("rt"));
   Segment sim = Segment::create(g.name, smallCapacity());
   Segment viewer = Segment::open(g.name, Access::kReadOnly);
   EXPECT_EQ(viewer.capacity().display_vertices, 10);
@@ -140,7 +140,7 @@ TEST(Display, TopologyAndFrameRoundTripToReadOnlySubscriber) {
 }
 
 TEST(Display, ZeroCapacityMeansNoDisplayPart) {
-  NameGuard g(uniqueName("none"));
+  DisplayNameGuard g(uniqueDisplayName("none"));
   SegmentCapacity c = SegmentCapacity::forContacts(2);
   c.display_vertices = 0;
   Segment sim = Segment::create(g.name, c);
@@ -149,14 +149,14 @@ TEST(Display, ZeroCapacityMeansNoDisplayPart) {
   EXPECT_FALSE(viewer.displaySubscriber().attached());
   EXPECT_EQ(viewer.header().display_bytes, 0u);
   // smaller than with the default display capacity
-  NameGuard g2(uniqueName("default"));
+  DisplayNameGuard g2(uniqueDisplayName("default"));
   Segment with = Segment::create(g2.name, SegmentCapacity::forContacts(2));
   EXPECT_GT(with.sizeBytes(), sim.sizeBytes());
   EXPECT_TRUE(with.displayPublisher().attached());
 }
 
 TEST(Display, CorruptedDisplayOffsetIsRefused) {
-  NameGuard g(uniqueName("bad"));
+  DisplayNameGuard g(uniqueDisplayName("bad"));
   Segment sim = Segment::create(g.name, smallCapacity());
   // rewrite display_offset through a private mapping
   const int fd = ::shm_open(("/" + g.name).c_str(), O_RDWR, 0);
@@ -181,7 +181,7 @@ TEST(Display, CorruptedDisplayOffsetIsRefused) {
 // count does not depend on how the two threads are scheduled); a check that fails stops both
 // threads before the test returns.
 TEST(Display, RacingWriterNeverYieldsATornFrame) {
-  NameGuard g(uniqueName("race"));
+  DisplayNameGuard g(uniqueDisplayName("race"));
   SegmentCapacity c = SegmentCapacity::forContacts(8);
   c.display_vertices = 2000;
   c.display_triangles = 10;

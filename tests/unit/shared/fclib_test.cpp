@@ -18,7 +18,7 @@ namespace tactus::shared {
 namespace {
 
 namespace fs = std::filesystem;
-const fs::path kFclibDir = fs::path(TACTUS_TEST_DATA_DIR) / "fclib";
+const fs::path kFclibSetDir = fs::path(TACTUS_TEST_DATA_DIR) / "fclib";
 
 // A file in the temp dir with `text`, removed at the end of the test.
 class TempFile {
@@ -109,7 +109,7 @@ TEST(FclibText, MalformedFilesNameFileAndLine) {
 }
 
 TEST(FclibReferenceFile, ReadsRowsAndTheStatedError) {
-  const FclibReference ref = readFclibReference(kFclibDir / "reference/CubeH8.local.ref.txt");
+  const FclibReference ref = readFclibReference(kFclibSetDir / "reference/CubeH8.local.ref.txt");
   ASSERT_EQ(ref.r.size(), 3u);
   ASSERT_EQ(ref.u.size(), 3u);
   EXPECT_DOUBLE_EQ(ref.r[0], 0.017461447862511029);
@@ -140,13 +140,13 @@ TEST(FclibReferenceFile, WriterRoundTrips) {
 
 TEST(FclibBundled, AllProblemsAndReferencesAreConsistent) {
   int count = 0;
-  for (const auto& e : fs::directory_iterator(kFclibDir / "problems")) {
+  for (const auto& e : fs::directory_iterator(kFclibSetDir / "problems")) {
     const std::string file = e.path().filename().string();
     SCOPED_TRACE(file);
     const FclibProblem p = readFclibText(e.path());
     const std::string name = file.substr(0, file.size() - std::string(".fc3d.txt").size());
     EXPECT_EQ(p.name, name);
-    const FclibReference ref = readFclibReference(kFclibDir / "reference" / (name + ".ref.txt"));
+    const FclibReference ref = readFclibReference(kFclibSetDir / "reference" / (name + ".ref.txt"));
     EXPECT_EQ(p.rows(), 3 * p.contacts);
     EXPECT_EQ(static_cast<int>(ref.r.size()), p.rows());
     EXPECT_EQ(p.W.size(), static_cast<std::size_t>(p.rows()) * p.rows());

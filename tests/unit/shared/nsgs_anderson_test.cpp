@@ -21,18 +21,18 @@ namespace {
 
 using Problem = test::DenseProblem;
 
-struct Solved {
+struct SolvedWithAnderson {
   NsgsResult result;
   std::vector<double> f;
 };
 
-Solved solve(const Problem& p, double tolerance, int depth, int max_sweeps = 20000) {
+SolvedWithAnderson solve(const Problem& p, double tolerance, int depth, int max_sweeps = 20000) {
   NsgsSettings s;
   s.tolerance = tolerance;
   s.max_sweeps = max_sweeps;
   s.anderson_depth = depth;
   NsgsWorkspace ws(p.rows(), p.contacts());
-  Solved run;
+  SolvedWithAnderson run;
   run.f.assign(static_cast<std::size_t>(p.rows()), 0.0);
   run.result = solveNsgs(p.view(), s, ws, run.f.data());
   return run;
@@ -46,8 +46,8 @@ double errorOf(const Problem& p, const std::vector<double>& f) {
 TEST(NsgsAnderson, FewerSweepsOnCapsulePilesToTheSameTolerance) {
   for (unsigned seed = 1; seed <= 3; ++seed) {
     const Problem p = test::capsulePile(4, 3, seed, 0.8);
-    const Solved plain = solve(p, 1e-9, 0);
-    const Solved fast = solve(p, 1e-9, 8);
+    const SolvedWithAnderson plain = solve(p, 1e-9, 0);
+    const SolvedWithAnderson fast = solve(p, 1e-9, 8);
     ASSERT_EQ(plain.result.status, NsgsStatus::kConverged) << seed;
     ASSERT_EQ(fast.result.status, NsgsStatus::kConverged) << seed;
     EXPECT_LE(errorOf(p, fast.f), 1e-9) << seed;
@@ -60,9 +60,9 @@ TEST(NsgsAnderson, ConvergesOnEveryFclibProblemPlainNsgsSolves) {
   int plain_total = 0, fast_total = 0;
   for (const auto& path : test::fclibProblemFiles(TACTUS_TEST_DATA_DIR)) {
     const Problem p = test::fromFclib(readFclibText(path));
-    const Solved plain = solve(p, 1e-9, 0);
+    const SolvedWithAnderson plain = solve(p, 1e-9, 0);
     if (plain.result.status != NsgsStatus::kConverged) continue;
-    const Solved fast = solve(p, 1e-9, 5);
+    const SolvedWithAnderson fast = solve(p, 1e-9, 5);
     EXPECT_EQ(fast.result.status, NsgsStatus::kConverged) << path;
     EXPECT_LE(errorOf(p, fast.f), 1e-9) << path;
     // a few sweeps more on some (Confeti-ex13: 32 against 29), fewer over the set
@@ -79,8 +79,8 @@ TEST(NsgsAnderson, ConvergesOnEveryFclibProblemPlainNsgsSolves) {
 TEST(NsgsAnderson, SafeguardKeepsConvergingWhereItDoesNotHelp) {
   for (unsigned seed : {4u, 6u, 8u}) {
     const Problem p = test::spherePile(40, seed, 0.8);
-    const Solved plain = solve(p, 1e-6, 0);
-    const Solved fast = solve(p, 1e-6, 5);
+    const SolvedWithAnderson plain = solve(p, 1e-6, 0);
+    const SolvedWithAnderson fast = solve(p, 1e-6, 5);
     ASSERT_EQ(plain.result.status, NsgsStatus::kConverged) << seed;
     EXPECT_EQ(fast.result.status, NsgsStatus::kConverged) << seed;
     EXPECT_LE(errorOf(p, fast.f), 1e-6) << seed;
@@ -90,7 +90,7 @@ TEST(NsgsAnderson, SafeguardKeepsConvergingWhereItDoesNotHelp) {
 // A warm start that already solves the problem costs one sweep, as without the acceleration.
 TEST(NsgsAnderson, ASolvedWarmStartCostsOneSweep) {
   const Problem p = test::capsulePile(4, 3, 2, 2.0);
-  const Solved first = solve(p, 1e-9, 8);
+  const SolvedWithAnderson first = solve(p, 1e-9, 8);
   ASSERT_EQ(first.result.status, NsgsStatus::kConverged);
   NsgsSettings s;
   s.tolerance = 1e-9;
@@ -104,8 +104,8 @@ TEST(NsgsAnderson, ASolvedWarmStartCostsOneSweep) {
 
 TEST(NsgsAnderson, DepthAboveTheLargestIsClampedAndWorks) {
   const Problem p = test::capsulePile(4, 3, 1, 0.8);
-  const Solved deepest = solve(p, 1e-9, kMaxAndersonDepth);
-  const Solved beyond = solve(p, 1e-9, 1000);
+  const SolvedWithAnderson deepest = solve(p, 1e-9, kMaxAndersonDepth);
+  const SolvedWithAnderson beyond = solve(p, 1e-9, 1000);
   ASSERT_EQ(deepest.result.status, NsgsStatus::kConverged);
   EXPECT_EQ(beyond.result.sweeps, deepest.result.sweeps);
   EXPECT_EQ(beyond.f, deepest.f);

@@ -27,11 +27,12 @@ namespace fs = std::filesystem;
 using test::DenseProblem;
 using test::spherePile;
 
-const fs::path kFclibDir = fs::path(TACTUS_TEST_DATA_DIR) / "fclib";
+const fs::path kBlocksFclibDir = fs::path(TACTUS_TEST_DATA_DIR) / "fclib";
 
 std::vector<std::pair<std::string, FclibProblem>> fclibSet() {
   std::vector<fs::path> paths;
-  for (const auto& e : fs::directory_iterator(kFclibDir / "problems")) paths.push_back(e.path());
+  for (const auto& e : fs::directory_iterator(kBlocksFclibDir / "problems"))
+    paths.push_back(e.path());
   std::sort(paths.begin(), paths.end());
   std::vector<std::pair<std::string, FclibProblem>> out;
   for (const fs::path& p : paths) out.emplace_back(p.filename().string(), readFclibText(p));
@@ -105,13 +106,14 @@ DenseProblem mixedRows(unsigned seed) {
   return p;
 }
 
-struct Solved {
+struct SolvedOnBlocks {
   NsgsResult result;
   std::vector<double> f, u;
 };
 
-Solved run(const ContactProblemView& v, const NsgsSettings& s, std::vector<double> warm = {}) {
-  Solved out;
+SolvedOnBlocks run(const ContactProblemView& v, const NsgsSettings& s,
+                   std::vector<double> warm = {}) {
+  SolvedOnBlocks out;
   out.f = warm.empty() ? std::vector<double>(v.rows, 0.0) : std::move(warm);
   NsgsWorkspace ws(v.rows, v.contacts);
   out.result = solveNsgs(v, s, ws, out.f.data());
@@ -137,8 +139,8 @@ void expectSameOnBothStorages(const std::string& name, const ContactProblemView&
   ContactProblemView sparse = dense;
   sparse.blocks = &blocks;
   sparse.W = nullptr;   // the block path must not read the dense W
-  const Solved a = run(dense, s);
-  const Solved b = run(sparse, s);
+  const SolvedOnBlocks a = run(dense, s);
+  const SolvedOnBlocks b = run(sparse, s);
   SCOPED_TRACE(name + " tol " + std::to_string(s.tolerance));
   EXPECT_EQ(a.result.status, b.result.status);
   // rounding differs (other summation order): a sweep more or less near the tolerance
@@ -344,13 +346,13 @@ TEST(NsgsBlocks, WarmStartsAndCurrentDeltaOnTheBlocks) {
 TEST(NsgsBlocks, FaultsAreTheSameOnTheBlocks) {
   // ill-posed: a zero normal diagonal, held at zero on both storages
   const FclibProblem ill =
-      readFclibText(kFclibDir / "ill_posed" / "zero_normal_diagonal_2c.fc3d.txt");
+      readFclibText(kBlocksFclibDir / "ill_posed" / "zero_normal_diagonal_2c.fc3d.txt");
   DelassusBlocks blocks(ill.rows(), ill.contacts, 1.0);
   ASSERT_TRUE(blocks.assign(ill.view(), 1.0));
   ContactProblemView sparse = ill.view();
   sparse.blocks = &blocks;
-  const Solved a = run(ill.view(), NsgsSettings{});
-  const Solved b = run(sparse, NsgsSettings{});
+  const SolvedOnBlocks a = run(ill.view(), NsgsSettings{});
+  const SolvedOnBlocks b = run(sparse, NsgsSettings{});
   EXPECT_EQ(a.result.status, NsgsStatus::kIllPosed);
   EXPECT_EQ(b.result.status, NsgsStatus::kIllPosed);
   EXPECT_EQ(a.result.ill_posed_contacts, b.result.ill_posed_contacts);
@@ -362,7 +364,7 @@ TEST(NsgsBlocks, FaultsAreTheSameOnTheBlocks) {
   ASSERT_TRUE(nan_blocks.assign(p.view(), 1.0));
   ContactProblemView nan_view = p.view();
   nan_view.blocks = &nan_blocks;
-  const Solved c = run(nan_view, NsgsSettings{}, std::vector<double>(p.rows(), 1.0));
+  const SolvedOnBlocks c = run(nan_view, NsgsSettings{}, std::vector<double>(p.rows(), 1.0));
   EXPECT_EQ(c.result.status, NsgsStatus::kNonFinite);
   EXPECT_TRUE(std::all_of(c.f.begin(), c.f.end(), [](double x) { return x == 0.0; }));
   // blocks of another problem (other sizes or row offsets): refused, f untouched
@@ -372,7 +374,7 @@ TEST(NsgsBlocks, FaultsAreTheSameOnTheBlocks) {
   const DenseProblem q = spherePile(40, 2, 0.8, 6);
   ContactProblemView mismatched = q.view();
   mismatched.blocks = &other_blocks;
-  const Solved d = run(mismatched, NsgsSettings{}, std::vector<double>(q.rows(), 2.0));
+  const SolvedOnBlocks d = run(mismatched, NsgsSettings{}, std::vector<double>(q.rows(), 2.0));
   EXPECT_EQ(d.result.status, NsgsStatus::kEmpty);
   EXPECT_TRUE(std::all_of(d.f.begin(), d.f.end(), [](double x) { return x == 2.0; }));
   // inconsistent views are not converted

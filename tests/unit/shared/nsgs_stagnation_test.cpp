@@ -24,9 +24,9 @@ namespace fs = std::filesystem;
 using Problem = test::DenseProblem;
 using test::spherePile;
 
-std::vector<fs::path> fclibProblems() { return test::fclibProblemFiles(TACTUS_TEST_DATA_DIR); }
-std::string stem(const fs::path& p) { return test::fclibStem(p); }
-FclibProblem boxStacks() { return test::fclibBoxStacks(TACTUS_TEST_DATA_DIR); }
+std::vector<fs::path> stagnationProblems() { return test::fclibProblemFiles(TACTUS_TEST_DATA_DIR); }
+std::string stagnationStem(const fs::path& p) { return test::fclibStem(p); }
+FclibProblem stagnationBoxStacks() { return test::fclibBoxStacks(TACTUS_TEST_DATA_DIR); }
 
 // Plain Gauss-Seidel can cycle on redundant frictional contacts: this problem (mu = 2, from the
 // drag_mu2 hard case) keeps an error ~3e-2 at sor 1 however many sweeps it gets. The stagnation
@@ -67,7 +67,7 @@ TEST(NsgsStagnation, UnderRelaxationBreaksALimitCycle) {
 
 // A problem that converges steadily never triggers the rule (the relaxation is left alone).
 TEST(NsgsStagnation, SteadyConvergenceKeepsTheRelaxation) {
-  const FclibProblem p = boxStacks();
+  const FclibProblem p = stagnationBoxStacks();
   NsgsWorkspace ws(p.rows(), p.contacts);
   NsgsSettings s;
   s.stall_sweeps = 5;
@@ -98,7 +98,8 @@ TEST(NsgsStagnation, TheRuleCostsNoSweepsWherePlainGaussSeidelConverges) {
   }
   piles.emplace_back("spheres 20 seed 4 mu 2", spherePile(20, 4, 2.0));
   std::vector<std::pair<std::string, FclibProblem>> files;
-  for (const fs::path& path : fclibProblems()) files.emplace_back(stem(path), readFclibText(path));
+  for (const fs::path& path : stagnationProblems())
+    files.emplace_back(stagnationStem(path), readFclibText(path));
   std::vector<std::pair<std::string, ContactProblemView>> views;
   for (const auto& [name, p] : piles) views.emplace_back(name, p.view());
   for (const auto& [name, p] : files) views.emplace_back(name, p.view());

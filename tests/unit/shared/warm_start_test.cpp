@@ -9,7 +9,7 @@
 namespace tactus::shared {
 namespace {
 
-struct Problem {
+struct WarmStartProblem {
   std::vector<std::int32_t> row_offset{0};
   std::vector<std::uint64_t> ids;
   std::vector<double> f_star;
@@ -22,7 +22,8 @@ struct Problem {
   int rows() const { return static_cast<int>(f_star.size()); }
 };
 
-int adopt(SnapshotWarmStart& w, const Problem& p, const double* last, std::vector<double>& out) {
+int adopt(SnapshotWarmStart& w, const WarmStartProblem& p, const double* last,
+          std::vector<double>& out) {
   out.assign(static_cast<std::size_t>(p.rows()), -99.0);
   return w.adopt(p.contacts(), p.rows(), p.row_offset.data(), p.ids.data(), p.f_star.data(), last,
                  out.data());
@@ -30,7 +31,7 @@ int adopt(SnapshotWarmStart& w, const Problem& p, const double* last, std::vecto
 
 TEST(SnapshotWarmStart, TheFirstSnapshotStartsFromItsOwnForces) {
   SnapshotWarmStart w(8, 24);
-  Problem p;
+  WarmStartProblem p;
   p.add(7, {1.0, 0.1, 0.2});
   p.add(9, {2.0});
   const std::vector<double> last = {5.0, 5.0, 5.0, 5.0};
@@ -41,7 +42,7 @@ TEST(SnapshotWarmStart, TheFirstSnapshotStartsFromItsOwnForces) {
 
 TEST(SnapshotWarmStart, CarriesEachContactsCorrectionByIdentity) {
   SnapshotWarmStart w(8, 24);
-  Problem a;
+  WarmStartProblem a;
   a.add(7, {1.0, 0.1, 0.2});
   a.add(9, {2.0, 0.0, 0.0});
   a.add(4, {0.5});
@@ -50,7 +51,7 @@ TEST(SnapshotWarmStart, CarriesEachContactsCorrectionByIdentity) {
   // the loop's converged solve on a: every contact moved from f*
   const std::vector<double> solved = {1.5, 0.3, 0.2, 2.25, -0.1, 0.0, 0.75};
   // b: the contacts in another order, a new one (11), and 4 with friction rows now
-  Problem b;
+  WarmStartProblem b;
   b.add(9, {3.0, 0.0, 0.5});
   b.add(11, {0.4, 0.0, 0.0});
   b.add(7, {1.2, 0.0, 0.0});
@@ -67,11 +68,11 @@ TEST(SnapshotWarmStart, CarriesEachContactsCorrectionByIdentity) {
 
 TEST(SnapshotWarmStart, WithoutAConvergedSolveNothingIsCarried) {
   SnapshotWarmStart w(4, 12);
-  Problem a;
+  WarmStartProblem a;
   a.add(1, {1.0, 0.0, 0.0});
   std::vector<double> f;
   adopt(w, a, nullptr, f);
-  Problem b;
+  WarmStartProblem b;
   b.add(1, {2.0, 0.0, 0.0});
   EXPECT_EQ(adopt(w, b, nullptr, f), 0);
   EXPECT_EQ(f, b.f_star);
@@ -79,14 +80,14 @@ TEST(SnapshotWarmStart, WithoutAConvergedSolveNothingIsCarried) {
 
 TEST(SnapshotWarmStart, TheLastSolveMayBeTheOutputArray) {
   SnapshotWarmStart w(4, 12);
-  Problem a;
+  WarmStartProblem a;
   a.add(1, {1.0, 0.0, 0.0});
   a.add(2, {1.0, 0.0, 0.0});
   std::vector<double> f(6);
   w.adopt(a.contacts(), a.rows(), a.row_offset.data(), a.ids.data(), a.f_star.data(), nullptr,
           f.data());
   f = {1.5, 0.1, 0.0, 0.5, 0.0, 0.0};   // the loop's solve, in place
-  Problem b;   // the two contacts swapped
+  WarmStartProblem b;                   // the two contacts swapped
   b.add(2, {2.0, 0.0, 0.0});
   b.add(1, {3.0, 0.0, 0.0});
   EXPECT_EQ(w.adopt(b.contacts(), b.rows(), b.row_offset.data(), b.ids.data(), b.f_star.data(),
@@ -97,20 +98,20 @@ TEST(SnapshotWarmStart, TheLastSolveMayBeTheOutputArray) {
 
 TEST(SnapshotWarmStart, ACorruptOrOversizedSnapshotIsNeitherCarriedIntoNorRemembered) {
   SnapshotWarmStart w(2, 6);
-  Problem a;
+  WarmStartProblem a;
   a.add(1, {1.0, 0.0, 0.0});
   std::vector<double> f;
   adopt(w, a, nullptr, f);
   const std::vector<double> solved = {2.0, 0.0, 0.0};
   // row offsets that step by 4 rows: f* only, and forgotten
-  Problem bad;
+  WarmStartProblem bad;
   bad.add(1, {1.0, 0.0, 0.0, 0.0});
   EXPECT_EQ(adopt(w, bad, solved.data(), f), 0);
   EXPECT_EQ(f, bad.f_star);
   EXPECT_EQ(adopt(w, a, solved.data(), f), 0);   // nothing remembered to carry from
   // more contacts than the capacity: the rows that fit are f*, nothing carried or remembered
   adopt(w, a, nullptr, f);
-  Problem big;
+  WarmStartProblem big;
   for (std::uint64_t id = 1; id <= 3; ++id) big.add(id, {1.0});
   std::vector<double> out(3, -99.0);
   EXPECT_EQ(w.adopt(big.contacts(), big.rows(), big.row_offset.data(), big.ids.data(),
@@ -122,7 +123,7 @@ TEST(SnapshotWarmStart, ACorruptOrOversizedSnapshotIsNeitherCarriedIntoNorRememb
 
 TEST(SnapshotWarmStart, ResetForgetsThePreviousSnapshot) {
   SnapshotWarmStart w(4, 12);
-  Problem a;
+  WarmStartProblem a;
   a.add(1, {1.0, 0.0, 0.0});
   std::vector<double> f;
   adopt(w, a, nullptr, f);
@@ -142,7 +143,7 @@ TEST(SnapshotWarmStart, FindsEveryIdentityOverManySnapshots) {
   std::vector<double> f;
   std::vector<double> solved;
   for (int s = 0; s < 50; ++s) {
-    Problem p;
+    WarmStartProblem p;
     // half the contacts persist (ids 0..149 << 32), half are new each snapshot
     for (int c = 0; c < kContacts; ++c) {
       const std::uint64_t id = c % 2 == 0 ? (static_cast<std::uint64_t>(c) << 32)
