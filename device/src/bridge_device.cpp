@@ -53,8 +53,6 @@ DeviceInfo BridgeDevice::info() const {
   DeviceInfo i;
   i.model = "bridge " + bind_ + ":" + std::to_string(port_);
   i.max_force_n = max_force_n_;
-  i.max_stiffness_npm = 0.0;
-  i.workspace_radius_m = bridge::kMaxPositionM;
   i.has_rotation = has_rotation_;
   i.has_gripper = has_gripper_;
   return i;

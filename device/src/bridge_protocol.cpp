@@ -137,7 +137,7 @@ std::size_t encodeCommand(std::uint64_t seq, std::int64_t t_ns, const DeviceComm
   putHeader(w, kTypeCommand, seq, t_ns, kCommandPayloadBytes);
   w.put(c.force_n);
   w.put(c.torque_nm);
-  w.put(c.gripper_force_n);
+  w.put(0.0);  // reserved
   w.put(state_seq);
   return w.size();
 }
@@ -185,14 +185,12 @@ DecodeStatus decodeCommand(const unsigned char* buf, std::size_t size, Header* h
   DeviceCommand c;
   r.get(c.force_n);
   r.get(c.torque_nm);
-  c.gripper_force_n = r.get<double>();
+  const auto reserved = r.get<double>();
   const auto seq = r.get<std::uint64_t>();
-  if (!allFinite(c.force_n) || !allFinite(c.torque_nm) || !std::isfinite(c.gripper_force_n)) {
-    return DecodeStatus::kNonFinite;
-  }
+  if (reserved != 0.0) return DecodeStatus::kBadReserved;  // a NaN is not 0 either
+  if (!allFinite(c.force_n) || !allFinite(c.torque_nm)) return DecodeStatus::kNonFinite;
   if (!finiteWithin(c.force_n, kMaxCommandComponent) ||
-      !finiteWithin(c.torque_nm, kMaxCommandComponent) ||
-      !(std::abs(c.gripper_force_n) <= kMaxCommandComponent)) {
+      !finiteWithin(c.torque_nm, kMaxCommandComponent)) {
     return DecodeStatus::kOutOfRange;
   }
   *header = h;

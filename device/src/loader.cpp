@@ -113,8 +113,6 @@ class PluginDevice final : public Device {
     ci.model[sizeof(ci.model) - 1] = '\0';
     i.model = shared::printable(ci.model, sizeof(ci.model));
     i.max_force_n = ci.max_force_n;
-    i.max_stiffness_npm = ci.max_stiffness_npm;
-    i.workspace_radius_m = ci.workspace_radius_m;
     i.has_rotation = ci.has_rotation != 0;
     i.has_gripper = ci.has_gripper != 0;
     return i;
@@ -170,7 +168,6 @@ class PluginDevice final : public Device {
       c.force_n[i] = cmd.force_n[i];
       c.torque_nm[i] = cmd.torque_nm[i];
     }
-    c.gripper_force_n = cmd.gripper_force_n;
     int rc = TACTUS_IO_FAULT;
     try {
       rc = plugin_->write(handle_, &c);

@@ -22,7 +22,6 @@ ReplayDevice::ReplayDevice(const DeviceConfig& config) {
 DeviceInfo ReplayDevice::info() const {
   DeviceInfo i;
   i.model = "tactus trajectory replay";
-  i.workspace_radius_m = 1.0;
   i.has_rotation = true;
   i.has_gripper = true;
   return i;

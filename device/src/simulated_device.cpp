@@ -55,8 +55,6 @@ DeviceInfo SimulatedDevice::info() const {
   DeviceInfo i;
   i.model = "tactus simulated hand";
   i.max_force_n = max_force_;
-  i.max_stiffness_npm = 2000.0;
-  i.workspace_radius_m = 0.2;
   i.has_rotation = true;
   i.has_gripper = true;
   return i;

@@ -216,7 +216,6 @@ int faultInfo(TactusDeviceHandle, TactusDeviceInfo* out) {
   std::memset(out, 0, sizeof(*out));
   std::snprintf(out->model, sizeof(out->model), "fault plugin");
   out->max_force_n = 10.0;
-  out->workspace_radius_m = 0.2;
   return TACTUS_DEVICE_OK;
 }
 

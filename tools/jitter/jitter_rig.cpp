@@ -27,8 +27,6 @@ device::DeviceInfo CircleDevice::info() const {
   device::DeviceInfo i;
   i.model = model_;
   i.max_force_n = 8.0;
-  i.max_stiffness_npm = 2000.0;
-  i.workspace_radius_m = 0.1;
   return i;
 }
 

@@ -117,8 +117,6 @@ int springInfo(TactusDeviceHandle h, TactusDeviceInfo* out) {
   std::memset(out, 0, sizeof(*out));
   std::snprintf(out->model, sizeof(out->model), "example spring (k=%.0f N/m)", s->stiffness_npm);
   out->max_force_n = 5.0;
-  out->max_stiffness_npm = s->stiffness_npm;
-  out->workspace_radius_m = 0.1;
   return TACTUS_DEVICE_OK;
 }
 

@@ -104,14 +104,13 @@ void SceneParser::readHaptics(const YAML::Node& n, HapticsSpec* h, int instrumen
   // the hard ranges are haptic_server's own (a scene value reaches it through start.sh)
   using L = shared::HapticLimits;
   const std::string p = "haptics";
-  checkKeys(n, p, {"enabled", "rate", "device", "force_scale", "max_force", "watchdog_ms",
+  checkKeys(n, p, {"enabled", "rate", "force_scale", "max_force", "watchdog_ms",
                    "max_sweeps_per_tick", "nsgs_tolerance", "nsgs_anderson_depth",
                    "snapshot_blend_ms", "local_model", "workspace", "workspaces"});
   h->enabled = true;  // a haptics section turns haptics on unless it says otherwise
   boolean(n, p, "enabled", &h->enabled);
   number(n, p, "rate", &h->rate_hz, kPositive, Range{L::kMinRateHz, L::kMaxRateHz},
          Range{100.0, L::kMaxRateHz});
-  string(n, p, "device", &h->device);
   number(n, p, "force_scale", &h->force_scale, kNonNegative, kAtMost(L::kMaxForceScale),
          kNonNegativeUpTo(L::kMaxForceScale));
   number(n, p, "max_force", &h->max_force_n, kPositive, kAtMost(L::kMaxForceN), kPositiveUpTo(40.0));

@@ -101,6 +101,17 @@ std::string SceneParser::join(const std::string& path, const std::string& key) {
   return path.empty() ? key : path + "." + key;
 }
 
+namespace {
+// Keys that were scene keys once; a scene that still has one gets told where the setting went.
+const char* removedKeyHint(const std::string& field) {
+  if (field == "haptics.device") {
+    return "no longer a scene key: the device backend is chosen where haptic_server starts "
+           "(scripts/start.sh --device NAME|PATH.so, haptic_server --device); delete the line";
+  }
+  return nullptr;
+}
+}  // namespace
+
 // Unknown and duplicate keys of a map.
 void SceneParser::checkKeys(const YAML::Node& map, const std::string& path,
                             std::initializer_list<const char*> allowed) {
@@ -114,6 +125,10 @@ void SceneParser::checkKeys(const YAML::Node& map, const std::string& path,
     const std::string k = shared::printable(key.Scalar());
     if (std::find_if(allowed.begin(), allowed.end(),
                      [&](const char* a) { return k == a; }) == allowed.end()) {
+      if (const char* hint = removedKeyHint(join(path, k))) {
+        error(key, join(path, k), hint);
+        continue;
+      }
       std::string list;
       for (const char* a : allowed) list += (list.empty() ? "" : ", ") + std::string(a);
       error(key, join(path, k), "unknown key (expected one of: " + list + ")");

@@ -298,6 +298,30 @@ TEST_F(BridgeDeviceTest, CommandsGoBackToTheSenderAndZeroWhileForcesAreDisabled)
   EXPECT_EQ(device_->counters().commands_sent, 2u);
 }
 
+// The command's reserved word (once a gripper force that nothing rendered) is sent as 0 and a
+// command with anything else there is refused, as the state's reserved word is.
+TEST(BridgeProtocol, TheCommandsReservedWordIsZeroAndChecked) {
+  DeviceCommand cmd;
+  cmd.force_n = {1.0, 2.0, 3.0};
+  std::array<unsigned char, bridge::kCommandBytes> buf{};
+  ASSERT_EQ(bridge::encodeCommand(3, 1000, cmd, 2, buf.data()), bridge::kCommandBytes);
+  double reserved = -1.0;
+  std::memcpy(&reserved, buf.data() + bridge::kHeaderBytes + 48, 8);
+  EXPECT_EQ(reserved, 0.0);
+  bridge::Header h;
+  DeviceCommand got;
+  std::uint64_t state_seq = 0;
+  ASSERT_EQ(bridge::decodeCommand(buf.data(), buf.size(), &h, &got, &state_seq),
+            bridge::DecodeStatus::kOk);
+  EXPECT_EQ(got.force_n, cmd.force_n);
+  EXPECT_EQ(state_seq, 2u);
+  for (const double bad : {0.5, std::nan("")}) {
+    std::memcpy(buf.data() + bridge::kHeaderBytes + 48, &bad, 8);
+    EXPECT_EQ(bridge::decodeCommand(buf.data(), buf.size(), &h, &got, &state_seq),
+              bridge::DecodeStatus::kBadReserved);
+  }
+}
+
 TEST_F(BridgeDeviceTest, ReadAndWriteAllocateNothing) {
   DeviceState out;
   sender_->sendState(1, kT0, {0, 0, 0});

@@ -116,7 +116,6 @@ TEST(Scene, FullSceneParsesToTheExpectedValues) {
 
   EXPECT_TRUE(s.haptics.enabled);
   EXPECT_DOUBLE_EQ(s.haptics.rate_hz, 2000);
-  EXPECT_EQ(s.haptics.device, "replay");
   EXPECT_DOUBLE_EQ(s.haptics.force_scale, 0.5);
   EXPECT_DOUBLE_EQ(s.haptics.max_force_n, 6.0);
   EXPECT_DOUBLE_EQ(s.haptics.watchdog_ms, 40);
@@ -309,6 +308,11 @@ TEST(Scene, EachKindOfErrorHasItsExactMessage) {
       "s.yaml:4:1: timestep: unknown key (expected one of: time_step, duration, gravity, "
       "tissues, instrument, instruments, solver, haptics, output, obstacles, obstacle_contact, "
       "tissue_contact)");
+  // a key that was removed says where its setting went, not only that it is unknown
+  EXPECT_EQ(sceneError(kFullHead + "haptics: {rate: 1000, device: simulated}\n"),
+            "s.yaml:4:23: haptics.device: no longer a scene key: the device backend is chosen "
+            "where haptic_server starts (scripts/start.sh --device NAME|PATH.so, haptic_server "
+            "--device); delete the line");
   EXPECT_EQ(sceneError(kFullHead + "duration: ten\n"),
             "s.yaml:4:11: duration: must be a number (got 'ten')");
   EXPECT_EQ(sceneError(kFullHead + "gravity: [0, -9.81]\n"),

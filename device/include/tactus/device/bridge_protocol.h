@@ -15,7 +15,7 @@
 //     f64 pos_m[3], f64 quat_wxyz[4] (unit within 1e-3), f64 vel_mps[3], f64 angvel_radps[3],
 //     f64 gripper_rad, u32 buttons, u32 reserved (0)
 //   command payload, 64 bytes
-//     f64 force_n[3], f64 torque_nm[3], f64 gripper_force_n,
+//     f64 force_n[3], f64 torque_nm[3], f64 reserved (0),
 //     u64 state_seq      the newest state the server had accepted when it computed the force
 //
 // decode*() validate everything (sizes, magic, version, type, reserved fields, finite numbers,

@@ -35,19 +35,16 @@ struct DeviceState {
   std::uint32_t buttons = 0;                       ///< bit i = button i pressed
 };
 
-/// The wrench to render on the hand (device frame), plus the gripper force.
+/// The wrench to render on the hand (device frame).
 struct DeviceCommand {
   std::array<double, 3> force_n{};
   std::array<double, 3> torque_nm{};
-  double gripper_force_n = 0.0;
 };
 
 /// What the device can do (chai3d's spec struct).
 struct DeviceInfo {
   std::string model;
   double max_force_n = 0.0;          ///< continuous force limit; the haptic loop clamps to it
-  double max_stiffness_npm = 0.0;    ///< highest stable rendered stiffness
-  double workspace_radius_m = 0.0;
   bool has_rotation = false;
   bool has_gripper = false;
 };

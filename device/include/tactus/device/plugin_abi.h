@@ -26,7 +26,9 @@
  * against and struct_size its sizeof(TactusDevicePlugin). This program loads version 2 (the
  * table below) and version 1 (the same table without `halt`, struct_size
  * TACTUS_DEVICE_PLUGIN_V1_SIZE): a plugin built for version 1 loads unchanged. Any other version
- * or size is refused.
+ * or size is refused. The `reserved` fields of TactusDeviceCommand and TactusDeviceInfo held a
+ * gripper force, a stiffness and a workspace radius that nothing rendered or read; they keep
+ * their place, so plugins built against either version keep loading.
  *
  * Exceptions: the entries are C functions. A C++ plugin must not let an exception escape them;
  * if one does anyway, the loader catches it at this boundary (read/write then report a fault
@@ -69,14 +71,13 @@ typedef struct TactusDeviceState {
 typedef struct TactusDeviceCommand {
   double force_n[3];
   double torque_nm[3];
-  double gripper_force_n;
+  double reserved;           /* always 0 (the layout of ABI versions 1 and 2 kept) */
 } TactusDeviceCommand;
 
 typedef struct TactusDeviceInfo {
   char model[64];            /* NUL-terminated */
-  double max_force_n;
-  double max_stiffness_npm;
-  double workspace_radius_m;
+  double max_force_n;        /* continuous force limit; the haptic loop clamps to it */
+  double reserved[2];        /* ignored (the layout of ABI versions 1 and 2 kept) */
   int32_t has_rotation;      /* 0 or 1 */
   int32_t has_gripper;       /* 0 or 1 */
 } TactusDeviceInfo;

@@ -216,7 +216,6 @@ enum class HapticLocalModel { kAutomatic, kFull, kLinearized };
 struct HapticsSpec {
   bool enabled = false;
   double rate_hz = 1000.0;
-  std::string device = "simulated";
   double force_scale = 1.0;
   double max_force_n = 8.0;
   double watchdog_ms = 50.0;
