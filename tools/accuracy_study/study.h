@@ -80,8 +80,9 @@ struct Options {
 
 // ---- common pieces (study_common.cpp)
 
-/// Median of v (upper median for even sizes); 0 for an empty vector.
-double median(std::vector<double> v);
+/// Median of v (nearest rank: the lower median for even sizes, tactus/shared/percentiles.h); 0
+/// for an empty vector.
+double median(const std::vector<double>& v);
 const char* complianceName(sim::ComplianceKind k);
 /// "exact" | "warped" | "rest" | "uncoupled"; throws tactus::Error otherwise.
 sim::ComplianceKind parseCompliance(const std::string& s);

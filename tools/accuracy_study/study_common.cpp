@@ -6,16 +6,12 @@
 #include "study.h"
 #include "tactus/shared/error.h"
 #include "tactus/shared/file_io.h"
+#include "tactus/shared/percentiles.h"
 #include "tactus/sim/instrument.h"
 
 namespace tactus::study {
 
-double median(std::vector<double> v) {
-  if (v.empty()) return 0.0;
-  const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
-  std::nth_element(v.begin(), mid, v.end());
-  return *mid;
-}
+double median(const std::vector<double>& v) { return shared::percentile(v, 0.5); }
 
 const char* complianceName(sim::ComplianceKind k) {
   switch (k) {

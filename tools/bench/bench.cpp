@@ -25,6 +25,7 @@
 #include "tactus/shared/clock.h"
 #include "tactus/shared/error.h"
 #include "tactus/shared/nsgs.h"
+#include "tactus/shared/percentiles.h"
 #include "tactus/shared/pose.h"
 #include "tactus/shared/segment.h"
 #include "tactus/shared/snapshot_file.h"
@@ -36,14 +37,8 @@ namespace {
 
 using namespace tactus;
 
-// Nearest-rank percentile (q in [0, 1]) of unsorted values.
-double pct(std::vector<double> v, double q) {
-  if (v.empty()) return 0.0;
-  std::sort(v.begin(), v.end());
-  const double rank = std::clamp(std::ceil(q * static_cast<double>(v.size()) - 1e-9), 1.0,
-                                 static_cast<double>(v.size()));
-  return v[static_cast<std::size_t>(rank) - 1];
-}
+// Nearest-rank percentile of unsorted values (the project's one definition, shared/percentiles.h).
+double pct(const std::vector<double>& v, double q) { return shared::percentile(v, q); }
 
 // CPU time of the calling thread (excludes time the benchmark was preempted on a busy machine).
 std::int64_t threadCpuNs() {

@@ -22,6 +22,7 @@
 #include "tactus/shared/error.h"
 #include "tactus/shared/fclib.h"
 #include "tactus/shared/nsgs.h"
+#include "tactus/shared/percentiles.h"
 #include "tactus/shared/snapshot_file.h"
 #include "tactus/shared/tool_main.h"
 #ifdef TACTUS_HAVE_HDF5
@@ -123,12 +124,7 @@ std::vector<fs::path> scanDirectory(const fs::path& dir) {
   return text;
 }
 
-double median(std::vector<double> v) {
-  if (v.empty()) return 0.0;
-  std::sort(v.begin(), v.end());
-  const std::size_t n = v.size();
-  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
+double median(const std::vector<double>& v) { return tactus::shared::percentile(v, 0.5); }
 
 /// Siconos' copy of a problem: W in column-major dense or 3x3 sparse-block storage.
 class SiconosProblem {

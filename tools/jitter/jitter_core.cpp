@@ -15,31 +15,6 @@
 
 namespace tactus::haptic::jitter {
 
-double nearestRank(const std::vector<double>& sorted, double q) {
-  if (sorted.empty()) return 0.0;
-  const auto n = static_cast<double>(sorted.size());
-  // rank = ceil(q n), clamped to [1, n]; a tiny slack keeps 0.9 * 10 = 9 from rounding up to 10
-  double rank = std::ceil(q * n - 1e-9);
-  rank = std::clamp(rank, 1.0, n);
-  return sorted[static_cast<std::size_t>(rank) - 1];
-}
-
-Percentiles summarize(std::vector<double> values) {
-  Percentiles p;
-  p.count = values.size();
-  if (values.empty()) return p;
-  std::sort(values.begin(), values.end());
-  p.p50 = nearestRank(values, 0.50);
-  p.p90 = nearestRank(values, 0.90);
-  p.p99 = nearestRank(values, 0.99);
-  p.p999 = nearestRank(values, 0.999);
-  p.max = values.back();
-  double sum = 0.0;
-  for (double v : values) sum += v;
-  p.mean = sum / static_cast<double>(values.size());
-  return p;
-}
-
 void JitterCollector::add(const shared::StatsRecord& r) {
   const std::int64_t tick_ns = r.finished_ns - r.woken_ns;
   period_error_us_.push_back(1e-3 * static_cast<double>(r.woken_ns - r.scheduled_ns));

@@ -22,26 +22,15 @@
 
 #include "tactus/shared/messages.h"
 #include "tactus/shared/segment.h"
+#include "tactus/shared/percentiles.h"
 #include "tactus/shared/stats_ring.h"
 
 namespace tactus::haptic::jitter {
 
-/// Nearest-rank percentiles of a sample: p_q is the ceil(q n)-th smallest value (1-based), so
-/// every reported figure is a value that occurred. count = 0: all zero.
-struct Percentiles {
-  std::size_t count = 0;
-  double p50 = 0.0;
-  double p90 = 0.0;
-  double p99 = 0.0;
-  double p999 = 0.0;
-  double max = 0.0;
-  double mean = 0.0;
-};
-
-/// Nearest-rank percentile of sorted values (q in [0, 1]; q = 0 gives the minimum).
-double nearestRank(const std::vector<double>& sorted, double q);
-/// Percentiles of `values` (taken by value: sorted in place).
-Percentiles summarize(std::vector<double> values);
+// Percentiles of the measured samples: the project's one definition (nearest rank).
+using shared::nearestRank;
+using shared::Percentiles;
+using shared::summarize;
 
 /// Aggregate of a run (all durations in microseconds).
 struct JitterReport {

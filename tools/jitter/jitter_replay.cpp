@@ -10,6 +10,7 @@
 
 #include "tactus/shared/clock.h"
 #include "tactus/shared/error.h"
+#include "tactus/shared/percentiles.h"
 #include "tactus/shared/rt.h"
 #include "tactus/haptic/local_model.h"
 
@@ -188,10 +189,7 @@ OfflineReplayReport replayOffline(const std::vector<shared::RecordedSnapshot>& s
     }
   }
   if (held.empty()) return rep;
-  std::vector<double> sorted = held;
-  std::nth_element(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(sorted.size() / 2),
-                   sorted.end());
-  rep.held_force_n = sorted[sorted.size() / 2];
+  rep.held_force_n = shared::percentile(held, 0.5);
   for (std::size_t j = 0; j < model_f.size(); ++j) {
     const double d = std::hypot(model_f[j][0] - full_f[j][0], model_f[j][1] - full_f[j][1],
                                 model_f[j][2] - full_f[j][2]);

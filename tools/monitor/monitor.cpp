@@ -15,6 +15,7 @@
 
 #include "tactus/shared/cli_checks.h"
 #include "tactus/shared/clock.h"
+#include "tactus/shared/percentiles.h"
 #include "tactus/shared/segment.h"
 
 namespace {
@@ -33,11 +34,6 @@ void sleepInterruptibly(double s) {
   }
 }
 
-double p99(std::vector<double>& v) {
-  if (v.empty()) return 0.0;
-  std::sort(v.begin(), v.end());
-  return v[static_cast<std::size_t>(0.99 * static_cast<double>(v.size() - 1))];
-}
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -152,7 +148,7 @@ int main(int argc, char** argv) {
       std::printf("[status] sim %6.1f Hz | haptic %7.1f Hz | contacts %3lld | %s | "
                   "tick p99 %7.1f us | wake p99 %7.1f us%s\n",
                   sim_hz, static_cast<double>(count) / dt, static_cast<long long>(newest.contacts),
-                  forces, p99(ticks_us), p99(period_err_us),
+                  forces, percentile(ticks_us, 0.99), percentile(period_err_us, 0.99),
                   (newest.flags & kStatsSnapshotStale) ? " | STALE" : "");
     }
     std::fflush(stdout);

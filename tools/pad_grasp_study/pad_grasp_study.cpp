@@ -14,6 +14,7 @@
 
 #include "support/pad_grasp.h"
 #include "tactus/shared/error.h"
+#include "tactus/shared/percentiles.h"
 #include "tactus/sim/scene.h"
 
 using tactus::test_support::ApproachPerturbation;
@@ -68,8 +69,6 @@ int main(int argc, char** argv) {
       a.offset_m += deeper +
                     1e-3 * Eigen::Vector3d(offset_mm_arg[0], offset_mm_arg[1], offset_mm_arg[2]);
       const auto r = tactus::test_support::runPadGrasp(spec, a);
-      std::vector<double> sweeps = r.sweeps;
-      std::sort(sweeps.begin(), sweeps.end());
       std::printf(
           "offset (%+.0f %+.0f %+.0f) mm roll %+3.0f deg: rise %6.1f %% (%d held nodes), smallest "
           "tet %.3f (tet %d at t = %.2f s), contacts max %d (%d distinct nodes held), unconverged "
@@ -77,7 +76,7 @@ int main(int argc, char** argv) {
           offset_mm.x(), offset_mm.y(), offset_mm.z(), a.roll_deg,
           100.0 * r.held_rise_m / r.tool_rise_m, r.held_nodes, r.min_volume_ratio,
           r.min_volume_tet, r.min_volume_ratio_t_s, r.max_contacts, r.max_distinct_nodes_held,
-          r.unconverged_steps, sweeps.empty() ? 0.0 : sweeps[sweeps.size() / 2],
+          r.unconverged_steps, tactus::shared::percentile(r.sweeps, 0.5),
           r.max_total_normal_n, r.max_load_n);
       std::fflush(stdout);
     }

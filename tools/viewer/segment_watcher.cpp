@@ -8,6 +8,7 @@
 #include <sstream>
 
 #include "tactus/shared/clock.h"
+#include "tactus/shared/percentiles.h"
 
 namespace tactus::viewer {
 namespace {
@@ -41,11 +42,6 @@ std::string jsonEscape(const std::string& in) {
   return out;
 }
 
-double percentile(std::vector<double> v, double p) {
-  if (v.empty()) return 0.0;
-  std::sort(v.begin(), v.end());
-  return v[static_cast<std::size_t>(p * static_cast<double>(v.size() - 1))];
-}
 
 }  // namespace
 
@@ -285,8 +281,8 @@ std::string SegmentWatcher::takeStatusJson(std::int64_t now_ns) {
     o << ",\"contacts\":" << newest_.contacts << ",\"force_n\":" << newest_.force_norm_n
       << ",\"sweeps\":" << newest_.sweeps << ",\"stale\":"
       << ((newest_.flags & shared::kStatsSnapshotStale) ? "true" : "false")
-      << ",\"period_error_us\":{\"p50\":" << percentile(err, 0.5)
-      << ",\"p99\":" << percentile(err, 0.99) << ",\"max\":"
+      << ",\"period_error_us\":{\"p50\":" << shared::percentile(err, 0.5)
+      << ",\"p99\":" << shared::percentile(err, 0.99) << ",\"max\":"
       << (err.empty() ? 0.0 : *std::max_element(err.begin(), err.end())) << ",\"n\":"
       << err.size() << ",\"edges\":[";
     constexpr std::size_t kBins = std::size(kPeriodErrorEdgesUs) + 1;

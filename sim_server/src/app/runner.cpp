@@ -18,33 +18,16 @@
 #include "tactus/shared/clock.h"
 #include "tactus/shared/error.h"
 #include "tactus/shared/file_io.h"
+#include "tactus/shared/percentiles.h"
 #include "tactus/shared/segment.h"
 #include "tactus/shared/snapshot_file.h"
 
 namespace tactus::sim {
 namespace {
 
-double percentile(std::vector<double> v, double p) {
-  if (v.empty()) return 0.0;
-  std::sort(v.begin(), v.end());
-  const double pos = p * static_cast<double>(v.size() - 1);
-  const auto lo = static_cast<std::size_t>(std::floor(pos));
-  const auto hi = std::min(lo + 1, v.size() - 1);
-  return v[lo] + (pos - static_cast<double>(lo)) * (v[hi] - v[lo]);
-}
-
 StageSummary summarise(const std::string& name, const std::vector<double>& v) {
-  StageSummary s;
-  s.name = name;
-  if (v.empty()) return s;
-  s.median_s = percentile(v, 0.5);
-  s.p90_s = percentile(v, 0.9);
-  s.p99_s = percentile(v, 0.99);
-  s.max_s = *std::max_element(v.begin(), v.end());
-  double sum = 0.0;
-  for (double x : v) sum += x;
-  s.mean_s = sum / static_cast<double>(v.size());
-  return s;
+  const shared::Percentiles p = shared::summarize(v);
+  return {name, p.p50, p.p90, p.p99, p.max, p.mean};
 }
 
 // A JSON string's content: quotes, backslashes and control characters escaped.
@@ -92,8 +75,8 @@ std::vector<StageSummary> RunStatistics::stages() const {
           summarise("total", total_)};
 }
 
-double RunStatistics::medianContacts() const { return percentile(contacts_, 0.5); }
-double RunStatistics::medianSweeps() const { return percentile(sweeps_, 0.5); }
+double RunStatistics::medianContacts() const { return shared::percentile(contacts_, 0.5); }
+double RunStatistics::medianSweeps() const { return shared::percentile(sweeps_, 0.5); }
 int RunStatistics::maxContacts() const {
   return contacts_.empty() ? 0 : static_cast<int>(*std::max_element(contacts_.begin(), contacts_.end()));
 }

@@ -44,7 +44,7 @@ struct RunOptions {
 void exportTrajectory(const SceneSpec& spec, const std::filesystem::path& csv, double dt_s = 0.01,
                       bool overwrite = false, int instrument = 0);
 
-/// Percentile summary of one stage over a run [s].
+/// Percentile summary of one stage over a run [s] (nearest rank, tactus/shared/percentiles.h).
 struct StageSummary {
   std::string name;
   double median_s = 0.0;
