@@ -141,8 +141,7 @@ HapticLoop::HapticLoop(std::span<device::Device* const> devices, const HapticSet
   }
 }
 
-HapticLoop::HapticLoop(device::Device& device, const HapticSettings& settings,
-                       UncheckedSettingsForTest)
+HapticLoop::HapticLoop(device::Device& device, const HapticSettings& settings, Unchecked)
     : settings_(settings), model_settings_(settings.localModel()) {
   channels_[0].device = &device;
   initLimits(channels_[0]);

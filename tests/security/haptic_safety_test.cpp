@@ -16,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include "support/haptic_loop_access.h"
 #include "support/scripted_device.h"
 #include "tactus/device/device.h"
 #include "tactus/haptic/haptic_loop.h"
@@ -148,7 +149,8 @@ TEST(HapticLoopProperty, EveryCommandIsFiniteAndWithinTheClampWhateverTheSetting
     s.render_torque = r.coin();
     LimitedDevice device;
     device.max_force_n = r.coin() ? r.mostly(0.0, 30.0) : 20.0;
-    haptic::HapticLoop loop(device, s, haptic::UncheckedSettingsForTest{});
+    const auto unchecked = haptic::HapticLoopTestAccess::unchecked(device, s);
+    haptic::HapticLoop& loop = *unchecked;
     double clamp = usableLimit(s.max_force_n, HapticSettingsLimits::kMaxForceN);
     if (std::isfinite(device.max_force_n) && device.max_force_n > 0.0) {
       clamp = std::min(clamp, device.max_force_n);

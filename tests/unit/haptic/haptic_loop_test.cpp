@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "../../support/alloc_counter.h"
+#include "../../support/haptic_loop_access.h"
 #include "../../support/haptic_segment_test.h"
 #include "../../support/scripted_device.h"
 #include "tactus/haptic/haptic_loop.h"
@@ -556,7 +557,8 @@ TEST_F(HapticLoopTest, AWithdrawnLinkIsNeverUsedEvenIfTheTickStalledWhileAdoptin
     AttachedSegment* link;
     bool would_free = false;
   } supervisor{&*loop_, link_b.get()};
-  loop_->setAdoptionHookForTest(
+  HapticLoopTestAccess::setAdoptionHook(
+      *loop_,
       [](void* context) {
         auto* s = static_cast<Supervisor*>(context);
         s->loop->offerLink(nullptr);                       // withdraw
@@ -572,7 +574,7 @@ TEST_F(HapticLoopTest, AWithdrawnLinkIsNeverUsedEvenIfTheTickStalledWhileAdoptin
   EXPECT_EQ(samples_b.latest().seq, 0u) << "the tick wrote into a link that may be freed";
   EXPECT_EQ(loop_->linkInUse(), nullptr);
   // the check can see writes: offered and not withdrawn, the link is adopted and written
-  loop_->setAdoptionHookForTest(nullptr, nullptr);
+  HapticLoopTestAccess::setAdoptionHook(*loop_, nullptr, nullptr);
   loop_->offerLink(link_b.get());
   tickFor(2);
   EXPECT_EQ(loop_->linkInUse(), link_b.get());

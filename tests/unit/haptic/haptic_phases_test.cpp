@@ -9,57 +9,16 @@
 #include <cmath>
 #include <vector>
 
+#include "../../support/haptic_loop_access.h"
 #include "../../support/haptic_segment_test.h"
 #include "../../support/scripted_device.h"
 #include "tactus/haptic/haptic_loop.h"
 #include "tactus/shared/clock.h"
 
 namespace tactus::haptic {
-
-// The tick's private phases, for these tests (a friend of HapticLoop).
-struct HapticLoopPhases {
-  static void adoptOfferedLink(HapticLoop& l) { l.adoptOfferedLink(); }
-  static device::IoStatus readDevice(HapticLoop& l, std::int64_t now, TickOutput& out) {
-    return l.readDevice(now, out);
-  }
-  static void publishSample(HapticLoop& l, std::int64_t now, device::IoStatus io) {
-    l.publishSample(now, io);
-  }
-  static void takeSnapshot(HapticLoop& l, std::int64_t now, TickOutput& out) {
-    l.takeSnapshot(now, 0, out);
-  }
-  // Prepares the newest snapshot (as the preparer thread would) and adopts it; its sequence.
-  static std::uint64_t prepareNewest(HapticLoop& l, AttachedSegment& link) {
-    (void)link.preparer.prepareNewest(l.model_settings_);
-    bool fresh = false;
-    const PreparedSnapshot* p = link.preparer.latest(&fresh);
-    if (fresh) link.model.adopt(p);
-    return p->seq();
-  }
-  // The local model on the adopted snapshot with device 0 at `device_pose`.
-  static void solveLocalModel(HapticLoop& l, AttachedSegment& link,
-                              const shared::Pose& device_pose, TickOutput& out) {
-    std::array<const shared::Pose*, shared::kMaxInstruments> poses{};
-    poses[0] = &device_pose;
-    l.solveLocalModel(link, poses, 0, out);
-  }
-  static void applySafetyChain(HapticLoop& l, TickOutput& out, std::array<double, 3>& force,
-                               std::array<double, 3>& torque) {
-    l.applySafetyChain(out, force, torque);
-  }
-  static void writeDevice(HapticLoop& l, const std::array<double, 3>& force,
-                          const std::array<double, 3>& torque) {
-    l.writeDevice(force, torque);
-  }
-  static void recordStats(HapticLoop& l, std::int64_t scheduled_ns, std::int64_t woken_ns,
-                          const TickOutput& out, const std::array<double, 3>& force) {
-    l.recordStats(scheduled_ns, woken_ns, out, force);
-  }
-};
-
 namespace {
 
-using P = HapticLoopPhases;
+using P = HapticLoopTestAccess;
 using test::ScriptedDevice;
 
 // A device whose writes fail.

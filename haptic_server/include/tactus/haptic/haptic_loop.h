@@ -255,9 +255,6 @@ struct TickOutput : DeviceTickOutput {
   std::uint64_t flags = 0;              ///< shared::StatsFlags
 };
 
-/// Tag for the test-only constructor that skips HapticSettings::validate().
-struct UncheckedSettingsForTest {};
-
 /// One device the loop serves: its backend, workspace mapping, and the state of its safety chain.
 struct DeviceChannel {
   device::Device* device = nullptr;
@@ -304,8 +301,6 @@ class HapticLoop {
   /// instrument i. Each gets its own clamp from its own info(). Throws tactus::Error on a bad
   /// count or null device.
   HapticLoop(std::span<device::Device* const> devices, const HapticSettings& settings);
-  /// Tests only: no validation, so the final guard can be exercised with nonsense settings.
-  HapticLoop(device::Device& device, const HapticSettings& settings, UncheckedSettingsForTest);
 
   /// One tick at time now_ns (scheduled_ns/woken_ns from the timer, for the stats record).
   /// Real-time: no allocation, lock, logging, exception.
@@ -345,13 +340,6 @@ class HapticLoop {
   double torqueLimitNm(int i = 0) const noexcept { return channel(i).torque_limit_nm; }
   int deviceCount() const noexcept { return device_count_; }
 
-  /// Tests only: called by the tick between its first read of the offered link and publishing
-  /// it as in use (to replay a supervisor acting while the real-time thread is stalled there).
-  void setAdoptionHookForTest(void (*hook)(void*), void* context) noexcept {
-    adoption_hook_ = hook;
-    adoption_context_ = context;
-  }
-
   /// Device i's workspace mapping (identity by default): configure() it before the first
   /// tick; setClutchRequest() from any thread.
   WorkspaceMapping& workspaceMapping(int i = 0) noexcept { return channel(i).mapping; }
@@ -360,10 +348,14 @@ class HapticLoop {
   shared::EventRing& events() noexcept { return events_; }
   const HapticSettings& settings() const noexcept { return settings_; }
 
-  /// Tests run the tick's phases one at a time (tests/unit/haptic/haptic_phases_test.cpp).
-  friend struct HapticLoopPhases;
+  /// The tests' access to the tick's phases, an unvalidated construction and the adoption hook
+  /// (tests/support/haptic_loop_access.h); nothing else uses them.
+  friend struct HapticLoopTestAccess;
 
  private:
+  struct Unchecked {};
+  /// No validation, so the final guard can be exercised with nonsense settings (tests).
+  HapticLoop(device::Device& device, const HapticSettings& settings, Unchecked);
   /// The local model on the adopted snapshot with device i at *poses[i] (nullptr: no pose, the
   /// device stays at x_h*): one solve under `deadline_ns`, the wrench on instrument i into
   /// out.device[i] (and device 0's into out). False when it gave no usable wrench (not solved,
@@ -387,38 +379,23 @@ class HapticLoop {
   };
   void pushRateLimited(NoisyEvent which, std::uint32_t code, std::int64_t now_ns, double a = 0.0,
                        double b = 0.0) noexcept;
-  // the tick's phases, in order (per device where they take a channel; the forms without one
-  // act on device 0, for the phase tests)
+  // the tick's phases, in order (per device where they take a channel)
   void adoptOfferedLink() noexcept;
   device::IoStatus readDevice(DeviceChannel& ch, int i, std::int64_t now,
                               TickOutput& out) noexcept;
-  device::IoStatus readDevice(std::int64_t now, TickOutput& out) noexcept {
-    return readDevice(channels_[0], 0, now, out);
-  }
   void publishSample(DeviceChannel& ch, int i, std::int64_t now, device::IoStatus io) noexcept;
-  void publishSample(std::int64_t now, device::IoStatus io) noexcept {
-    publishSample(channels_[0], 0, now, io);
-  }
   /// The newest prepared snapshot, its age, and the local model under `deadline_ns`.
   void takeSnapshot(std::int64_t now, std::int64_t deadline_ns, TickOutput& out) noexcept;
   /// After takeSnapshot: blends a new snapshot's wrench in (HapticSettings::snapshot_blend_ms).
   void blendSnapshot(bool switched, bool solved, TickOutput& out) noexcept;
   void writeDevice(DeviceChannel& ch, const std::array<double, 3>& force,
                    const std::array<double, 3>& torque) noexcept;
-  void writeDevice(const std::array<double, 3>& force,
-                   const std::array<double, 3>& torque) noexcept {
-    writeDevice(channels_[0], force, torque);
-  }
   void recordStats(std::int64_t scheduled_ns, std::int64_t woken_ns, const TickOutput& out,
                    const std::array<double, 3>& force) noexcept;
   /// `dev` holds the contact wrench on the channel's instrument (mapped to the device frame) on
   /// entry and the command on exit; flags go to `out`.
   void applySafetyChain(DeviceChannel& ch, int i, TickOutput& out, DeviceTickOutput& dev,
                         std::array<double, 3>& force, std::array<double, 3>& torque) noexcept;
-  void applySafetyChain(TickOutput& out, std::array<double, 3>& force,
-                        std::array<double, 3>& torque) noexcept {
-    applySafetyChain(channels_[0], 0, out, out, force, torque);
-  }
   void initLimits(DeviceChannel& ch);
   /// Closes device i's engage gate (an interruption): its held wrench fades out.
   void disengage(DeviceChannel& ch, int i) noexcept;
@@ -435,6 +412,8 @@ class HapticLoop {
   std::atomic<AttachedSegment*> offered_{nullptr};
   std::atomic<AttachedSegment*> in_use_{nullptr};
   AttachedSegment* link_ = nullptr;
+  /// called by the tick between its first read of the offered link and publishing it as in use
+  /// (tests replay a supervisor acting while the real-time thread is stalled there)
   void (*adoption_hook_)(void*) = nullptr;
   void* adoption_context_ = nullptr;
   std::int64_t watchdog_ns_ = 0;   ///< settings' watchdog (0 when not usable: always stale)
