@@ -8,7 +8,7 @@ namespace tactus::test {
 
 class ScriptedDevice : public device::Device {
  public:
-  device::DeviceInfo info() const override { return {"scripted", 20.0, 1e4, 0.2, true, true}; }
+  device::DeviceInfo info() const override { return {"scripted", 20.0, true, true}; }
   void open() override {}
   void calibrate() override {}
   void enableForces(bool) override {}
