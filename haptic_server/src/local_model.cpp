@@ -1378,27 +1378,25 @@ LocalModelResult LocalModel::solve(DevicePoses poses, const LocalModelSettings& 
     out.fallback = FallbackReason::kNotLinearized;   // wanted, but not available
   }
   if (linear) {
-    out.fallback = evaluateLinearization(settings);
-    if (out.fallback == FallbackReason::kNone) {
+    // the linearisation (or its corrected form) answered exactly: no sweep, no warm start kept
+    const auto exact = [&](LocalModelUsed used) {
       delta_valid_ = false;
-      out.used = LocalModelUsed::kLinearized;
+      out.used = used;
       out.status = shared::NsgsStatus::kConverged;
       out.error = 0.0;
       std::copy_n(delta_free_.data(), p.rows_, last_delta_free_.data());
       wrenches(out);
       out.elapsed_ns = shared::monotonicNs() - t0;
+    };
+    out.fallback = evaluateLinearization(settings);
+    if (out.fallback == FallbackReason::kNone) {
+      exact(LocalModelUsed::kLinearized);
       return out;
     }
     // a few contacts changed state: the linearisation with its active set corrected
     if (settings.active_set_correction && out.fallback != FallbackReason::kOutOfRange &&
         correctActiveSet(deadline_ns, out)) {
-      delta_valid_ = false;
-      out.used = LocalModelUsed::kCorrected;
-      out.status = shared::NsgsStatus::kConverged;
-      out.error = 0.0;
-      std::copy_n(delta_free_.data(), p.rows_, last_delta_free_.data());
-      wrenches(out);
-      out.elapsed_ns = shared::monotonicNs() - t0;
+      exact(LocalModelUsed::kCorrected);
       return out;
     }
     // fall back: NSGS from the prediction, whose W f + delta_free is in workspace_.delta
