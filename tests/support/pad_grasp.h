@@ -6,7 +6,10 @@
 //    closed (t = 2.95 s, before the lift); their mean rise from then to the end of the hold
 //    (5.8 s) against the tool's rise.
 //  * the smallest volume ratio (det of the deformed / rest edge matrix) over the tets that
-//    touch a node in contact, every step from the closing (2 s) to the end of the hold.
+//    touch a node in contact, every step from the closing (2 s) to the end of the hold; and over
+//    every tet of the mesh, every step from the start (an inversion anywhere).
+//  * the held nodes' rise against the tool's at each 0.1 s from the start of the lift (3 s), to
+//    see when a slip shows (what decides how long a run must be).
 //  * per contact step: NSGS status and sweeps, contacts, distinct tissue nodes, total normal
 //    force, the contact force the tool carries against gravity, and the geometric penetration
 //    after the step (fresh query).
@@ -17,6 +20,7 @@
 #include <cmath>
 #include <set>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "tactus/sim/fem.h"
@@ -25,10 +29,12 @@
 namespace tactus::test_support {
 
 /// A perturbed approach: every trajectory key after the settling (t > 1 s) moved by `offset_m`
-/// and rolled by `roll_deg` about the instrument's own axis (tool z).
+/// and rolled by `roll_deg` about the instrument's own axis (tool z, the jaws' axis); with
+/// grip_k_nmprad >= 0 the grasper's grip stiffness replaced (the scene's when negative).
 struct ApproachPerturbation {
   Eigen::Vector3d offset_m = Eigen::Vector3d::Zero();
   double roll_deg = 0.0;
+  double grip_k_nmprad = -1.0;
 };
 
 struct PadGraspResult {
@@ -38,6 +44,27 @@ struct PadGraspResult {
   double min_volume_ratio = 1.0;   ///< over the tets touching a node in contact
   double min_volume_ratio_t_s = 0.0;   ///< when min_volume_ratio was reached
   int min_volume_tet = -1;             ///< which tet (index in the mesh)
+  /// that tet's centroid then, in the tool's frame (z along the jaws, 0 at the hinge end) [m]
+  Eigen::Vector3d min_volume_tet_in_tool_m = Eigen::Vector3d::Zero();
+  /// over every tet of the mesh, every step from the start: the smallest volume ratio, which tet
+  /// and when; inverted_steps counts the steps that ended with a tet at a ratio <= 0
+  double min_volume_ratio_anywhere = 1.0;
+  int min_volume_tet_anywhere = -1;
+  double min_volume_ratio_anywhere_t_s = 0.0;
+  int inverted_steps = 0;
+  /// (t, held nodes' rise / tool's rise) at each 0.1 s from the start of the lift
+  std::vector<std::pair<double, double>> rise_ratio_trace;
+  /// why a grasp slips: the jaws' opening (0..1 of the full one) when they have closed (2.95 s);
+  /// from then to the end, the fewest contacts one jaw had at a step, and over the steps the
+  /// largest share of the friction cone used (sum |f_t| / sum mu f_n; 1: every contact slides)
+  /// and the largest fraction of contacts on their cone's boundary (|f_t| >= 0.99 mu f_n)
+  double opening_closed = 0.0;
+  int min_contacts_one_jaw_held = -1;
+  double max_friction_use_held = 0.0;
+  double max_sliding_fraction_held = 0.0;
+  /// the steps' own time (StepReport's total) in the script's phases: settling (to 1 s), approach
+  /// (to 2 s), closing (to 3 s), lift (to 4.5 s), hold (to the end) [s]
+  std::array<double, 5> step_s_by_phase{};
   /// over the nodes in contact: the volume of the node's tets (its one-ring patch), deformed /
   /// rest. Unlike the per-tet ratio it does not follow a sliver (liver_23k has tets of quality
   /// 0.004 in the lobe, 0.015 mm^3, that invert under gravity alone), only crushing
@@ -79,6 +106,46 @@ inline std::vector<ApproachPerturbation> testApproaches() {
           {Eigen::Vector3d(-0.003, 0.002, 0.0), 10.0}};
 }
 
+/// The grasp-anywhere grid on liver_grasp_20k and liver_grasp_23k (pad_grasp_study --grid; its
+/// corners are pad_grasp_test's grid tests): the grasp point moved over the lobe's free edge by
+/// up to 5 mm along the jaws (world x; + backs the jaws out, - pushes them deeper) and sideways
+/// along the edge (world y), the jaws rolled by up to 20 deg about their axis, at the scenes'
+/// grip (0.015 N m/rad) and at twice it (liver_grasp's 0.03). A central composite design per
+/// grip: the 8 corners (x, y, roll at +-5 mm, +-20 deg), the 6 axial points (one of them at its
+/// extreme, the others 0) and the centre: 30 approaches.
+inline constexpr double kGridOffsetM = 0.005;
+inline constexpr double kGridRollDeg = 20.0;
+inline constexpr double kGridGripsNmprad[2] = {0.015, 0.03};
+
+inline std::vector<ApproachPerturbation> gridApproaches() {
+  std::vector<ApproachPerturbation> out;
+  const double d = kGridOffsetM, r = kGridRollDeg;
+  for (double grip : kGridGripsNmprad) {
+    for (double sx : {-1.0, 1.0}) {
+      for (double sy : {-1.0, 1.0}) {
+        for (double sr : {-1.0, 1.0}) out.push_back({Eigen::Vector3d(sx * d, sy * d, 0.0), sr * r, grip});
+      }
+    }
+    for (double s : {-1.0, 1.0}) {
+      out.push_back({Eigen::Vector3d(s * d, 0.0, 0.0), 0.0, grip});
+      out.push_back({Eigen::Vector3d(0.0, s * d, 0.0), 0.0, grip});
+      out.push_back({Eigen::Vector3d::Zero(), s * r, grip});
+    }
+    out.push_back({Eigen::Vector3d::Zero(), 0.0, grip});
+  }
+  return out;
+}
+
+/// The grid's corners pad_grasp_test runs on each mesh (six of the 16: every factor at both of
+/// its extremes three times).
+inline std::vector<ApproachPerturbation> gridTestApproaches() {
+  const double d = kGridOffsetM, r = kGridRollDeg;
+  const double light = kGridGripsNmprad[0], firm = kGridGripsNmprad[1];
+  return {{Eigen::Vector3d(-d, -d, 0.0), -r, light}, {Eigen::Vector3d(d, d, 0.0), r, light},
+          {Eigen::Vector3d(-d, d, 0.0), -r, light},  {Eigen::Vector3d(d, -d, 0.0), -r, firm},
+          {Eigen::Vector3d(-d, d, 0.0), r, firm},    {Eigen::Vector3d(d, -d, 0.0), r, firm}};
+}
+
 inline sim::SceneSpec perturbedScene(sim::SceneSpec spec, const ApproachPerturbation& p) {
   const Eigen::Quaterniond roll(
       Eigen::AngleAxisd(p.roll_deg * M_PI / 180.0, Eigen::Vector3d::UnitZ()));
@@ -87,17 +154,44 @@ inline sim::SceneSpec perturbedScene(sim::SceneSpec spec, const ApproachPerturba
     k.pose.position_m += p.offset_m;
     k.pose.orientation = (k.pose.orientation * roll).normalized();
   }
+  if (p.grip_k_nmprad >= 0.0) spec.instrument.grip_k_nmprad = p.grip_k_nmprad;
   return spec;
 }
 
+/// A run's state at the end of the settling (t = 1 s) and what was measured until then: every
+/// perturbed approach of the scene starts from it (a perturbation changes the script after 1 s
+/// only, and the grip only acts once the jaws touch), which saves each the settling's 100 steps.
+struct SettledStart {
+  std::string state;          ///< Simulation::saveState at 1 s
+  PadGraspResult so_far;
+};
+
+PadGraspResult runPadGrasp(const sim::SceneSpec& scene, const ApproachPerturbation& p,
+                           double end_s = 5.8, const SettledStart* start = nullptr,
+                           std::string* end_state = nullptr);
+
+/// The scene's settling, once (see SettledStart).
+inline SettledStart settle(const sim::SceneSpec& scene) {
+  SettledStart s;
+  s.so_far = runPadGrasp(scene, {}, 1.0, nullptr, &s.state);
+  return s;
+}
+
+/// The scripted grasp with the perturbation `p` to end_s; from `start` (settle(scene)) instead of
+/// t = 0 when given; the simulation's state at the end into `end_state` when given.
 inline PadGraspResult runPadGrasp(const sim::SceneSpec& scene, const ApproachPerturbation& p,
-                                  double end_s = 5.8) {
+                                  double end_s, const SettledStart* start,
+                                  std::string* end_state) {
   sim::SceneSpec spec = perturbedScene(scene, p);
   spec.haptics.enabled = false;
   sim::Simulation sim(spec);
+  PadGraspResult out;
+  if (start != nullptr) {
+    sim.restoreState(start->state, "the settled state");
+    out = start->so_far;
+  }
   const sim::FemBody& body = sim.tissue(0);
   const Eigen::Vector3d up = -spec.gravity_mps2.value_or(Eigen::Vector3d(0, 0, -1)).normalized();
-  PadGraspResult out;
   // node -> tets (CSR) for the tets in the jaws
   const auto& tets = body.mesh().tets;
   std::vector<int> node_tet_offset(static_cast<std::size_t>(body.nodeCount()) + 1, 0);
@@ -112,6 +206,8 @@ inline PadGraspResult runPadGrasp(const sim::SceneSpec& scene, const ApproachPer
       for (int v : tets[t]) node_tet[static_cast<std::size_t>(fill[static_cast<std::size_t>(v)]++)] = static_cast<int>(t);
     }
   }
+  std::vector<double> rest_volume6(tets.size());   // all positive in a valid mesh
+  for (std::size_t i = 0; i < tets.size(); ++i) rest_volume6[i] = tetVolume6(body.restPositions(), tets[i]);
   std::vector<int> held;
   double held_z0 = 0.0, tool_z0 = 0.0;
   auto heldZ = [&] {
@@ -129,9 +225,15 @@ inline PadGraspResult runPadGrasp(const sim::SceneSpec& scene, const ApproachPer
     return nodes;
   };
   const int steps = static_cast<int>(std::lround(end_s / spec.time_step_s));
-  for (int k = 0; k < steps; ++k) {
+  for (long k = sim.stepIndex(); k < steps; ++k) {
     sim.setDeviceTarget(sim.scriptedTarget(sim.time()));
+    const double t_before = sim.time();
     const sim::StepReport r = sim.step();
+    out.step_s_by_phase[t_before < 1.0 - 1e-9   ? 0
+                        : t_before < 2.0 - 1e-9 ? 1
+                        : t_before < 3.0 - 1e-9 ? 2
+                        : t_before < 4.5 - 1e-9 ? 3
+                                                : 4] += r.times.total_s;
     if (r.contacts > 0) {
       ++out.contact_steps;
       if (r.nsgs.status != shared::NsgsStatus::kConverged) ++out.unconverged_steps;
@@ -177,6 +279,10 @@ inline PadGraspResult runPadGrasp(const sim::SceneSpec& scene, const ApproachPer
             out.min_volume_ratio = ratio;
             out.min_volume_ratio_t_s = t;
             out.min_volume_tet = node_tet[static_cast<std::size_t>(i)];
+            Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+            for (int n : tet) centroid += 0.25 * body.positions().segment<3>(3 * n);
+            const shared::Pose& tool = sim.instrument()->pose();
+            out.min_volume_tet_in_tool_m = tool.rot.conjugate() * (centroid - tool.pos_m);
           }
           patch += tetVolume6(body.positions(), tet);
           patch_rest += tetVolume6(body.restPositions(), tet);
@@ -184,14 +290,64 @@ inline PadGraspResult runPadGrasp(const sim::SceneSpec& scene, const ApproachPer
         if (patch_rest > 0.0) out.min_patch_volume_ratio = std::min(out.min_patch_volume_ratio, patch / patch_rest);
       }
     }
+    if (t > 2.95 - 0.5 * spec.time_step_s && sim.instrument() != nullptr) {   // the grip's contacts
+      const sim::ContactProblemData& prob = sim.lastProblem();
+      const auto features = sim.instrument()->features();
+      std::array<int, 2> per_jaw{0, 0};
+      double ft_sum = 0.0, cone_sum = 0.0;
+      int sliding = 0;
+      for (int c = 0; c < prob.contacts; ++c) {
+        const auto cs = static_cast<std::size_t>(c);
+        const auto feature = static_cast<std::size_t>((prob.contact_id[cs] >> 32) & 0xFFFFFFu);
+        if (feature < features.size() && features[feature].part >= 0 && features[feature].part < 2) {
+          ++per_jaw[static_cast<std::size_t>(features[feature].part)];
+        }
+        const int row = prob.row_offset[cs];
+        if (prob.row_offset[cs + 1] - row < 3) continue;
+        const double fn = prob.f[row];
+        const double ft = std::hypot(prob.f[row + 1], prob.f[row + 2]);
+        ft_sum += ft;
+        cone_sum += prob.mu[cs] * fn;
+        if (fn > 0.0 && ft >= 0.99 * prob.mu[cs] * fn) ++sliding;
+      }
+      const int fewest = std::min(per_jaw[0], per_jaw[1]);
+      if (out.min_contacts_one_jaw_held < 0 || fewest < out.min_contacts_one_jaw_held) {
+        out.min_contacts_one_jaw_held = fewest;
+      }
+      if (cone_sum > 0.0) out.max_friction_use_held = std::max(out.max_friction_use_held, ft_sum / cone_sum);
+      if (prob.contacts > 0) {
+        out.max_sliding_fraction_held = std::max(
+            out.max_sliding_fraction_held, static_cast<double>(sliding) / prob.contacts);
+      }
+    }
+    bool inverted = false;   // every tet, every step
+    for (std::size_t i = 0; i < tets.size(); ++i) {
+      const double v6 = tetVolume6(body.positions(), tets[i]);
+      if (v6 < out.min_volume_ratio_anywhere * rest_volume6[i]) {
+        out.min_volume_ratio_anywhere = v6 / rest_volume6[i];
+        out.min_volume_tet_anywhere = static_cast<int>(i);
+        out.min_volume_ratio_anywhere_t_s = t;
+      }
+      inverted = inverted || v6 <= 0.0;
+    }
+    if (inverted) ++out.inverted_steps;
+    if (t > 3.0 - 0.5 * spec.time_step_s && !held.empty()) {
+      const long tenth = std::lround(10.0 * t);
+      if (std::abs(t - 0.1 * static_cast<double>(tenth)) < 0.5 * spec.time_step_s) {
+        const double tool_rise = sim.instrument()->pose().pos_m.z() - tool_z0;
+        out.rise_ratio_trace.emplace_back(t, tool_rise > 1e-4 ? (heldZ() - held_z0) / tool_rise : 0.0);
+      }
+    }
     if (std::abs(t - 2.95) < 0.5 * spec.time_step_s) {   // jaws closed, before the lift
       const std::set<int> nodes = contactNodes();
       held.assign(nodes.begin(), nodes.end());
       out.held_nodes = static_cast<int>(held.size());
+      out.opening_closed = sim.instrument()->gripperOpening();
       held_z0 = heldZ();
       tool_z0 = sim.instrument()->pose().pos_m.z();
     }
   }
+  if (end_state != nullptr) *end_state = sim.saveState();
   out.held_rise_m = heldZ() - held_z0;
   out.tool_rise_m = sim.instrument()->pose().pos_m.z() - tool_z0;
   return out;
