@@ -9,6 +9,9 @@ meta.csv from RESULTS_DIR and writes there:
   accuracy_pareto.png   force error against time per step / per tick, Pareto fronts
   accuracy_forces.png   contact force over time: compliance models; haptic models at one rate
 Run it with Debian's /usr/bin/python3 (matplotlib from python3-matplotlib).
+
+Example (scripts/accuracy-study runs it on its --out folder):
+  accuracy_report.py results/accuracy
 """
 import csv
 import math
@@ -387,6 +390,9 @@ Every rate (force error RMS against R1 / against R2):
 
 
 def main():
+    if len(sys.argv) == 2 and sys.argv[1] in ("-h", "--help"):
+        print(__doc__.strip())
+        return
     if len(sys.argv) != 2:
         sys.exit(__doc__)
     d = sys.argv[1]

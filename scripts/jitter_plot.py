@@ -11,11 +11,6 @@ import argparse
 import csv
 import sys
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-
 
 def read_columns(path, names):
     cols = {n: [] for n in names}
@@ -27,12 +22,18 @@ def read_columns(path, names):
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(
+        description=__doc__.splitlines()[0], formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog="Example:\n  jitter_plot.py jitter.csv jitter.png --baseline jitter_baseline.csv")
     ap.add_argument("records")
     ap.add_argument("out")
     ap.add_argument("--title", default="haptic tick timing")
     ap.add_argument("--baseline", default=None, help="bare-loop CSV (tick,late_ns)")
     a = ap.parse_args()
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
 
     c = read_columns(a.records, ["woken_ns", "period_error_ns", "tick_ns", "solve_ns"])
     if not c["woken_ns"]:

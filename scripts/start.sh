@@ -13,6 +13,10 @@
 #        --run-dir: logs there (default run/<date-time>, which run/latest then points to)
 #        --no-build: use the binaries already built. Exit status: 0 after a clean run or stop,
 #        else the failing daemon's (sim_server's, or haptic_server's when it stopped early).
+#
+# Examples:
+#   scripts/start.sh
+#   scripts/start.sh scenes/liver_bimanual.yaml --duration 10 --view
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 source "$root/scripts/env.sh"
@@ -29,7 +33,7 @@ rate=""
 view=0
 view_port=8090
 build_first=1
-usage() { sed -n '2,14p' "$0" | sed 's/^# \{0,1\}//'; }
+usage() { sed -n '2,19p' "$0" | sed 's/^# \{0,1\}//'; }
 while [[ $# -gt 0 ]]; do
   case "$1" in
     -h|--help) usage; exit 0 ;;

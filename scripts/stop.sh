@@ -2,8 +2,14 @@
 # Stops a pair started by scripts/start.sh (the latest run, or the run directory given). A pid
 # file is trusted only while it names a running sim_server or haptic_server: a stale one (its
 # process gone, its pid reused by another program) is removed and nothing is killed.
+#
+# Usage: scripts/stop.sh [RUN_DIR]
+#
+# Example:
+#   scripts/stop.sh run/latest
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+if [[ "${1:-}" == "-h" || "${1:-}" == "--help" ]]; then sed -n '2,9p' "$0" | sed 's/^# \{0,1\}//'; exit 0; fi
 run_dir="${1:-$root/run/latest}"
 [[ -d "$run_dir" ]] || { echo "stop.sh: no run directory $run_dir" >&2; exit 1; }
 stopped=0

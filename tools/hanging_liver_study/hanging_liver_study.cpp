@@ -14,6 +14,9 @@
 int main(int argc, char** argv) {
   using tactus::sim::MaterialLaw;
   CLI::App app{"hanging_liver_study: inverted tetrahedra of a liver hanging from its base"};
+  app.footer(
+      "Example:\n"
+      "  hanging_liver_study --mesh scenes/meshes/liver_23k.msh --law invertible_neo_hookean");
   std::vector<std::string> meshes;
   std::vector<std::string> laws{"corotational", "invertible_neo_hookean"};
   tactus::test_support::HangingLiverOptions o;
