@@ -378,7 +378,7 @@ PYBIND11_MODULE(tactus, m) {
   m.def("write_fclib", &tactus::writeFclib, "path"_a, "problem"_a, "overwrite"_a = false,
         "Writes a problem in FCLIB's text form (never over an existing file unless overwrite)");
   m.def("read_snapshots", &tactus::readSnapshots, "path"_a,
-        "The problems of a snapshot file (tactus-bench --record-snapshots)");
+        "The problems of a snapshot file (sim_server --record-snapshots)");
   m.def(
       "write_snapshots",
       [](const std::filesystem::path& path, const std::vector<tactus::ContactProblem>& problems,

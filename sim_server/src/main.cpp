@@ -30,8 +30,9 @@ void onSignal(int signo) {
 int main(int argc, char** argv) {
   CLI::App app{"Tactus simulation server: FEM tissue, contact and friction, god-object instrument"};
   app.footer(
-      "Example:\n"
-      "  sim_server scenes/liver_grasp.yaml   (scripts/start.sh starts it with haptic_server)");
+      "Examples:\n"
+      "  sim_server scenes/liver_grasp.yaml   (scripts/start.sh starts it with haptic_server)\n"
+      "  sim_server scenes/liver_grasp.yaml --steps 800 --record-snapshots grasp.snap");
   tactus::sim::RunOptions opt;
   std::string log_level = "info";
   app.add_option("scene", opt.scene_path, "Scene file (YAML)")->required()->check(CLI::ExistingFile);
@@ -60,12 +61,13 @@ int main(int argc, char** argv) {
                "Print haptic_server's options for the scene's haptics section (workspace "
                "mapping), one per line, and exit");
   app.add_option("--record-snapshots", opt.record_snapshots,
-                 "Record every step's contact snapshot (simulated time stamps) to FILE, written "
-                 "at the end of the run, for tactus-jitter --replay FILE");
+                 "Record every step's contact snapshot (simulated time stamps) to a new FILE, "
+                 "written at the end of the run, for tactus-jitter --replay FILE (offline with "
+                 "--steps, or as a daemon)");
   app.add_option("--record-snapshots-max-mb", opt.record_snapshots_max_mb,
                  "Stop recording snapshots (the run goes on) before the file passes this size "
                  "[MiB]; 2048 is what tactus-jitter --replay reads")
-      ->check(CLI::Range(1, 2048))->capture_default_str();
+      ->check(CLI::Range(1, tactus::sim::kMaxRecordingMiB))->capture_default_str();
   app.add_flag("--overwrite", opt.overwrite,
                "Replace existing --stats-json / --export-trajectory / --record-snapshots files "
                "and an earlier "

@@ -338,7 +338,7 @@ int runBounded(const std::string& cmd, int timeout_s) {
 }
 
 // A 1 s run of the cube pressed by the probe (tests/data/scenes/press_cube.yaml with a scripted
-// press), recorded by tactus-bench. writePressScene() writes the scene.
+// press), recorded by sim_server --steps. writePressScene() writes the scene.
 fs::path writePressScene(const TempDir& dir) {
   const std::string scene_text = readAll(fs::path(TACTUS_TEST_DATA_DIR) / "scenes/press_cube.yaml");
   std::string scene = scene_text;
@@ -363,16 +363,17 @@ fs::path writePressScene(const TempDir& dir) {
 fs::path recordPressCube(const TempDir& dir) {
   const fs::path scene_file = writePressScene(dir);
   const fs::path snap = dir.path() / "press.snap";
-  const std::string cmd = std::string(TACTUS_BINARY_DIR) + "/tools/bench/tactus-bench '" +
-                          scene_file.string() + "' --record-snapshots '" + snap.string() +
-                          "' > '" + (dir.path() / "bench.log").string() + "' 2>&1";
-  EXPECT_EQ(runBounded(cmd, 120), 0) << readAll(dir.path() / "bench.log");
+  const std::string cmd = std::string(TACTUS_BINARY_DIR) + "/sim_server/sim_server '" +
+                          scene_file.string() + "' --steps 100 --record-snapshots '" +
+                          snap.string() + "' > '" + (dir.path() / "sim.log").string() + "' 2>&1";
+  EXPECT_EQ(runBounded(cmd, 120), 0) << readAll(dir.path() / "sim.log");
   return snap;
 }
 
-// tactus-bench sizes its segment as sim_server does (the obstacles' and tissue pairs' contacts
-// too): with room for 5 instrument contacts, three boxes pressing the cube's sides give more
-// obstacle contacts than that, and every step's problem is published and recorded whole (a
+// tactus-bench's segment and sim_server's recording are sized as sim_server's segment (the
+// obstacles' and tissue pairs' contacts too): with room for 5 instrument contacts, three boxes
+// pressing the cube's sides give more obstacle contacts than that, and every step's problem is
+// published (the bench stops with an error on one that does not fit) and recorded whole (a
 // segment sized for the instrument alone dropped them: empty snapshots).
 TEST(JitterReplay, TheBenchPublishesObstacleContactsBeyondTheInstrumentsCapacity) {
   TempDir dir;
@@ -394,10 +395,30 @@ TEST(JitterReplay, TheBenchPublishesObstacleContactsBeyondTheInstrumentsCapacity
   writeAll(scene_file, scene);
   const fs::path snap = dir.path() / "side.snap";
   const fs::path log = dir.path() / "bench.log";
-  const std::string cmd = std::string(TACTUS_BINARY_DIR) + "/tools/bench/tactus-bench '" +
-                          scene_file.string() + "' --steps 20 --record-snapshots '" +
-                          snap.string() + "' > '" + log.string() + "' 2>&1";
-  ASSERT_EQ(runBounded(cmd, 120), 0) << readAll(log);
+  const fs::path json = dir.path() / "bench.json";
+  const std::string bench = std::string(TACTUS_BINARY_DIR) + "/tools/bench/tactus-bench '" +
+                            scene_file.string() + "' --steps 20 --json '" + json.string() +
+                            "' > '" + log.string() + "' 2>&1";
+  ASSERT_EQ(runBounded(bench, 120), 0) << readAll(log);
+  const std::string js = readAll(json);
+  const std::string key = "\"contacts\": {\"median\": ";
+  const std::size_t at = js.find(key);
+  ASSERT_NE(at, std::string::npos) << js;
+  const std::size_t max_at = js.find("\"max\": ", at);
+  ASSERT_NE(max_at, std::string::npos) << js;
+  EXPECT_GT(std::stod(js.substr(max_at + 7)), 5.0) << js;
+  const std::string record = std::string(TACTUS_BINARY_DIR) + "/sim_server/sim_server '" +
+                             scene_file.string() + "' --steps 20 --record-snapshots '" +
+                             snap.string() + "' > '" + log.string() + "' 2>&1";
+  ASSERT_EQ(runBounded(record, 120), 0) << readAll(log);
+  // the bench records nothing itself: asked to, it names sim_server's option and fails
+  EXPECT_NE(runBounded(std::string(TACTUS_BINARY_DIR) + "/tools/bench/tactus-bench '" +
+                           scene_file.string() + "' --record-snapshots '" +
+                           (dir.path() / "b.snap").string() + "' > '" + log.string() + "' 2>&1",
+                       120),
+            0);
+  EXPECT_NE(readAll(log).find("sim_server"), std::string::npos) << readAll(log);
+  EXPECT_FALSE(fs::exists(dir.path() / "b.snap"));
   const auto snaps = shared::readSnapshotFile(snap);
   ASSERT_EQ(snaps.size(), 20u);
   int most = 0, obstacle_contacts = 0;

@@ -25,6 +25,7 @@
 
 #include "tactus/sim/fem.h"
 #include "tactus/sim/pipeline.h"
+#include "tactus/sim/runner.h"
 
 namespace tactus::test_support {
 
@@ -224,11 +225,9 @@ inline PadGraspResult runPadGrasp(const sim::SceneSpec& scene, const ApproachPer
     }
     return nodes;
   };
-  const int steps = static_cast<int>(std::lround(end_s / spec.time_step_s));
-  for (long k = sim.stepIndex(); k < steps; ++k) {
-    sim.setDeviceTarget(sim.scriptedTarget(sim.time()));
-    const double t_before = sim.time();
-    const sim::StepReport r = sim.step();
+  // the scripted grasp through the headless runner (tactus/sim/runner.h), measured each step
+  double t_before = sim.time();   // the step's start
+  const auto measure = [&](long, const sim::StepReport& r) {
     out.step_s_by_phase[t_before < 1.0 - 1e-9   ? 0
                         : t_before < 2.0 - 1e-9 ? 1
                         : t_before < 3.0 - 1e-9 ? 2
@@ -346,7 +345,10 @@ inline PadGraspResult runPadGrasp(const sim::SceneSpec& scene, const ApproachPer
       held_z0 = heldZ();
       tool_z0 = sim.instrument()->pose().pos_m.z();
     }
-  }
+    t_before = sim.time();
+  };
+  const long steps = std::lround(end_s / spec.time_step_s);
+  sim::runHeadless(sim, {.steps = steps - sim.stepIndex(), .after_step = measure});
   if (end_state != nullptr) *end_state = sim.saveState();
   out.held_rise_m = heldZ() - held_z0;
   out.tool_rise_m = sim.instrument()->pose().pos_m.z() - tool_z0;

@@ -7,8 +7,8 @@
 // (delta_free moved by J times a small device displacement, NSGS warm-started as the loop's first
 // tick on a snapshot: the simulation's f plus the correction carried from the previous snapshot,
 // shared/warm_start.h; the loop's sweep and time budget). --json writes everything for comparison
-// between commits. --record-snapshots FILE writes every published snapshot, stamped with the
-// simulated time, for tactus-jitter --replay FILE.
+// between commits. The scene runs through the headless runner (tactus/sim/runner.h), as
+// sim_server --steps does; sim_server --record-snapshots records the same snapshots.
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 #include <unistd.h>
@@ -31,6 +31,7 @@
 #include "tactus/shared/snapshot_file.h"
 #include "tactus/haptic/local_model.h"
 #include "tactus/sim/pipeline.h"
+#include "tactus/sim/runner.h"
 #include "tactus/sim/scene.h"
 
 namespace {
@@ -70,8 +71,6 @@ struct BenchOptions {
   long steps = 0;
   std::string json;
   std::string trace;
-  std::string record_snapshots;
-  bool overwrite = false;  ///< replace an existing --record-snapshots file
   double budget_us = 0.0;
   int tick_sweeps = 0;
   double displacement_mm = 0.2;
@@ -168,14 +167,6 @@ int run(const BenchOptions& o) {
   double load_at_max_fn = 0.0, max_load = 0.0, max_fn = -1.0;   // contact force on the tool against gravity [N]
   const Eigen::Vector3d up =
       spec.gravity_mps2 ? Eigen::Vector3d(-spec.gravity_mps2->normalized()) : Eigen::Vector3d::UnitZ();
-  std::unique_ptr<shared::SnapshotFileWriter> recorder;
-  if (!o.record_snapshots.empty()) {
-    shared::OutputOptions oo;
-    oo.overwrite = o.overwrite;
-    oo.overwrite_hint = "pass --overwrite";
-    recorder = std::make_unique<shared::SnapshotFileWriter>(o.record_snapshots, oo);
-  }
-  bool recorder_full = false;   // the recording stopped at the replay limit
   std::FILE* trace = nullptr;
   if (!o.trace.empty()) {
     trace = std::fopen(o.trace.c_str(), "w");
@@ -183,22 +174,12 @@ int run(const BenchOptions& o) {
     std::fprintf(trace, "step,t_s,contacts,rows,sim_sweeps,step_ms,tick_solve_us,tick_sweeps,groups,solve_ms\n");
   }
   const std::int64_t t0 = shared::monotonicNs();
-  for (long k = 0; k < steps; ++k) {
-    for (int i = 0; i < sim.instrumentCount(); ++i) {
-      sim.setDeviceTarget(i, sim.scriptedTarget(i, sim.time()));
-    }
-    const sim::StepReport r = sim.step();
-    if (!r.finite) throw NumericalError(fmt::format("step {}: the state became non-finite", k));
+  // each step of the headless runner: publish, the figures, the haptic tick on the snapshot
+  const auto afterStep = [&](long k, const sim::StepReport& r) {
     const std::int64_t tp = shared::monotonicNs();
     publishProblem(sim, pub, static_cast<std::uint64_t>(k + 1), spec.instrument.max_opening_rad);
     seg.beat(shared::Side::kSim);
     const double publish_s = 1e-9 * static_cast<double>(shared::monotonicNs() - tp);
-    if (recorder && !recorder_full && !recorder->append(sub.latest(), std::llround(sim.time() * 1e9))) {
-      spdlog::warn("--record-snapshots reached the replay limit ({} MiB) after {} snapshots: "
-                   "recording stopped, the file keeps them", recorder->bytes() >> 20,
-                   recorder->count());
-      recorder_full = true;
-    }
     stages[0].v.push_back(r.times.free_motion_s);
     fem_cg.push_back(r.fem_cg_iterations);
     fem_factorisations += r.fem_factorisations;
@@ -244,7 +225,7 @@ int run(const BenchOptions& o) {
     const shared::SnapshotView snap = sub.latest();
     if (snap.contacts() <= 0) {
       model.reset();
-      continue;
+      return;
     }
     const shared::PoseSample& xs = snap.header().device_pose;
     shared::Pose pose;
@@ -272,12 +253,12 @@ int run(const BenchOptions& o) {
                    1e-3 * static_cast<double>(res.elapsed_ns), res.sweeps, r.contact_groups,
                    1e3 * r.times.solve_contacts_s);
     }
-  }
+  };
+  const sim::HeadlessResult run =
+      sim::runHeadless(sim, {.steps = steps, .after_step = afterStep});
   if (trace != nullptr) std::fclose(trace);
-  if (recorder) {
-    recorder->commit();
-    std::printf("%llu snapshots recorded to %s\n",
-                static_cast<unsigned long long>(recorder->count()), o.record_snapshots.c_str());
+  if (run.end == sim::RunEnd::kNonFinite) {
+    throw NumericalError(fmt::format("step {}: the state became non-finite", run.steps - 1));
   }
   const double wall_s = 1e-9 * static_cast<double>(shared::monotonicNs() - t0);
 
@@ -390,17 +371,19 @@ int main(int argc, char** argv) {
       "tactus-bench: per-stage timing of a scene and the haptic tick's solve on its "
       "snapshots (headless, scripted instrument)"};
   app.footer(
+      "Snapshots for tactus-jitter --replay are recorded by sim_server (the same headless run):\n"
+      "  sim_server SCENE --steps N --record-snapshots FILE\n"
+      "\n"
       "Example:\n"
       "  tactus-bench scenes/liver_grasp.yaml --json bench.json");
   BenchOptions o;
+  // the one --record-snapshots is sim_server's: a hidden option that says so
+  std::string record_snapshots;
+  app.add_option("--record-snapshots", record_snapshots)->group("");
   app.add_option("scene", o.scene, "Scene YAML file")->required()->check(CLI::ExistingFile);
   app.add_option("--steps", o.steps, "Steps to run (default: the scene's duration / time step)");
   app.add_option("--json", o.json, "Write the results as JSON");
   app.add_option("--trace", o.trace, "Write one CSV row per step (contacts, sweeps, timings)");
-  app.add_option("--record-snapshots", o.record_snapshots,
-                 "Write every published contact snapshot (stamped with the simulated time) to a "
-                 "new FILE, for tactus-jitter --replay FILE");
-  app.add_flag("--overwrite", o.overwrite, "Replace an existing --record-snapshots file");
   app.add_option("--budget-us", o.budget_us,
                  "Haptic solve time budget [us] (default: 40 % of the scene's haptic period)");
   app.add_option("--tick-sweeps", o.tick_sweeps,
@@ -441,6 +424,11 @@ int main(int argc, char** argv) {
       ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error"}))
       ->capture_default_str();
   CLI11_PARSE(app, argc, argv);
+  if (!record_snapshots.empty()) {
+    std::fprintf(stderr, "tactus-bench: snapshots are recorded by sim_server: sim_server %s "
+                 "--steps N --record-snapshots %s\n", o.scene.c_str(), record_snapshots.c_str());
+    return 2;
+  }
   spdlog::set_level(spdlog::level::from_str(o.log_level));
   try {
     return run(o);

@@ -61,7 +61,7 @@ FclibProblem load(const fs::path& path) {
 }
 
 /// The `count` largest frictional problems (3 rows per contact) with at most max_contacts
-/// contacts (most contacts first, earliest on ties) of a snapshot file recorded by tactus-bench
+/// contacts (most contacts first, earliest on ties) of a snapshot file recorded by sim_server
 /// --record-snapshots: the simulation's own contact problems (one tissue's dense W), named
 /// FILE#INDEX.
 std::vector<FclibProblem> loadSnapshots(const fs::path& path, int count, int max_contacts) {
@@ -371,7 +371,7 @@ int run(int argc, char** argv) {
       ->check(CLI::IsMember({"auto", "dense", "blocks"}));
   int snapshot_count = 3;
   app.add_option("--snapshots-per-file", snapshot_count,
-                 "for .snap inputs (tactus-bench --record-snapshots): how many of the file's "
+                 "for .snap inputs (sim_server --record-snapshots): how many of the file's "
                  "largest frictional problems to run")
       ->capture_default_str()
       ->check(CLI::Range(1, 100000));

@@ -417,7 +417,7 @@ int main(int argc, char** argv) {
       "  tactus-jitter --segment tactus --duration 10 --baseline --plot jitter.png\n"
       "  tactus-jitter --synthetic 450 --duration 10 --baseline\n"
       "  tactus-jitter --synthetic 900 --baseline --baseline-mode after\n"
-      "  tactus-jitter --replay grasp.snap --loop --duration 10 --baseline   (tactus-bench "
+      "  tactus-jitter --replay grasp.snap --loop --duration 10 --baseline   (sim_server "
       "--record-snapshots)\n"
       "  tactus-jitter --synthetic 450 --duration 7 --reader none   (vs --reader live / busy)");
   Options o;
@@ -442,7 +442,7 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(3, 3000));
   app.add_option("--replay", o.replay,
                  "Replay mode: run the haptic loop in-process on the snapshots recorded in FILE "
-                 "(tactus-bench SCENE --record-snapshots FILE), published at their recorded times")
+                 "(sim_server SCENE --steps N --record-snapshots FILE), published at their recorded times")
       ->check(CLI::ExistingFile);
   app.add_flag("--loop", o.loop_replay, "Replay: start the recording over after its end");
   app.add_option("--rate", o.rate_hz, "Synthetic/replay: haptic loop rate [Hz]")

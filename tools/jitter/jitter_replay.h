@@ -1,6 +1,6 @@
 #pragma once
 // Replay mode of the jitter tool: the contact snapshots a run recorded (shared/snapshot_file.h,
-// tactus-bench --record-snapshots FILE) are published into a private segment at their recorded
+// sim_server --record-snapshots FILE) are published into a private segment at their recorded
 // times (optionally looping), and the real HapticLoop re-solves them every period on a pinned
 // real-time thread, as in synthetic mode. The in-process device follows the recorded device pose
 // of the snapshot being replayed plus a small circle (so the local model moves delta_free by J

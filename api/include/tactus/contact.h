@@ -1,7 +1,7 @@
 #pragma once
 // The contact solver on ContactProblem (docs/api.md): NSGS (tactus/shared/nsgs.h does the work),
 // and the problem files: FCLIB's text form (the frictional contact library's local 3D problems)
-// and the snapshot files tactus-bench --record-snapshots writes (tactus/shared/snapshot_file.h);
+// and the snapshot files sim_server --record-snapshots writes (tactus/shared/snapshot_file.h);
 // and a problem written into a snapshot slot, the form the haptic process receives
 // (tactus/shared/messages.h).
 //

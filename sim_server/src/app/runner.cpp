@@ -4,6 +4,7 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <functional>
 #include <cmath>
 #include <fmt/format.h>
 #include <memory>
@@ -183,37 +184,78 @@ void exportTrajectory(const SceneSpec& spec, const std::filesystem::path& csv, d
   out.commit();
 }
 
-int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
-  SceneSpec spec = loadScene(options.scene_path);
-  // refuse an existing statistics file now, not after the run
-  std::unique_ptr<shared::OutputFile> stats_file;
-  if (!options.stats_json.empty() && options.export_trajectory.empty()) {
-    stats_file = std::make_unique<shared::OutputFile>(
-        options.stats_json, "statistics file",
-        shared::OutputOptions{.overwrite = options.overwrite,
-                              .overwrite_hint = "pass --overwrite"});
+SnapshotRecorder::SnapshotRecorder(const SceneSpec& spec, const SnapshotRecordingOptions& options)
+    : options_(options), max_opening_rad_(spec.instrument.max_opening_rad) {
+  if (options.max_mb < 1 || options.max_mb > kMaxRecordingMiB) {
+    throw Error(fmt::format("--record-snapshots-max-mb {}: must be 1..{} (what tactus-jitter "
+                            "--replay reads)",
+                            options.max_mb, kMaxRecordingMiB));
   }
-  if (!options.export_trajectory.empty()) {
-    exportTrajectory(spec, options.export_trajectory, 0.01, options.overwrite,
-                     options.export_instrument);
-    spdlog::info("trajectory written to {}", options.export_trajectory);
-    return 0;
-  }
-  if (!options.output_dir.empty()) {
-    spec.output.enabled = true;
-    spec.output.directory = options.output_dir;
-  }
-  if (options.output_every > 0) spec.output.every_n_steps = options.output_every;
-  if (spec.output.enabled && !options.overwrite) refuseExistingSeries(spec.output.directory);
-  const bool offline = options.steps > 0;
-  if (offline || options.no_haptics) spec.haptics.enabled = false;
+  writer_ = std::make_unique<shared::SnapshotFileWriter>(
+      options.path,
+      shared::OutputOptions{.overwrite = options.overwrite,
+                            .overwrite_hint = "pass --overwrite to replace it"},
+      static_cast<std::uint64_t>(options.max_mb) << 20);
+  // a private slot of the capacity the segment has (instruments', obstacles', tissue pairs')
+  const shared::SegmentCapacity cap = problemCapacity(spec);
+  layout_ = shared::SnapshotLayout::forCapacity(cap.max_rows, cap.max_contacts);
+  slot_.assign(layout_.total_bytes / sizeof(double) + 1, 0.0);
+}
 
-  Simulation sim(spec);
-  OutputWriter output;
-  shared::throwIfStopRequested("loading the scene");
-  spdlog::info("scene {}: stages:", spec.source.string());
-  for (const auto& s : sim.stages()) spdlog::info("  - {}", s);
+SnapshotRecorder::~SnapshotRecorder() = default;
 
+std::uint64_t SnapshotRecorder::count() const { return writer_->count(); }
+
+void SnapshotRecorder::record(const Simulation& sim, std::uint64_t seq) {
+  if (full_ || !sim.hasInstrument()) return;
+  const std::int64_t t_ns = std::llround(sim.time() * 1e9);
+  shared::SnapshotWriter slot(slot_.data(), layout_);
+  writeSnapshot(sim, max_opening_rad_, seq, t_ns, 0, slot);
+  if (!writer_->append(slot.view(), t_ns)) {
+    // bounded: a daemon in contact writes tens of MB per simulated second
+    spdlog::warn("--record-snapshots reached its cap of {} MiB after {} snapshots ({:.2f} s "
+                 "simulated): recording stopped, the run goes on; the file keeps them "
+                 "(--record-snapshots-max-mb sets the cap)",
+                 options_.max_mb, writer_->count(), sim.time());
+    full_ = true;
+  }
+}
+
+void SnapshotRecorder::commit() {
+  writer_->commit();
+  spdlog::info("{} snapshots recorded to {}", writer_->count(), options_.path.string());
+}
+
+HeadlessResult runHeadless(Simulation& sim, const HeadlessRun& run) {
+  HeadlessResult result;
+  for (long k = 0; k < run.steps; ++k) {
+    if (run.stop != nullptr && run.stop->load(std::memory_order_relaxed)) {
+      result.end = RunEnd::kStopped;
+      return result;
+    }
+    for (int i = 0; i < sim.instrumentCount(); ++i) {
+      sim.setDeviceTarget(i, sim.scriptedTarget(i, sim.time()));
+    }
+    StepReport report = sim.step();
+    ++result.steps;
+    if (!report.finite) {
+      if (run.statistics != nullptr) run.statistics->add(report);
+      result.end = RunEnd::kNonFinite;
+      return result;
+    }
+    if (run.recorder != nullptr) run.recorder->record(sim, static_cast<std::uint64_t>(k + 1));
+    if (run.after_step) run.after_step(k, report);
+    if (run.statistics != nullptr) run.statistics->add(report);
+  }
+  return result;
+}
+
+// The daemon: paced to real time until `stop` or --duration, publishing to the haptic process
+// when the scene enables haptics. Returns the exit code.
+static int runPaced(const RunOptions& options, const SceneSpec& spec, Simulation& sim,
+                    SnapshotRecorder* recorder, RunStatistics& stats,
+                    const std::function<void(StepReport&)>& write_output,
+                    const std::atomic<bool>& stop) {
   std::unique_ptr<SegmentHost> link;
   if (spec.haptics.enabled && sim.hasInstrument()) {
     std::vector<BoxSpec> workspaces;
@@ -223,36 +265,15 @@ int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
     link = std::make_unique<SegmentHost>(options.segment, spec, std::move(workspaces));
   }
   auto display = link ? std::make_unique<DisplayLink>(options.segment, sim) : nullptr;
-
-  // --record-snapshots: each step's snapshot, written into a private slot of the capacity the
-  // segment has, then appended (the target is checked now, before the run)
-  std::unique_ptr<shared::SnapshotFileWriter> recorder;
-  shared::SnapshotLayout record_layout;
-  std::vector<double> record_slot;  // doubles: 8-byte aligned for every array of the layout
-  bool record_full = false;         // the recording reached its cap and stopped
-  if (!options.record_snapshots.empty()) {
-    recorder = std::make_unique<shared::SnapshotFileWriter>(
-        options.record_snapshots,
-        shared::OutputOptions{.overwrite = options.overwrite,
-                              .overwrite_hint = "pass --overwrite to replace it"},
-        static_cast<std::uint64_t>(options.record_snapshots_max_mb) << 20);
-    const shared::SegmentCapacity cap = problemCapacity(spec);   // instruments' and obstacles'
-    record_layout = shared::SnapshotLayout::forCapacity(cap.max_rows, cap.max_contacts);
-    record_slot.assign(record_layout.total_bytes / sizeof(double) + 1, 0.0);
-  }
-
   const double h = spec.time_step_s;
   // a daemon runs until stopped (or --duration); the scene's duration is for offline tools
   const double duration = options.duration_s;
-  RunStatistics stats;
   const std::int64_t t0 = shared::monotonicNs();
   long late_steps = 0;
   std::int64_t last_report_ns = t0;
   std::int64_t last_status_ns = t0;
-  int exit_code = 0;
   for (long k = 0; !stop.load(std::memory_order_relaxed); ++k) {
-    if (offline && k >= options.steps) break;
-    if (!offline && duration > 0.0 && sim.time() >= duration - 1e-12) break;
+    if (duration > 0.0 && sim.time() >= duration - 1e-12) break;
     // device target: the newest haptic sample when fresh, else the scene's script
     for (int i = 0; i < sim.instrumentCount(); ++i) {
       DeviceTarget target = sim.scriptedTarget(i, sim.time());
@@ -265,37 +286,18 @@ int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
       if (const std::string why = link->displacedReason(shared::monotonicNs()); !why.empty()) {
         spdlog::error("{}", why);
         stats.add(report);
-        exit_code = 3;
-        break;
+        return 3;
       }
       link->publish(sim);
     }
     if (display) display->publish(sim, report);
-    if (recorder && !record_full && sim.hasInstrument()) {
-      shared::SnapshotWriter slot(record_slot.data(), record_layout);
-      writeSnapshot(sim, spec.instrument.max_opening_rad, static_cast<std::uint64_t>(k + 1),
-                    std::llround(sim.time() * 1e9), 0, slot);
-      if (!recorder->append(slot.view(), std::llround(sim.time() * 1e9))) {
-        // bounded: a daemon in contact writes tens of MB per simulated second
-        spdlog::warn("--record-snapshots reached its cap of {} MiB after {} snapshots ({:.2f} s "
-                     "simulated): recording stopped, the run goes on; the file keeps them "
-                     "(--record-snapshots-max-mb sets the cap)",
-                     options.record_snapshots_max_mb, recorder->count(), sim.time());
-        record_full = true;
-      }
-    }
-    // VTK output after the snapshot is published (the haptic side does not wait for it), timed
-    // into the step's statistics outside total_s
-    const std::int64_t t_output = shared::monotonicNs();
-    output.writeIfDue(sim);
-    report.times.output_s = shared::secondsSinceNs(t_output);
+    if (recorder != nullptr) recorder->record(sim, static_cast<std::uint64_t>(k + 1));
+    write_output(report);
     stats.add(report);
     if (!report.finite) {
       spdlog::error("step {}: the state became non-finite; stopping", k);
-      exit_code = 2;
-      break;
+      return 2;
     }
-    if (offline) continue;
     if (options.status && shared::monotonicNs() - last_status_ns >= 1'000'000'000LL) {
       last_status_ns = shared::monotonicNs();
       if (sim.hasInstrument()) {
@@ -326,11 +328,72 @@ int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
       if (link) link->logStatus();
     }
   }
-  output.finish(spec);
-  if (recorder) {
-    recorder->commit();
-    spdlog::info("{} snapshots recorded to {}", recorder->count(), options.record_snapshots);
+  return 0;
+}
+
+int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
+  SceneSpec spec = loadScene(options.scene_path);
+  // refuse an existing statistics file now, not after the run
+  std::unique_ptr<shared::OutputFile> stats_file;
+  if (!options.stats_json.empty() && options.export_trajectory.empty()) {
+    stats_file = std::make_unique<shared::OutputFile>(
+        options.stats_json, "statistics file",
+        shared::OutputOptions{.overwrite = options.overwrite,
+                              .overwrite_hint = "pass --overwrite"});
   }
+  if (!options.export_trajectory.empty()) {
+    exportTrajectory(spec, options.export_trajectory, 0.01, options.overwrite,
+                     options.export_instrument);
+    spdlog::info("trajectory written to {}", options.export_trajectory);
+    return 0;
+  }
+  if (!options.output_dir.empty()) {
+    spec.output.enabled = true;
+    spec.output.directory = options.output_dir;
+  }
+  if (options.output_every > 0) spec.output.every_n_steps = options.output_every;
+  if (spec.output.enabled && !options.overwrite) refuseExistingSeries(spec.output.directory);
+  const bool offline = options.steps > 0;
+  if (offline || options.no_haptics) spec.haptics.enabled = false;
+  // --record-snapshots: the target is checked now, before the scene is built
+  std::unique_ptr<SnapshotRecorder> recorder;
+  if (!options.record_snapshots.empty()) {
+    recorder = std::make_unique<SnapshotRecorder>(
+        spec, SnapshotRecordingOptions{.path = options.record_snapshots,
+                                       .max_mb = options.record_snapshots_max_mb,
+                                       .overwrite = options.overwrite});
+  }
+
+  Simulation sim(spec);
+  OutputWriter output;
+  shared::throwIfStopRequested("loading the scene");
+  spdlog::info("scene {}: stages:", spec.source.string());
+  for (const auto& s : sim.stages()) spdlog::info("  - {}", s);
+
+  RunStatistics stats;
+  const std::int64_t t0 = shared::monotonicNs();
+  int exit_code = 0;
+  // VTK output after the snapshot is published (the haptic side does not wait for it), timed
+  // into the step's statistics outside total_s
+  const auto writeOutput = [&](StepReport& report) {
+    const std::int64_t t_output = shared::monotonicNs();
+    output.writeIfDue(sim);
+    report.times.output_s = shared::secondsSinceNs(t_output);
+  };
+  if (offline) {
+    // --steps: the headless runner
+    const HeadlessResult run = runHeadless(
+        sim, {.steps = options.steps, .stop = &stop, .recorder = recorder.get(),
+              .statistics = &stats, .after_step = [&](long, StepReport& r) { writeOutput(r); }});
+    if (run.end == RunEnd::kNonFinite) {
+      spdlog::error("step {}: the state became non-finite; stopping", run.steps - 1);
+      exit_code = 2;
+    }
+  } else {
+    exit_code = runPaced(options, spec, sim, recorder.get(), stats, writeOutput, stop);
+  }
+  output.finish(spec);
+  if (recorder) recorder->commit();
   const double wall_s = 1e-9 * static_cast<double>(shared::monotonicNs() - t0);
   spdlog::info("{} steps, simulated {:.3f} s in {:.3f} s wall", stats.steps(), sim.time(), wall_s);
   std::printf("%s", stats.table().c_str());

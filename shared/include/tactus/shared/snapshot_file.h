@@ -1,7 +1,7 @@
 #pragma once
 // Recorded contact snapshots: a binary file holding the sequence of contact problems a run
 // published (what messages.h's ContactSnapshot carries), so the haptic loop can replay a real
-// problem later (tactus-jitter --replay FILE). Written by tactus-bench --record-snapshots FILE.
+// problem later (tactus-jitter --replay FILE). Written by sim_server --record-snapshots FILE.
 //
 // Format (native byte order, little-endian hosts; every count checked when reading):
 //   file header (24 bytes): magic "TACTSNAP", uint32 version (2), uint32 sizeof(record header),

@@ -1,17 +1,38 @@
 #pragma once
-// The sim_server main loop: offline (a fixed number of steps, as fast as possible) or paced to
-// real time, publishing each step's contact problem to the haptic process and reading its
-// device samples when the scene enables haptics.
+// Running a scene: the headless runner (runHeadless: a fixed number of steps as fast as
+// possible, the instruments following the scene's script) that sim_server --steps, tactus-bench
+// and pad_grasp_study run scenes with; the one snapshot recorder (sim_server's
+// --record-snapshots); and sim_server's loop, offline through the headless runner or paced to
+// real time, publishing each step's contact problem to the haptic process and reading its device
+// samples when the scene enables haptics.
 
 #include <atomic>
+#include <cstdint>
 #include <filesystem>
+#include <functional>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
 
 #include "tactus/sim/pipeline.h"
 
+namespace tactus::shared {
+class SnapshotFileWriter;
+}
+
 namespace tactus::sim {
+
+/// Largest snapshot recording [MiB]: what tactus-jitter --replay reads
+/// (shared::kMaxSnapshotFileBytes).
+inline constexpr int kMaxRecordingMiB = 2048;
+
+/// sim_server's --record-snapshots and --record-snapshots-max-mb.
+struct SnapshotRecordingOptions {
+  std::filesystem::path path;        ///< empty: nothing recorded
+  int max_mb = kMaxRecordingMiB;     ///< 1..kMaxRecordingMiB
+  bool overwrite = false;            ///< replace an existing file
+};
 
 struct RunOptions {
   std::filesystem::path scene_path;
@@ -27,12 +48,12 @@ struct RunOptions {
   int export_instrument = 0;         ///< whose trajectory export_trajectory writes
   bool overwrite = false;            ///< replace an existing stats_json / export_trajectory file,
                                      ///< or an earlier run's VTK series in the output folder
-  /// Record every step's contact snapshot (shared/snapshot_file.h, stamped with the simulated
-  /// time) to this file, for tactus-jitter --replay; written at the end of the run.
+  /// Record every step's contact snapshot to this file (SnapshotRecorder), for tactus-jitter
+  /// --replay; written at the end of the run.
   std::string record_snapshots;
   /// The recording stops (with a warning; the run goes on) before the file passes this size
-  /// [MiB]; at most 2048, what tactus-jitter --replay reads.
-  int record_snapshots_max_mb = 2048;
+  /// [MiB]; at most kMaxRecordingMiB.
+  int record_snapshots_max_mb = kMaxRecordingMiB;
 };
 
 /// Writes the scene's instrument trajectory in the replay device's CSV format
@@ -83,6 +104,61 @@ class RunStatistics {
   int last_inverted_ = 0;
   std::optional<ReactionForces> reactions_;
 };
+
+/// Records every step's contact snapshot (shared/snapshot_file.h: the problem sim_server
+/// publishes, stamped with the simulated time) for tactus-jitter --replay. The one recorder of the
+/// project: sim_server's --record-snapshots, offline and as a daemon.
+class SnapshotRecorder {
+ public:
+  /// Checks the target now, before the run: an existing file is refused unless
+  /// options.overwrite (FileError naming --overwrite); a cap outside 1..kMaxRecordingMiB is
+  /// refused (Error naming --record-snapshots-max-mb).
+  SnapshotRecorder(const SceneSpec& spec, const SnapshotRecordingOptions& options);
+  ~SnapshotRecorder();
+  SnapshotRecorder(const SnapshotRecorder&) = delete;
+  SnapshotRecorder& operator=(const SnapshotRecorder&) = delete;
+
+  /// Appends the last step's problem (`seq`: the step's number, from 1). A scene without an
+  /// instrument records nothing. At the cap the recording stops with one warning; the run goes
+  /// on and the file keeps what was recorded.
+  void record(const Simulation& sim, std::uint64_t seq);
+  std::uint64_t count() const;
+  /// Writes the file into place and logs how many snapshots it holds. Throws FileError.
+  void commit();
+
+ private:
+  SnapshotRecordingOptions options_;
+  double max_opening_rad_ = 0.0;
+  std::unique_ptr<shared::SnapshotFileWriter> writer_;
+  shared::SnapshotLayout layout_;
+  std::vector<double> slot_;   // doubles: 8-byte aligned for every array of the layout
+  bool full_ = false;          // the recording reached its cap and stopped
+};
+
+/// How a headless run (runHeadless) ended.
+enum class RunEnd { kSteps, kStopped, kNonFinite };
+
+/// One headless run: the step count and what each step feeds.
+struct HeadlessRun {
+  long steps = 0;                              ///< steps to run
+  const std::atomic<bool>* stop = nullptr;     ///< polled before each step when set
+  SnapshotRecorder* recorder = nullptr;        ///< each step's snapshot, when set
+  RunStatistics* statistics = nullptr;         ///< each step's report, when set
+  /// After each finite step (its index from 0 and its report), before the statistics take the
+  /// report: the caller's own per-step figures and work (it may add its output time).
+  std::function<void(long, StepReport&)> after_step;
+};
+
+struct HeadlessResult {
+  long steps = 0;   ///< steps taken (a non-finite one included)
+  RunEnd end = RunEnd::kSteps;
+};
+
+/// Steps `sim` headless and unpaced: before each step every instrument takes the scene's
+/// scripted target at the simulated time; after it the snapshot goes to the recorder, the
+/// caller's after_step runs and the statistics take the report. A step whose state became
+/// non-finite ends the run (the statistics take it; it is neither recorded nor passed on).
+HeadlessResult runHeadless(Simulation& sim, const HeadlessRun& run);
 
 /// Runs a scene until `stop`, the step count or the duration. Returns the process exit code.
 int runSimulation(const RunOptions& options, const std::atomic<bool>& stop);
