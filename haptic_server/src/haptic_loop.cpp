@@ -18,6 +18,23 @@
 
 namespace tactus::haptic {
 
+// StatsRecord carries LocalModelUsed and FallbackReason as the shared enums' values
+static_assert(shared::kStatsModelNone == static_cast<int>(LocalModelUsed::kNone) &&
+              shared::kStatsModelFull == static_cast<int>(LocalModelUsed::kFull) &&
+              shared::kStatsModelLinearized == static_cast<int>(LocalModelUsed::kLinearized) &&
+              shared::kStatsModelFallbackSolve == static_cast<int>(LocalModelUsed::kFallback) &&
+              shared::kStatsModelCorrected == static_cast<int>(LocalModelUsed::kCorrected) &&
+              shared::kStatsModelCount == static_cast<int>(LocalModelUsed::kCorrected) + 1);
+static_assert(
+    shared::kStatsFallbackNone == static_cast<int>(FallbackReason::kNone) &&
+    shared::kStatsFallbackNotLinearized == static_cast<int>(FallbackReason::kNotLinearized) &&
+    shared::kStatsFallbackOutOfRange == static_cast<int>(FallbackReason::kOutOfRange) &&
+    shared::kStatsFallbackContactCloses == static_cast<int>(FallbackReason::kContactCloses) &&
+    shared::kStatsFallbackContactLifts == static_cast<int>(FallbackReason::kContactLifts) &&
+    shared::kStatsFallbackLeavesCone == static_cast<int>(FallbackReason::kLeavesCone) &&
+    shared::kStatsFallbackSlipTurns == static_cast<int>(FallbackReason::kSlipTurns) &&
+    shared::kStatsFallbackReasonCount == static_cast<int>(FallbackReason::kSlipTurns) + 1);
+
 using detail::finite;
 using detail::sanitizeLimit;
 
@@ -455,6 +472,8 @@ bool HapticLoop::solveLocalModel(
   out.residual = res.error;
   out.solve_ns = res.elapsed_ns;
   out.model_used = res.used;
+  out.fallback_reason = res.fallback;
+  out.correction_rounds = res.correction_rounds;
   if (!res.solved()) return false;
   if (res.used == LocalModelUsed::kLinearized) {
     counters_.linearized_ticks.fetch_add(1, std::memory_order_relaxed);
@@ -578,6 +597,8 @@ void HapticLoop::recordStats(std::int64_t scheduled_ns, std::int64_t woken_ns,
   rec.deadline_ns = out.deadline_ns;
   rec.model = static_cast<std::int64_t>(out.model_used);
   rec.prepare_ns = out.prepare_ns;
+  rec.fallback_reason = static_cast<std::int64_t>(out.fallback_reason);
+  rec.correction_rounds = out.correction_rounds;
   // an overrun: the tick's work ended more than one period after its scheduled start
   const std::int64_t late_ns = rec.finished_ns - scheduled_ns - settings_.period_ns;
   const bool overrun = late_ns > 0;

@@ -79,6 +79,38 @@ TEST(JitterCollector, PeriodOverrunsAndSolvedTicks) {
   EXPECT_EQ(given.periodNs(), 2'000'000);
 }
 
+TEST(JitterCollector, CountsEachModelAndWhyTheLinearisationFellBack) {
+  JitterCollector c(1'000'000);
+  const auto add = [&](std::int64_t model, std::int64_t reason, std::int64_t rounds) {
+    shared::StatsRecord r = record(c.records(), 1'000'000, 0, 100'000, 4);
+    r.model = model;
+    r.fallback_reason = reason;
+    r.correction_rounds = rounds;
+    c.add(r);
+  };
+  for (int i = 0; i < 5; ++i) add(shared::kStatsModelLinearized, shared::kStatsFallbackNone, 0);
+  add(shared::kStatsModelCorrected, shared::kStatsFallbackContactLifts, 2);
+  add(shared::kStatsModelFallbackSolve, shared::kStatsFallbackSlipTurns, 6);
+  add(shared::kStatsModelFallbackSolve, shared::kStatsFallbackSlipTurns, 6);
+  add(shared::kStatsModelFallbackSolve, shared::kStatsFallbackOutOfRange, 0);
+  add(shared::kStatsModelFallbackSolve, 99, 0);   // a value this build does not know
+  add(shared::kStatsModelFull, shared::kStatsFallbackNone, 0);
+  const JitterReport rep = c.report();
+  EXPECT_EQ(rep.model_linearized, 5u);
+  EXPECT_EQ(rep.model_corrected, 1u);
+  EXPECT_EQ(rep.model_fallback, 4u);
+  EXPECT_EQ(rep.model_full, 1u);
+  EXPECT_EQ(rep.fallback_by_reason[shared::kStatsFallbackSlipTurns], 2u);
+  EXPECT_EQ(rep.fallback_by_reason[shared::kStatsFallbackOutOfRange], 1u);
+  EXPECT_EQ(rep.fallback_by_reason[shared::kStatsFallbackContactLifts], 0u);  // corrected
+  EXPECT_EQ(rep.correction_gave_up, 2u);
+  const std::string table = formatTable(rep);
+  EXPECT_NE(table.find("fallbacks by reason: out_of_range 1 slip_turns 2; after the active-set "
+                       "correction gave up 2"),
+            std::string::npos)
+      << table;
+}
+
 TEST(JitterCollector, PeriodEstimateIgnoresSkippedTicks) {
   JitterCollector c;
   std::uint64_t tick = 0;
@@ -96,6 +128,9 @@ TEST(JitterCsv, OneRowPerRecordWithDerivedColumns) {
     shared::StatsRecord a = record(7, 1'000'000, 1234, 56'789, 3);
     a.force_norm_n = 1.5;
     a.flags = shared::kStatsOverrun | shared::kStatsForceClamped;
+    a.model = shared::kStatsModelFallbackSolve;
+    a.fallback_reason = shared::kStatsFallbackSlipTurns;
+    a.correction_rounds = 6;
     w.write(a);
     w.write(record(8, 1'000'000, 0, 1, 0));
     w.close();
@@ -107,10 +142,10 @@ TEST(JitterCsv, OneRowPerRecordWithDerivedColumns) {
   std::getline(in, l2);
   EXPECT_FALSE(std::getline(in, extra));
   EXPECT_EQ(header, CsvWriter::header());
-  // (then model, read_ns, model_ns, output_ns, deadline_ns, prepare_ns: zero in these records)
+  // (read_ns, model_ns, output_ns, deadline_ns, prepare_ns: zero in these records)
   EXPECT_EQ(l1, "7,1007000000,1007001234,1007058023,1234,56789,28394,0,1e-07,3,1.5,0,17,"
-                "0,0,0,0,0,0");
-  EXPECT_EQ(l2, "8,1008000000,1008000000,1008000001,0,1,0,0,0,0,0,0,0,0,0,0,0,0,0");
+                "3,0,0,0,0,0,6,6");
+  EXPECT_EQ(l2, "8,1008000000,1008000000,1008000001,0,1,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0");
   std::remove(path.c_str());
   EXPECT_THROW({ CsvWriter bad("/nonexistent-dir/x.csv"); }, tactus::Error);
 }

@@ -29,9 +29,13 @@ void JitterCollector::add(const shared::StatsRecord& r) {
     } else {
       ++non_finite_;
     }
-    if (r.model >= 0 && r.model < 5) ++model_counts_[r.model];
+    if (r.model >= 0 && r.model < shared::kStatsModelCount) ++model_counts_[r.model];
     if (r.model == shared::kStatsModelFallbackSolve) {
       fallback_us_.push_back(1e-3 * static_cast<double>(r.solve_ns));
+      if (r.fallback_reason >= 0 && r.fallback_reason < shared::kStatsFallbackReasonCount) {
+        ++fallback_by_reason_[static_cast<std::size_t>(r.fallback_reason)];
+      }
+      if (r.correction_rounds > 0) ++correction_gave_up_;
     }
     model_us_.push_back(1e-3 * static_cast<double>(r.model_ns));
   }
@@ -90,9 +94,9 @@ JitterReport JitterCollector::report() const {
   rep.model_full = model_counts_[shared::kStatsModelFull];
   rep.model_linearized = model_counts_[shared::kStatsModelLinearized];
   rep.model_fallback = model_counts_[shared::kStatsModelFallbackSolve];
-  // (StatsRecord::model holds LocalModelUsed's values; the corrected linearisation has no name
-  // among StatsModel's)
-  rep.model_corrected = model_counts_[static_cast<int>(haptic::LocalModelUsed::kCorrected)];
+  rep.model_corrected = model_counts_[shared::kStatsModelCorrected];
+  rep.fallback_by_reason = fallback_by_reason_;
+  rep.correction_gave_up = correction_gave_up_;
   rep.deadline_missed = deadline_missed_;
   rep.contacts_p50 = summarize(contacts_).p50;
   rep.residual_p50 = summarize(residuals_).p50;
@@ -161,6 +165,14 @@ std::string formatTable(const JitterReport& r, const Percentiles* bare,
         100.0 * static_cast<double>(r.model_fallback) / solved,
         100.0 * (solved - static_cast<double>(r.not_converged)) / solved, r.deadline_us_p50,
         r.deadline_missed);
+    if (r.model_fallback > 0) {
+      out += "fallbacks by reason:";
+      for (int k = 0; k < shared::kStatsFallbackReasonCount; ++k) {
+        const std::uint64_t n = r.fallback_by_reason[static_cast<std::size_t>(k)];
+        if (n > 0) out += fmt::format(" {} {}", toString(static_cast<FallbackReason>(k)), n);
+      }
+      out += fmt::format("; after the active-set correction gave up {}\n", r.correction_gave_up);
+    }
   }
   return out;
 }
@@ -176,7 +188,7 @@ std::string formatLine(double t_s, const JitterReport& r, std::uint64_t lost_tot
 const char* CsvWriter::header() {
   return "tick,scheduled_ns,woken_ns,finished_ns,period_error_ns,tick_ns,solve_ns,sweeps,residual,"
          "contacts,force_norm_n,snapshot_seq,flags,model,read_ns,model_ns,output_ns,deadline_ns,"
-         "prepare_ns";
+         "prepare_ns,fallback_reason,correction_rounds";
 }
 
 CsvWriter::CsvWriter(const std::string& path) : path_(path) {
@@ -197,7 +209,7 @@ CsvWriter::~CsvWriter() {
 void CsvWriter::write(const shared::StatsRecord& r) {
   std::fprintf(file_,
                "%llu,%lld,%lld,%lld,%lld,%lld,%lld,%lld,%.6g,%lld,%.6g,%llu,%llu,%lld,%lld,%lld,"
-               "%lld,%lld,%lld\n",
+               "%lld,%lld,%lld,%lld,%lld\n",
                static_cast<unsigned long long>(r.tick), static_cast<long long>(r.scheduled_ns),
                static_cast<long long>(r.woken_ns), static_cast<long long>(r.finished_ns),
                static_cast<long long>(r.woken_ns - r.scheduled_ns),
@@ -209,7 +221,8 @@ void CsvWriter::write(const shared::StatsRecord& r) {
                static_cast<long long>(r.read_ns), static_cast<long long>(r.model_ns),
                static_cast<long long>(r.output_ns),
                static_cast<long long>(r.deadline_ns > 0 ? r.deadline_ns - r.started_ns : 0),
-               static_cast<long long>(r.prepare_ns));
+               static_cast<long long>(r.prepare_ns), static_cast<long long>(r.fallback_reason),
+               static_cast<long long>(r.correction_rounds));
 }
 
 void CsvWriter::close() {

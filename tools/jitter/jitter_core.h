@@ -13,6 +13,7 @@
 // None of this runs inside the haptic tick; only BareLoop::run is real-time (allocation-free
 // after construction).
 
+#include <array>
 #include <atomic>
 #include <cstdint>
 #include <cstdio>
@@ -47,6 +48,10 @@ struct JitterReport {
   /// linearisation, the linearisation with its active set corrected, a re-solve where neither
   /// held
   std::uint64_t model_full = 0, model_linearized = 0, model_corrected = 0, model_fallback = 0;
+  /// fallback re-solves by why the linearisation did not hold (index: StatsFallbackReason)
+  std::array<std::uint64_t, shared::kStatsFallbackReasonCount> fallback_by_reason{};
+  /// fallback re-solves after the active-set correction tried and gave up
+  std::uint64_t correction_gave_up = 0;
   std::uint64_t deadline_missed = 0;  ///< records flagged kStatsDeadlineMissed
   double deadline_us_p50 = 0.0;     ///< the tick's budget (deadline - start), median
   std::uint64_t non_finite_residuals = 0;
@@ -89,7 +94,9 @@ class JitterCollector {
   std::vector<std::int64_t> steps_ns_;
   std::uint64_t overrun_flags_ = 0;
   std::uint64_t not_converged_ = 0;
-  std::uint64_t model_counts_[5] = {};
+  std::uint64_t model_counts_[shared::kStatsModelCount] = {};
+  std::array<std::uint64_t, shared::kStatsFallbackReasonCount> fallback_by_reason_{};
+  std::uint64_t correction_gave_up_ = 0;
   std::uint64_t deadline_missed_ = 0;
   std::vector<double> work_us_, model_us_, fallback_us_, deadline_us_;
   std::uint64_t stale_ = 0;

@@ -920,6 +920,7 @@ TEST(HapticLoopLarge, ALinearisedTickOf900RowsAndItsFallbackAllocateNothing) {
   test::AllocScope scope;
   std::int64_t allocations = 0, c_allocations = 0;
   TickOutput out;
+  int out_of_range = 0;   // far ticks that fell back and said why
   for (int i = 0; i < 40; ++i) {
     if (i % 10 == 0) {
       const std::int64_t a = scope.allocations(), ca = scope.cAllocations();
@@ -933,12 +934,17 @@ TEST(HapticLoopLarge, ALinearisedTickOf900RowsAndItsFallbackAllocateNothing) {
     const double far = i % 4 == 0 ? -3e-3 : 0.0;
     rig.device().state.pos_m = {1e-6 * (i % 4), 0.0, -1e-6 * (i % 7) + far};
     out = rig.tick();
+    if (far != 0.0 && out.model_used == LocalModelUsed::kFallback &&
+        out.fallback_reason == FallbackReason::kOutOfRange && out.correction_rounds == 0) {
+      ++out_of_range;
+    }
   }
   EXPECT_EQ(scope.allocations() + allocations, 0);
   EXPECT_EQ(scope.cAllocations() + c_allocations, 0);
   EXPECT_EQ(out.contacts, 300);
   EXPECT_GT(rig.loop().counters().linearized_ticks.load(), 10u);
   EXPECT_GT(rig.loop().counters().model_fallbacks.load(), 3u);
+  EXPECT_GE(out_of_range, 6);   // 8 far ticks, 2 of them also publish
 }
 
 // Contacts a device can move in the first and the last body: not contiguous, so the whole

@@ -246,6 +246,8 @@ struct TickOutput : DeviceTickOutput {
   double residual = 0.0;
   std::int64_t solve_ns = 0;            ///< time in the local model's solve
   LocalModelUsed model_used = LocalModelUsed::kNone;
+  FallbackReason fallback_reason = FallbackReason::kNone;   ///< LocalModelResult::fallback
+  int correction_rounds = 0;            ///< LocalModelResult::correction_rounds
   // the tick's phases [ns] (StatsRecord) and its absolute deadline (0: none)
   std::int64_t read_ns = 0, model_ns = 0, output_ns = 0;
   std::int64_t started_ns = 0, deadline_ns = 0;

@@ -348,7 +348,22 @@ enum StatsModel : std::int64_t {
   kStatsModelFull = 1,        ///< full re-solve
   kStatsModelLinearized = 2,  ///< the linearisation held
   kStatsModelFallbackSolve = 3,  ///< the linearisation did not hold: full re-solve
+  kStatsModelCorrected = 4,   ///< the linearisation with its active set corrected in a few contacts
 };
+inline constexpr int kStatsModelCount = 5;
+
+/// StatsRecord::fallback_reason: why the linearisation did not hold at the tick's pose
+/// (haptic::FallbackReason's values).
+enum StatsFallbackReason : std::int64_t {
+  kStatsFallbackNone = 0,
+  kStatsFallbackNotLinearized = 1,  ///< the snapshot has no linearisation
+  kStatsFallbackOutOfRange = 2,     ///< the device is beyond the linearisation's validity range
+  kStatsFallbackContactCloses = 3,  ///< a separated contact would penetrate
+  kStatsFallbackContactLifts = 4,   ///< an active contact's normal force would turn negative
+  kStatsFallbackLeavesCone = 5,     ///< a sticking contact's force would leave its cone
+  kStatsFallbackSlipTurns = 6,      ///< a sliding contact would stop or turn against its force
+};
+inline constexpr int kStatsFallbackReasonCount = 7;
 
 /// One record per haptic tick, written into the stats ring. Only 8-byte fields (the ring copies
 /// records word by word).
@@ -375,6 +390,12 @@ struct StatsRecord {
   std::int64_t deadline_ns = 0;      ///< the tick's absolute deadline (0: sweeps only)
   std::int64_t model = 0;            ///< StatsModel
   std::int64_t prepare_ns = 0;       ///< off-thread preparation time of the snapshot solved
+  /// StatsFallbackReason: why the linearisation did not hold (also on a corrected tick: what the
+  /// correction repaired); kStatsFallbackNone when it held or was not used
+  std::int64_t fallback_reason = 0;
+  /// rounds of the active-set correction (on a fallback tick: the rounds it tried before it
+  /// gave up; 0: not tried)
+  std::int64_t correction_rounds = 0;
 };
 static_assert(std::is_trivially_copyable_v<StatsRecord>);
 static_assert(sizeof(StatsRecord) % 8 == 0);
