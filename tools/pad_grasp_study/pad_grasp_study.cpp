@@ -33,9 +33,10 @@ int main(int argc, char** argv) {
       "  pad_grasp_study --scene scenes/liver_grasp.yaml --nominal-only\n"
       "  pad_grasp_study --scene scenes/liver_grasp_20k.yaml --grid --end-s 5 --csv grid_20k.csv");
   std::string scene = std::string(TACTUS_SOURCE_DIR) + "/scenes/liver_grasp.yaml";
-  double yaw_deg = 0.0, deeper_mm = 0.0, grip = -1.0;
+  double yaw_deg = 0.0, deeper_mm = 0.0, grip = -1.0, roll_deg = 0.0;
   std::vector<double> offset_mm_arg{0.0, 0.0, 0.0};
-  bool nominal_only = false, grid = false, settle_each = false;
+  bool nominal_only = false, grid = false, settle_each = false, settle_only = false;
+  int grid_skip = 0;
   std::string csv_path;
   double end_s = 5.8;
   app.add_option("--scene", scene, "Scene file")->check(CLI::ExistingFile);
@@ -47,6 +48,8 @@ int main(int argc, char** argv) {
                  "Grip stiffness [N m/rad] (default: the scene's); with --grid: run the grid's "
                  "approaches at that grip only")
       ->check(CLI::Range(0.0, 1.0));
+  app.add_option("--roll-deg", roll_deg, "Roll the jaws about their axis after the settling [deg]")
+      ->check(CLI::Range(-90.0, 90.0));
   app.add_option("--offset-mm", offset_mm_arg,
                  "Move the whole script after the settling by x y z in the world frame [mm]")
       ->expected(3)
@@ -55,8 +58,13 @@ int main(int argc, char** argv) {
   app.add_flag("--grid", grid,
                "Run the grasp-anywhere grid (tests/support/pad_grasp.h) instead of the six")
       ->excludes("--nominal-only");
+  app.add_option("--grid-skip", grid_skip, "With --grid: skip its first N approaches")
+      ->check(CLI::Range(0, 1000))
+      ->needs("--grid");
   app.add_flag("--settle-each", settle_each,
                "Settle each approach from t = 0 instead of starting all from one settled state");
+  app.add_flag("--settle-only", settle_only, "Settle, print what the settling measured and stop")
+      ->excludes("--settle-each");
   app.add_option("--csv", csv_path, "Also write one row per approach to this new file");
   app.add_option("--end-s", end_s, "End of the run [s] (the lift ends at 4.5 s)")
       ->check(CLI::Range(3.5, 8.0));
@@ -90,6 +98,10 @@ int main(int argc, char** argv) {
         });
         if (approaches.empty()) throw tactus::Error("--grid: no grid approach has that --grip");
       }
+      // a part of the list (two processes sharing a grid)
+      const auto skip = std::min(approaches.size(), static_cast<std::size_t>(grid_skip));
+      approaches.erase(approaches.begin(), approaches.begin() + static_cast<long>(skip));
+      if (approaches.empty()) throw tactus::Error("--grid-skip: no approach left");
     } else {
       if (!nominal_only) approaches = tactus::test_support::testApproaches();
       approaches.insert(approaches.begin(), ApproachPerturbation{});
@@ -108,9 +120,19 @@ int main(int argc, char** argv) {
     // every approach from the same settled state (tests/support/pad_grasp.h, SettledStart)
     const tactus::test_support::SettledStart settled =
         settle_each ? tactus::test_support::SettledStart{} : tactus::test_support::settle(spec);
+    if (!settle_each) {
+      const auto& s = settled.so_far;
+      std::printf("settled (1 s, shared by the approaches): smallest tet anywhere %.3f (tet %d at t "
+                  "= %.2f s), %d steps with a tet inverted\n",
+                  s.min_volume_ratio_anywhere, s.min_volume_tet_anywhere,
+                  s.min_volume_ratio_anywhere_t_s, s.inverted_steps);
+      std::fflush(stdout);
+    }
+    if (settle_only) return 0;
     for (ApproachPerturbation a : approaches) {
       a.offset_m += deeper +
                     1e-3 * Eigen::Vector3d(offset_mm_arg[0], offset_mm_arg[1], offset_mm_arg[2]);
+      a.roll_deg += roll_deg;
       const Eigen::Vector3d offset_mm = 1e3 * a.offset_m;
       if (a.grip_k_nmprad < 0.0) a.grip_k_nmprad = spec.instrument.grip_k_nmprad;
       const auto start = std::chrono::steady_clock::now();

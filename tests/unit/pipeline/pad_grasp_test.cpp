@@ -20,6 +20,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <ostream>
 #include <string>
 
 #include "../../support/openblas_core.h"
@@ -110,19 +111,52 @@ TEST_P(PerturbedPadGraspTest, HoldsTheLobe) {
   expectHeldAndWellPosed(test_support::runPadGrasp(scene("liver_grasp.yaml"), GetParam()));
 }
 
+// e.g. x0_yp3_z0_roll0: the offset in mm and the roll in deg, p/m for the sign; with a grip,
+// _grip15 for 0.015 N m/rad
+std::string approachName(const ApproachPerturbation& a) {
+  std::string name;
+  auto part = [&name](const char* axis, double v) {
+    const long n = std::lround(v);
+    if (!name.empty()) name += '_';
+    name += axis;
+    name += n > 0 ? "p" : n < 0 ? "m" : "";
+    name += std::to_string(std::abs(n));
+  };
+  part("x", 1e3 * a.offset_m.x());
+  part("y", 1e3 * a.offset_m.y());
+  part("z", 1e3 * a.offset_m.z());
+  part("roll", a.roll_deg);
+  if (a.grip_k_nmprad >= 0.0) name += "_grip" + std::to_string(std::lround(1e3 * a.grip_k_nmprad));
+  return name;
+}
+
 INSTANTIATE_TEST_SUITE_P(
-    Approaches, PerturbedPadGraspTest,
-    ::testing::ValuesIn(test_support::testApproaches()),
+    Approaches, PerturbedPadGraspTest, ::testing::ValuesIn(test_support::testApproaches()),
     [](const ::testing::TestParamInfo<ApproachPerturbation>& info) {
-      // e.g. x0_yp3_z0_roll0: the offset in mm and the roll in deg, p/m for the sign
-      auto part = [](const char* axis, double v) {
-        const long n = std::lround(v);
-        return std::string(axis) + (n > 0 ? "p" : n < 0 ? "m" : "") + std::to_string(std::abs(n));
-      };
-      const ApproachPerturbation& a = info.param;
-      return part("x", 1e3 * a.offset_m.x()) + "_" + part("y", 1e3 * a.offset_m.y()) + "_" +
-             part("z", 1e3 * a.offset_m.z()) + "_" + part("roll", a.roll_deg);
+      return approachName(info.param);
     });
+
+// pad_grasp_study starts every approach from one state saved after the settling (SettledStart):
+// an approach that changes the script after 1 s and the grip gives the same figures, to the bit,
+// as one that settles itself. Through the closing and into the lift (3.2 s).
+TEST(PadGraspTest, SettledStartGivesTheSameGraspAsSettlingEach) {
+  const SceneSpec spec = scene("liver_grasp.yaml");
+  const ApproachPerturbation a{Eigen::Vector3d(0.002, -0.002, 0.0), 10.0, 0.02};
+  const test_support::SettledStart settled = test_support::settle(spec);
+  const PadGraspResult from_settled = test_support::runPadGrasp(spec, a, 3.2, &settled);
+  const PadGraspResult settling = test_support::runPadGrasp(spec, a, 3.2);
+  printResult(from_settled);
+  EXPECT_GT(settling.held_nodes, 2);
+  EXPECT_GT(settling.contact_steps, 50);
+  EXPECT_EQ(from_settled.held_nodes, settling.held_nodes);
+  EXPECT_EQ(from_settled.contact_steps, settling.contact_steps);
+  EXPECT_EQ(from_settled.held_rise_m, settling.held_rise_m);
+  EXPECT_EQ(from_settled.tool_rise_m, settling.tool_rise_m);
+  EXPECT_EQ(from_settled.min_volume_ratio, settling.min_volume_ratio);
+  EXPECT_EQ(from_settled.min_volume_ratio_anywhere, settling.min_volume_ratio_anywhere);
+  EXPECT_EQ(from_settled.max_total_normal_n, settling.max_total_normal_n);
+  EXPECT_EQ(from_settled.sweeps, settling.sweeps);
+}
 
 // liver_grasp_23k (SOFA's liver_23k with its caps peeled and its tets improved by TetGen: 7144
 // nodes, 28931 tets; its compliance is 1.6 GB, built once in about 40 s into
@@ -162,6 +196,68 @@ TEST(PadGrasp20kTest, NominalApproachHoldsTheLobe) {
   SceneSpec spec = loadScene(std::string(TACTUS_SOURCE_DIR) + "/scenes/liver_grasp_20k.yaml");
   expectHeldAndWellPosed(test_support::runPadGrasp(spec, {}));
 }
+
+// The grasp anywhere (tests/support/pad_grasp.h, gridApproaches): six corners of the grid on each
+// of liver_grasp_20k and liver_grasp_23k (gridTestApproaches), the grasp point 5 mm off along the
+// jaws and along the lobe's edge, the jaws rolled 20 deg, at the scenes' grip and at twice it.
+// Each must lift the held nodes at least 90 % of the tool's rise, keep every tet in the jaws at
+// 0.3 of its rest volume or more and invert no tet anywhere. The run ends at 5.0 s, 0.5 s into the
+// hold, as pad_grasp_study --grid's (the nominal tests hold to 5.8 s): in the 11 grid approaches
+// run to 5.8 s every verdict at 5.0 s was the verdict at 5.8 s; a slip shows as the lift ends
+// (4.4-4.7 s) or earlier. Not shorter: a liver_grasp_23k corner reached its smallest tet in the
+// jaws (0.258) at 4.86 s.
+//
+// Disabled: the corners fail today on both meshes (docs/measurements.md, "The grasp anywhere":
+// the lobe slips out of one jaw, tets invert under the lower jaw, liver_grasp_23k's jaws stand at
+// their stop and crush). Run them with --gtest_also_run_disabled_tests --gtest_filter='*Corners*';
+// drop DISABLED_ when they pass.
+constexpr double kGridTestEndS = 5.0;
+
+struct GridCase {
+  const char* scene;
+  ApproachPerturbation approach;
+};
+
+std::vector<GridCase> gridCases() {
+  std::vector<GridCase> out;
+  for (const char* file : {"liver_grasp_20k.yaml", "liver_grasp_23k.yaml"}) {
+    for (const ApproachPerturbation& a : test_support::gridTestApproaches()) out.push_back({file, a});
+  }
+  return out;
+}
+
+void PrintTo(const GridCase& c, std::ostream* os) {
+  *os << c.scene << ' ' << approachName(c.approach);
+}
+
+class PadGraspGridTest : public ::testing::TestWithParam<GridCase> {};
+
+TEST_P(PadGraspGridTest, HoldsWithoutCrushOrInversion) {
+  const SceneSpec spec =
+      loadScene(std::string(TACTUS_SOURCE_DIR) + "/scenes/" + GetParam().scene);
+  const PadGraspResult r = test_support::runPadGrasp(spec, GetParam().approach, kGridTestEndS);
+  printResult(r);
+  std::printf("smallest tet anywhere %.3f (tet %d at t = %.2f s), %d steps with a tet inverted\n",
+              r.min_volume_ratio_anywhere, r.min_volume_tet_anywhere,
+              r.min_volume_ratio_anywhere_t_s, r.inverted_steps);
+  EXPECT_GT(r.tool_rise_m, 0.018);
+  EXPECT_GT(r.held_nodes, 2);
+  EXPECT_GE(r.held_rise_m, 0.9 * r.tool_rise_m);
+  EXPECT_GE(r.min_volume_ratio, 0.3);
+  EXPECT_GT(r.min_volume_ratio_anywhere, 0.0);
+  EXPECT_EQ(r.inverted_steps, 0);
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    DISABLED_Corners, PadGraspGridTest, ::testing::ValuesIn(gridCases()),
+    [](const ::testing::TestParamInfo<GridCase>& info) {
+      // e.g. liver_grasp_20k_xm5_ym5_z0_rollm20_grip15
+      std::string name = info.param.scene;
+      name.resize(name.find('.'));
+      name += '_';
+      name += approachName(info.param.approach);
+      return name;
+    });
 
 }  // namespace
 }  // namespace tactus::sim
