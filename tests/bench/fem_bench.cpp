@@ -331,6 +331,24 @@ void nodeRotations(benchmark::State& state, const char* name) {
 void BM_NodeRotations_Liver23k(benchmark::State& s) { nodeRotations(s, "liver_23k.msh"); }
 BENCHMARK(BM_NodeRotations_Liver23k)->Arg(0)->Arg(2)->Unit(benchmark::kMillisecond);
 
+// The same from the last free motion's element rotations (FemBody::stepNodeRotations, what the
+// warped compliance's update reads): no polar decomposition per element; the node sums are
+// kept from the step's first call (the preconditioner's), so this is the smoothing and the
+// polar factor per node.
+void stepNodeRotations(benchmark::State& state, const char* name) {
+  const int passes = static_cast<int>(state.range(0));
+  auto body = makeBody(loadLiver(name), LinearSolverKind::kCholmod, PcgPreconditioner::kJacobi, 20);
+  for (int s = 0; s < 3; ++s) body->freeMotion(kH);
+  std::vector<Eigen::Matrix3d> r;
+  for (auto _ : state) {
+    body->stepNodeRotations(r, nullptr, passes);
+    benchmark::DoNotOptimize(r.data());
+  }
+  state.counters["tets"] = body->mesh().tetCount();
+}
+void BM_StepNodeRotations_Liver23k(benchmark::State& s) { stepNodeRotations(s, "liver_23k.msh"); }
+BENCHMARK(BM_StepNodeRotations_Liver23k)->Arg(0)->Arg(2)->Unit(benchmark::kMillisecond);
+
 }  // namespace
 }  // namespace tactus::sim
 

@@ -89,7 +89,6 @@ void FemBody::Impl::init(const TetMesh& m, const FemMaterial& mat,
   const int ne = mesh.tetCount();
   grad.resize(ne);
   volume.resize(ne);
-  rotation.assign(ne, Eigen::Matrix3d::Identity());
   for (int e = 0; e < ne; ++e) {
     const auto& t = mesh.tets[e];
     for (int k = 0; k < 4; ++k)
@@ -190,34 +189,45 @@ void FemBody::Impl::buildRotationGroups() {
                mesh.source.empty() ? "mesh" : mesh.source, tied, groups, kShortEdgeRatio);
 }
 
-void FemBody::Impl::averageRotations(const std::vector<Eigen::Matrix3d>& element_rot,
-                                     std::vector<Eigen::Matrix3d>& acc,
-                                     std::vector<Eigen::Matrix3d>& out, int smoothing_passes,
-                                     std::vector<double>* weight) {
+void FemBody::Impl::sumNodeRotations(const std::vector<Eigen::Matrix3d>* element_rot,
+                                     std::vector<Eigen::Matrix3d>& acc, std::vector<double>& w) {
   acc.assign(n, Eigen::Matrix3d::Zero());
-  std::vector<double> local_weight;
-  std::vector<double>& w = weight != nullptr ? *weight : local_weight;
-  const bool weighted = weight != nullptr || smoothing_passes > 0;
-  if (weighted) w.assign(static_cast<std::size_t>(n), 0.0);
-  for (int e = 0; e < mesh.tetCount(); ++e) {
-    for (int k = 0; k < 4; ++k) {
-      acc[mesh.tets[e][k]] += volume[e] * element_rot[e];
-      if (weighted) w[mesh.tets[e][k]] += volume[e];
+  w.assign(static_cast<std::size_t>(n), 0.0);
+  if (element_rot != nullptr) {
+    for (int e = 0; e < mesh.tetCount(); ++e) {
+      for (int k = 0; k < 4; ++k) {
+        acc[mesh.tets[e][k]] += volume[e] * (*element_rot)[e];
+        w[mesh.tets[e][k]] += volume[e];
+      }
+    }
+  } else {
+    // the kept rotations, in assembly order
+    for (std::size_t slot = 0; slot < assembly_elems.size(); ++slot) {
+      const AssemblyElement& el = assembly_elems[slot];
+      const Eigen::Matrix3d vr = el.vol * slotRotation(static_cast<int>(slot));
+      for (int k = 0; k < 4; ++k) {
+        acc[el.node[k]] += vr;
+        w[el.node[k]] += el.vol;
+      }
     }
   }
   if (!rot_group.empty()) {
     // every member of a group gets the group's sum
     group_acc.assign(rot_group_count, Eigen::Matrix3d::Zero());
-    std::vector<double> group_w(weighted ? static_cast<std::size_t>(rot_group_count) : 0, 0.0);
+    group_w.assign(static_cast<std::size_t>(rot_group_count), 0.0);
     for (int i = 0; i < n; ++i) {
       group_acc[rot_group[i]] += acc[i];
-      if (weighted) group_w[rot_group[i]] += w[i];
+      group_w[rot_group[i]] += w[i];
     }
     for (int i = 0; i < n; ++i) {
       acc[i] = group_acc[rot_group[i]];
-      if (weighted) w[i] = group_w[rot_group[i]];
+      w[i] = group_w[rot_group[i]];
     }
   }
+}
+
+void FemBody::Impl::finishNodeRotations(std::vector<Eigen::Matrix3d>& acc, std::vector<double>& w,
+                                        std::vector<Eigen::Matrix3d>& out, int smoothing_passes) {
   // smoothing: each pass gives every node the sum over its elements of their nodes' sums (one
   // element layer wider on each side); rotations and weights alike, rescaled to the largest
   // weight so that repeated passes cannot overflow (the polar factor ignores the scale)
@@ -258,6 +268,12 @@ void FemBody::Impl::averageRotations(const std::vector<Eigen::Matrix3d>& element
                                         : Eigen::Matrix3d::Identity();
 }
 
+void FemBody::Impl::ensureStepNodeSums() {
+  if (step_sums_current) return;
+  sumNodeRotations(nullptr, step_acc, step_w);
+  step_sums_current = true;
+}
+
 // ---- FemBody ----
 
 FemBody::FemBody(const TetMesh& mesh, const FemMaterial& material,
@@ -282,7 +298,19 @@ Eigen::VectorXd& FemBody::velocities() { return impl_->v; }
 const Eigen::VectorXd& FemBody::positions() const { return impl_->q; }
 const Eigen::VectorXd& FemBody::velocities() const { return impl_->v; }
 const Eigen::VectorXd& FemBody::lumpedMass() const { return impl_->mass; }
-const std::vector<Eigen::Matrix3d>& FemBody::elementRotations() const { return impl_->rotation; }
+const std::vector<Eigen::Matrix3d>& FemBody::elementRotations() const {
+  Impl& m = *impl_;
+  if (m.rotation_by_tet_stale) {
+    m.rotation_by_tet.assign(static_cast<std::size_t>(m.mesh.tetCount()),
+                             Eigen::Matrix3d::Identity());
+    if (m.corotational)
+      for (std::size_t slot = 0; slot < m.assembly_elems.size(); ++slot)
+        m.rotation_by_tet[static_cast<std::size_t>(m.assembly_elems[slot].index)] =
+            m.slotRotation(static_cast<int>(slot));
+    m.rotation_by_tet_stale = false;
+  }
+  return m.rotation_by_tet;
+}
 const FemBody::Counters& FemBody::counters() const { return impl_->counters; }
 double FemBody::lastStepH() const { return impl_->last_h; }
 std::uint64_t FemBody::restHash() const { return impl_->hash; }
@@ -306,7 +334,7 @@ FemStepStats FemBody::freeMotion(double h, const Eigen::VectorXd* external_force
   const double beta = damped ? m.material.damping->stiffness_beta_s : 0.0;
   // linearise at q + h v: internal force, tangent, and K v for the damping force
   m.evaluate(m.q, &m.v, h, beta, &m.f_int, &m.a, h + beta, 1.0 / h + alpha, false,
-             &stats.inverted_elements);
+             &stats.inverted_elements, true);
   if (stats.inverted_elements > 0 && !m.inversion_warned) {
     m.inversion_warned = true;
     spdlog::warn("{}: {} of {} tetrahedra inverted (det F <= 0); the corotational force pushes "
@@ -354,7 +382,8 @@ FemStepStats FemBody::solveStatic(const Eigen::VectorXd* external_force_n, int m
   if (!m.chol.analyzed()) m.chol.analyze(m.a);
   for (int it = 0; it < max_iterations; ++it) {
     const std::int64_t t0 = shared::monotonicNs();
-    m.evaluate(m.q, nullptr, 0.0, 0.0, &m.f_int, &m.a, 1.0, 0.0, false);
+    m.evaluate(m.q, nullptr, 0.0, 0.0, &m.f_int, &m.a, 1.0, 0.0, false, nullptr, true);
+    m.rotation_current = false;   // not a step's linearisation point
     m.chol_current = false;
     m.a_is_step_matrix = false;
     m.reuse.forget();  // chol will hold K, not a step's A

@@ -61,6 +61,15 @@ struct FemModel {
     double vol;                     // = volume[index]
   };
   std::vector<AssemblyElement> assembly_elems;
+  // The same elements four at a time for the batched element loop (fem_assembly.cpp): lane l of
+  // batch b is assembly element 4 b + l; the last batch's missing lanes repeat its first element
+  // (computed, never scattered).
+  struct ElementBatch {
+    int x[4][4];        // [local node][lane]: 3 * node, the node's first entry in q, v and forces
+    double g[3][4][4];  // [component][local node][lane]: the shape gradients
+    double vol[4];
+  };
+  std::vector<ElementBatch> batches;
   // where each element writes into A's fixed pattern: per assembly element and block (a, b),
   // a >= b, in order (0,0), (1,0), (1,1), (2,0), ...: for each column j of the block, the
   // position in A's values of its first entry (row p of column q + j, or row p + j on the
@@ -68,8 +77,10 @@ struct FemModel {
   std::vector<int> block_offset;
   std::vector<int> diag_offset;  // per reduced DOF
 
-  // The general element loop (fem_domains.cpp) runs instead of the corotational one when the
-  // material asks for more: the consistent tangent, the invertible law or edge-smoothed strain.
+  // The general element loop (fem_domains.cpp) runs instead of the batched corotational one
+  // (fem_assembly.cpp) when the material asks for more: the consistent tangent, the invertible
+  // law or edge-smoothed strain. It keeps its rotations in `rotation` as the batched loop does
+  // (keep_rotations) but does not warm-start from them.
   bool general_loop = false;
   bool rotation_stiffness = false;   // the tangent's rotation modes (B > 0) are kept
   // Edge-smoothed strain: one integration domain per mesh edge (empty for linear tets). Domain d
@@ -101,9 +112,19 @@ struct FemModel {
 
 struct FemState {
   Eigen::VectorXd q, v;
-  // per element: rotation at the positions of the last element loop (nodeRotations, the
-  // warped compliance and the preconditioner read it after the step)
-  std::vector<Eigen::Matrix3d> rotation;
+  // Per element: the rotation of the last element loop that kept its rotations (freeMotion,
+  // solveStatic; the linearisation point q + h v of a step), in the batched loop's layout
+  // ([batch].r[row][col][lane]). The element loop starts each element's polar decomposition from
+  // it, so it is state: a step continues bit for bit only from the same rotations. The warped
+  // compliance and the preconditioner read the node rotations made from it (stepNodeRotations).
+  struct RotationBatch {
+    double r[3][3][4];
+  };
+  std::vector<RotationBatch> rotation;
+  bool rotation_current = false;   // `rotation` is that of the last freeMotion's linearisation
+  // the same per mesh element (FemBody::elementRotations), filled on demand
+  std::vector<Eigen::Matrix3d> rotation_by_tet;
+  bool rotation_by_tet_stale = true;
   // The system matrix A (lower triangle). Its pattern is the model's (block_offset and
   // diag_offset index it, fixed at init); its values are the last step's A (or solveStatic's K),
   // kept as state because the compliance queries factorise it after the step
@@ -135,9 +156,17 @@ struct FemScratch {
   std::vector<Eigen::Matrix3d> node_rot, node_acc;  // warped preconditioner
   // kCholmodReuse: this step's node rotations relative to the factor's (the preconditioner's warp)
   std::vector<Eigen::Matrix3d> relative_rot;
-  std::vector<Eigen::Matrix3d> group_acc;           // averageRotations' per-group sums
-  std::vector<Eigen::Matrix3d> tet_acc;             // averageRotations' smoothing: per-tet sums
-  std::vector<double> tet_w;                        // and their weights
+  std::vector<Eigen::Matrix3d> group_acc;           // sumNodeRotations' per-group sums
+  std::vector<double> group_w;
+  std::vector<Eigen::Matrix3d> tet_acc;             // finishNodeRotations' smoothing: per-tet
+  std::vector<double> tet_w;                        // sums and their weights
+  std::vector<double> node_w;                       // node weights of the preconditioner's sums
+  // the node sums of the last kept element rotations (ensureStepNodeSums) and a working copy
+  std::vector<Eigen::Matrix3d> step_acc, work_acc;
+  std::vector<double> step_w, work_w;
+  bool step_sums_current = false;
+  // the element loop's reference-path elements of one call (slots)
+  std::vector<int> fallback_slots;
 };
 
 struct FemBody::Impl : FemModel, FemState, FemScratch {
@@ -159,7 +188,7 @@ struct FemBody::Impl : FemModel, FemState, FemScratch {
   // general_loop is set).
   void evaluateGeneral(const Eigen::VectorXd& q, const Eigen::VectorXd* v, double h, double beta,
                        Eigen::VectorXd* f_out, Sparse* target, double c_k, double c_m,
-                       bool use_rest_frame, int* inverted_at_q);
+                       bool use_rest_frame, int* inverted_at_q, bool keep_rotations);
   // One integration domain of the general loop (k nodes, gradients 3 per node, volume vol,
   // offsets off): adds its internal force into fd (if non-null) and c_k times its tangent into
   // vals (if non-null); returns the rotation it used (identity without rotation).
@@ -174,11 +203,33 @@ struct FemBody::Impl : FemModel, FemState, FemScratch {
   //    force plus the stiffness-proportional damping force (beta = 0 or v null: elastic only);
   //  * target (if non-null): c_k K(x) + c_m M into its fixed pattern;
   //  * inverted_at_q (if non-null): elements with det F <= 0 at q (not x).
-  // Element rotations are taken at x and kept in `rotation`; use_rest_frame: R = I without
-  // rotation extraction (rest tangent).
+  // Element rotations are taken at x, each polar decomposition starting from `rotation`;
+  // keep_rotations: they replace `rotation` (a step's or a static solve's linearisation point;
+  // queries leave the state alone). use_rest_frame: R = I without rotation extraction (rest
+  // tangent). Elements go four at a time through the batched kernel (AVX where the CPU has it,
+  // the same operations in SSE2 otherwise: the same bits); those it cannot finish (an
+  // ill-conditioned or inverted F, a rotation the warm-started iteration did not reach) go
+  // through elementStep, the reference constitutive step.
   void evaluate(const Eigen::VectorXd& q, const Eigen::VectorXd* v, double h, double beta,
                 Eigen::VectorXd* f_out, Sparse* target, double c_k, double c_m,
-                bool use_rest_frame, int* inverted_at_q = nullptr);
+                bool use_rest_frame, int* inverted_at_q = nullptr, bool keep_rotations = false);
+  // One element through the reference path (Eigen, the robust polar decomposition of
+  // fem_detail::polarRotation): its force and tangent scattered as evaluate describes; returns its
+  // rotation.
+  Eigen::Matrix3d elementStep(int slot, const double* q, const double* v, double h, double beta,
+                              double* f_out, double* vals, double c_k, bool rotate) const;
+  Eigen::Matrix3d slotRotation(int slot) const {
+    const RotationBatch& b = rotation[static_cast<std::size_t>(slot / 4)];
+    Eigen::Matrix3d r;
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) r(i, j) = b.r[i][j][slot % 4];
+    return r;
+  }
+  void setSlotRotation(int slot, const Eigen::Matrix3d& r) {
+    RotationBatch& b = rotation[static_cast<std::size_t>(slot / 4)];
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) b.r[i][j][slot % 4] = r(i, j);
+  }
   Eigen::Matrix3d elementF(int e, const Eigen::VectorXd& x) const {
     const auto& t = mesh.tets[e];
     Eigen::Matrix<double, 3, 4> xe;
@@ -202,10 +253,16 @@ struct FemBody::Impl : FemModel, FemState, FemScratch {
   // Node rotations from element rotations: volume-weighted sum over the adjacent elements,
   // summed over the node's rotation group, widened by `smoothing_passes` passes over the
   // elements (FemBody::nodeRotations), polar factor. Nodes with no weight get identity.
-  // `weight` (optional): the same sums of the element volumes alone (acc's scale).
-  void averageRotations(const std::vector<Eigen::Matrix3d>& element_rot,
-                        std::vector<Eigen::Matrix3d>& acc, std::vector<Eigen::Matrix3d>& out,
-                        int smoothing_passes = 0, std::vector<double>* weight = nullptr);
+  // sumNodeRotations fills acc (and w, the same sums of the volumes alone) from per-mesh-element
+  // rotations, or (null) from `rotation`, groups included; finishNodeRotations smooths and takes
+  // the polar factors.
+  void sumNodeRotations(const std::vector<Eigen::Matrix3d>* element_rot,
+                        std::vector<Eigen::Matrix3d>& acc, std::vector<double>& w);
+  void finishNodeRotations(std::vector<Eigen::Matrix3d>& acc, std::vector<double>& w,
+                           std::vector<Eigen::Matrix3d>& out, int smoothing_passes);
+  // The node sums of `rotation` (step_acc, step_w), computed once per element loop that kept
+  // its rotations.
+  void ensureStepNodeSums();
   void ensureRestFactor(double h);
   void ensureCurrentFactor();
   // dv = A^-1 rhs by a fresh CHOLMOD factorisation of `a` (timed into stats); false when A is not

@@ -247,7 +247,7 @@ Eigen::Matrix3d FemBody::Impl::domainKernel(int k, const int* node, const double
 void FemBody::Impl::evaluateGeneral(const Eigen::VectorXd& q, const Eigen::VectorXd* v, double h,
                                     double beta, Eigen::VectorXd* f_out, Sparse* target,
                                     double c_k, double c_m, bool use_rest_frame,
-                                    int* inverted_at_q) {
+                                    int* inverted_at_q, bool keep_rotations) {
   if (f_out) f_out->setZero(3 * n);
   double* vals = target ? target->valuePtr() : nullptr;
   if (target) std::fill(vals, vals + target->nonZeros(), 0.0);
@@ -272,7 +272,7 @@ void FemBody::Impl::evaluateGeneral(const Eigen::VectorXd& q, const Eigen::Vecto
           block_offset.data() + static_cast<std::size_t>(slot) * kBlockOffsetsPerElement;
       const Eigen::Matrix3d r = domainKernel(4, el.node.data(), el.g.data(), el.vol, off, qd, vd,
                                              h, beta, fd, vals, c_k, rotate);
-      if (rotate) rotation[el.index] = r;
+      if (rotate && keep_rotations) setSlotRotation(slot, r);
     }
     if (rotate) polars += ne;
     counters.general_domain_evaluations += ne;
@@ -284,21 +284,28 @@ void FemBody::Impl::evaluateGeneral(const Eigen::VectorXd& q, const Eigen::Vecto
                    dom_offset.data() + dom_offset_start[d], qd, vd, h, beta, fd, vals, c_k,
                    rotate);
     // the elements' own rotations (node rotations, the warped compliance) and inversions
-    if (rotate || inverted_at_q) {
-      for (int e = 0; e < ne; ++e) {
+    const bool keep = rotate && keep_rotations;
+    if (keep || inverted_at_q) {
+      for (int slot = 0; slot < ne; ++slot) {
+        const int e = assembly_elems[static_cast<std::size_t>(slot)].index;
         const Eigen::Matrix3d fq = elementF(e, q);
         if (inverted_at_q && !(fq.determinant() > 0.0)) ++inverted;
-        if (rotate) {
+        if (keep) {
           const Eigen::Matrix3d f = vd ? Eigen::Matrix3d(fq + h * elementF(e, *v)) : fq;
-          rotation[e] = fem_detail::polarRotation(f);
+          setSlotRotation(slot, fem_detail::polarRotation(f));
         }
       }
     }
-    if (rotate) polars += nd + ne;
+    if (rotate) polars += nd + (keep ? ne : 0);
     counters.general_domain_evaluations += nd;
   }
   if (inverted_at_q) *inverted_at_q = inverted;
   counters.rotation_extractions += polars;
+  if (rotate && keep_rotations) {
+    rotation_current = true;
+    rotation_by_tet_stale = true;
+    step_sums_current = false;
+  }
   if (target && c_m != 0.0)
     for (int i = 0; i < n; ++i)
       if (dof_base[i] >= 0)

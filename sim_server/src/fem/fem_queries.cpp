@@ -19,12 +19,31 @@ void FemBody::nodeRotations(std::vector<Eigen::Matrix3d>& out, std::vector<doubl
     element_rot[e] = fem_detail::polarRotation(m.elementF(e, m.q));
   m.counters.rotation_extractions += m.mesh.tetCount();
   std::vector<double> weight;
-  m.averageRotations(element_rot, acc, out, smoothing_passes,
-                     coherence != nullptr ? &weight : nullptr);
+  m.sumNodeRotations(&element_rot, acc, weight);
+  m.finishNodeRotations(acc, weight, out, smoothing_passes);
   if (coherence == nullptr) return;
   // |sum v_e R_e|_F / (sqrt(3) sum v_e) over the same elements (groups, passes) as the average
   for (int i = 0; i < m.n; ++i)
     (*coherence)[i] = weight[i] > 0.0 ? acc[i].norm() / (std::sqrt(3.0) * weight[i]) : 1.0;
+}
+
+void FemBody::stepNodeRotations(std::vector<Eigen::Matrix3d>& out,
+                                std::vector<double>* coherence, int smoothing_passes) const {
+  Impl& m = *impl_;
+  if (smoothing_passes < 0) throw Error("stepNodeRotations: smoothing_passes must be >= 0");
+  if (!m.corotational || !m.rotation_current) {
+    nodeRotations(out, coherence, smoothing_passes);
+    return;
+  }
+  m.ensureStepNodeSums();
+  m.work_acc = m.step_acc;
+  m.work_w = m.step_w;
+  m.finishNodeRotations(m.work_acc, m.work_w, out, smoothing_passes);
+  if (coherence == nullptr) return;
+  coherence->resize(static_cast<std::size_t>(m.n));
+  for (int i = 0; i < m.n; ++i)
+    (*coherence)[i] =
+        m.work_w[i] > 0.0 ? m.work_acc[i].norm() / (std::sqrt(3.0) * m.work_w[i]) : 1.0;
 }
 
 void FemBody::stresses(std::vector<Eigen::Matrix3d>& out) const {

@@ -73,7 +73,10 @@ bool FemBody::Impl::solveStep(double h, FemStepStats& stats) {
       dv = 2.0 * dv_prev - dv_prev2;  // warm start
       const std::int64_t t_warp = shared::monotonicNs();
       if (corotational) {
-        averageRotations(rotation, node_acc, node_rot);
+        ensureStepNodeSums();
+        work_acc = step_acc;
+        work_w = step_w;
+        finishNodeRotations(work_acc, work_w, node_rot, 0);
         relative_rot.resize(n_free / 3);
         if (factor_node_rot.size() != relative_rot.size())
           factor_node_rot.assign(relative_rot.size(), Eigen::Matrix3d::Identity());
@@ -118,7 +121,10 @@ bool FemBody::Impl::pcg(double tol, int max_iter, FemStepStats& stats) {
       options.pcg_preconditioner == PcgPreconditioner::kRestCholesky || warped;
   if (warped && corotational) {
     // per-node rotations from this step's element rotations (volume-weighted, re-orthonormalised)
-    averageRotations(rotation, node_acc, node_rot);
+    ensureStepNodeSums();
+    work_acc = step_acc;
+    work_w = step_w;
+    finishNodeRotations(work_acc, work_w, node_rot, 0);
   }
   const bool rotate = warped && corotational;
   if (!use_rest) {

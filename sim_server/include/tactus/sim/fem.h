@@ -15,6 +15,13 @@
 // choice"); the system matrix's pattern then couples every pair of nodes of the tetrahedra
 // around an edge.
 //
+// Element loops: linear and corotational tetrahedra with the corotated tangent (the default,
+// every shipped scene) go four elements at a time through a vector kernel whose polar
+// decompositions start from each element's last rotation (femElementKernelName). The tissue
+// options (kConsistent, the invertible neo-Hookean law, kEdgeSmoothedTet) take the reference
+// element loop instead, one element or domain at a time with a fresh SVD polar decomposition:
+// the batched kernel computes only the corotated linear stress and tangent.
+//
 // The system matrix keeps a fixed sparsity pattern; CHOLMOD's symbolic analysis runs once in the
 // constructor and every step refactorises numerically (LinearSolverKind::kCholmod), or a
 // recent factorisation preconditions a PCG (kCholmodReuse, see FemSolverOptions). Fixed nodes are eliminated (their rows and
@@ -203,6 +210,13 @@ class FemBody {
   /// grasp). Throws tactus::Error when smoothing_passes < 0.
   void nodeRotations(std::vector<Eigen::Matrix3d>& out,
                      std::vector<double>* coherence = nullptr, int smoothing_passes = 0) const;
+  /// The same node rotations from the element rotations of the last free motion's element loop,
+  /// i.e. at its linearisation point q + h v, where the step's system matrix A (and so the exact
+  /// compliance C = h A^-1) was taken: no second polar decomposition per element. Before the
+  /// first free motion, or after solveStatic, nodeRotations at the current positions. The
+  /// warped compliance's update reads these.
+  void stepNodeRotations(std::vector<Eigen::Matrix3d>& out,
+                         std::vector<double>* coherence = nullptr, int smoothing_passes = 0) const;
 
   /// Per-element volume ratio det F = current signed volume / rest volume at the current
   /// positions (<= 0: inverted).
@@ -232,6 +246,9 @@ class FemBody {
     /// integration domains evaluated by the general element loop: 0 unless the material asks
     /// for the consistent tangent, the invertible law or edge-smoothed strain
     long general_domain_evaluations = 0;
+    /// elements the element loop's batched kernel left to its reference path (an
+    /// ill-conditioned or inverted F, a rotation its warm-started Newton steps did not reach)
+    long fallback_elements = 0;
   };
   const Counters& counters() const;
 
@@ -255,6 +272,14 @@ class FemBody {
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };
+
+/// The element loop's kernel this process runs: "avx" or "generic" (the same operations in the
+/// x86-64 baseline: both give the same bits), or "reference" (every element through the
+/// reference constitutive step, for tests). Chosen once from the CPU (AVX when it has it);
+/// TACTUS_FEM_KERNEL names another. setFemElementKernel switches (false: unknown or not
+/// supported by this CPU; nothing changes); not while an element loop runs.
+const char* femElementKernelName();
+bool setFemElementKernel(const char* name);
 
 /// Threads of the numeric libraries CHOLMOD brings into the process.
 struct NumericThreads {
