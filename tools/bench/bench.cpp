@@ -281,9 +281,22 @@ int run(const BenchOptions& o) {
   } else if (o.min_contacts > 0) {
     std::printf("no step had >= %d contacts\n", o.min_contacts);
   }
-  std::printf("free motion linear solve: %ld CHOLMOD factorisations in %ld steps; PCG iterations "
-              "per step median %.0f, p90 %.0f, max %.0f\n",
-              fem_factorisations, steps, pct(fem_cg, 0.5), pct(fem_cg, 0.9), pct(fem_cg, 1.0));
+  long background_factorisations = 0, background_waits = 0;
+  double background_wait_max_s = 0.0;
+  for (int i = 0; i < sim.tissueCount(); ++i) {
+    const sim::FemBody::Counters& c = sim.tissue(i).counters();
+    background_factorisations += c.background_factorisations;
+    background_waits += c.background_waits;
+    background_wait_max_s = std::max(background_wait_max_s, c.background_wait_max_s);
+  }
+  std::printf("free motion linear solve: %ld CHOLMOD factorisations on the step's thread and %ld "
+              "in the background in %ld steps (%ld steps waited for the background one, at most "
+              "%.2f ms); PCG iterations per step median %.0f, p90 %.0f, max %.0f\n",
+              fem_factorisations, background_factorisations, steps, background_waits,
+              1e3 * background_wait_max_s, pct(fem_cg, 0.5), pct(fem_cg, 0.9), pct(fem_cg, 1.0));
+  const sim::BlasLockFigures blas_lock = sim::blasLockFigures();
+  std::printf("BLAS calls that waited for the other thread's (the serialising lock): %ld, %.1f ms "
+              "in all\n", blas_lock.contended_calls, 1e3 * blas_lock.waited_s);
   std::printf(
       "steps in contact: %zu of %ld; over those: contacts median %.0f, max %.0f (rows "
       "median %.0f, max %.0f); sim NSGS sweeps median %.0f\n",

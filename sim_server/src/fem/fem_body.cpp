@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <mutex>
 #include <string>
 
 #include <spdlog/spdlog.h>
@@ -40,8 +41,24 @@ void FemBody::Impl::init(const TetMesh& m, const FemMaterial& mat,
   mesh = m;
   material = mat;
   options = opt;
-  reuse = fem_detail::ReusedFactorSolver(
-      {opt.cg_tolerance, opt.refactor_iterations, opt.refactor_every_steps});
+  if (opt.background_refactor_lag_steps < 0)
+    throw Error("FemBody: background_refactor_lag_steps must be >= 0");
+  reuse = fem_detail::ReusedFactorSolver({opt.cg_tolerance, opt.refactor_iterations,
+                                          opt.refactor_every_steps,
+                                          opt.background_refactor_lag_steps});
+  if (opt.linear == LinearSolverKind::kCholmodReuse && opt.background_refactor_lag_steps > 0) {
+    if (fem_detail::blasCallsSerialised()) {
+      background = std::make_unique<fem_detail::BackgroundFactoriser>();
+      reuse.setBackground(background.get());
+    } else {
+      static std::once_flag logged;
+      std::call_once(logged, [] {
+        spdlog::warn("FemBody: the BLAS calls of CHOLMOD cannot be serialised in this program "
+                     "(its BLAS definitions do not take precedence); factor refreshes stay on "
+                     "the step's thread");
+      });
+    }
+  }
   corotational = mat.law != MaterialLaw::kLinear;
   rotation_stiffness =
       mat.law == MaterialLaw::kCorotational && mat.tangent == TangentKind::kConsistent;

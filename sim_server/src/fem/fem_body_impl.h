@@ -138,6 +138,12 @@ struct FemState {
   // kCholmodReuse on a corotational body: node rotations of the factor's step (per free node, in
   // DOF order)
   std::vector<Eigen::Matrix3d> factor_node_rot;
+  // background refreshes (background_refactor_lag_steps > 0): the worker, and the node rotations
+  // of the step whose A it factorises (they become factor_node_rot when its factor is taken)
+  std::unique_ptr<fem_detail::BackgroundFactoriser> background;
+  std::vector<Eigen::Matrix3d> background_node_rot;
+  // and the values of that A (they become factor_values when its factor is taken)
+  Eigen::VectorXd background_factor_values;
   double compliance_scale = 0.0; // C = compliance_scale * A^-1 for the current `a`
   double last_h = 0.0;
   // the last two steps' dv (reduced): the iterative solvers' warm start

@@ -71,6 +71,19 @@ bool FemBody::Impl::solveStep(double h, FemStepStats& stats) {
       return factorizeAndSolve(stats) && dv.allFinite();
     case LinearSolverKind::kCholmodReuse: {
       dv = 2.0 * dv_prev - dv_prev2;  // warm start
+      double background_factor_s = 0.0;
+      const bool taken = reuse.adoptDue(chol, stats.factor_wait_s, background_factor_s);
+      if (stats.factor_wait_s > 1e-4) {
+        ++counters.background_waits;
+        counters.background_wait_max_s = std::max(counters.background_wait_max_s, stats.factor_wait_s);
+      }
+      if (taken) {
+        // the worker's factor of an earlier step's A: its rotations are that step's
+        stats.background_factor_taken = true;
+        ++counters.background_factorisations;
+        if (corotational) factor_node_rot = background_node_rot;
+        factor_values.swap(background_factor_values);   // the factor of record's source
+      }
       const std::int64_t t_warp = shared::monotonicNs();
       if (corotational) {
         ensureStepNodeSums();
@@ -91,7 +104,16 @@ bool FemBody::Impl::solveStep(double h, FemStepStats& stats) {
         keepFactorRotations();
         noteFactorSource();
       }
-      stats.factorisation_s = r.factorisation_s;
+      if (r.background_started) {
+        if (corotational) {
+          background_node_rot.resize(n_free / 3);
+          for (int i = 0; i < n; ++i)
+            if (dof_base[i] >= 0) background_node_rot[dof_base[i] / 3] = node_rot[i];
+        }
+        background_factor_values = Eigen::Map<const Eigen::VectorXd>(a.valuePtr(), a.nonZeros());
+      }
+      stats.background_factorisation_started = r.background_started;
+      stats.factorisation_s = r.factorisation_s + stats.factor_wait_s;
       stats.solve_s = warp_s + r.solve_s;
       stats.cg_iterations = r.cg_iterations;
       stats.cg_residual = r.residual;

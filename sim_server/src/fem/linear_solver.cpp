@@ -2,9 +2,13 @@
 
 #include "fem_internal.h"
 
+#include <dlfcn.h>
 #include <pthread.h>
 #include <signal.h>
+#include <sys/resource.h>
+#include <unistd.h>
 
+#include <algorithm>
 #include <cstring>
 #include <string>
 
@@ -129,6 +133,18 @@ void CholmodSolver::solve(const double* b, double* x, int ncols) {
   std::memcpy(x, x_->x, sizeof(double) * n * bd.ncol);
 }
 
+void CholmodSolver::analyzeLike(const CholmodSolver& other) {
+  if (factor_) cholmod_free_factor(&factor_, &common_);
+  factorized_ = false;
+  factor_ = cholmod_copy_factor(other.factor_, &common_);
+  if (!factor_) throw NumericalError("CHOLMOD: copying a factor failed (out of memory?)");
+}
+
+void CholmodSolver::swapFactor(CholmodSolver& other) noexcept {
+  std::swap(factor_, other.factor_);
+  std::swap(factorized_, other.factorized_);
+}
+
 std::size_t CholmodSolver::factorNonzeros() const {
   if (!factor_) return 0;
   if (factor_->is_super) {
@@ -138,20 +154,147 @@ std::size_t CholmodSolver::factorNonzeros() const {
   return factor_->nzmax;
 }
 
+// ---- background factorisation ----
+
+namespace {
+constexpr int kWorkerNice = 10;
+
+// OpenMP keeps its limits per thread: a new thread starts from the environment's, and CHOLMOD's
+// supernodal factorisation then opened parallel regions whose threads called the serial
+// OpenBLAS at once (wrong factors). The worker takes the process's limit (no nested team, one
+// thread) for itself.
+void limitOpenMpInThisThread() {
+  using SetInt = void (*)(int);
+  if (auto* fn = reinterpret_cast<SetInt>(dlsym(RTLD_DEFAULT, "omp_set_max_active_levels"))) fn(0);
+  if (auto* fn = reinterpret_cast<SetInt>(dlsym(RTLD_DEFAULT, "omp_set_num_threads"))) fn(1);
+}
+}  // namespace
+
+BackgroundFactoriser::~BackgroundFactoriser() {
+  if (!worker_.joinable()) return;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    stop_ = true;
+  }
+  wake_.notify_all();
+  worker_.join();
+}
+
+void BackgroundFactoriser::start(const Sparse& a, const CholmodSolver& like) {
+  if (!solver_) {
+    solver_ = std::make_unique<CholmodSolver>();
+    solver_->analyzeLike(like);
+    copy_ = a;   // pattern and values; later jobs copy the values only
+  } else {
+    std::copy(a.valuePtr(), a.valuePtr() + a.nonZeros(), copy_.valuePtr());
+  }
+  if (!worker_.joinable()) {
+    const StopSignalsBlocked stop_signals_blocked;   // the new thread inherits the mask
+    worker_ = std::thread([this] { run(); });
+  }
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    pending_ = true;
+    done_ = false;
+  }
+  busy_ = true;
+  wake_.notify_all();
+}
+
+bool BackgroundFactoriser::finished() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return done_;
+}
+
+bool BackgroundFactoriser::collect(CholmodSolver& factor, double& waited_s,
+                                   double& factorisation_s) {
+  const std::int64_t t0 = shared::monotonicNs();
+  std::unique_lock<std::mutex> lock(mutex_);
+  wake_.wait(lock, [this] { return done_; });
+  waited_s = shared::secondsSinceNs(t0);
+  factorisation_s = factorisation_s_;
+  busy_ = false;
+  if (!ok_) return false;
+  factor.swapFactor(*solver_);
+  return true;
+}
+
+void BackgroundFactoriser::discard() {
+  std::unique_lock<std::mutex> lock(mutex_);
+  wake_.wait(lock, [this] { return done_; });
+  busy_ = false;
+}
+
+void BackgroundFactoriser::run() {
+  // below the simulation's and the haptic loop's threads: it takes the CPU they leave
+  setpriority(PRIO_PROCESS, static_cast<id_t>(gettid()), kWorkerNice);
+  limitOpenMpInThisThread();
+  std::unique_lock<std::mutex> lock(mutex_);
+  for (;;) {
+    wake_.wait(lock, [this] { return stop_ || pending_; });
+    if (stop_) return;
+    pending_ = false;
+    lock.unlock();
+    const std::int64_t t0 = shared::monotonicNs();
+    const bool ok = solver_->factorize(copy_);
+    const double seconds = shared::secondsSinceNs(t0);
+    lock.lock();
+    ok_ = ok;
+    factorisation_s_ = seconds;
+    done_ = true;
+    wake_.notify_all();
+  }
+}
+
 // ---- factor reuse ----
+
+bool ReusedFactorSolver::adoptDue(CholmodSolver& factor, double& waited_s,
+                                  double& factorisation_s) {
+  waited_s = 0.0;
+  factorisation_s = 0.0;
+  if (background_ == nullptr || !background_->busy()) return false;
+  ++job_steps_;
+  if (job_steps_ < policy_.background_lag_steps) return false;
+  if (job_stale_) {
+    // a newer factor was made since the job started: drop it (at the same step as it would
+    // have been taken, so that what runs when does not depend on the worker's speed)
+    const std::int64_t t0 = shared::monotonicNs();
+    background_->discard();
+    waited_s = shared::secondsSinceNs(t0);
+    return false;
+  }
+  if (!background_->collect(factor, waited_s, factorisation_s)) return false;
+  // the factor is job_steps_ steps old; solve() counts this step
+  age_steps_ = job_steps_ - 1;
+  last_iterations_ = 0;
+  ++refreshes_;
+  return true;
+}
 
 ReuseSolveResult ReusedFactorSolver::solve(CholmodSolver& factor, Sparse& a,
                                            const Eigen::VectorXd& b, Eigen::VectorXd& x,
                                            const Eigen::Matrix3d* block_rotation) {
   ReuseSolveResult out;
   if (age_steps_ >= 0) ++age_steps_;
-  bool refresh = age_steps_ < 0 || !factor.factorized() ||
-                 (policy_.refactor_every_steps > 0 && age_steps_ >= policy_.refactor_every_steps) ||
-                 2 * last_iterations_ > policy_.refactor_iterations;
+  const bool missing = age_steps_ < 0 || !factor.factorized();
+  const bool due =
+      (policy_.refactor_every_steps > 0 && age_steps_ >= policy_.refactor_every_steps) ||
+      2 * last_iterations_ > policy_.refactor_iterations;
+  const bool background = background_ != nullptr && policy_.background_lag_steps > 0;
+  bool refresh = missing || (due && !background);
+  auto startBackground = [&] {
+    if (background_->busy()) return;
+    background_->start(a, factor);
+    job_steps_ = 0;
+    job_stale_ = false;
+    out.background_started = true;
+  };
+  if (!refresh && background && due) startBackground();
   if (!refresh) {
     const std::int64_t t0 = shared::monotonicNs();
+    const int bound = background ? 3 * policy_.refactor_iterations : policy_.refactor_iterations;
     const CgResult cg = conjugateGradient(
-        a, b, x, policy_.tolerance, policy_.refactor_iterations, cg_,
+        a, b, x, policy_.tolerance, bound, cg_,
         [&](const Eigen::VectorXd& r, Eigen::VectorXd& z) {
           if (!block_rotation) {
             factor.solve(r.data(), z.data(), 1);
@@ -171,8 +314,10 @@ ReuseSolveResult ReusedFactorSolver::solve(CholmodSolver& factor, Sparse& a,
     out.residual = cg.residual;
     last_iterations_ = cg.iterations;
     refresh = !cg.converged;
+    if (background && cg.iterations > policy_.refactor_iterations) startBackground();
   }
   if (refresh) {
+    job_stale_ = true;   // this factor is newer than a running job's
     const std::int64_t t1 = shared::monotonicNs();
     if (!factor.analyzed()) factor.analyze(a);
     const bool factored = factor.factorize(a);

@@ -7,7 +7,11 @@
 
 #include <Eigen/Core>
 #include <Eigen/SparseCore>
+#include <condition_variable>
 #include <cstddef>
+#include <memory>
+#include <mutex>
+#include <thread>
 
 #include "tactus/sim/state_archive.h"
 
@@ -34,6 +38,11 @@ class CholmodSolver {
   void solve(const double* b, double* x, int ncols);
   /// Nonzeros of the factor (for the log/benchmarks).
   std::size_t factorNonzeros() const;
+  /// The symbolic analysis of `other` (analyzed) taken over by copying its factor: no second
+  /// ordering, and both then factorise matrices of the same pattern alike.
+  void analyzeLike(const CholmodSolver& other);
+  /// Exchanges the factors (and whether each holds a numeric one) with `other`.
+  void swapFactor(CholmodSolver& other) noexcept;
 
  private:
   cholmod_sparse view(Sparse& lower) const;
@@ -108,11 +117,63 @@ CgResult conjugateGradient(const CholmodSolver::Sparse& lower, const Eigen::Vect
   return out;
 }
 
+/// A worker thread that factorises a copy of a system matrix while its caller goes on (the
+/// factor-reuse strategy's background refresh). One job at a time: start() copies the matrix's
+/// values and returns; collect() waits for the job if it still runs and hands its factor over.
+/// The thread starts with the first job and is joined by the destructor; it runs at nice 10 (it
+/// takes the CPU the simulation and the haptic loop leave) with the stop signals blocked (they
+/// reach the process's other threads). CHOLMOD's state is per solver; its BLAS calls are
+/// serialised with the caller's (blasCallsSerialised), and OpenMP is limited in the worker as in
+/// the process.
+class BackgroundFactoriser {
+ public:
+  using Sparse = CholmodSolver::Sparse;
+  BackgroundFactoriser() = default;
+  ~BackgroundFactoriser();
+  BackgroundFactoriser(const BackgroundFactoriser&) = delete;
+  BackgroundFactoriser& operator=(const BackgroundFactoriser&) = delete;
+  /// Starts factorising a copy of `a`, whose pattern `like` (analyzed) was analysed for.
+  /// Requires !busy().
+  void start(const Sparse& a, const CholmodSolver& like);
+  /// A job was started and not collected.
+  bool busy() const { return busy_; }
+  /// The started job has finished (its result can be collected without waiting).
+  bool finished();
+  /// Waits for the started job; when its factorisation succeeded, swaps its factor into
+  /// `factor` and returns true. `waited_s`: how long this call waited; `factorisation_s`: the
+  /// job's own time.
+  bool collect(CholmodSolver& factor, double& waited_s, double& factorisation_s);
+  /// Waits for the started job and drops its result.
+  void discard();
+
+ private:
+  void run();
+  std::thread worker_;
+  std::mutex mutex_;
+  std::condition_variable wake_;
+  Sparse copy_;
+  std::unique_ptr<CholmodSolver> solver_;
+  bool busy_ = false;       // caller's side: started, not collected
+  bool pending_ = false;    // guarded: the worker has a job to take
+  bool done_ = false;       // guarded: the job finished
+  bool ok_ = false;         // guarded: and succeeded
+  bool stop_ = false;       // guarded
+  double factorisation_s_ = 0.0;
+};
+
+/// The BLAS routines CHOLMOD calls reach this module's serialising definitions (blas_lock.cpp):
+/// true when the program links them ahead of the library's. A background factorisation is safe
+/// only then.
+bool blasCallsSerialised();
+
 /// When the factor-reuse strategy refreshes its factorisation.
 struct FactorReusePolicy {
   double tolerance = 1e-8;        ///< PCG relative residual
   int refactor_iterations = 8;    ///< PCG iteration bound (see ReusedFactorSolver)
   int refactor_every_steps = 0;   ///< also refresh when the factor is this many steps old (0: never)
+  /// > 0: refresh in the background (see ReusedFactorSolver), the new factor taking over this
+  /// many steps after the step whose matrix it factorises; 0: refresh synchronously
+  int background_lag_steps = 0;
 };
 
 /// Figures of one ReusedFactorSolver::solve.
@@ -123,6 +184,8 @@ struct ReuseSolveResult {
   double residual = 0.0;         ///< final relative residual (0 after a direct solve)
   double factorisation_s = 0.0;
   double solve_s = 0.0;
+  /// background mode: this solve started factorising its A on the worker thread
+  bool background_started = false;
 };
 
 /// A dv = b with the CHOLMOD factorisation of a recent system matrix A_f as the preconditioner of
@@ -136,10 +199,26 @@ struct ReuseSolveResult {
 /// So every solve meets the tolerance: a direct solve with a fresh factor, or a PCG that
 /// converged. The factor is the caller's (shared with the exact compliance path): whoever
 /// refactorises it at the current A calls noteFactorised().
+///
+/// Background mode (background_lag_steps = L > 0, a worker set with setBackground): the schedule
+/// and the drift (all reasons but a missing factor) start factorising the current A on the
+/// worker instead (when it is idle) and the step goes on with PCG on the old factor; L steps later, adoptDue() at the start of that step
+/// takes the new factor (waiting for the worker only if it has not finished: counted by the
+/// caller). A PCG that misses refactor_iterations goes on to 3 x refactor_iterations (and starts
+/// a background factorisation); only one that misses those too refreshes synchronously. The
+/// factor changes at steps fixed by the iteration counts, not by the worker's speed: the results
+/// do not depend on timing.
 class ReusedFactorSolver {
  public:
   using Sparse = CholmodSolver::Sparse;
   explicit ReusedFactorSolver(const FactorReusePolicy& policy) : policy_(policy) {}
+  /// The worker of background mode (the caller's; it outlives this solver's use).
+  void setBackground(BackgroundFactoriser* worker) { background_ = worker; }
+  /// Background mode, at the start of each step before solve(): when the worker's job is
+  /// background_lag_steps steps old, swaps its factor into `factor` (waiting for it if it still
+  /// runs; `waited_s`) and returns true: the factor is then that of the matrix of the step that
+  /// started the job. A job made stale by a newer factor is dropped at that step instead.
+  bool adoptDue(CholmodSolver& factor, double& waited_s, double& factorisation_s);
   /// x holds the warm start (the previous step's solution) on entry, the solution on exit.
   /// `block_rotation` (null: none) warps the preconditioner to T A_f^-1 T^T with T block
   /// diagonal, one 3x3 rotation per 3 consecutive unknowns (size / 3 of them): the rotation of
@@ -150,9 +229,13 @@ class ReusedFactorSolver {
   void noteFactorised() {
     age_steps_ = 0;
     last_iterations_ = 0;
+    job_stale_ = true;
   }
   /// The factor no longer holds a step's A (e.g. a static solve factorised K): refresh next time.
-  void forget() { age_steps_ = -1; }
+  void forget() {
+    age_steps_ = -1;
+    job_stale_ = true;
+  }
   /// Steps since the factor was computed (-1: none yet).
   int ageSteps() const { return age_steps_; }
   long refreshes() const { return refreshes_; }
@@ -170,6 +253,9 @@ class ReusedFactorSolver {
   int age_steps_ = -1;
   int last_iterations_ = 0;
   long refreshes_ = 0;
+  BackgroundFactoriser* background_ = nullptr;
+  int job_steps_ = 0;        // steps since the worker's job started (while it is busy)
+  bool job_stale_ = false;   // a newer factor than the job's was made since it started
 };
 
 }  // namespace tactus::sim::fem_detail

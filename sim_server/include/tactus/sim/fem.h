@@ -85,6 +85,13 @@ enum class PcgPreconditioner {
 ///    refactor_iterations iterations, when the previous step needed more than half of them,
 ///    and every refactor_every_steps steps when that is > 0. Every step's dv meets cg_tolerance
 ///    (relative residual) or comes from a fresh factorisation. cg_max_iterations is not used.
+///    With background_refactor_lag_steps > 0 (the default) the schedule and the drift refresh
+///    off the step's critical path: a worker thread factorises the step's A while the steps go
+///    on with PCG on the old factor (up to 3 x refactor_iterations), and the new factor takes
+///    over background_refactor_lag_steps steps later (that step waits for the worker only if
+///    it has not finished: FemStepStats::factor_wait_s). Only the first step, and a PCG that
+///    misses 3 x refactor_iterations, factorise on the step's thread. The steps at which the
+///    factor changes do not depend on the worker's speed: the results do not depend on timing.
 struct FemSolverOptions {
   LinearSolverKind linear = LinearSolverKind::kCholmod;
   double cg_tolerance = 1e-8;                   ///< relative residual ||A dv - b|| / ||b||
@@ -92,6 +99,9 @@ struct FemSolverOptions {
   PcgPreconditioner pcg_preconditioner = PcgPreconditioner::kJacobi;
   int refactor_iterations = 8;                  ///< kCholmodReuse: PCG iteration bound (>= 1)
   int refactor_every_steps = 0;                 ///< kCholmodReuse: refresh schedule (0: none)
+  /// kCholmodReuse: steps between a background factorisation's start and the step that takes
+  /// its factor (0: refresh synchronously, on the step's thread)
+  int background_refactor_lag_steps = 2;
 };
 
 /// Per-stage wall times of the last step [s] and solver figures. freeMotion allocates nothing
@@ -99,7 +109,7 @@ struct FemSolverOptions {
 struct FemStepStats {
   double assembly_s = 0.0;
   /// CHOLMOD numeric factorisation (PCG: the rest factor when it is refreshed; kCholmodReuse:
-  /// the steps that refresh)
+  /// the steps that refresh, and the wait for a background factor, factor_wait_s)
   double factorisation_s = 0.0;
   double solve_s = 0.0;
   int cg_iterations = 0;                        ///< 0 for kCholmod
@@ -110,6 +120,11 @@ struct FemStepStats {
   /// kCholmodReuse: the step factorised its current A (then cg_iterations counts the PCG
   /// iterations of an attempt that did not converge within the bound, if any).
   bool factor_refreshed = false;
+  /// kCholmodReuse in the background: the step started factorising its A on the worker thread,
+  /// took a finished background factor, and waited this long for the worker (0: it had finished)
+  bool background_factorisation_started = false;
+  bool background_factor_taken = false;
+  double factor_wait_s = 0.0;
   /// Tetrahedra inverted at the start of the step (det F <= 0 at the positions the step starts
   /// from). The corotational force pushes an inverted element back (see polarRotation); a count
   /// that stays up at equilibrium means the mesh or material cannot carry the load.
@@ -242,7 +257,11 @@ class FemBody {
   struct Counters {
     long rotation_extractions = 0;              ///< element polar decompositions performed
     long damping_evaluations = 0;               ///< steps that built damping terms
-    long factorisations = 0;
+    long factorisations = 0;                    ///< on the step's thread
+    long background_factorisations = 0;         ///< taken from the worker thread
+    /// steps that waited more than 0.1 ms for the worker (factor_wait_s), and the longest wait
+    long background_waits = 0;
+    double background_wait_max_s = 0.0;
     /// integration domains evaluated by the general element loop: 0 unless the material asks
     /// for the consistent tangent, the invertible law or edge-smoothed strain
     long general_domain_evaluations = 0;
@@ -299,6 +318,15 @@ NumericThreads limitNumericThreads();
 
 /// The current state, without changing it.
 NumericThreads queryNumericThreads();
+
+/// The BLAS routines CHOLMOD calls go through one process-wide lock (the serial OpenBLAS keeps one
+/// work buffer per process, so a background factorisation and a solve on the step's thread must
+/// not run BLAS at once). Calls that found the lock taken, and their total wait [s].
+struct BlasLockFigures {
+  long contended_calls = 0;
+  double waited_s = 0.0;
+};
+BlasLockFigures blasLockFigures();
 
 /// A scene tissue's material and the scene's linear solver settings as the FemBody takes them.
 FemMaterial femMaterial(const TissueSpec& tissue);
