@@ -5,8 +5,6 @@
 #include <dlfcn.h>
 #include <pthread.h>
 #include <signal.h>
-#include <sys/resource.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <cstring>
@@ -157,8 +155,6 @@ std::size_t CholmodSolver::factorNonzeros() const {
 // ---- background factorisation ----
 
 namespace {
-constexpr int kWorkerNice = 10;
-
 // OpenMP keeps its limits per thread: a new thread starts from the environment's, and CHOLMOD's
 // supernodal factorisation then opened parallel regions whose threads called the serial
 // OpenBLAS at once (wrong factors). The worker takes the process's limit (no nested team, one
@@ -226,8 +222,6 @@ void BackgroundFactoriser::discard() {
 }
 
 void BackgroundFactoriser::run() {
-  // below the simulation's and the haptic loop's threads: it takes the CPU they leave
-  setpriority(PRIO_PROCESS, static_cast<id_t>(gettid()), kWorkerNice);
   limitOpenMpInThisThread();
   std::unique_lock<std::mutex> lock(mutex_);
   for (;;) {

@@ -120,9 +120,10 @@ CgResult conjugateGradient(const CholmodSolver::Sparse& lower, const Eigen::Vect
 /// A worker thread that factorises a copy of a system matrix while its caller goes on (the
 /// factor-reuse strategy's background refresh). One job at a time: start() copies the matrix's
 /// values and returns; collect() waits for the job if it still runs and hands its factor over.
-/// The thread starts with the first job and is joined by the destructor; it runs at nice 10 (it
-/// takes the CPU the simulation and the haptic loop leave) with the stop signals blocked (they
-/// reach the process's other threads). CHOLMOD's state is per solver; its BLAS calls are
+/// The thread starts with the first job and is joined by the destructor; the stop signals are
+/// blocked in it (they reach the process's other threads). It runs at the process's priority:
+/// it holds the BLAS lock while it computes, so a lower priority would make the step's thread
+/// wait for it whenever the machine is busy. CHOLMOD's state is per solver; its BLAS calls are
 /// serialised with the caller's (blasCallsSerialised), and OpenMP is limited in the worker as in
 /// the process.
 class BackgroundFactoriser {
