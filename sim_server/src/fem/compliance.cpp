@@ -55,8 +55,8 @@ public:
     body_ = &body;
     active_ = kind_;
     if (kind_ == ComplianceKind::kWarped)
-      body.stepNodeRotations(rot_, opt_.exact_below_coherence > 0.0 ? &coherence_ : nullptr,
-                             opt_.rotation_smoothing_passes);
+      body.nodeRotations(rot_, opt_.exact_below_coherence > 0.0 ? &coherence_ : nullptr,
+                         opt_.rotation_smoothing_passes);
   }
 
   void addW(std::span<const TissueRow> rows,

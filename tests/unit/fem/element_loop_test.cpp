@@ -12,7 +12,6 @@
 #include <string>
 
 #include "../../../sim_server/src/fem/fem_internal.h"
-#include "tactus/sim/compliance.h"
 #include "tactus/sim/fem.h"
 #include "tactus/sim/mesh.h"
 
@@ -196,38 +195,6 @@ TEST(ElementLoop, InvertedAndHalfTurnedElementsTakeTheReferencePath) {
     body.elasticForce(q, f);
     EXPECT_GT(f[11], 0.0) << kernel;   // pushed back out
   }
-}
-
-TEST(ElementLoop, OnePolarDecompositionPerElementPerStep) {
-  // a step's free motion and the warped compliance's update: the update takes its node rotations
-  // from the free motion's element rotations, so the step decomposes each element once
-  const TetMesh mesh = liver();
-  const Eigen::Vector3d gravity(0, 0, -9.81);
-  FemBody body(mesh, material(), lowestX(mesh, 30), &gravity, direct());
-  deform(body, 5);
-  ComplianceOptions options;
-  options.h_s = 0.01;
-  options.show_progress = false;
-  auto warped = makeCompliance(ComplianceKind::kWarped, body, options);
-  for (int s = 0; s < 3; ++s) {
-    const long before = body.counters().rotation_extractions;
-    ASSERT_TRUE(body.freeMotion(0.01).ok);
-    warped->update(body);
-    EXPECT_EQ(body.counters().rotation_extractions - before, mesh.tetCount()) << "step " << s;
-  }
-  // and they are the node rotations at the free motion's linearisation point (q + h v; at rest,
-  // q before the step)
-  body.velocities().setZero();
-  const Eigen::VectorXd q_before = body.positions();
-  ASSERT_TRUE(body.freeMotion(0.01).ok);
-  std::vector<Eigen::Matrix3d> from_step, from_query;
-  body.stepNodeRotations(from_step);
-  body.positions() = q_before;
-  body.nodeRotations(from_query);
-  double worst = 0.0;
-  for (std::size_t i = 0; i < from_step.size(); ++i)
-    worst = std::max(worst, (from_step[i] - from_query[i]).norm());
-  EXPECT_LT(worst, 1e-9);
 }
 
 }  // namespace

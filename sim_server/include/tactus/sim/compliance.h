@@ -13,8 +13,8 @@
 //                CHOLMOD: one factorisation, one solve per surface DOF, progress shown),
 //                cached on disk (header: magic, version, hash of mesh+material+h, sizes; a stale
 //                or corrupt file is rebuilt, never trusted). R: per-node rotations
-//                (FemBody::stepNodeRotations: from the element rotations of the last free
-//                motion's linearisation point; nodes tied by very short edges share one).
+//                (FemBody::nodeRotations at the free state: the linearisation point's
+//                rotations crushed the finite grip; nodes tied by very short edges share one).
 //  * rest      : C0 without rotation.
 //  * uncoupled : diagonal per-node compliance (diag of C0, isotropic 3x3 per node).
 // Constrained motion (paper 3.3): r0 = (H R)^T f, dq0 = C0 r0 (all DOFs, one solve with the
@@ -117,8 +117,8 @@ class TissueCompliance {
  public:
   virtual ~TissueCompliance() = default;
   virtual ComplianceKind kind() const = 0;
-  /// Once per step, after free motion: refresh rotations (warped: the node rotations of the
-  /// free motion's element loop, FemBody::stepNodeRotations) / nothing (rest).
+  /// Once per step, after free motion: refresh rotations (warped: FemBody::nodeRotations at
+  /// the free state, a second polar decomposition per element) / nothing (rest).
   virtual void update(FemBody& body) = 0;
   /// W += H C H^T for the given rows (W is rows.size() square, row-major or column-major alike:
   /// the result is symmetric).

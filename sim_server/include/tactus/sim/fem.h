@@ -229,7 +229,7 @@ class FemBody {
   /// i.e. at its linearisation point q + h v, where the step's system matrix A (and so the exact
   /// compliance C = h A^-1) was taken: no second polar decomposition per element. Before the
   /// first free motion, or after solveStatic, nodeRotations at the current positions. The
-  /// warped compliance's update reads these.
+  /// cholmod_reuse preconditioner's warp uses them (not the warped compliance: see design.md).
   void stepNodeRotations(std::vector<Eigen::Matrix3d>& out,
                          std::vector<double>* coherence = nullptr, int smoothing_passes = 0) const;
 
