@@ -27,9 +27,8 @@ FemSolverOptions femSolverOptions(const SolverSpec& solver) {
   o.cg_max_iterations = solver.cg_max_iterations;
   o.refactor_iterations = solver.refactor_iterations;
   o.refactor_every_steps = solver.refactor_every_steps;
-  // scenes refresh on the step's thread: on the shared 2-core machine the background refresh
-  // made the scenes' p99 worse (docs/design.md, "Free motion", Solvers)
-  o.background_refactor_lag_steps = 0;
+  // background_refactor_lag_steps keeps its default 0: scenes refresh on the step's thread
+  // (docs/design.md, "Free motion", Solvers)
   return o;
 }
 
