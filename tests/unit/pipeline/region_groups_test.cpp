@@ -62,7 +62,8 @@ std::string groupsSceneError(const std::string& yaml) {
 TEST(RegionGroupsTest, AFixedGroupPinsExactlyItsNodes) {
   const std::vector<int> base = nodesOn(2, 0.0);
   ASSERT_GE(base.size(), 6u);
-  Simulation sim(parseGroups(kGroupsHead + "    fixed: {regions: [{group: base}]}\n"));
+  Simulation sim(parseGroups(kGroupsHead + "    fixed: {regions: [{group: base}]}\n" +
+                             "gravity: [0, 0, -9.81]\n"));
   const FemBody& body = sim.tissue(0);
   std::vector<int> fixed;
   for (int i = 0; i < body.nodeCount(); ++i) {
