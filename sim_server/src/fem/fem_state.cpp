@@ -7,9 +7,12 @@ namespace tactus::sim {
 
 // A member added to FemState must be added below (or to the list of members rebuilt from
 // others): this stops the build until it is.
-static_assert(kAggregateFields<FemState> == 14,
+static_assert(kAggregateFields<FemState> == 20,
               "FemState gained or lost a member: walk it in FemBody::Impl::transferState "
               "(fem_state.cpp) and update this count");
+
+static_assert(sizeof(FemState::RotationBatch) == 36 * sizeof(double),
+              "transferState writes the rotations as 36 doubles per batch");
 
 void FemBody::Impl::noteFactorSource() {
   if (options.linear != LinearSolverKind::kCholmodReuse) return;
@@ -19,7 +22,10 @@ void FemBody::Impl::noteFactorSource() {
 void FemBody::Impl::transferState(StateArchive& ar) {
   ar("q", q);
   ar("v", v);
-  ar("rotation", rotation);
+  // the kept element rotations, the element loop's warm starts (batched layout: 36 doubles per
+  // batch of four elements), and whether they are the last free motion's linearisation point
+  ar.block("rotation", reinterpret_cast<double*>(rotation.data()), rotation.size() * 36);
+  ar("rotation_current", rotation_current);
   ar.block("a", a.valuePtr(), static_cast<std::size_t>(a.nonZeros()));
   ar("chol_current", chol_current);
   ar("a_is_step_matrix", a_is_step_matrix);
@@ -41,7 +47,16 @@ void FemBody::Impl::transferState(StateArchive& ar) {
   Eigen::VectorXd none;
   ar.resizable("factor_values", old_factor_read ? factor_values : none,
                static_cast<std::size_t>(a.nonZeros()));
+  // background refreshes: the node rotations and values of the A of a job started and not yet
+  // taken (ReusedFactorSolver refuses to save while one is in flight, so they are only read
+  // back as kept)
+  ar.resizable("background_node_rot", background_node_rot, static_cast<std::size_t>(n_free / 3));
+  ar.resizable("background_factor_values", background_factor_values,
+               static_cast<std::size_t>(a.nonZeros()));
   if (!ar.loading()) return;
+  // rebuilt from the rotations on demand: FemBody::elementRotations' per-tet copy and the node sums
+  rotation_by_tet_stale = true;
+  step_sums_current = false;
   if (old_factor_read && factor_values.size() != a.nonZeros()) {
     ar.fail("factor_values", "missing: the factor of record cannot be rebuilt");
   }
@@ -59,7 +74,8 @@ void FemBody::Impl::transferState(StateArchive& ar) {
     }
     if (!ok) ar.fail("chol", "the factor of record could not be rebuilt (not positive definite)");
   }
-  // Not state: the model (FemModel, with the rest factor built from it on demand), the step's
+  // Not state: the background worker (`background`, a thread; idle when a state is saved), the
+  // model (FemModel, with the rest factor built from it on demand), the step's
   // buffers (FemScratch, written before they are read, but node_rot above) and the statistics
   // (counters, inversion_warned).
 }

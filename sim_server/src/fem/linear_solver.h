@@ -245,6 +245,11 @@ class ReusedFactorSolver {
   void transferState(StateArchive& ar) {
     ar("age_steps", age_steps_);
     ar("last_iterations", last_iterations_);
+    // background mode: a job in flight is a factor being computed from an earlier step's A on
+    // another thread, which a state cannot hold: saving is refused until it is taken
+    if (!ar.loading() && background_ != nullptr && background_->busy())
+      ar.fail("background job", "a background factorisation is in flight (not saved)");
+    if (ar.loading() && background_ != nullptr && background_->busy()) background_->discard();
   }
 
  private:
