@@ -200,6 +200,47 @@ void BM_Settle_Liver23k_Cholmod(benchmark::State& s) {
 void BM_Settle_Liver23k_CholmodReuse(benchmark::State& s) {
   runScene(s, "liver_grasp_23k.yaml", LinearSolverKind::kCholmodReuse);
 }
+// The factor solves of the liver_grasp_23k scene's system matrix (its tissue, settled 5 steps
+// from rest), through solveComplianceBatch (reduce, CHOLMOD solve, expand): Arg 0 = 0 the
+// supernodal factor a synchronous refresh keeps (CHOLMOD's BLAS path), 1 the simplicial form the
+// background refresh solves with (no BLAS on the step's thread); Arg 1: right-hand sides per
+// solve (1: a PCG preconditioner solve).
+//   fem_bench --benchmark_filter=FactorSolve
+void BM_FactorSolve_Liver23k(benchmark::State& state) {
+  static std::map<int, std::unique_ptr<FemBody>> bodies;
+  const int simplicial = static_cast<int>(state.range(0));
+  auto& body = bodies[simplicial];
+  if (!body) {
+    SceneSpec spec = loadScene(std::filesystem::path(TACTUS_SOURCE_DIR) / "scenes" /
+                               "liver_grasp_23k.yaml");
+    const TissueSpec& ts = spec.tissues.at(0);
+    TetMesh mesh = loadTetMesh(ts.mesh_path);
+    transformMesh(mesh, ts.scale, ts.rotation_deg, ts.translation_m);
+    FemSolverOptions opt = femSolverOptions(spec.solver);
+    opt.linear = LinearSolverKind::kCholmod;
+    // the background refresh's setting makes the body's factors simplicial
+    if (simplicial) {
+      opt.linear = LinearSolverKind::kCholmodReuse;
+      opt.background_refactor_lag_steps = 2;
+    }
+    const Eigen::Vector3d gravity = spec.gravity_mps2.value_or(Eigen::Vector3d::Zero());
+    body = std::make_unique<FemBody>(mesh, femMaterial(ts), nodesInBoxes(mesh, ts.fixed_boxes),
+                                     &gravity, opt);
+    for (int s = 0; s < 5; ++s) body->freeMotion(spec.time_step_s);
+  }
+  const int cols = static_cast<int>(state.range(1));
+  Eigen::MatrixXd r = Eigen::MatrixXd::Zero(body->dofCount(), cols), x;
+  for (int c = 0; c < cols; ++c)
+    for (int i = 0; i < body->nodeCount(); i += 5 + c) r(3 * i + c % 3, c) = 1.0;
+  // the step's factor is current after kCholmod's step; with the reuse strategy the first
+  // steps refresh it (a solve that found it stale would factorise: not timed)
+  body->solveComplianceBatch(r, x);
+  for (auto _ : state) body->solveComplianceBatch(r, x);
+  state.counters["factor_nnz"] = static_cast<double>(body->factorNonzeros());
+}
+BENCHMARK(BM_FactorSolve_Liver23k)
+    ->ArgsProduct({{0, 1}, {1, 3}})
+    ->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_Settle_Liver2_Cholmod)->Unit(benchmark::kMillisecond)->Iterations(3);
 BENCHMARK(BM_Settle_Liver2_CholmodReuse)->Unit(benchmark::kMillisecond)->Iterations(3);
 BENCHMARK(BM_Settle_Liver23k_Cholmod)->Unit(benchmark::kMillisecond)->Iterations(1);

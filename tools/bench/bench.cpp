@@ -295,8 +295,9 @@ int run(const BenchOptions& o) {
               fem_factorisations, background_factorisations, steps, background_waits,
               1e3 * background_wait_max_s, pct(fem_cg, 0.5), pct(fem_cg, 0.9), pct(fem_cg, 1.0));
   const sim::BlasLockFigures blas_lock = sim::blasLockFigures();
-  std::printf("BLAS calls that waited for the other thread's (the serialising lock): %ld, %.1f ms "
-              "in all\n", blas_lock.contended_calls, 1e3 * blas_lock.waited_s);
+  std::printf("CHOLMOD calls that waited for the BLAS lock (another thread's supernodal "
+              "factorisation or solve): %ld, %.1f ms in all\n", blas_lock.contended_calls,
+              1e3 * blas_lock.waited_s);
   std::printf(
       "steps in contact: %zu of %ld; over those: contacts median %.0f, max %.0f (rows "
       "median %.0f, max %.0f); sim NSGS sweeps median %.0f\n",

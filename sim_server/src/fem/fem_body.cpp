@@ -5,7 +5,6 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <mutex>
 #include <string>
 
 #include <spdlog/spdlog.h>
@@ -47,17 +46,12 @@ void FemBody::Impl::init(const TetMesh& m, const FemMaterial& mat,
                                           opt.refactor_every_steps,
                                           opt.background_refactor_lag_steps});
   if (opt.linear == LinearSolverKind::kCholmodReuse && opt.background_refactor_lag_steps > 0) {
-    if (fem_detail::blasCallsSerialised()) {
-      background = std::make_unique<fem_detail::BackgroundFactoriser>();
-      reuse.setBackground(background.get());
-    } else {
-      static std::once_flag logged;
-      std::call_once(logged, [] {
-        spdlog::warn("FemBody: the BLAS calls of CHOLMOD cannot be serialised in this program "
-                     "(its BLAS definitions do not take precedence); factor refreshes stay on "
-                     "the step's thread");
-      });
-    }
+    // the worker runs BLAS (CHOLMOD's supernodal factorisation) while the steps go on: the
+    // step's own solves use simplicial factors, which make no BLAS call (linear_solver.h)
+    background = std::make_unique<fem_detail::BackgroundFactoriser>();
+    reuse.setBackground(background.get());
+    chol.setBlasFreeSolves(true);
+    chol_rest.setBlasFreeSolves(true);
   }
   corotational = mat.law != MaterialLaw::kLinear;
   rotation_stiffness =

@@ -7,6 +7,8 @@
 #include <signal.h>
 
 #include <algorithm>
+#include <atomic>
+#include <cstdint>
 #include <cstring>
 #include <string>
 
@@ -48,7 +50,31 @@ class StopSignalsBlocked {
   bool blocked_ = false;
 };
 
+std::atomic<long> g_blas_contended{0};
+std::atomic<std::int64_t> g_blas_waited_ns{0};
+
+// Holds cholmodBlasMutex() for one CHOLMOD call; counts the calls that found it taken and their
+// wait.
+class CholmodBlasCall {
+ public:
+  CholmodBlasCall() : lock_(cholmodBlasMutex(), std::try_to_lock) {
+    if (lock_.owns_lock()) return;
+    const std::int64_t t0 = shared::monotonicNs();
+    lock_.lock();
+    g_blas_contended.fetch_add(1, std::memory_order_relaxed);
+    g_blas_waited_ns.fetch_add(shared::monotonicNs() - t0, std::memory_order_relaxed);
+  }
+
+ private:
+  std::unique_lock<std::mutex> lock_;
+};
+
 }  // namespace
+
+std::mutex& cholmodBlasMutex() {
+  static std::mutex m;
+  return m;
+}
 
 CholmodSolver::CholmodSolver() {
   limitNumericThreads();
@@ -63,6 +89,7 @@ CholmodSolver::CholmodSolver() {
 
 CholmodSolver::~CholmodSolver() {
   if (factor_) cholmod_free_factor(&factor_, &common_);
+  if (symbolic_) cholmod_free_factor(&symbolic_, &common_);
   if (x_) cholmod_free_dense(&x_, &common_);
   if (y_) cholmod_free_dense(&y_, &common_);
   if (e_) cholmod_free_dense(&e_, &common_);
@@ -91,6 +118,7 @@ cholmod_sparse CholmodSolver::view(Sparse& lower) const {
 void CholmodSolver::analyze(Sparse& lower) {
   if (!lower.isCompressed()) lower.makeCompressed();
   if (factor_) cholmod_free_factor(&factor_, &common_);
+  if (symbolic_) cholmod_free_factor(&symbolic_, &common_);
   cholmod_sparse a = view(lower);
   {
     const StopSignalsBlocked stop_signals_pending;
@@ -102,6 +130,10 @@ void CholmodSolver::analyze(Sparse& lower) {
                          std::to_string(common_.status) + ") for a system of " +
                          std::to_string(lower.rows()) + " unknowns");
   }
+  if (factor_->is_super) {
+    symbolic_ = cholmod_copy_factor(factor_, &common_);
+    if (!symbolic_) throw NumericalError("CHOLMOD: copying a factor failed (out of memory?)");
+  }
   spdlog::debug("CHOLMOD analysis: n {} nnz(A) {} nnz(L) {:.0f} flops {:.3g} ordering {} {}", lower.rows(),
                 lower.nonZeros(), common_.lnz, common_.fl,
                 common_.method[common_.selected].ordering,
@@ -109,10 +141,38 @@ void CholmodSolver::analyze(Sparse& lower) {
 }
 
 bool CholmodSolver::factorize(Sparse& lower) {
+  if (!factor_->is_super && symbolic_ != nullptr) {
+    // a simplicial conversion of an earlier factor: start again from the supernodal analysis
+    cholmod_free_factor(&factor_, &common_);
+    factorized_ = false;
+    factor_ = cholmod_copy_factor(symbolic_, &common_);
+    if (!factor_) throw NumericalError("CHOLMOD: copying a factor failed (out of memory?)");
+  }
   cholmod_sparse a = view(lower);
-  const int ok = cholmod_factorize(&a, factor_, &common_);
+  int ok = 0;
+  if (factor_->is_super) {
+    const CholmodBlasCall blas;
+    ok = cholmod_factorize(&a, factor_, &common_);
+  } else {
+    ok = cholmod_factorize(&a, factor_, &common_);
+  }
   factorized_ = ok && common_.status == CHOLMOD_OK && factor_->minor == factor_->n;
+  if (factorized_ && blas_free_solves_) toSimplicial();
   return factorized_;
+}
+
+void CholmodSolver::toSimplicial() {
+  if (!factor_->is_super) return;
+  // LL' kept (the values are moved, no square roots), packed, monotonic
+  const int ok = cholmod_change_factor(CHOLMOD_REAL, 1, 0, 1, 1, factor_, &common_);
+  if (!ok || common_.status < CHOLMOD_OK)
+    throw NumericalError("CHOLMOD: converting a factor to the simplicial form failed (status " +
+                         std::to_string(common_.status) + ")");
+}
+
+void CholmodSolver::setBlasFreeSolves(bool on) {
+  blas_free_solves_ = on;
+  if (on && factorized_) toSimplicial();
 }
 
 void CholmodSolver::solve(const double* b, double* x, int ncols) {
@@ -126,16 +186,26 @@ void CholmodSolver::solve(const double* b, double* x, int ncols) {
   bd.z = nullptr;
   bd.xtype = CHOLMOD_REAL;
   bd.dtype = CHOLMOD_DOUBLE;
-  cholmod_solve2(CHOLMOD_A, factor_, &bd, nullptr, &x_, nullptr, &y_, &e_, &common_);
+  if (factor_->is_super) {
+    const CholmodBlasCall blas;
+    cholmod_solve2(CHOLMOD_A, factor_, &bd, nullptr, &x_, nullptr, &y_, &e_, &common_);
+  } else {
+    cholmod_solve2(CHOLMOD_A, factor_, &bd, nullptr, &x_, nullptr, &y_, &e_, &common_);
+  }
   if (!x_) throw NumericalError("CHOLMOD solve failed (out of memory?)");
   std::memcpy(x, x_->x, sizeof(double) * n * bd.ncol);
 }
 
 void CholmodSolver::analyzeLike(const CholmodSolver& other) {
   if (factor_) cholmod_free_factor(&factor_, &common_);
+  if (symbolic_) cholmod_free_factor(&symbolic_, &common_);
   factorized_ = false;
-  factor_ = cholmod_copy_factor(other.factor_, &common_);
+  factor_ = cholmod_copy_factor(other.symbolic_ ? other.symbolic_ : other.factor_, &common_);
   if (!factor_) throw NumericalError("CHOLMOD: copying a factor failed (out of memory?)");
+  if (other.symbolic_) {
+    symbolic_ = cholmod_copy_factor(other.symbolic_, &common_);
+    if (!symbolic_) throw NumericalError("CHOLMOD: copying a factor failed (out of memory?)");
+  }
 }
 
 void CholmodSolver::swapFactor(CholmodSolver& other) noexcept {
@@ -180,6 +250,7 @@ void BackgroundFactoriser::start(const Sparse& a, const CholmodSolver& like) {
   if (!solver_) {
     solver_ = std::make_unique<CholmodSolver>();
     solver_->analyzeLike(like);
+    solver_->setBlasFreeSolves(true);   // the factor handed over is solved without BLAS
     copy_ = a;   // pattern and values; later jobs copy the values only
   } else {
     std::copy(a.valuePtr(), a.valuePtr() + a.nonZeros(), copy_.valuePtr());
@@ -334,3 +405,16 @@ ReuseSolveResult ReusedFactorSolver::solve(CholmodSolver& factor, Sparse& a,
 }
 
 }  // namespace tactus::sim::fem_detail
+
+namespace tactus::sim {
+
+BlasLockFigures blasLockFigures() {
+  return {fem_detail::g_blas_contended.load(std::memory_order_relaxed),
+          1e-9 * static_cast<double>(fem_detail::g_blas_waited_ns.load(std::memory_order_relaxed))};
+}
+
+std::unique_lock<std::mutex> lockCholmodBlas() {
+  return std::unique_lock<std::mutex>(fem_detail::cholmodBlasMutex());
+}
+
+}  // namespace tactus::sim

@@ -17,9 +17,25 @@
 
 namespace tactus::sim::fem_detail {
 
+/// The process-wide lock of the CHOLMOD calls that use BLAS: supernodal numeric factorisation
+/// and supernodal solves (cholmod_super_numeric and cholmod_super_solve are the only parts of
+/// CHOLMOD that reference BLAS). CholmodSolver takes it around those calls and nothing else; the
+/// figures are public (blasLockFigures in fem.h). Why: the serial OpenBLAS that Debian installs
+/// keeps one work buffer per process without a lock, so two threads in BLAS at once overwrite
+/// each other's panels (wrong factors, found by helgrind with a background factorisation).
+std::mutex& cholmodBlasMutex();
+
 /// Sparse symmetric positive-definite factorisation through the CHOLMOD C API. The matrix is the
 /// lower triangle of a compressed column-major Eigen matrix whose pattern never changes:
 /// analyze() once, factorize() per step, solve() with workspaces kept between calls.
+///
+/// CHOLMOD chooses a supernodal factor for the large meshes (dense blocks, BLAS) and a simplicial
+/// one for the small. A supernodal factorisation or solve holds cholmodBlasMutex(). With
+/// setBlasFreeSolves(true) every numeric factor is converted to the simplicial form right after
+/// its factorisation (cholmod_change_factor, LL' kept: the values are moved, not recomputed), so
+/// that solve() is CHOLMOD's simplicial triangular solves, plain loops without BLAS and without
+/// the lock: the solvers a step's thread uses while a background factorisation runs are set so.
+/// The next factorize() starts again from the supernodal symbolic analysis kept by analyze().
 class CholmodSolver {
  public:
   using Sparse = Eigen::SparseMatrix<double, Eigen::ColMajor, int>;
@@ -38,20 +54,28 @@ class CholmodSolver {
   void solve(const double* b, double* x, int ncols);
   /// Nonzeros of the factor (for the log/benchmarks).
   std::size_t factorNonzeros() const;
-  /// The symbolic analysis of `other` (analyzed) taken over by copying its factor: no second
-  /// ordering, and both then factorise matrices of the same pattern alike.
+  /// The symbolic analysis of `other` (analyzed) taken over by copying it: no second ordering,
+  /// and both then factorise matrices of the same pattern alike.
   void analyzeLike(const CholmodSolver& other);
   /// Exchanges the factors (and whether each holds a numeric one) with `other`.
   void swapFactor(CholmodSolver& other) noexcept;
+  /// See the class comment; turning it on converts a supernodal numeric factor held now.
+  void setBlasFreeSolves(bool on);
+  bool blasFreeSolves() const { return blas_free_solves_; }
+  /// The numeric factor is supernodal (its solves use BLAS and take the lock).
+  bool supernodal() const { return factor_ != nullptr && factor_->is_super; }
 
  private:
   cholmod_sparse view(Sparse& lower) const;
+  void toSimplicial();
   cholmod_common common_;
   cholmod_factor* factor_ = nullptr;
+  cholmod_factor* symbolic_ = nullptr;   // the supernodal analysis (null when simplicial)
   cholmod_dense* x_ = nullptr;
   cholmod_dense* y_ = nullptr;
   cholmod_dense* e_ = nullptr;
   bool factorized_ = false;
+  bool blas_free_solves_ = false;
 };
 
 /// Work vectors of conjugateGradient, kept between calls (no allocation once sized).
@@ -121,11 +145,14 @@ CgResult conjugateGradient(const CholmodSolver::Sparse& lower, const Eigen::Vect
 /// factor-reuse strategy's background refresh). One job at a time: start() copies the matrix's
 /// values and returns; collect() waits for the job if it still runs and hands its factor over.
 /// The thread starts with the first job and is joined by the destructor; the stop signals are
-/// blocked in it (they reach the process's other threads). It runs at the process's priority:
-/// it holds the BLAS lock while it computes, so a lower priority would make the step's thread
-/// wait for it whenever the machine is busy. CHOLMOD's state is per solver; its BLAS calls are
-/// serialised with the caller's (blasCallsSerialised), and OpenMP is limited in the worker as in
-/// the process.
+/// blocked in it (they reach the process's other threads), and OpenMP is limited in it as in the
+/// process. Its CHOLMOD state is its own; its factorisation holds cholmodBlasMutex() (several
+/// bodies' workers and the step's own factorisations never run BLAS at once) and then converts
+/// the factor to the simplicial form outside the lock (CholmodSolver::setBlasFreeSolves), so the
+/// factor handed over is solved without BLAS. The caller's solver must be set so too: then
+/// nothing on the step's thread runs BLAS while the worker does, except a factorisation there,
+/// which waits for the worker's. The worker runs at the process's priority: a lower one would
+/// make such a factorisation wait longer whenever the machine is busy.
 class BackgroundFactoriser {
  public:
   using Sparse = CholmodSolver::Sparse;
@@ -161,11 +188,6 @@ class BackgroundFactoriser {
   bool stop_ = false;       // guarded
   double factorisation_s_ = 0.0;
 };
-
-/// The BLAS routines CHOLMOD calls reach this module's serialising definitions (blas_lock.cpp):
-/// true when the program links them ahead of the library's. A background factorisation is safe
-/// only then.
-bool blasCallsSerialised();
 
 /// When the factor-reuse strategy refreshes its factorisation.
 struct FactorReusePolicy {

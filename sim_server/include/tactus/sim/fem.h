@@ -35,6 +35,7 @@
 #include <Eigen/SparseCore>
 #include <cstdint>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <string>
 #include <vector>
@@ -322,14 +323,24 @@ NumericThreads limitNumericThreads();
 /// The current state, without changing it.
 NumericThreads queryNumericThreads();
 
-/// The BLAS routines CHOLMOD calls go through one process-wide lock (the serial OpenBLAS keeps one
-/// work buffer per process, so a background factorisation and a solve on the step's thread must
-/// not run BLAS at once). Calls that found the lock taken, and their total wait [s].
+/// The CHOLMOD calls that use BLAS (supernodal factorisations and solves, of every FemBody in the
+/// process) hold one process-wide lock: the serial OpenBLAS that Debian installs keeps one work
+/// buffer per process, so two threads must not run BLAS at once. Nothing else is serialised:
+/// the library defines no BLAS routine of its own. With the background refresh on
+/// (FemSolverOptions::background_refactor_lag_steps > 0) a worker thread runs BLAS, under this
+/// lock, between and during steps, and the body's step-thread solves use simplicial factors (no
+/// BLAS). A program that calls BLAS itself on other threads meanwhile (numpy included) must take
+/// lockCholmodBlas() around those calls, or use a BLAS that is safe to call from several threads
+/// (an OpenBLAS built with threads or with USE_LOCKING), or keep the background refresh off.
+/// Calls that found the lock taken, and their total wait [s].
 struct BlasLockFigures {
   long contended_calls = 0;
   double waited_s = 0.0;
 };
 BlasLockFigures blasLockFigures();
+
+/// The lock above, for a program's own BLAS calls (see BlasLockFigures).
+std::unique_lock<std::mutex> lockCholmodBlas();
 
 /// A scene tissue's material and the scene's linear solver settings as the FemBody takes them.
 FemMaterial femMaterial(const TissueSpec& tissue);
