@@ -32,13 +32,13 @@ class KernelScope {
   bool ok_ = false;
 };
 
-TetMesh liver() {
+TetMesh elementLoopLiver() {
   TetMesh mesh = loadTetMesh(std::filesystem::path(TACTUS_TEST_DATA_DIR) / "meshes" / "liver2.msh");
   transformMesh(mesh, 0.1, Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero());
   return mesh;
 }
 
-FemMaterial material() {
+FemMaterial elementLoopMaterial() {
   FemMaterial m;
   m.law = MaterialLaw::kCorotational;
   m.young_pa = 3000.0;
@@ -93,9 +93,9 @@ struct StepOutcome {
 StepOutcome run(const char* kernel) {
   KernelScope scope(kernel);
   EXPECT_TRUE(scope.ok()) << kernel;
-  const TetMesh mesh = liver();
+  const TetMesh mesh = elementLoopLiver();
   const Eigen::Vector3d gravity(0, 0, -9.81);
-  FemBody body(mesh, material(), lowestX(mesh, 30), &gravity, direct());
+  FemBody body(mesh, elementLoopMaterial(), lowestX(mesh, 30), &gravity, direct());
   deform(body, 7);
   for (int s = 0; s < 3; ++s) EXPECT_TRUE(body.freeMotion(0.01).ok);
   StepOutcome out;
@@ -147,8 +147,8 @@ TEST(ElementLoop, AvxAndGenericKernelsGiveTheSameBits) {
 }
 
 TEST(ElementLoop, WarmStartedRotationsArePolarFactors) {
-  const TetMesh mesh = liver();
-  FemBody body(mesh, material(), lowestX(mesh, 30), nullptr, direct());
+  const TetMesh mesh = elementLoopLiver();
+  FemBody body(mesh, elementLoopMaterial(), lowestX(mesh, 30), nullptr, direct());
   deform(body, 3);
   body.velocities().setZero();   // the loop then evaluates at q: F is the test's own
   ASSERT_TRUE(body.freeMotion(0.01).ok);   // cold start (identity): many fall back
@@ -184,7 +184,7 @@ TEST(ElementLoop, InvertedAndHalfTurnedElementsTakeTheReferencePath) {
   mesh.tets = {{0, 1, 2, 3}};
   for (const char* kernel : {"generic", "reference"}) {
     KernelScope scope(kernel);
-    FemBody body(mesh, material(), {}, nullptr, direct());
+    FemBody body(mesh, elementLoopMaterial(), {}, nullptr, direct());
     const Eigen::Matrix3d half = Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitX()).toRotationMatrix();
     Eigen::VectorXd q(12), f;
     for (int i = 0; i < 4; ++i) q.segment<3>(3 * i) = half * mesh.nodes.col(i);
