@@ -13,10 +13,6 @@
 
 namespace tactus::sim::scene_detail {
 
-namespace {
-constexpr Range kFriction{0.0, 100.0};
-}
-
 void SceneParser::readObstacles(const YAML::Node& root, SceneSpec* spec) {
   YAML::Node c;
   if (section(root, "", "obstacle_contact", &c)) {

@@ -48,6 +48,8 @@ struct Range {
 constexpr Range kPositive{0.0, kInf, true, false};
 constexpr Range kNonNegative{0.0, kInf, false, false};
 constexpr Range kAny{};
+/// A friction coefficient's hard range (the obstacles' and the tissue pairs').
+constexpr Range kFriction{0.0, 100.0};
 
 // Physical sanity (scenes/README.md "Value ranges"): a value outside its hard range is an error
 // (impossible, or it would exhaust memory or time); outside its plausible range, a warning.

@@ -9,10 +9,6 @@
 
 namespace tactus::sim::scene_detail {
 
-namespace {
-constexpr Range kFriction{0.0, 100.0};
-}
-
 bool SceneParser::tissueIndex(const YAML::Node& n, const std::string& p, const SceneSpec& spec,
                               int* out) {
   if (!n.IsScalar()) {
