@@ -13,7 +13,9 @@
 
 namespace tactus::sim {
 
-namespace {
+// (a named namespace, not an anonymous one: TissueContacts::Impl holds these, and the library is
+// a unity build, where GCC warns about a class member whose type has internal linkage)
+namespace tissue_contact_detail {
 
 // One tissue's surface at the positions of the last refit, with its self-contact neighbourhoods.
 struct SurfaceState : collision_detail::MovingSurface {
@@ -54,10 +56,10 @@ void buildNeighbourhoods(SurfaceState& s) {
   }
 }
 
-}  // namespace
+}  // namespace tissue_contact_detail
 
 struct TissueContacts::Impl {
-  std::vector<SurfaceState> tissues;
+  std::vector<tissue_contact_detail::SurfaceState> tissues;
   std::vector<TissueContactSpec> specs;
   std::vector<Direction> directions;
   std::vector<std::vector<Contact>> found;   // per direction
@@ -87,7 +89,7 @@ TissueContacts::TissueContacts(std::span<const TetMesh* const> meshes,
       if (t < 0 || t >= static_cast<int>(meshes.size())) {
         throw SceneError(fmt::format("{}: no tissue {}", spec.where, t));
       }
-      SurfaceState& s = impl_->tissues[static_cast<std::size_t>(t)];
+      tissue_contact_detail::SurfaceState& s = impl_->tissues[static_cast<std::size_t>(t)];
       if (s.surface->triangles.empty()) {
         throw SceneError(fmt::format("{}: tissue {} has no surface", spec.where, t));
       }
@@ -109,10 +111,10 @@ TissueContacts::TissueContacts(std::span<const TetMesh* const> meshes,
     if (spec.tissue_a == spec.tissue_b) self[static_cast<std::size_t>(spec.tissue_a)] = true;
   }
   for (std::size_t t = 0; t < impl_->tissues.size(); ++t) {
-    SurfaceState& s = impl_->tissues[t];
+    tissue_contact_detail::SurfaceState& s = impl_->tissues[t];
     if (!s.used) continue;
     s.init(*s.mesh, *s.surface);
-    if (self[t]) buildNeighbourhoods(s);
+    if (self[t]) tissue_contact_detail::buildNeighbourhoods(s);
   }
   impl_->found.resize(impl_->directions.size());
   impl_->overflow.assign(impl_->directions.size(), 0);
@@ -151,8 +153,8 @@ void TissueContacts::Impl::detectDirection(int k, const Eigen::VectorXd& qa,
                                            const Eigen::VectorXd& qb) {
   const Direction& d = directions[static_cast<std::size_t>(k)];
   const TissueContactSpec& spec = specs[static_cast<std::size_t>(d.pair)];
-  const SurfaceState& a = tissues[static_cast<std::size_t>(d.vertex_tissue)];
-  const SurfaceState& b = tissues[static_cast<std::size_t>(d.surface_tissue)];
+  const tissue_contact_detail::SurfaceState& a = tissues[static_cast<std::size_t>(d.vertex_tissue)];
+  const tissue_contact_detail::SurfaceState& b = tissues[static_cast<std::size_t>(d.surface_tissue)];
   const bool self = d.vertex_tissue == d.surface_tissue;
   const auto slot = static_cast<std::uint64_t>(d.slot);
   const double reach = std::max(spec.alarm_distance_m, spec.depth_m);
