@@ -27,8 +27,7 @@ FemSolverOptions femSolverOptions(const SolverSpec& solver) {
   o.cg_max_iterations = solver.cg_max_iterations;
   o.refactor_iterations = solver.refactor_iterations;
   o.refactor_every_steps = solver.refactor_every_steps;
-  // background_refactor_lag_steps keeps its default 0: scenes refresh on the step's thread
-  // (docs/design.md, "Free motion", Solvers)
+  o.background_refactor_lag_steps = solver.background_refactor_lag_steps;
   return o;
 }
 

@@ -248,10 +248,13 @@ TEST(Scene, LinearSolverStrategies) {
   EXPECT_EQ(def.solver.linear, LinearSolverKind::kCholmod);
   EXPECT_EQ(def.solver.refactor_iterations, 8);
   EXPECT_EQ(def.solver.refactor_every_steps, 0);
+  EXPECT_EQ(def.solver.background_refactor_lag_steps, 0);
   const SceneSpec s = parseScene(
       kFullHead +
-          "solver: {linear: cholmod_reuse, refactor_iterations: 12, refactor_every_steps: 50}\n",
+          "solver: {linear: cholmod_reuse, refactor_iterations: 12, refactor_every_steps: 50,\n"
+          "         background_refactor_lag_steps: 2}\n",
       "s.yaml", kSceneFiles);
+  EXPECT_EQ(s.solver.background_refactor_lag_steps, 2);
   EXPECT_EQ(s.solver.linear, LinearSolverKind::kCholmodReuse);
   EXPECT_EQ(s.solver.refactor_iterations, 12);
   EXPECT_EQ(s.solver.refactor_every_steps, 50);
@@ -263,6 +266,8 @@ TEST(Scene, LinearSolverStrategies) {
             "s.yaml:4:32: solver.refactor_every_steps: must be >= 0 (got -1)");
   EXPECT_EQ(sceneError(kFullHead + "solver: {refactor_iterations: 20000}\n"),
             "s.yaml:4:31: solver.refactor_iterations: must be in [1, 10000] (got 20000)");
+  EXPECT_EQ(sceneError(kFullHead + "solver: {background_refactor_lag_steps: -1}\n"),
+            "s.yaml:4:41: solver.background_refactor_lag_steps: must be >= 0 (got -1)");
 }
 
 TEST(Scene, EulerAnglesApplyXThenYThenZ) {

@@ -179,6 +179,9 @@ struct SolverSpec {
   int cg_max_iterations = 500;
   int refactor_iterations = 8;                  ///< kCholmodReuse: PCG iteration bound
   int refactor_every_steps = 0;                 ///< kCholmodReuse: refresh schedule (0: none)
+  /// kCholmodReuse: > 0 refreshes the factor on a worker thread, the new factor taking over this
+  /// many steps later (FemSolverOptions::background_refactor_lag_steps); 0: on the step's thread
+  int background_refactor_lag_steps = 0;
   double nsgs_tolerance = 1e-6;
   int nsgs_max_sweeps = 500;
   double nsgs_sor = 1.0;                        ///< over-relaxation factor in (0, 2)
