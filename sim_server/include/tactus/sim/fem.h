@@ -86,9 +86,10 @@ enum class PcgPreconditioner {
 ///    refactor_iterations iterations, when the previous step needed more than half of them,
 ///    and every refactor_every_steps steps when that is > 0. Every step's dv meets cg_tolerance
 ///    (relative residual) or comes from a fresh factorisation. cg_max_iterations is not used.
-///    With background_refactor_lag_steps > 0 (opt-in; the default 0 refreshes synchronously,
-///    which is what scenes get: on the shared 2-core machine the background refresh made the
-///    liver scenes' p99 worse, docs/design.md) the schedule and the drift refresh
+///    With background_refactor_lag_steps > 0 (opt-in, scene key
+///    solver.background_refactor_lag_steps; the default 0 refreshes synchronously, which the
+///    liver scenes keep: on the shared 2-core machine the background refresh made their median
+///    step slower, docs/design.md) the schedule and the drift refresh
 ///    off the step's critical path: a worker thread factorises the step's A while the steps go
 ///    on with PCG on the old factor (up to 3 x refactor_iterations), and the new factor takes
 ///    over background_refactor_lag_steps steps later (that step waits for the worker only if
