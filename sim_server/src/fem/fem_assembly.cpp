@@ -155,18 +155,9 @@ typedef double V2 __attribute__((vector_size(16)));
   out[2] += in[2];
 }
 // Entries e..e+3 of a [entry][lane] buffer to out[lane][e..e+3]: a 4 x 4 transpose.
-[[gnu::always_inline]] inline void transpose4(const double* in, double (*out)[80], int e) {
-  const V4 a = load4(in), b = load4(in + 4), c = load4(in + 8), d = load4(in + 12);
-  const V4 t0 = __builtin_shuffle(a, b, M4{0, 4, 2, 6});
-  const V4 t1 = __builtin_shuffle(a, b, M4{1, 5, 3, 7});
-  const V4 t2 = __builtin_shuffle(c, d, M4{0, 4, 2, 6});
-  const V4 t3 = __builtin_shuffle(c, d, M4{1, 5, 3, 7});
-  store4(out[0] + e, __builtin_shuffle(t0, t2, M4{0, 1, 4, 5}));
-  store4(out[1] + e, __builtin_shuffle(t1, t3, M4{0, 1, 4, 5}));
-  store4(out[2] + e, __builtin_shuffle(t0, t2, M4{2, 3, 6, 7}));
-  store4(out[3] + e, __builtin_shuffle(t1, t3, M4{2, 3, 6, 7}));
-}
-[[gnu::always_inline]] inline void transpose4(const double* in, double (*out)[12], int e) {
+template <int kRowLength>
+[[gnu::always_inline]] inline void transpose4(const double* in, double (*out)[kRowLength],
+                                            int e) {
   const V4 a = load4(in), b = load4(in + 4), c = load4(in + 8), d = load4(in + 12);
   const V4 t0 = __builtin_shuffle(a, b, M4{0, 4, 2, 6});
   const V4 t1 = __builtin_shuffle(a, b, M4{1, 5, 3, 7});
