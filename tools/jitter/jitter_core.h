@@ -50,7 +50,7 @@ struct JitterReport {
   std::uint64_t model_full = 0, model_linearized = 0, model_corrected = 0, model_fallback = 0;
   /// fallback re-solves by why the linearisation did not hold (index: StatsFallbackReason)
   std::array<std::uint64_t, shared::kStatsFallbackReasonCount> fallback_by_reason{};
-  /// fallback re-solves after the active-set correction tried and gave up
+  /// fallback re-solves after at least one corrected solve of the active-set correction
   std::uint64_t correction_gave_up = 0;
   std::uint64_t deadline_missed = 0;  ///< records flagged kStatsDeadlineMissed
   double deadline_us_p50 = 0.0;     ///< the tick's budget (deadline - start), median

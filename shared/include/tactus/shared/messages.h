@@ -393,8 +393,9 @@ struct StatsRecord {
   /// StatsFallbackReason: why the linearisation did not hold (also on a corrected tick: what the
   /// correction repaired); kStatsFallbackNone when it held or was not used
   std::int64_t fallback_reason = 0;
-  /// rounds of the active-set correction (on a fallback tick: the rounds it tried before it
-  /// gave up; 0: not tried)
+  /// corrected solves of the active-set correction (on a fallback tick: those it made before it
+  /// gave up; 0: none, because it was not tried or it gave up at the prediction's own check,
+  /// e.g. more contacts to change than it corrects)
   std::int64_t correction_rounds = 0;
 };
 static_assert(std::is_trivially_copyable_v<StatsRecord>);
