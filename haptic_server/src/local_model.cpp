@@ -4,19 +4,30 @@
 
 #include <Eigen/Dense>
 
+#if defined(__x86_64__) || defined(__i386__)
+#define TACTUS_LOCAL_MODEL_X86 1
+#include <immintrin.h>
+#endif
+
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <limits>
 #include <string>
 
 #include "tactus/shared/clock.h"
 #include "tactus/shared/error.h"
+#include "tactus/shared/nsgs_kernels.h"
 
 namespace tactus::haptic {
 namespace {
 
 constexpr int kNoTool = -1;
 constexpr int kMaxCols = 6 * shared::kMaxInstruments;
+
+// |(a, b)| without std::hypot's care for overflow (the tick's forces and velocities are far
+// from it), which costs tens of nanoseconds a call
+inline double norm2(double a, double b) noexcept { return std::sqrt(a * a + b * b); }
 
 bool finiteAll(const double* v, std::size_t n) noexcept {
   double acc = 0.0;   // NaN/Inf propagate through the product with zero
@@ -73,6 +84,163 @@ shared::NsgsSettings tickNsgsSettings(const LocalModelSettings& settings,
   return ns;
 }
 
+// One Gauss-Jordan step's update of the rows other than the pivot row k: with t_i = a(i, k),
+// a(i, k) = 0 and then a(i, j) -= t_i rk[j] for every j. Four rows at a time, so that each rk[j]
+// is loaded once for four rows (the update is bound by the matrix's traffic through the cache).
+// Generic (the baseline build) and AVX2 with fused multiply-add, chosen once at load by what the
+// CPU reports; the two round differently, so the inverses differ in the last bits.
+using EliminateFn = void (*)(double* a, int n, int k) noexcept;
+
+template <int kRows>
+inline void takeMultipliers(double* a, std::ptrdiff_t N, int i0, int k, double* t) noexcept {
+  for (int r = 0; r < kRows; ++r) {
+    double* ri = a + (i0 + r) * N;
+    t[r] = ri[k];
+    ri[k] = 0.0;
+  }
+}
+
+void eliminateGeneric(double* a, int n, int k) noexcept {
+  const auto N = static_cast<std::ptrdiff_t>(n);
+  const double* rk = a + k * N;
+  auto one = [&](int i) {
+    double* ri = a + i * N;
+    const double t = ri[k];
+    if (t == 0.0) return;
+    ri[k] = 0.0;
+    for (int j = 0; j < n; ++j) ri[j] -= t * rk[j];
+  };
+  int i = 0;
+  while (i < n) {
+    if (i + 4 > n || (k >= i && k < i + 4)) {   // the pivot row's block and the tail: one by one
+      if (i != k) one(i);
+      ++i;
+      continue;
+    }
+    double t[4];
+    takeMultipliers<4>(a, N, i, k, t);
+    double* r0 = a + i * N;
+    double* r1 = r0 + N;
+    double* r2 = r1 + N;
+    double* r3 = r2 + N;
+    for (int j = 0; j < n; ++j) {
+      const double v = rk[j];
+      r0[j] -= t[0] * v;
+      r1[j] -= t[1] * v;
+      r2[j] -= t[2] * v;
+      r3[j] -= t[3] * v;
+    }
+    i += 4;
+  }
+}
+
+#ifdef TACTUS_LOCAL_MODEL_X86
+__attribute__((target("avx2,fma"))) void eliminateAvx2(double* a, int n, int k) noexcept {
+  const auto N = static_cast<std::ptrdiff_t>(n);
+  const double* rk = a + k * N;
+  const int n4 = n & ~3;
+  auto one = [&](int i) __attribute__((target("avx2,fma"))) {
+    double* ri = a + i * N;
+    const double t = ri[k];
+    if (t == 0.0) return;
+    ri[k] = 0.0;
+    const __m256d tv = _mm256_set1_pd(t);
+    int j = 0;
+    for (; j < n4; j += 4) {
+      _mm256_storeu_pd(ri + j, _mm256_fnmadd_pd(tv, _mm256_loadu_pd(rk + j), _mm256_loadu_pd(ri + j)));
+    }
+    for (; j < n; ++j) ri[j] -= t * rk[j];
+  };
+  int i = 0;
+  while (i < n) {
+    if (i + 4 > n || (k >= i && k < i + 4)) {
+      if (i != k) one(i);
+      ++i;
+      continue;
+    }
+    double t[4];
+    takeMultipliers<4>(a, N, i, k, t);
+    double* r0 = a + i * N;
+    double* r1 = r0 + N;
+    double* r2 = r1 + N;
+    double* r3 = r2 + N;
+    const __m256d t0 = _mm256_set1_pd(t[0]), t1 = _mm256_set1_pd(t[1]);
+    const __m256d t2 = _mm256_set1_pd(t[2]), t3 = _mm256_set1_pd(t[3]);
+    int j = 0;
+    for (; j < n4; j += 4) {
+      const __m256d v = _mm256_loadu_pd(rk + j);
+      _mm256_storeu_pd(r0 + j, _mm256_fnmadd_pd(t0, v, _mm256_loadu_pd(r0 + j)));
+      _mm256_storeu_pd(r1 + j, _mm256_fnmadd_pd(t1, v, _mm256_loadu_pd(r1 + j)));
+      _mm256_storeu_pd(r2 + j, _mm256_fnmadd_pd(t2, v, _mm256_loadu_pd(r2 + j)));
+      _mm256_storeu_pd(r3 + j, _mm256_fnmadd_pd(t3, v, _mm256_loadu_pd(r3 + j)));
+    }
+    for (; j < n; ++j) {
+      const double v = rk[j];
+      r0[j] -= t[0] * v;
+      r1[j] -= t[1] * v;
+      r2[j] -= t[2] * v;
+      r3[j] -= t[3] * v;
+    }
+    i += 4;
+  }
+}
+
+#endif  // TACTUS_LOCAL_MODEL_X86
+
+// sum a[k] b[k] over n: eight partial sums, so that the additions do not wait on each other
+double dotGeneric(const double* a, const double* b, int n) noexcept {
+  double p[8] = {};
+  int k = 0;
+  for (; k + 8 <= n; k += 8) {
+    for (int j = 0; j < 8; ++j) p[j] += a[k + j] * b[k + j];
+  }
+  for (; k < n; ++k) p[0] += a[k] * b[k];
+  return ((p[0] + p[1]) + (p[2] + p[3])) + ((p[4] + p[5]) + (p[6] + p[7]));
+}
+
+#ifdef TACTUS_LOCAL_MODEL_X86
+__attribute__((target("avx2,fma"))) double dotAvx2(const double* a, const double* b,
+                                                   int n) noexcept {
+  __m256d s0 = _mm256_setzero_pd(), s1 = _mm256_setzero_pd();
+  int k = 0;
+  for (; k + 8 <= n; k += 8) {
+    s0 = _mm256_fmadd_pd(_mm256_loadu_pd(a + k), _mm256_loadu_pd(b + k), s0);
+    s1 = _mm256_fmadd_pd(_mm256_loadu_pd(a + k + 4), _mm256_loadu_pd(b + k + 4), s1);
+  }
+  if (k + 4 <= n) {
+    s0 = _mm256_fmadd_pd(_mm256_loadu_pd(a + k), _mm256_loadu_pd(b + k), s0);
+    k += 4;
+  }
+  alignas(32) double lanes[4];
+  _mm256_store_pd(lanes, _mm256_add_pd(s0, s1));
+  double sum = (lanes[0] + lanes[1]) + (lanes[2] + lanes[3]);
+  for (; k < n; ++k) sum += a[k] * b[k];
+  return sum;
+}
+#endif  // TACTUS_LOCAL_MODEL_X86
+
+using DotFn = double (*)(const double* a, const double* b, int n) noexcept;
+struct Kernels {
+  EliminateFn eliminate = &eliminateGeneric;
+  DotFn dot = &dotGeneric;
+};
+
+// AVX2 with FMA where the CPU has both, unless TACTUS_NSGS_KERNEL=generic asks for the generic
+// kernels (as for NSGS, shared/nsgs_kernels.h).
+Kernels chooseKernels() noexcept {
+  Kernels k;
+#ifdef TACTUS_LOCAL_MODEL_X86
+  const shared::NsgsKernel nsgs = shared::chooseNsgsKernel(std::getenv("TACTUS_NSGS_KERNEL"));
+  if (nsgs != shared::NsgsKernel::kGeneric && __builtin_cpu_supports("fma") != 0) {
+    k.eliminate = &eliminateAvx2;
+    k.dot = &dotAvx2;
+  }
+#endif
+  return k;
+}
+// chosen while the program loads, before any preparation or tick
+const Kernels g_kernels = chooseKernels();
+
 // In-place inverse of the n x n row-major matrix a (Gauss-Jordan with row pivoting; swap: n
 // ints). False when a pivot is zero or not finite.
 bool invertInPlace(double* a, int n, int* swap) noexcept {
@@ -94,14 +262,7 @@ bool invertInPlace(double* a, int n, int* swap) noexcept {
     const double d = 1.0 / rk[k];
     rk[k] = 1.0;
     for (int j = 0; j < n; ++j) rk[j] *= d;
-    for (int i = 0; i < n; ++i) {
-      if (i == k) continue;
-      double* ri = a + i * N;
-      const double t = ri[k];
-      if (t == 0.0) continue;
-      ri[k] = 0.0;
-      for (int j = 0; j < n; ++j) ri[j] -= t * rk[j];
-    }
+    g_kernels.eliminate(a, n, k);
   }
   for (int k = n - 1; k >= 0; --k) {
     if (swap[k] == k) continue;
@@ -228,6 +389,7 @@ void PreparedSnapshot::resize(int max_rows, int max_contacts) {
   active_pos_.assign(r, -1);
   Ainv_.assign(r * r, 0.0);
   WA_.assign(r * r, 0.0);
+  wa_norm_.assign(r, 0.0);
 }
 
 shared::ContactProblemView PreparedSnapshot::problem() const noexcept {
@@ -606,6 +768,7 @@ void SnapshotPreparation::linearize(const LocalModelSettings& settings,
     const double* wr = W + static_cast<std::ptrdiff_t>(r) * m;
     double* dst = WA + static_cast<std::ptrdiff_t>(r - r_begin) * NA;
     for (int p = 0; p < na; ++p) dst[p] = wr[act[p]];
+    out.wa_norm_[static_cast<std::size_t>(r - r_begin)] = std::sqrt(dotGeneric(dst, dst, na));
     double* g = out.G_.data() + static_cast<std::ptrdiff_t>(r) * kMaxCols;
     for (int p = 0; p < na; ++p) {
       const double w = dst[p];
@@ -811,12 +974,12 @@ FallbackReason LocalModel::evaluateLinearization(const LocalModelSettings& setti
         break;
       case ContactState::kSticking:
         if (fc[0] < -slack) return FallbackReason::kContactLifts;
-        if (std::hypot(fc[1], fc[2]) > mu * fc[0] + slack) return FallbackReason::kLeavesCone;
+        if (norm2(fc[1], fc[2]) > mu * fc[0] + slack) return FallbackReason::kLeavesCone;
         break;
       case ContactState::kSliding: {
         // still sliding, against the force: the force's direction within 18 degrees of -delta_t
-        const double ft = std::hypot(fc[1], fc[2]);
-        const double st = std::hypot(dc[1], dc[2]);
+        const double ft = norm2(fc[1], fc[2]);
+        const double st = norm2(dc[1], dc[2]);
         if (fc[0] < -slack) return FallbackReason::kContactLifts;
         if (!(ft > 0.0) || !(st > 0.0)) return FallbackReason::kSlipTurns;
         if (-(fc[1] * dc[1] + fc[2] * dc[2]) < 0.95 * ft * st) return FallbackReason::kSlipTurns;
@@ -834,12 +997,12 @@ FallbackReason LocalModel::evaluateLinearization(const LocalModelSettings& setti
     fc[0] = std::max(fc[0], 0.0);
     if (k != 3) continue;
     if (s == ContactState::kSliding) {
-      const double ft = std::hypot(fc[1], fc[2]);
+      const double ft = norm2(fc[1], fc[2]);
       const double scale = mu * fc[0] / ft;
       fc[1] *= scale;
       fc[2] *= scale;
     } else if (s == ContactState::kSticking) {
-      const double ft = std::hypot(fc[1], fc[2]);
+      const double ft = norm2(fc[1], fc[2]);
       if (ft > mu * fc[0] && ft > 0.0) {
         fc[1] *= mu * fc[0] / ft;
         fc[2] *= mu * fc[0] / ft;
@@ -978,16 +1141,6 @@ CorrectionMode modeOf(ContactState s) noexcept {
   return kModeOpen;
 }
 
-// sum a[k] b[k] over n: eight partial sums, so that the additions do not wait on each other
-double dotProduct(const double* a, const double* b, int n) noexcept {
-  double s[8] = {};
-  int k = 0;
-  for (; k + 8 <= n; k += 8) {
-    for (int j = 0; j < 8; ++j) s[j] += a[k + j] * b[k + j];
-  }
-  for (; k < n; ++k) s[0] += a[k] * b[k];
-  return ((s[0] + s[1]) + (s[2] + s[3])) + ((s[4] + s[5]) + (s[6] + s[7]));
-}
 
 // Solves the s x s row-major system a x = b in place (x in b), partial pivoting. False when a
 // pivot is below 1e-12 of the largest entry.
@@ -1101,9 +1254,9 @@ int LocalModel::correctionSolve() noexcept {
       const int r = ro[c];
       const double* f0 = p.f0_.data() + r;
       const double* d0 = p.delta0_.data() + r;
-      const double ft = std::hypot(f0[1], f0[2]);
+      const double ft = norm2(f0[1], f0[2]);
       const double u[2] = {f0[1] / ft, f0[2] / ft};
-      const double a = p.mu_[static_cast<std::size_t>(c)] * f0[0] / std::hypot(d0[1], d0[2]);
+      const double a = p.mu_[static_cast<std::size_t>(c)] * f0[0] / norm2(d0[1], d0[2]);
       const double w1 = W[static_cast<std::ptrdiff_t>(r + 1) * m + j];
       const double w2 = W[static_cast<std::ptrdiff_t>(r + 2) * m + j];
       col_[static_cast<std::size_t>(pos[r + 1])] = a * ((1.0 - u[0] * u[0]) * w1 - u[0] * u[1] * w2);
@@ -1128,7 +1281,7 @@ int LocalModel::correctionSolve() noexcept {
       rhs_[static_cast<std::size_t>(i)] = -dc_[static_cast<std::size_t>(row)];
       for (int j = 0; j < s; ++j) {
         const double* z = Z_.data() + j * DD;
-        double v = dotProduct(wa, z, na);
+        double v = g_kernels.dot(wa, z, na);
         for (int k = 0; k < nn; ++k) v += wr[new_row_[static_cast<std::size_t>(k)]] * z[na + k];
         RZ[i * s + j] = v;
       }
@@ -1162,17 +1315,33 @@ int LocalModel::correctionSolve() noexcept {
     for (int k = 0; k < nn; ++k) {
       fc_[static_cast<std::size_t>(new_row_[static_cast<std::size_t>(k)])] += dy_[static_cast<std::size_t>(na + k)];
     }
+    // the new unknowns' part of W dy on a row
+    auto newPart = [&](int row) {
+      const double* wr = W + static_cast<std::ptrdiff_t>(row) * m;
+      double v = 0.0;
+      for (int k = 0; k < nn; ++k) v += wr[new_row_[static_cast<std::size_t>(k)]] * dy_[static_cast<std::size_t>(na + k)];
+      return v;
+    };
     auto moveDelta = [&](int row) {
       const double* wa = WA + static_cast<std::ptrdiff_t>(row - r_begin) * NA;
-      const double* wr = W + static_cast<std::ptrdiff_t>(row) * m;
-      double v = dotProduct(wa, dy_.data(), na);
-      for (int k = 0; k < nn; ++k) v += wr[new_row_[static_cast<std::size_t>(k)]] * dy_[static_cast<std::size_t>(na + k)];
-      dc_[static_cast<std::size_t>(row)] += v;
+      dc_[static_cast<std::size_t>(row)] += g_kernels.dot(wa, dy_.data(), na) + newPart(row);
     };
+    // |W(row, active) dy| <= |W(row, active)| |dy|: a separated contact whose gap stays above
+    // -slack by that bound passes the check whatever the product (its delta is read nowhere
+    // else), so the product is skipped (1 % margin for rounding)
+    const double dy_norm = std::sqrt(g_kernels.dot(dy_.data(), dy_.data(), na));
+    const double* wa_norm = p.wa_norm_.data();
+    const double slack = slack_;
     for (int c = c_begin; c < c_end; ++c) {
       const auto mode = static_cast<CorrectionMode>(mode_[static_cast<std::size_t>(c)]);
       const int r = ro[c];
-      if (mode == kModeOpen) moveDelta(r);
+      if (mode == kModeOpen) {
+        const double extra = newPart(r);
+        const double bound = wa_norm[r - r_begin] * dy_norm + std::abs(extra);
+        if (dc_[static_cast<std::size_t>(r)] - 1.01 * bound >= -slack) continue;
+        const double* wa = WA + static_cast<std::ptrdiff_t>(r - r_begin) * NA;
+        dc_[static_cast<std::size_t>(r)] += g_kernels.dot(wa, dy_.data(), na) + extra;
+      }
       if (mode == kModeSlide || mode == kModeSlideFixed) {
         moveDelta(r + 1);
         moveDelta(r + 2);
@@ -1208,7 +1377,7 @@ int LocalModel::correctionCheck() noexcept {
     bool aim = false;          // set slide_u_ to (u1, u2)
     double u1 = 0.0, u2 = 0.0;
     auto along = [&](double a, double b) {   // slide along (a, b); false when it is zero
-      const double n = std::hypot(a, b);
+      const double n = norm2(a, b);
       if (!(n > 0.0)) return false;
       mode = kModeSlideFixed;
       aim = true;
@@ -1236,7 +1405,7 @@ int LocalModel::correctionCheck() noexcept {
         }
         break;
       case kModeStick: {
-        const double ft = std::hypot(fc[1], fc[2]);
+        const double ft = norm2(fc[1], fc[2]);
         if (fc[0] < -slack) {
           if (!tried(kModeOpen)) {
             mode = kModeOpen;
@@ -1250,8 +1419,8 @@ int LocalModel::correctionCheck() noexcept {
         break;
       }
       case kModeSlide: {
-        const double ft = std::hypot(fc[1], fc[2]);
-        const double st = std::hypot(dc[1], dc[2]);
+        const double ft = norm2(fc[1], fc[2]);
+        const double st = norm2(dc[1], dc[2]);
         if (fc[0] < -slack) {
           mode = kModeOpen;
         } else if (st <= slack) {
@@ -1266,7 +1435,7 @@ int LocalModel::correctionCheck() noexcept {
         break;
       }
       case kModeSlideFixed: {
-        const double st = std::hypot(dc[1], dc[2]);
+        const double st = norm2(dc[1], dc[2]);
         const double a = -(slide_u_[2 * k] * dc[1] + slide_u_[2 * k + 1] * dc[2]);
         if (fc[0] < -slack) {
           mode = kModeOpen;
@@ -1335,7 +1504,7 @@ bool LocalModel::correctActiveSet(std::int64_t deadline_ns, LocalModelResult& ou
     const auto mode = static_cast<CorrectionMode>(mode_[static_cast<std::size_t>(c)]);
     fc[0] = mode == kModeOpen ? 0.0 : std::max(fc[0], 0.0);
     if (k == 3) {
-      const double ft = std::hypot(fc[1], fc[2]);
+      const double ft = norm2(fc[1], fc[2]);
       if (mode == kModeOpen || mu == 0.0) {
         fc[1] = fc[2] = 0.0;
       } else if (mode == kModeSlideFixed) {

@@ -53,7 +53,13 @@
 //    of its predicted tangential force (re-aimed along its slip when that disagrees). The
 //    corrected solution is checked as the linearisation is, and states are switched again for
 //    up to kMaxCorrectionRounds rounds and kMaxCorrectedContacts contacts; it is rendered when
-//    every check holds (LocalModelUsed::kCorrected), else the tick falls back as above.
+//    every check holds (LocalModelUsed::kCorrected), else the tick falls back as above. A
+//    round's check of a separated contact skips the product W(row, active) dy when its gap stays
+//    above the tolerance's slack by |W(row, active)| |dy| (Cauchy-Schwarz; the norms are
+//    prepared), which is most of them.
+//  Kernels: the preparation's Gauss-Jordan inversion and the correction's dot products run AVX2
+//    with fused multiply-add where the CPU has both (chosen at load; TACTUS_NSGS_KERNEL=generic
+//    forces the generic ones, as for NSGS), so their results differ in the last bits by CPU.
 //  - kAutomatic: linearized for problems of at least LocalModelSettings::automatic_min_rows
 //    rows, full below (where a warm re-solve costs a few microseconds).
 //
@@ -147,9 +153,10 @@ using DevicePoses = std::span<const shared::Pose* const>;
 /// the device's displacement from the linearisation point (local_model.h, top).
 inline constexpr double kReducedReachFactor = 2.0;
 /// The active-set correction (top) changes the state of at most this many contacts, in at most
-/// this many rounds of solve and check.
+/// this many rounds of solve and check (on liver_grasp_23k's replayed hold no corrected tick
+/// needed more than 3 or 4; the rounds beyond only delayed the fallback).
 inline constexpr int kMaxCorrectedContacts = 16;
-inline constexpr int kMaxCorrectionRounds = 6;
+inline constexpr int kMaxCorrectionRounds = 4;
 
 /// Per contact of a prepared snapshot: its state in the linearised solution.
 enum class ContactState : std::uint8_t { kSeparated, kSticking, kSliding, kNormalOnly };
@@ -282,6 +289,7 @@ class PreparedSnapshot {
   std::vector<int> active_pos_;
   std::vector<double> Ainv_;
   std::vector<double> WA_;
+  std::vector<double> wa_norm_;   ///< |WA_ row| per reached row (the correction's bound)
   std::int64_t prepare_ns_ = 0, copy_ns_ = 0, storage_ns_ = 0, solve_ns_ = 0, linearize_ns_ = 0;
 };
 
