@@ -485,6 +485,36 @@ TEST(JitterReplay, RecordedPressReplaysThroughTheHapticLoop) {
   EXPECT_LT(r.not_converged, r.solved);
   EXPECT_EQ(r.non_finite_residuals, 0u);
 
+  // bouncing: past the end the recording plays backwards, so the device follows neighbouring
+  // snapshots only (looping jumps from the last one's pose back to the first's)
+  {
+    std::vector<shared::RecordedSnapshot> again = shared::readSnapshotFile(snap);
+    const std::size_t n = again.size();
+    haptic::jitter::ReplayOptions bo;
+    bo.loop = true;
+    bo.bounce = true;
+    haptic::jitter::ReplayRig bouncing(std::move(again), bo);
+    bouncing.start();
+    std::size_t last = bouncing.device(0).following(), largest_step = 0, turns = 0;
+    bool backwards = false;
+    const auto until = std::chrono::steady_clock::now() + std::chrono::milliseconds(1500);
+    while (std::chrono::steady_clock::now() < until) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(2));
+      const std::size_t now = bouncing.device(0).following();
+      if (now == last) continue;
+      largest_step = std::max(largest_step, now > last ? now - last : last - now);
+      if ((now < last) != backwards) {
+        backwards = now < last;
+        ++turns;
+      }
+      last = now;
+    }
+    bouncing.stop();
+    EXPECT_GE(bouncing.passes(), 1u);
+    EXPECT_GE(turns, 1u) << "the replay never turned round";
+    EXPECT_LT(largest_step, n / 4) << "the device jumped across the recording";
+  }
+
   // the tactus-jitter binary: --replay for a second, exit 0, the replay table printed
   const fs::path log = dir.path() / "jitter.log";
   const std::string cmd = std::string(TACTUS_BINARY_DIR) + "/tools/jitter/tactus-jitter --replay '" +

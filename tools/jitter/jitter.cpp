@@ -63,6 +63,7 @@ struct Options {
   int synthetic_rows = 0;
   std::string replay;
   bool loop_replay = false;
+  bool bounce_replay = false;
   double rate_hz = 1000.0;
   double sim_rate_hz = 100.0;
   int core = -1;
@@ -142,7 +143,9 @@ std::string plotScript() {
 int run(const Options& o) {
   const bool replay = !o.replay.empty();
   if (replay && o.synthetic_rows > 0) throw Error("--replay and --synthetic exclude each other");
-  if (!replay && o.loop_replay) throw Error("--loop needs --replay FILE");
+  if (!replay && (o.loop_replay || o.bounce_replay)) {
+    throw Error("--loop and --bounce need --replay FILE");
+  }
   if (o.offline_device_leads && !o.offline) throw Error("--offline-device-leads needs --offline");
   // synthetic or replay: the haptic loop runs in-process
   const bool synthetic = o.synthetic_rows > 0 || replay;
@@ -205,7 +208,8 @@ int run(const Options& o) {
   if (replay) {
     std::vector<shared::RecordedSnapshot> snaps = shared::readSnapshotFile(o.replay);
     ReplayOptions ro;
-    ro.loop = o.loop_replay;
+    ro.loop = o.loop_replay || o.bounce_replay;
+    ro.bounce = o.bounce_replay;
     ro.rate_hz = o.rate_hz;
     ro.core = core;
     ro.priority = o.priority;
@@ -224,14 +228,15 @@ int run(const Options& o) {
         "loop %.0f Hz on core %d, SCHED_FIFO %d, %d sweeps max, deadline %.0f us, local model "
         "%s (%s%s fallback); reader: %s; NSGS kernel %s\n",
         replay_rig->snapshotCount(), o.replay.c_str(), 1e-9 * static_cast<double>(replay_rig->passNs()),
-        o.loop_replay ? ", looping" : "", replay_rig->maxRows(), replay_rig->maxContacts(),
+        o.bounce_replay ? ", back and forth" : o.loop_replay ? ", looping" : "",
+        replay_rig->maxRows(), replay_rig->maxContacts(),
         replay_rig->devices(),
         o.rate_hz, core, o.priority, o.sweeps,
         o.budget_fraction * 1e-3 * static_cast<double>(period_ns), o.local_model.c_str(),
         o.no_correction ? "" : "active-set correction, ", o.full_fallback ? "full" : "reduced",
         o.reader.c_str(),
         shared::nsgsKernelName(shared::nsgsKernel()));
-    if (!o.loop_replay && shared::secondsToNs(o.duration_s) > replay_rig->passNs()) {
+    if (!ro.loop && shared::secondsToNs(o.duration_s) > replay_rig->passNs()) {
       std::printf(
           "note: the recording is shorter than --duration: after it the snapshot goes stale "
           "and forces fade (--loop replays it again)\n");
@@ -444,7 +449,12 @@ int main(int argc, char** argv) {
                  "Replay mode: run the haptic loop in-process on the snapshots recorded in FILE "
                  "(sim_server SCENE --steps N --record-snapshots FILE), published at their recorded times")
       ->check(CLI::ExistingFile);
-  app.add_flag("--loop", o.loop_replay, "Replay: start the recording over after its end");
+  app.add_flag("--loop", o.loop_replay,
+               "Replay: start the recording over after its end (the device jumps back to the "
+               "first snapshot's pose)");
+  app.add_flag("--bounce", o.bounce_replay,
+               "Replay: loop by playing the recording backwards from its end, then forwards "
+               "again (the device moves only by recorded steps; implies --loop)");
   app.add_option("--rate", o.rate_hz, "Synthetic/replay: haptic loop rate [Hz]")
       ->check(CLI::Range(50.0, 4000.0))
       ->capture_default_str();

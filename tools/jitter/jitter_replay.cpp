@@ -94,25 +94,41 @@ void ReplayRig::publish(std::size_t index) {
 
 void ReplayRig::start() {
   rig_.start([this] {
-    // snapshot i of pass k at origin + k * pass + (t_i - t_0); the first was published already
-    const std::int64_t t_first = snapshots_.front().t_ns;
-    std::int64_t origin = shared::monotonicNs();
-    std::size_t i = 1;
+    // each snapshot after its recorded gap from the one before it in play order; at an end of
+    // the recording: stop, start over (the first snapshot one recorded step after the last) or
+    // turn round. The first snapshot was published already.
+    const std::size_t n = snapshots_.size();
+    const std::int64_t first_step = firstStepNs(snapshots_);
+    std::int64_t due = shared::monotonicNs();
+    std::size_t current = 0;
+    bool backwards = false;
     while (!rig_.stopRequested()) {
-      if (i == snapshots_.size()) {
+      std::size_t next = 0;
+      std::int64_t gap = 0;
+      if (!backwards && current + 1 < n) {
+        next = current + 1;
+        gap = snapshots_[next].t_ns - snapshots_[current].t_ns;
+      } else if (backwards && current > 0) {
+        next = current - 1;
+        gap = snapshots_[current].t_ns - snapshots_[next].t_ns;
+      } else {
         passes_.fetch_add(1, std::memory_order_relaxed);
         if (!options_.loop) break;
-        origin += pass_ns_;
-        i = 0;
+        if (options_.bounce && n > 1) {
+          backwards = !backwards;
+          continue;
+        }
+        next = 0;
+        gap = first_step;
       }
-      const std::int64_t due = origin + (snapshots_[i].t_ns - t_first);
+      due += std::max<std::int64_t>(gap, 0);
       // short sleeps so that stop() is seen within 20 ms even across a long recorded gap
       while (!rig_.stopRequested() && shared::monotonicNs() < due) {
         shared::sleepUntilNs(std::min(due, shared::monotonicNs() + 20'000'000));
       }
       if (rig_.stopRequested()) break;
-      publish(i);
-      ++i;
+      publish(next);
+      current = next;
     }
   });
 }

@@ -5,7 +5,9 @@
 // real-time thread, as in synthetic mode. The in-process device follows the recorded device pose
 // of the snapshot being replayed plus a small circle (so the local model moves delta_free by J
 // times a small displacement, as with a hand on the device). The kSnapshotShuttingDown flag of a
-// recorded snapshot is dropped (a replayed run never shuts the loop down).
+// recorded snapshot is dropped (a replayed run never shuts the loop down). Looping starts over at
+// the first snapshot (the device jumps back to its pose) or, bouncing, plays the recording
+// backwards and forwards (the device only ever moves by a recorded step).
 
 #include <atomic>
 #include <cstdint>
@@ -24,6 +26,10 @@ namespace tactus::haptic::jitter {
 
 struct ReplayOptions : LoopRunOptions {
   bool loop = false;                   ///< start over after the last snapshot
+  /// With loop: play the recording backwards from its end, then forwards again, and so on, each
+  /// step after its recorded gap, instead of jumping from the last snapshot back to the first
+  /// (whose device pose a hand cannot reach in one step: liver_grasp_23k's hold jumps 6.7 mm).
+  bool bounce = false;
 };
 
 /// The replay set-up: private segment sized for the largest recorded problem, publisher thread
@@ -54,7 +60,10 @@ class ReplayRig {
   /// What the real-time set-up refused (empty: pinned, SCHED_FIFO, memory locked).
   const std::string& rtSummary() const { return rig_.rtSummary(); }
   HapticLoop& loop() { return rig_.loop(); }
-  /// Snapshots published so far (the first one included) and whole passes completed.
+  /// The device of instrument i (it follows the snapshot last published).
+  CircleDevice& device(std::size_t i = 0) { return rig_.device(i); }
+  /// Snapshots published so far (the first one included) and whole passes completed (bouncing:
+  /// each way counts as one).
   std::uint64_t published() const { return rig_.published(); }
   std::uint64_t passes() const { return passes_.load(std::memory_order_relaxed); }
 

@@ -38,6 +38,8 @@ class CircleDevice : public device::Device {
   [[nodiscard]] device::IoStatus write(const device::DeviceCommand& cmd) noexcept override;
   /// Selects the centre the device circles about (index into the table; clamped).
   void follow(std::size_t index) noexcept { index_.store(index, std::memory_order_relaxed); }
+  /// The centre it circles about now (any thread).
+  std::size_t following() const noexcept { return index_.load(std::memory_order_relaxed); }
   /// Commands written so far.
   std::uint64_t writes() const noexcept { return writes_.load(std::memory_order_relaxed); }
 
