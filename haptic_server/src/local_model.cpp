@@ -198,7 +198,22 @@ double dotGeneric(const double* a, const double* b, int n) noexcept {
   return ((p[0] + p[1]) + (p[2] + p[3])) + ((p[4] + p[5]) + (p[6] + p[7]));
 }
 
+// y[k] += a x[k] over n
+void axpyGeneric(double a, const double* x, double* y, int n) noexcept {
+  for (int k = 0; k < n; ++k) y[k] += a * x[k];
+}
+
 #ifdef TACTUS_LOCAL_MODEL_X86
+__attribute__((target("avx2,fma"))) void axpyAvx2(double a, const double* x, double* y,
+                                                  int n) noexcept {
+  const __m256d av = _mm256_set1_pd(a);
+  int k = 0;
+  for (; k + 4 <= n; k += 4) {
+    _mm256_storeu_pd(y + k, _mm256_fmadd_pd(av, _mm256_loadu_pd(x + k), _mm256_loadu_pd(y + k)));
+  }
+  for (; k < n; ++k) y[k] += a * x[k];
+}
+
 __attribute__((target("avx2,fma"))) double dotAvx2(const double* a, const double* b,
                                                    int n) noexcept {
   __m256d s0 = _mm256_setzero_pd(), s1 = _mm256_setzero_pd();
@@ -220,9 +235,11 @@ __attribute__((target("avx2,fma"))) double dotAvx2(const double* a, const double
 #endif  // TACTUS_LOCAL_MODEL_X86
 
 using DotFn = double (*)(const double* a, const double* b, int n) noexcept;
+using AxpyFn = void (*)(double a, const double* x, double* y, int n) noexcept;
 struct Kernels {
   EliminateFn eliminate = &eliminateGeneric;
   DotFn dot = &dotGeneric;
+  AxpyFn axpy = &axpyGeneric;
 };
 
 // AVX2 with FMA where the CPU has both, unless TACTUS_NSGS_KERNEL=generic asks for the generic
@@ -234,6 +251,7 @@ Kernels chooseKernels() noexcept {
   if (nsgs != shared::NsgsKernel::kGeneric && __builtin_cpu_supports("fma") != 0) {
     k.eliminate = &eliminateAvx2;
     k.dot = &dotAvx2;
+    k.axpy = &axpyAvx2;
   }
 #endif
   return k;
@@ -861,10 +879,11 @@ LocalModel::LocalModel(int max_rows, int max_contacts)
   eq_row_.assign(e, 0);
   eq_contact_.assign(e, 0);
   Z_.assign((r + e) * e, 0.0);
+  cnew_.assign(r * e, 0.0);
+  znew_.assign(e, 0);
   RZ_.assign(e * e, 0.0);
   rhs_.assign(e, 0.0);
   dy_.assign(r + e, 0.0);
-  col_.assign(r, 0.0);
   fc_.assign(r, 0.0);
   dc_.assign(r, 0.0);
 }
@@ -1238,7 +1257,15 @@ int LocalModel::correctionSolve() noexcept {
   const auto NA = static_cast<std::ptrdiff_t>(na);
   auto index = [&](int row) { return pos[row] >= 0 ? pos[row] : new_index_[static_cast<std::size_t>(row)]; };
   // Z: the prepared system's inverse on the replaced equations' columns (a new unknown j:
-  // [-A^-1 C_j; e_j], C_j its coefficients in the prepared equations)
+  // [-A^-1 C_j; e_j], C_j its coefficients in the prepared equations). The new unknowns' products
+  // with A^-1 share one pass over it. With a symmetric W (the simulation's), C_j's entries
+  // W(active, j) are W(j, active), row j of the prepared WA, instead of a strided column of W.
+  const bool symmetric = p.coupling_ == shared::NsgsCoupling::kSymmetricRowUpdate;
+  auto wAt = [&](int row, int col) {   // W(row, col), read along a row when W is symmetric
+    return symmetric ? W[static_cast<std::ptrdiff_t>(col) * m + row]
+                     : W[static_cast<std::ptrdiff_t>(row) * m + col];
+  };
+  int nz = 0;
   for (int i = 0; i < s; ++i) {
     double* z = Z_.data() + i * DD;
     const int q = eq_index_[static_cast<std::size_t>(i)];
@@ -1248,7 +1275,13 @@ int LocalModel::correctionSolve() noexcept {
       continue;
     }
     const int j = new_row_[static_cast<std::size_t>(q - na)];
-    for (int e = 0; e < na; ++e) col_[static_cast<std::size_t>(e)] = W[static_cast<std::ptrdiff_t>(act[e]) * m + j];
+    double* cj = cnew_.data() + nz * NA;
+    znew_[static_cast<std::size_t>(nz++)] = i;
+    if (symmetric) {
+      std::copy_n(WA + static_cast<std::ptrdiff_t>(j - r_begin) * NA, na, cj);
+    } else {
+      for (int e = 0; e < na; ++e) cj[e] = W[static_cast<std::ptrdiff_t>(act[e]) * m + j];
+    }
     for (int c = c_begin; c < c_end; ++c) {   // sliding equations: P (W_t df)
       if (p.state_[static_cast<std::size_t>(c)] != ContactState::kSliding) continue;
       const int r = ro[c];
@@ -1257,18 +1290,20 @@ int LocalModel::correctionSolve() noexcept {
       const double ft = norm2(f0[1], f0[2]);
       const double u[2] = {f0[1] / ft, f0[2] / ft};
       const double a = p.mu_[static_cast<std::size_t>(c)] * f0[0] / norm2(d0[1], d0[2]);
-      const double w1 = W[static_cast<std::ptrdiff_t>(r + 1) * m + j];
-      const double w2 = W[static_cast<std::ptrdiff_t>(r + 2) * m + j];
-      col_[static_cast<std::size_t>(pos[r + 1])] = a * ((1.0 - u[0] * u[0]) * w1 - u[0] * u[1] * w2);
-      col_[static_cast<std::size_t>(pos[r + 2])] = a * (-u[1] * u[0] * w1 + (1.0 - u[1] * u[1]) * w2);
-    }
-    for (int e = 0; e < na; ++e) {
-      const double cj = col_[static_cast<std::size_t>(e)];
-      if (cj == 0.0) continue;
-      const double* ae = Ainv + e * NA;
-      for (int k = 0; k < na; ++k) z[k] -= cj * ae[k];
+      const double w1 = wAt(r + 1, j);
+      const double w2 = wAt(r + 2, j);
+      cj[pos[r + 1]] = a * ((1.0 - u[0] * u[0]) * w1 - u[0] * u[1] * w2);
+      cj[pos[r + 2]] = a * (-u[1] * u[0] * w1 + (1.0 - u[1] * u[1]) * w2);
     }
     z[q] = 1.0;
+  }
+  for (int e = 0; e < na && nz > 0; ++e) {
+    const double* ae = Ainv + e * NA;
+    for (int k = 0; k < nz; ++k) {
+      const double c = cnew_[static_cast<std::size_t>(k * NA + e)];
+      if (c == 0.0) continue;
+      g_kernels.axpy(-c, ae, Z_.data() + znew_[static_cast<std::size_t>(k)] * DD, na);
+    }
   }
   // R Z, and the right-hand side: minus the new equations' residuals at the prediction
   double* RZ = RZ_.data();

@@ -314,34 +314,42 @@ TEST(LocalModelTest, TheReducedFallbackTakesInAContactLeftOutThatCloses) {
 // The same two contacts with the active-set correction: L lifts (one contact changed), then S
 // closes once L has lifted (two), found in the correction's second round. Both active sets are
 // linear problems: the corrected force is the full problem's.
+// (With W marked symmetric the closing contact's column of W is read along its row; unmarked,
+// down the column: the same numbers here.)
 TEST(LocalModelTest, TheActiveSetCorrectionFollowsAContactThatLiftsAndOneThatCloses) {
-  Slot slot(2, 2);
-  fillLiftAndClose(slot);
-  OfflineLocalModel lin(2, 2, settingsFor(LocalModelKind::kLinearized));
-  const shared::Pose origin = at(0, 0, 0);
-  const shared::Pose* start[] = {&origin};
-  ASSERT_EQ(lin.adopt(slot.view(), start), PrepareStatus::kReady);
-  ASSERT_TRUE(lin.prepared().linearized());
-  struct Case {
-    double z_m;
-    int changed;
-    int rounds;
-  };
-  for (const Case c : {Case{1.5e-5, 1, 1}, Case{3.5e-5, 2, 2}}) {
-    SCOPED_TRACE(c.z_m);
-    const shared::Pose p = at(0, 0, c.z_m);
-    const shared::Pose* poses[] = {&p};
-    const LocalModelResult r = lin.solve(poses);
-    EXPECT_EQ(r.used, LocalModelUsed::kCorrected);
-    EXPECT_EQ(r.fallback, FallbackReason::kContactLifts);
-    EXPECT_EQ(r.corrected_contacts, c.changed);
-    EXPECT_EQ(r.correction_rounds, c.rounds);
-    ASSERT_TRUE(r.converged());
-    EXPECT_EQ(lin.model().forces()[0], 0.0);
-    EXPECT_EQ(lin.model().forces()[1] > 0.0, c.changed == 2);
-    const LocalModelResult ref = reference(slot, p);
-    for (int k = 0; k < 3; ++k) {
-      EXPECT_NEAR(r.force_n[0][k], ref.force_n[0][k], 1e-9 * (1.0 + norm3(ref.force_n[0])));
+  for (const bool marked_symmetric : {true, false}) {
+    SCOPED_TRACE(marked_symmetric);
+    Slot slot(2, 2);
+    fillLiftAndClose(slot);
+    if (!marked_symmetric) {
+      slot.writer().header().flags &= ~static_cast<std::uint32_t>(shared::kSnapshotSymmetricW);
+    }
+    OfflineLocalModel lin(2, 2, settingsFor(LocalModelKind::kLinearized));
+    const shared::Pose origin = at(0, 0, 0);
+    const shared::Pose* start[] = {&origin};
+    ASSERT_EQ(lin.adopt(slot.view(), start), PrepareStatus::kReady);
+    ASSERT_TRUE(lin.prepared().linearized());
+    struct Case {
+      double z_m;
+      int changed;
+      int rounds;
+    };
+    for (const Case c : {Case{1.5e-5, 1, 1}, Case{3.5e-5, 2, 2}}) {
+      SCOPED_TRACE(c.z_m);
+      const shared::Pose p = at(0, 0, c.z_m);
+      const shared::Pose* poses[] = {&p};
+      const LocalModelResult r = lin.solve(poses);
+      EXPECT_EQ(r.used, LocalModelUsed::kCorrected);
+      EXPECT_EQ(r.fallback, FallbackReason::kContactLifts);
+      EXPECT_EQ(r.corrected_contacts, c.changed);
+      EXPECT_EQ(r.correction_rounds, c.rounds);
+      ASSERT_TRUE(r.converged());
+      EXPECT_EQ(lin.model().forces()[0], 0.0);
+      EXPECT_EQ(lin.model().forces()[1] > 0.0, c.changed == 2);
+      const LocalModelResult ref = reference(slot, p);
+      for (int k = 0; k < 3; ++k) {
+        EXPECT_NEAR(r.force_n[0][k], ref.force_n[0][k], 1e-9 * (1.0 + norm3(ref.force_n[0])));
+      }
     }
   }
 }

@@ -56,7 +56,9 @@
 //    every check holds (LocalModelUsed::kCorrected), else the tick falls back as above. A
 //    round's check of a separated contact skips the product W(row, active) dy when its gap stays
 //    above the tolerance's slack by |W(row, active)| |dy| (Cauchy-Schwarz; the norms are
-//    prepared), which is most of them.
+//    prepared), which is most of them. The new unknowns of contacts that close share one pass
+//    over A^-1, and with W marked symmetric their coefficients are rows of the prepared W(reached,
+//    active) rather than strided columns of W.
 //  Kernels: the preparation's Gauss-Jordan inversion and the correction's dot products run AVX2
 //    with fused multiply-add where the CPU has both (chosen at load; TACTUS_NSGS_KERNEL=generic
 //    forces the generic ones, as for NSGS), so their results differ in the last bits by CPU.
@@ -410,7 +412,9 @@ class LocalModel {
   std::vector<int> new_row_;
   std::vector<int> new_index_;
   std::vector<int> eq_index_, eq_kind_, eq_row_, eq_contact_;
-  std::vector<double> Z_, RZ_, rhs_, dy_, col_;
+  std::vector<double> Z_, RZ_, rhs_, dy_;
+  std::vector<double> cnew_;   ///< the new unknowns' C_j (active rows each)
+  std::vector<int> znew_;      ///< their columns of Z_
   std::vector<double> fc_, dc_;   ///< the corrected f and delta on the reached rows
 };
 
