@@ -87,105 +87,88 @@ shared::NsgsSettings tickNsgsSettings(const LocalModelSettings& settings,
 // One Gauss-Jordan step's update of the rows other than the pivot row k: with t_i = a(i, k),
 // a(i, k) = 0 and then a(i, j) -= t_i rk[j] for every j. Four rows at a time, so that each rk[j]
 // is loaded once for four rows (the update is bound by the matrix's traffic through the cache).
-// Generic (the baseline build) and AVX2 with fused multiply-add, chosen once at load by what the
-// CPU reports; the two round differently, so the inverses differ in the last bits.
-using EliminateFn = void (*)(double* a, int n, int k) noexcept;
+// The row kernels are generic (the baseline build) or AVX2 with fused multiply-add, chosen once
+// at load by what the CPU reports; the two round differently, so the inverses differ in the last
+// bits.
+//   oneRow: ri[j] -= t rk[j], j < n;  fourRows: row r (r < 4, at r0 + r ld) -= t[r] rk[j], j < n
+using OneRowFn = void (*)(double* ri, double t, const double* rk, int n) noexcept;
+using FourRowsFn = void (*)(double* r0, std::ptrdiff_t ld, const double* t, const double* rk,
+                            int n) noexcept;
 
-template <int kRows>
-inline void takeMultipliers(double* a, std::ptrdiff_t N, int i0, int k, double* t) noexcept {
-  for (int r = 0; r < kRows; ++r) {
-    double* ri = a + (i0 + r) * N;
-    t[r] = ri[k];
-    ri[k] = 0.0;
-  }
+void oneRowGeneric(double* ri, double t, const double* rk, int n) noexcept {
+  for (int j = 0; j < n; ++j) ri[j] -= t * rk[j];
 }
 
-void eliminateGeneric(double* a, int n, int k) noexcept {
-  const auto N = static_cast<std::ptrdiff_t>(n);
-  const double* rk = a + k * N;
-  auto one = [&](int i) {
-    double* ri = a + i * N;
-    const double t = ri[k];
-    if (t == 0.0) return;
-    ri[k] = 0.0;
-    for (int j = 0; j < n; ++j) ri[j] -= t * rk[j];
-  };
-  int i = 0;
-  while (i < n) {
-    if (i + 4 > n || (k >= i && k < i + 4)) {   // the pivot row's block and the tail: one by one
-      if (i != k) one(i);
-      ++i;
-      continue;
-    }
-    double t[4];
-    takeMultipliers<4>(a, N, i, k, t);
-    double* r0 = a + i * N;
-    double* r1 = r0 + N;
-    double* r2 = r1 + N;
-    double* r3 = r2 + N;
-    for (int j = 0; j < n; ++j) {
-      const double v = rk[j];
-      r0[j] -= t[0] * v;
-      r1[j] -= t[1] * v;
-      r2[j] -= t[2] * v;
-      r3[j] -= t[3] * v;
-    }
-    i += 4;
+void fourRowsGeneric(double* r0, std::ptrdiff_t ld, const double* t, const double* rk,
+                     int n) noexcept {
+  double* r1 = r0 + ld;
+  double* r2 = r1 + ld;
+  double* r3 = r2 + ld;
+  for (int j = 0; j < n; ++j) {
+    const double v = rk[j];
+    r0[j] -= t[0] * v;
+    r1[j] -= t[1] * v;
+    r2[j] -= t[2] * v;
+    r3[j] -= t[3] * v;
   }
 }
 
 #ifdef TACTUS_LOCAL_MODEL_X86
-__attribute__((target("avx2,fma"))) void eliminateAvx2(double* a, int n, int k) noexcept {
+__attribute__((target("avx2,fma"))) void oneRowAvx2(double* ri, double t, const double* rk,
+                                                    int n) noexcept {
+  const __m256d tv = _mm256_set1_pd(t);
+  int j = 0;
+  for (; j + 4 <= n; j += 4) {
+    _mm256_storeu_pd(ri + j, _mm256_fnmadd_pd(tv, _mm256_loadu_pd(rk + j), _mm256_loadu_pd(ri + j)));
+  }
+  oneRowGeneric(ri + j, t, rk + j, n - j);
+}
+
+__attribute__((target("avx2,fma"))) void fourRowsAvx2(double* r0, std::ptrdiff_t ld,
+                                                      const double* t, const double* rk,
+                                                      int n) noexcept {
+  double* r1 = r0 + ld;
+  double* r2 = r1 + ld;
+  double* r3 = r2 + ld;
+  const __m256d t0 = _mm256_set1_pd(t[0]), t1 = _mm256_set1_pd(t[1]);
+  const __m256d t2 = _mm256_set1_pd(t[2]), t3 = _mm256_set1_pd(t[3]);
+  int j = 0;
+  for (; j + 4 <= n; j += 4) {
+    const __m256d v = _mm256_loadu_pd(rk + j);
+    _mm256_storeu_pd(r0 + j, _mm256_fnmadd_pd(t0, v, _mm256_loadu_pd(r0 + j)));
+    _mm256_storeu_pd(r1 + j, _mm256_fnmadd_pd(t1, v, _mm256_loadu_pd(r1 + j)));
+    _mm256_storeu_pd(r2 + j, _mm256_fnmadd_pd(t2, v, _mm256_loadu_pd(r2 + j)));
+    _mm256_storeu_pd(r3 + j, _mm256_fnmadd_pd(t3, v, _mm256_loadu_pd(r3 + j)));
+  }
+  fourRowsGeneric(r0 + j, ld, t, rk + j, n - j);
+}
+#endif  // TACTUS_LOCAL_MODEL_X86
+
+void eliminate(double* a, int n, int k, OneRowFn one_row, FourRowsFn four_rows) noexcept {
   const auto N = static_cast<std::ptrdiff_t>(n);
   const double* rk = a + k * N;
-  const int n4 = n & ~3;
-  auto one = [&](int i) __attribute__((target("avx2,fma"))) {
-    double* ri = a + i * N;
-    const double t = ri[k];
-    if (t == 0.0) return;
-    ri[k] = 0.0;
-    const __m256d tv = _mm256_set1_pd(t);
-    int j = 0;
-    for (; j < n4; j += 4) {
-      _mm256_storeu_pd(ri + j, _mm256_fnmadd_pd(tv, _mm256_loadu_pd(rk + j), _mm256_loadu_pd(ri + j)));
-    }
-    for (; j < n; ++j) ri[j] -= t * rk[j];
-  };
   int i = 0;
   while (i < n) {
-    if (i + 4 > n || (k >= i && k < i + 4)) {
-      if (i != k) one(i);
+    if (i + 4 > n || (k >= i && k < i + 4)) {   // the pivot row's block and the tail: one by one
+      double* ri = a + i * N;
+      const double t = ri[k];
+      if (i != k && t != 0.0) {
+        ri[k] = 0.0;
+        one_row(ri, t, rk, n);
+      }
       ++i;
       continue;
     }
     double t[4];
-    takeMultipliers<4>(a, N, i, k, t);
-    double* r0 = a + i * N;
-    double* r1 = r0 + N;
-    double* r2 = r1 + N;
-    double* r3 = r2 + N;
-    const __m256d t0 = _mm256_set1_pd(t[0]), t1 = _mm256_set1_pd(t[1]);
-    const __m256d t2 = _mm256_set1_pd(t[2]), t3 = _mm256_set1_pd(t[3]);
-    int j = 0;
-    for (; j < n4; j += 4) {
-      const __m256d v = _mm256_loadu_pd(rk + j);
-      _mm256_storeu_pd(r0 + j, _mm256_fnmadd_pd(t0, v, _mm256_loadu_pd(r0 + j)));
-      _mm256_storeu_pd(r1 + j, _mm256_fnmadd_pd(t1, v, _mm256_loadu_pd(r1 + j)));
-      _mm256_storeu_pd(r2 + j, _mm256_fnmadd_pd(t2, v, _mm256_loadu_pd(r2 + j)));
-      _mm256_storeu_pd(r3 + j, _mm256_fnmadd_pd(t3, v, _mm256_loadu_pd(r3 + j)));
+    for (int r = 0; r < 4; ++r) {
+      double* ri = a + (i + r) * N;
+      t[r] = ri[k];
+      ri[k] = 0.0;
     }
-    for (; j < n; ++j) {
-      const double v = rk[j];
-      r0[j] -= t[0] * v;
-      r1[j] -= t[1] * v;
-      r2[j] -= t[2] * v;
-      r3[j] -= t[3] * v;
-    }
+    four_rows(a + i * N, N, t, rk, n);
     i += 4;
   }
 }
-
-#endif  // TACTUS_LOCAL_MODEL_X86
 
 // sum a[k] b[k] over n: eight partial sums, so that the additions do not wait on each other
 double dotGeneric(const double* a, const double* b, int n) noexcept {
@@ -237,7 +220,8 @@ __attribute__((target("avx2,fma"))) double dotAvx2(const double* a, const double
 using DotFn = double (*)(const double* a, const double* b, int n) noexcept;
 using AxpyFn = void (*)(double a, const double* x, double* y, int n) noexcept;
 struct Kernels {
-  EliminateFn eliminate = &eliminateGeneric;
+  OneRowFn one_row = &oneRowGeneric;
+  FourRowsFn four_rows = &fourRowsGeneric;
   DotFn dot = &dotGeneric;
   AxpyFn axpy = &axpyGeneric;
 };
@@ -249,7 +233,8 @@ Kernels chooseKernels() noexcept {
 #ifdef TACTUS_LOCAL_MODEL_X86
   const shared::NsgsKernel nsgs = shared::chooseNsgsKernel(std::getenv("TACTUS_NSGS_KERNEL"));
   if (nsgs != shared::NsgsKernel::kGeneric && __builtin_cpu_supports("fma") != 0) {
-    k.eliminate = &eliminateAvx2;
+    k.one_row = &oneRowAvx2;
+    k.four_rows = &fourRowsAvx2;
     k.dot = &dotAvx2;
     k.axpy = &axpyAvx2;
   }
@@ -280,7 +265,7 @@ bool invertInPlace(double* a, int n, int* swap) noexcept {
     const double d = 1.0 / rk[k];
     rk[k] = 1.0;
     for (int j = 0; j < n; ++j) rk[j] *= d;
-    g_kernels.eliminate(a, n, k);
+    eliminate(a, n, k, g_kernels.one_row, g_kernels.four_rows);
   }
   for (int k = n - 1; k >= 0; --k) {
     if (swap[k] == k) continue;
