@@ -4,21 +4,19 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <numbers>
 
 #include "tactus/shared/clock.h"
 #include "tactus/shared/rt.h"
 
 namespace tactus::haptic::jitter {
-namespace {
-constexpr double kPi = 3.14159265358979323846;
-}  // namespace
 
 CircleDevice::CircleDevice(std::vector<shared::PoseSample> centres, std::string model,
                            double radius_m, double freq_hz)
     : centres_(std::move(centres)),
       model_(std::move(model)),
       radius_m_(radius_m),
-      omega_(2.0 * kPi * freq_hz),
+      omega_(2.0 * std::numbers::pi * freq_hz),
       t0_ns_(shared::monotonicNs()) {
   if (centres_.empty()) centres_.emplace_back();
 }

@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <numbers>
 #include <random>
 
 #include "tactus/shared/clock.h"
@@ -19,7 +20,6 @@
 namespace tactus::haptic::jitter {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
 // god-object compliance seen through the contacts: (m/h^2 + b/h + k)^-1 for the liver scene's
 // grasper (0.05 kg, 8 N s/m, 800 N/m, h = 10 ms) and its rotational counterpart
 constexpr double kToolCompliance = 4.8e-4;   // m/N
@@ -53,7 +53,7 @@ SyntheticProblem makeSyntheticProblem(const SyntheticProblemOptions& o) {
   p.drift_phase.resize(nc);
   for (int c = 0; c < nc; ++c) {
     const double rad = o.patch_radius_m * std::sqrt(uni(rng));
-    const double th = 2.0 * kPi * uni(rng);
+    const double th = 2.0 * std::numbers::pi * uni(rng);
     const double x = rad * std::cos(th);
     const double y = rad * std::sin(th);
     const double z = std::sqrt(sphere_r * sphere_r - x * x - y * y) - sphere_r;
@@ -72,7 +72,7 @@ SyntheticProblem makeSyntheticProblem(const SyntheticProblemOptions& o) {
       p.tangent[6 * c + k] = t1[k];
       p.tangent[6 * c + 3 + k] = t2[k];
     }
-    p.drift_phase[c] = 2.0 * kPi * uni(rng);
+    p.drift_phase[c] = 2.0 * std::numbers::pi * uni(rng);
   }
 
   // per row: direction e and the tool twist sensitivity g = [e; r x e]
@@ -178,7 +178,7 @@ void writeSnapshot(const SyntheticProblem& p, shared::SnapshotWriter slot, std::
   double* df = slot.deltaFree();
   std::copy(p.delta_free.begin(), p.delta_free.end(), df);
   for (int c = 0; c < p.contacts; ++c) {
-    df[3 * c] += drift_m * std::sin(p.drift_phase[c] + 2.0 * kPi * 0.5 * t_s);
+    df[3 * c] += drift_m * std::sin(p.drift_phase[c] + 2.0 * std::numbers::pi * 0.5 * t_s);
   }
   std::copy(p.f.begin(), p.f.end(), slot.f());
   std::copy(p.J.begin(), p.J.end(), slot.J());
