@@ -232,6 +232,7 @@ PYBIND11_MODULE(tactus, m) {
       .def_readonly("max_penetration_m", &tactus::StepReport::max_penetration_m)
       .def_readonly("contact_passes", &tactus::StepReport::contact_passes)
       .def_readonly("geometric_penetration_m", &tactus::StepReport::geometric_penetration_m)
+      .def_readonly("excess_penetration_m", &tactus::StepReport::excess_penetration_m)
       .def_readonly("distinct_tissue_nodes", &tactus::StepReport::distinct_tissue_nodes)
       .def_readonly("total_normal_force_n", &tactus::StepReport::total_normal_force_n)
       .def_property_readonly("tool_wrench",

@@ -60,6 +60,9 @@ struct StepReport {
   /// max(-gap) by a fresh collision query at the corrected state, >= 0; measured only when
   /// solver.contact_iterations > 1 (else 0)
   double geometric_penetration_m = 0.0;
+  /// The same query's largest penetration beyond the contact compliance's give,
+  /// max(0, -(gap + c f_n)) (what the passes compare with solver.penetration_tolerance_m)
+  double excess_penetration_m = 0.0;
   /// Tissue nodes with a non-zero weight in some contact (a vertex contact's node, a face
   /// contact's triangle nodes), over all tissues, in the last assembled problem
   int distinct_tissue_nodes = 0;

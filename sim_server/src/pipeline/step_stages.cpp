@@ -301,6 +301,7 @@ bool nextContactPass(const SimulationModel& model, SimulationState& state, StepS
       std::isfinite(geometric_gap) ? std::max(0.0, -geometric_gap) : 0.0;
   // with a contact compliance a contact may penetrate by c f_n: the passes look at the rest
   const double min_gap = scratch.min_excess_gap;
+  report.excess_penetration_m = std::isfinite(min_gap) ? std::max(0.0, -min_gap) : 0.0;
   if (!(min_gap < -solver.penetration_tolerance_m) || pass + 1 >= passes) return false;
   if (pass > 0 && min_gap < previous_gap) {
     // worse than the previous pass: the linearisations alternate (the contact set flips
