@@ -85,6 +85,12 @@ struct PadGraspResult {
   double max_load_n = 0.0;         ///< largest contact force on the tool against gravity
   double max_geometric_penetration_m = 0.0;
   std::vector<double> geometric_penetration_m;   ///< after each contact step
+  /// from the closing (2 s), per 0.1 s: its end, the jaws' opening then (0..1), the smallest tet
+  /// ratio in the jaws and the largest total normal force [N] within it
+  struct Tenth {
+    double t_s = 0.0, opening = 0.0, min_jaw_ratio = 1.0, max_normal_n = 0.0;
+  };
+  std::vector<Tenth> trace;
 };
 
 /// Six times the signed volume of tet t at the positions p (3n).
@@ -233,6 +239,14 @@ inline PadGraspResult runPadGrasp(const sim::SceneSpec& scene, const ApproachPer
                         : t_before < 3.0 - 1e-9 ? 2
                         : t_before < 4.5 - 1e-9 ? 3
                                                 : 4] += r.times.total_s;
+    const double t_now = sim.time();
+    if (t_now > 2.0 + 0.5 * spec.time_step_s) {
+      const double end = 0.1 * std::ceil(10.0 * t_now - 1e-6);
+      if (out.trace.empty() || out.trace.back().t_s < end - 1e-9) out.trace.push_back({end});
+      PadGraspResult::Tenth& tenth = out.trace.back();
+      tenth.opening = sim.instrument()->gripperOpening();
+      tenth.max_normal_n = std::max(tenth.max_normal_n, r.total_normal_force_n);
+    }
     if (r.contacts > 0) {
       ++out.contact_steps;
       if (r.nsgs.status != shared::NsgsStatus::kConverged) ++out.unconverged_steps;
@@ -274,6 +288,7 @@ inline PadGraspResult runPadGrasp(const sim::SceneSpec& scene, const ApproachPer
         for (int i = node_tet_offset[static_cast<std::size_t>(v)]; i < node_tet_offset[static_cast<std::size_t>(v) + 1]; ++i) {
           const auto& tet = tets[static_cast<std::size_t>(node_tet[static_cast<std::size_t>(i)])];
           const double ratio = tetVolumeRatio(body, tet);
+          if (!out.trace.empty()) out.trace.back().min_jaw_ratio = std::min(out.trace.back().min_jaw_ratio, ratio);
           if (ratio < out.min_volume_ratio) {
             out.min_volume_ratio = ratio;
             out.min_volume_ratio_t_s = t;

@@ -165,6 +165,12 @@ int main(int argc, char** argv) {
       const auto& ph = r.step_s_by_phase;
       std::printf("  steps' time: settle %.1f s, approach %.1f s, close %.1f s, lift %.1f s, hold %.1f s\n",
                   ph[0], ph[1], ph[2], ph[3], ph[4]);
+      std::printf("  from the closing, each 0.1 s, t:opening/smallest tet in the jaws/largest normal "
+                  "force [N]:");
+      for (const auto& x : r.trace) {
+        std::printf(" %.1f:%.3f/%.3g/%.3g", x.t_s, x.opening, x.min_jaw_ratio, x.max_normal_n);
+      }
+      std::printf("\n");
       std::printf("  rise / tool's rise from the lift's start, each 0.1 s:");
       for (const auto& [t, ratio] : r.rise_ratio_trace) std::printf(" %.1f:%.1f", t, 100.0 * ratio);
       std::printf("\n");
