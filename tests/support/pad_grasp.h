@@ -113,8 +113,8 @@ inline std::vector<ApproachPerturbation> testApproaches() {
           {Eigen::Vector3d(-0.003, 0.002, 0.0), 10.0}};
 }
 
-/// The grasp-anywhere grid on liver_grasp_20k and liver_grasp_23k (pad_grasp_study --grid; its
-/// corners are pad_grasp_test's grid tests): the grasp point moved over the lobe's free edge by
+/// The grasp-anywhere grid on liver_grasp_20k and liver_grasp_23k (pad_grasp_study --grid;
+/// pad_grasp_test runs some of its approaches): the grasp point moved over the lobe's free edge by
 /// up to 5 mm along the jaws (world x; + backs the jaws out, - pushes them deeper) and sideways
 /// along the edge (world y), the jaws rolled by up to 20 deg about their axis, at the scenes'
 /// grip (0.015 N m/rad) and at twice it (liver_grasp's 0.03). A central composite design per
@@ -141,16 +141,6 @@ inline std::vector<ApproachPerturbation> gridApproaches() {
     out.push_back({Eigen::Vector3d::Zero(), 0.0, grip});
   }
   return out;
-}
-
-/// The grid's corners pad_grasp_test runs on each mesh (six of the 16: every factor at both of
-/// its extremes three times).
-inline std::vector<ApproachPerturbation> gridTestApproaches() {
-  const double d = kGridOffsetM, r = kGridRollDeg;
-  const double light = kGridGripsNmprad[0], firm = kGridGripsNmprad[1];
-  return {{Eigen::Vector3d(-d, -d, 0.0), -r, light}, {Eigen::Vector3d(d, d, 0.0), r, light},
-          {Eigen::Vector3d(-d, d, 0.0), -r, light},  {Eigen::Vector3d(d, -d, 0.0), -r, firm},
-          {Eigen::Vector3d(-d, d, 0.0), r, firm},    {Eigen::Vector3d(d, -d, 0.0), r, firm}};
 }
 
 inline sim::SceneSpec perturbedScene(sim::SceneSpec spec, const ApproachPerturbation& p) {

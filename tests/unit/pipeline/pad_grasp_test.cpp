@@ -197,45 +197,28 @@ TEST(PadGrasp20kTest, NominalApproachHoldsTheLobe) {
   expectHeldAndWellPosed(test_support::runPadGrasp(spec, {}));
 }
 
-// The grasp anywhere (tests/support/pad_grasp.h, gridApproaches): six corners of the grid on each
-// of liver_grasp_20k and liver_grasp_23k (gridTestApproaches), the grasp point 5 mm off along the
-// jaws and along the lobe's edge, the jaws rolled 20 deg, at the scenes' grip and at twice it.
-// Each must lift the held nodes at least 90 % of the tool's rise, keep every tet in the jaws at
-// 0.3 of its rest volume or more and invert no tet anywhere. The run ends at 5.0 s, 0.5 s into the
-// hold, as pad_grasp_study --grid's (the nominal tests hold to 5.8 s): in the 11 grid approaches
-// run to 5.8 s every verdict at 5.0 s was the verdict at 5.8 s; a slip shows as the lift ends
-// (4.4-4.7 s) or earlier. Not shorter: a liver_grasp_23k corner reached its smallest tet in the
-// jaws (0.258) at 4.86 s.
+// The grasp anywhere (tests/support/pad_grasp.h, gridApproaches): approaches of the grid on
+// liver_grasp_20k and liver_grasp_23k, the grasp point up to 5 mm off along the jaws and along
+// the lobe's edge, the jaws rolled up to 20 deg, at the scenes' grip and at twice it. Each must
+// lift the held nodes at least 90 % of the tool's rise, keep every tet in the jaws at 0.3 of its
+// rest volume or more and invert no tet anywhere. The run ends at 5.0 s, 0.5 s into the hold, as
+// pad_grasp_study --grid's (the nominal tests hold to 5.8 s): in the 11 grid approaches run to
+// 5.8 s every verdict at 5.0 s was the verdict at 5.8 s; a slip shows as the lift ends (4.4-4.7 s)
+// or earlier. Not shorter: a liver_grasp_23k corner reached its smallest tet in the jaws (0.258)
+// at 4.86 s.
 //
-// Disabled: the corners fail today on both meshes (docs/measurements.md, "The grasp anywhere":
-// the lobe slips out of one jaw, tets invert under the lower jaw, liver_grasp_23k's jaws stand at
-// their stop and crush). Run them with --gtest_also_run_disabled_tests --gtest_filter='*Corners*';
-// drop DISABLED_ when they pass.
+// Enabled (HoldsWithoutCrushOrInversion/<mesh>): the grid's approaches that meet the three
+// criteria in docs/measurements.md's grid, besides the nominal one the tests above run; one test
+// per mesh runs them one after the other from one settled state (the mesh's compliance loaded
+// and its 100 settling steps run once; SettledStartGivesTheSameGraspAsSettlingEach shows that
+// this gives the same figures to the bit). Disabled (DISABLED_Failing): six corners per mesh
+// (every factor at both of its extremes three times) and one more approach that passed at the
+// free state, each with what failed. Run them with
+// --gtest_also_run_disabled_tests --gtest_filter='*Failing*'; move an approach to the enabled
+// list when it passes.
 constexpr double kGridTestEndS = 5.0;
 
-struct GridCase {
-  const char* scene;
-  ApproachPerturbation approach;
-};
-
-std::vector<GridCase> gridCases() {
-  std::vector<GridCase> out;
-  for (const char* file : {"liver_grasp_20k.yaml", "liver_grasp_23k.yaml"}) {
-    for (const ApproachPerturbation& a : test_support::gridTestApproaches()) out.push_back({file, a});
-  }
-  return out;
-}
-
-void PrintTo(const GridCase& c, std::ostream* os) {
-  *os << c.scene << ' ' << approachName(c.approach);
-}
-
-class PadGraspGridTest : public ::testing::TestWithParam<GridCase> {};
-
-TEST_P(PadGraspGridTest, HoldsWithoutCrushOrInversion) {
-  const SceneSpec spec =
-      loadScene(std::string(TACTUS_SOURCE_DIR) + "/scenes/" + GetParam().scene);
-  const PadGraspResult r = test_support::runPadGrasp(spec, GetParam().approach, kGridTestEndS);
+void expectHeldWithoutCrushOrInversion(const PadGraspResult& r) {
   printResult(r);
   std::printf("smallest tet anywhere %.3f (tet %d at t = %.2f s), %d steps with a tet inverted\n",
               r.min_volume_ratio_anywhere, r.min_volume_tet_anywhere,
@@ -248,15 +231,97 @@ TEST_P(PadGraspGridTest, HoldsWithoutCrushOrInversion) {
   EXPECT_EQ(r.inverted_steps, 0);
 }
 
+ApproachPerturbation gridApproach(double x_mm, double y_mm, double roll_deg, double grip) {
+  return {Eigen::Vector3d(1e-3 * x_mm, 1e-3 * y_mm, 0.0), roll_deg, grip};
+}
+
+struct GridMesh {
+  const char* scene;
+  std::vector<ApproachPerturbation> approaches;
+};
+
+void PrintTo(const GridMesh& m, std::ostream* os) { *os << m.scene; }
+
+std::vector<GridMesh> passingGridApproaches() {
+  // liver_grasp_20k: of its 30 only the nominal approach, which PadGrasp20kTest runs to 5.8 s
+  return {{"liver_grasp_23k.yaml", {gridApproach(5, 5, 20, 0.03)}}};
+}
+
+class PadGraspGridTest : public ::testing::TestWithParam<GridMesh> {};
+
+TEST_P(PadGraspGridTest, HoldsWithoutCrushOrInversion) {
+  const SceneSpec spec =
+      loadScene(std::string(TACTUS_SOURCE_DIR) + "/scenes/" + GetParam().scene);
+  const test_support::SettledStart settled = test_support::settle(spec);
+  for (const ApproachPerturbation& a : GetParam().approaches) {
+    SCOPED_TRACE(approachName(a));
+    std::printf("%s %s\n", GetParam().scene, approachName(a).c_str());
+    expectHeldWithoutCrushOrInversion(
+        test_support::runPadGrasp(spec, a, kGridTestEndS, &settled));
+  }
+}
+
+std::string sceneStem(const char* file) {
+  std::string name = file;
+  name.resize(name.find('.'));
+  return name;
+}
+
+INSTANTIATE_TEST_SUITE_P(Grid, PadGraspGridTest, ::testing::ValuesIn(passingGridApproaches()),
+                         [](const ::testing::TestParamInfo<GridMesh>& info) {
+                           return sceneStem(info.param.scene);
+                         });
+
+struct FailingGridCase {
+  const char* scene;
+  ApproachPerturbation approach;
+  const char* reason;   ///< what failed in docs/measurements.md's grid
+};
+
+void PrintTo(const FailingGridCase& c, std::ostream* os) {
+  *os << c.scene << ' ' << approachName(c.approach) << ": " << c.reason;
+}
+
+std::vector<FailingGridCase> failingGridApproaches() {
+  // liver_grasp_20k at the step's start (2026-11-28); liver_grasp_23k's corners at the free state
+  // (2026-11-27), but +5, -5, +20 deg at the scenes' grip, measured at the step's start too
+  const double light = test_support::kGridGripsNmprad[0], firm = test_support::kGridGripsNmprad[1];
+  return {
+      {"liver_grasp_20k.yaml", gridApproach(-5, -5, -20, light), "slips (rise 5 %), a tet inverted"},
+      {"liver_grasp_20k.yaml", gridApproach(5, 5, 20, light), "slips (rise 20 %)"},
+      {"liver_grasp_20k.yaml", gridApproach(-5, 5, -20, light), "slips (rise -13 %)"},
+      {"liver_grasp_20k.yaml", gridApproach(5, -5, -20, firm),
+       "slips (rise 52 %), tets inverted (-65)"},
+      {"liver_grasp_20k.yaml", gridApproach(-5, 5, 20, firm), "slips (rise 29 %)"},
+      {"liver_grasp_20k.yaml", gridApproach(5, -5, 20, firm),
+       "holds (95 %), a tet under the lower jaw inverted (-0.17)"},
+      {"liver_grasp_23k.yaml", gridApproach(-5, -5, -20, light),
+       "collapses: tets in the jaws inverted from the closing on (-7950)"},
+      {"liver_grasp_23k.yaml", gridApproach(5, 5, 20, light), "crushes a tet in the jaws to 0.258"},
+      {"liver_grasp_23k.yaml", gridApproach(5, -5, 20, light), "crushes a tet in the jaws to 0.107"},
+      {"liver_grasp_23k.yaml", gridApproach(-5, 5, -20, light),
+       "collapses: tets in the jaws inverted (-11436)"},
+      {"liver_grasp_23k.yaml", gridApproach(5, -5, -20, firm), "slips (rise 77 %), tets inverted"},
+      {"liver_grasp_23k.yaml", gridApproach(-5, 5, 20, firm), "tets inverted in the jaws (-2.2)"},
+      {"liver_grasp_23k.yaml", gridApproach(5, -5, 20, firm), "crushes a tet in the jaws to 0.225"},
+  };
+}
+
+class FailingPadGraspGridTest : public ::testing::TestWithParam<FailingGridCase> {};
+
+TEST_P(FailingPadGraspGridTest, HoldsWithoutCrushOrInversion) {
+  const SceneSpec spec =
+      loadScene(std::string(TACTUS_SOURCE_DIR) + "/scenes/" + GetParam().scene);
+  std::printf("failed in the grid: %s\n", GetParam().reason);
+  expectHeldWithoutCrushOrInversion(
+      test_support::runPadGrasp(spec, GetParam().approach, kGridTestEndS));
+}
+
 INSTANTIATE_TEST_SUITE_P(
-    DISABLED_Corners, PadGraspGridTest, ::testing::ValuesIn(gridCases()),
-    [](const ::testing::TestParamInfo<GridCase>& info) {
+    DISABLED_Failing, FailingPadGraspGridTest, ::testing::ValuesIn(failingGridApproaches()),
+    [](const ::testing::TestParamInfo<FailingGridCase>& info) {
       // e.g. liver_grasp_20k_xm5_ym5_z0_rollm20_grip15
-      std::string name = info.param.scene;
-      name.resize(name.find('.'));
-      name += '_';
-      name += approachName(info.param.approach);
-      return name;
+      return sceneStem(info.param.scene) + '_' + approachName(info.param.approach);
     });
 
 }  // namespace
