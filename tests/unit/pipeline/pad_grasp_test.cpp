@@ -211,9 +211,9 @@ TEST(PadGrasp20kTest, NominalApproachHoldsTheLobe) {
 // criteria in docs/measurements.md's grid, besides the nominal one the tests above run; one test
 // per mesh runs them one after the other from one settled state (the mesh's compliance loaded
 // and its 100 settling steps run once; SettledStartGivesTheSameGraspAsSettlingEach shows that
-// this gives the same figures to the bit). Disabled (DISABLED_Failing): six corners per mesh
-// (every factor at both of its extremes three times) and one more approach that passed at the
-// free state, each with what failed. Run them with
+// this gives the same figures to the bit). Disabled (DISABLED_Failing): the corners of six per
+// mesh (every factor at both of its extremes three times) that fail and one more approach that
+// passed at the free state, each with what failed. Run them with
 // --gtest_also_run_disabled_tests --gtest_filter='*Failing*'; move an approach to the enabled
 // list when it passes.
 constexpr double kGridTestEndS = 5.0;
@@ -244,7 +244,8 @@ void PrintTo(const GridMesh& m, std::ostream* os) { *os << m.scene; }
 
 std::vector<GridMesh> passingGridApproaches() {
   // liver_grasp_20k: of its 30 only the nominal approach, which PadGrasp20kTest runs to 5.8 s
-  return {{"liver_grasp_23k.yaml", {gridApproach(5, 5, 20, 0.03)}}};
+  return {{"liver_grasp_23k.yaml",
+           {gridApproach(5, 5, 20, 0.015), gridApproach(5, 5, 20, 0.03)}}};
 }
 
 class PadGraspGridTest : public ::testing::TestWithParam<GridMesh> {};
@@ -283,8 +284,7 @@ void PrintTo(const FailingGridCase& c, std::ostream* os) {
 }
 
 std::vector<FailingGridCase> failingGridApproaches() {
-  // liver_grasp_20k at the step's start (2026-11-28); liver_grasp_23k's corners at the free state
-  // (2026-11-27), but +5, -5, +20 deg at the scenes' grip, measured at the step's start too
+  // measured at the step's start (2026-11-28)
   const double light = test_support::kGridGripsNmprad[0], firm = test_support::kGridGripsNmprad[1];
   return {
       {"liver_grasp_20k.yaml", gridApproach(-5, -5, -20, light), "slips (rise 5 %), a tet inverted"},
@@ -296,14 +296,13 @@ std::vector<FailingGridCase> failingGridApproaches() {
       {"liver_grasp_20k.yaml", gridApproach(5, -5, 20, firm),
        "holds (95 %), a tet under the lower jaw inverted (-0.17)"},
       {"liver_grasp_23k.yaml", gridApproach(-5, -5, -20, light),
-       "collapses: tets in the jaws inverted from the closing on (-7950)"},
-      {"liver_grasp_23k.yaml", gridApproach(5, 5, 20, light), "crushes a tet in the jaws to 0.258"},
+       "tets in the jaws inverted from the closing on (-145)"},
       {"liver_grasp_23k.yaml", gridApproach(5, -5, 20, light), "crushes a tet in the jaws to 0.107"},
       {"liver_grasp_23k.yaml", gridApproach(-5, 5, -20, light),
-       "collapses: tets in the jaws inverted (-11436)"},
-      {"liver_grasp_23k.yaml", gridApproach(5, -5, -20, firm), "slips (rise 77 %), tets inverted"},
+       "slips (rise 68 %), tets in the jaws collapse (-8415)"},
+      {"liver_grasp_23k.yaml", gridApproach(5, -5, -20, firm), "tets in the jaws inverted (-20)"},
       {"liver_grasp_23k.yaml", gridApproach(-5, 5, 20, firm), "tets inverted in the jaws (-2.2)"},
-      {"liver_grasp_23k.yaml", gridApproach(5, -5, 20, firm), "crushes a tet in the jaws to 0.225"},
+      {"liver_grasp_23k.yaml", gridApproach(5, -5, 20, firm), "a tet in the jaws inverted (-0.15)"},
   };
 }
 
