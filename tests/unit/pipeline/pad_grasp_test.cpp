@@ -244,8 +244,9 @@ void PrintTo(const GridMesh& m, std::ostream* os) { *os << m.scene; }
 
 std::vector<GridMesh> passingGridApproaches() {
   // liver_grasp_20k: of its 30 only the nominal approach, which PadGrasp20kTest runs to 5.8 s
+  const double light = test_support::kGridGripsNmprad[0], firm = test_support::kGridGripsNmprad[1];
   return {{"liver_grasp_23k.yaml",
-           {gridApproach(5, 5, 20, 0.015), gridApproach(5, 5, 20, 0.03)}}};
+           {gridApproach(5, 5, 20, light), gridApproach(5, 5, 20, firm)}}};
 }
 
 class PadGraspGridTest : public ::testing::TestWithParam<GridMesh> {};
