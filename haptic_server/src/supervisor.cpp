@@ -63,41 +63,48 @@ bool Supervisor::watchTick(std::int64_t now_ns) {
                    1e-6 * static_cast<double>(stuck_longest_ns_));
     }
     stuck_ = false;
+    halt_device_ = -1;
     still_stuck_reported_ = false;
     return false;
   }
   stuck_longest_ns_ = p.running_ns;
-  if (stuck_) {
-    // a device that took the halt but did not return from its call: say so once
-    if (!still_stuck_reported_ && p.running_ns > 2 * bound_ns && p.device >= 0) {
-      spdlog::error("the haptic tick is still stuck in device {}'s read or write {:.0f} ms "
-                    "after the halt request: the device does not honour halt and keeps rendering "
-                    "its last command; stop haptic_server (SIGTERM ends it after a grace period) "
-                    "and fix the device backend",
-                    p.device, 1e-6 * static_cast<double>(p.running_ns - bound_ns));
-      still_stuck_reported_ = true;
+  if (!stuck_) {
+    stuck_ = true;
+    if (p.device < 0) {
+      // preempted between the tick's stamps, or stuck outside a device call: if it then sits in
+      // a device call, the next poll asks that device to halt (below)
+      spdlog::error("the haptic tick has been stuck for {:.0f} ms (watchdog {} ms), not in a "
+                    "device call: the device keeps its last command",
+                    1e-6 * static_cast<double>(p.running_ns), loop_.settings().watchdog_ms);
+    }
+  }
+  if (p.device >= 0 && halt_device_ != p.device) {
+    // once per device and episode: the first time the stuck tick is seen in this device's call
+    halt_device_ = p.device;
+    halt_requested_ns_ = p.running_ns;
+    if (loop_.device(p.device).halt()) {
+      spdlog::error("the haptic tick has been stuck for {:.0f} ms in device {}'s read or write "
+                    "(the device contract forbids blocking): asked the device to halt; its force "
+                    "fades out once the call returns",
+                    1e-6 * static_cast<double>(p.running_ns), p.device);
+    } else {
+      spdlog::error("the haptic tick has been stuck for {:.0f} ms in device {}'s read or write "
+                    "(the device contract forbids blocking) and the device cannot be halted: it "
+                    "keeps rendering its last command; stop haptic_server (SIGTERM ends it after "
+                    "a grace period) and fix the device backend",
+                    1e-6 * static_cast<double>(p.running_ns), p.device);
     }
     return true;
   }
-  stuck_ = true;
-  if (p.device < 0) {
-    spdlog::error("the haptic tick has been stuck for {:.0f} ms (watchdog {} ms), not in a device "
-                  "call: the device keeps its last command", 1e-6 * static_cast<double>(p.running_ns),
-                  loop_.settings().watchdog_ms);
-    return true;
-  }
-  const bool halted = loop_.device(p.device).halt();
-  if (halted) {
-    spdlog::error("the haptic tick has been stuck for {:.0f} ms in device {}'s read or write "
-                  "(the device contract forbids blocking): asked the device to halt; its force "
-                  "fades out once the call returns",
-                  1e-6 * static_cast<double>(p.running_ns), p.device);
-  } else {
-    spdlog::error("the haptic tick has been stuck for {:.0f} ms in device {}'s read or write "
-                  "(the device contract forbids blocking) and the device cannot be halted: it "
-                  "keeps rendering its last command; stop haptic_server (SIGTERM ends it after a "
-                  "grace period) and fix the device backend",
-                  1e-6 * static_cast<double>(p.running_ns), p.device);
+  // a device that took the halt but did not return from its call: say so once
+  if (!still_stuck_reported_ && halt_device_ >= 0 && p.device == halt_device_ &&
+      p.running_ns - halt_requested_ns_ > bound_ns) {
+    spdlog::error("the haptic tick is still stuck in device {}'s read or write {:.0f} ms after "
+                  "the halt request: the device does not honour halt and keeps rendering its "
+                  "last command; stop haptic_server (SIGTERM ends it after a grace period) and "
+                  "fix the device backend",
+                  p.device, 1e-6 * static_cast<double>(p.running_ns - halt_requested_ns_));
+    still_stuck_reported_ = true;
   }
   return true;
 }

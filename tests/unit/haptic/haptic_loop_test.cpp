@@ -1008,14 +1008,74 @@ TEST(HapticWatchdog, ATickStuckInADeviceReadIsReportedAndTheDeviceHalted) {
     if (!haltable) {
       EXPECT_EQ(loop.tickProgress(shared::monotonicNs()).device, 0) << "stuck in device 0";
       EXPECT_FALSE(returned.load());
-      device.halted.store(true);   // the test lets it go
     }
+    EXPECT_EQ(device.halted.load(), haltable) << "the watchdog asks a haltable device to halt";
+    device.halted.store(true);   // the test lets it go (also when the watchdog failed)
     rt.join();
     EXPECT_TRUE(returned.load());
     EXPECT_EQ(loop.counters().device_faults.load(), 1u);
     EXPECT_FALSE(supervisor.watchTick(shared::monotonicNs()));
     loop.stopped();
   }
+}
+
+// A tick first seen stuck outside a device call (here held in the link adoption, as a tick
+// preempted before its device read would be) and then stuck in a device's read: the watchdog
+// still asks that device to halt, and the tick returns.
+TEST(HapticWatchdog, ATickFirstStuckOutsideADeviceCallIsHaltedOnceInOne) {
+  const std::string name = "tactus_watchdog_late_" + std::to_string(::getpid());
+  shared::Segment::remove(name);
+  shared::Segment sim = shared::Segment::create(name, shared::SegmentCapacity::forContacts(4, true));
+  // offered to the tick, which adopts it (and runs the hook) at its start; outlives the loop
+  auto link = std::make_unique<AttachedSegment>(shared::Segment::open(name));
+  BlockingDevice device;
+  HapticSettings settings;
+  settings.watchdog_ms = 5.0;
+  HapticLoop loop(device, settings);
+  Supervisor supervisor(loop, name + "_none");
+  struct Gate {
+    std::atomic<bool> entered{false};
+    std::atomic<bool> open{false};
+  } gate;
+  HapticLoopTestAccess::setAdoptionHook(
+      loop,
+      [](void* context) {
+        auto* g = static_cast<Gate*>(context);
+        g->entered.store(true);
+        while (!g->open.load()) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+      },
+      &gate);
+  loop.offerLink(link.get());
+  device.block.store(true);
+  std::atomic<bool> returned{false};
+  std::thread rt([&] {
+    const std::int64_t now = shared::monotonicNs();
+    loop.tick(now, now);
+    returned.store(true);
+  });
+  bool stuck_outside = false;
+  for (int i = 0; i < 5000 && !stuck_outside; ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    stuck_outside = gate.entered.load() && supervisor.watchTick(shared::monotonicNs());
+  }
+  EXPECT_TRUE(stuck_outside);
+  EXPECT_EQ(loop.tickProgress(shared::monotonicNs()).device, -1) << "held before the read";
+  EXPECT_FALSE(device.halted.load()) << "no device call to halt yet";
+  gate.open.store(true);   // the tick goes on into the blocking read
+  for (int i = 0; i < 5000 && !device.halted.load(); ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    EXPECT_TRUE(supervisor.watchTick(shared::monotonicNs()) || returned.load());
+  }
+  EXPECT_TRUE(device.halted.load()) << "the watchdog asks the device it is stuck in to halt";
+  device.halted.store(true);   // the test lets it go (also when the watchdog failed)
+  rt.join();
+  EXPECT_TRUE(returned.load());
+  EXPECT_EQ(loop.counters().device_faults.load(), 1u);
+  EXPECT_FALSE(supervisor.watchTick(shared::monotonicNs()));
+  HapticLoopTestAccess::setAdoptionHook(loop, nullptr, nullptr);
+  loop.offerLink(nullptr);
+  loop.stopped();
+  shared::Segment::remove(name);
 }
 
 }  // namespace

@@ -25,9 +25,11 @@ class Supervisor {
   void poll();
   /// The watchdog of the real-time thread: when the tick now running has been running for
   /// longer than twice the loop's watchdog_ms, it is stuck (a device read or write that blocks,
-  /// against the device contract): logs it once per episode and asks the device to halt
-  /// (Device::halt: a plugin that supports it stops its force and returns), or says that it
-  /// cannot, and says so again once if the call still has not returned after as long again.
+  /// against the device contract): logs it once per episode and, the first time the stuck tick
+  /// is seen inside a device's call (also when the episode began outside one, e.g. the tick
+  /// preempted before the call), asks that device to halt (Device::halt: a plugin that supports
+  /// it stops its force and returns), or says that it cannot, and says so again once if the call
+  /// still has not returned after as long again.
   /// Returns true while the tick is stuck. Called by poll().
   bool watchTick(std::int64_t now_ns);
   /// Logs the loop's pending events (spdlog). Returns how many.
@@ -48,6 +50,8 @@ class Supervisor {
   std::string last_open_message_;
   bool creator_alive_ = true;
   bool stuck_ = false;                           ///< in a stuck-tick episode (logged once)
+  int halt_device_ = -1;                          ///< the device asked to halt this episode
+  std::int64_t halt_requested_ns_ = 0;           ///< the tick's running time at that request
   bool still_stuck_reported_ = false;            ///< ... and still stuck after the halt
   std::int64_t stuck_longest_ns_ = 0;            ///< how long the episode's tick ran so far
 };
