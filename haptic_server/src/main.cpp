@@ -1,6 +1,6 @@
 // haptic_server: the hard-real-time haptic loop. Pins a core, runs at SCHED_FIFO where allowed,
 // polls a device backend and re-solves the simulation's last contact problem every period.
-#include <CLI/CLI.hpp>
+#include "tactus/shared/cli.h"
 #include <spdlog/spdlog.h>
 
 #include <atomic>

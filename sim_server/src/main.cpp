@@ -1,7 +1,7 @@
 // sim_server: runs a scene. Offline (--steps N) as fast as possible with a per-stage timing
 // table at the end, or as a daemon paced to real time that publishes the contact problem to the
 // haptic process through the shared segment (when the scene enables haptics).
-#include <CLI/CLI.hpp>
+#include "tactus/shared/cli.h"
 #include <new>
 #include <spdlog/spdlog.h>
 

@@ -13,7 +13,7 @@
 #include <spdlog/spdlog.h>
 #include <unistd.h>
 
-#include <CLI/CLI.hpp>
+#include "tactus/shared/cli.h"
 #include <algorithm>
 #include <cmath>
 #include <cstdio>

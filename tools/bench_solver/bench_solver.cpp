@@ -6,7 +6,7 @@
 
 #include <spdlog/spdlog.h>
 
-#include <CLI/CLI.hpp>
+#include "tactus/shared/cli.h"
 #include <algorithm>
 #include <chrono>
 #include <cmath>

@@ -5,7 +5,7 @@
 // and applies the newest force command received. A vendor-SDK bridge has the same shape with
 // the SDK's read/write in place of the simulated hand. When no valid command has arrived for
 // --command-timeout-ms (haptic_server gone), it renders zero force until commands return.
-#include <CLI/CLI.hpp>
+#include "tactus/shared/cli.h"
 #include <arpa/inet.h>
 #include <netinet/in.h>
 #include <sys/socket.h>

@@ -5,7 +5,7 @@
 
 #include <spdlog/spdlog.h>
 
-#include <CLI/CLI.hpp>
+#include "tactus/shared/cli.h"
 #include <cmath>
 #include <cstdio>
 #include <filesystem>

@@ -3,7 +3,7 @@
 // and at the end, for each law asked. The test command runs liver2 (hanging_liver_test); this
 // tool runs the larger meshes (minutes each), e.g.
 //   build/tools/hanging_liver_study/hanging_liver_study --mesh scenes/meshes/liver_23k.msh --law invertible_neo_hookean
-#include <CLI/CLI.hpp>
+#include "tactus/shared/cli.h"
 #include <cstdio>
 #include <string>
 #include <vector>

@@ -15,7 +15,7 @@
 // longer (e.g. 900-row problems) the bare loop's wake-ups queue behind them and its figures are
 // inflated: use --baseline-mode after (synthetic only), which runs the bare loop alone on the
 // same core for as many ticks once the haptic loop has stopped (same core, different moment).
-#include <CLI/CLI.hpp>
+#include "tactus/shared/cli.h"
 #include <fmt/format.h>
 #include <unistd.h>
 

@@ -3,7 +3,7 @@
 // scripts/start.sh; costs the haptic loop nothing (it only reads the stats ring). Waits at most
 // --wait seconds for the segment to (re)appear, then gives up with a message; SIGINT, SIGTERM
 // and SIGHUP stop it within 50 ms.
-#include <CLI/CLI.hpp>
+#include "tactus/shared/cli.h"
 
 #include <algorithm>
 #include <atomic>

@@ -8,7 +8,7 @@
 // plots it). The docs/measurements.md ("Grasps") quotes its runs, e.g.
 //   build/tools/pad_grasp_study/pad_grasp_study --yaw-deg 65 --grip 0.03 --deeper-mm 4
 //   build/tools/pad_grasp_study/pad_grasp_study --scene scenes/liver_grasp_20k.yaml --grid --csv g.csv
-#include <CLI/CLI.hpp>
+#include "tactus/shared/cli.h"
 #include <algorithm>
 #include <chrono>
 #include <filesystem>

@@ -14,7 +14,7 @@
 //
 // Single-threaded (one Asio io_context): a timer polls the segment at --rate Hz and broadcasts.
 // A client that cannot keep up loses frames, never the topology, and never slows the others.
-#include <CLI/CLI.hpp>
+#include "tactus/shared/cli.h"
 #include <sys/resource.h>
 
 #include <boost/asio.hpp>

@@ -6,7 +6,7 @@
 // Header-only; include it only from programs that already link CLI11 (the daemons and tools).
 #pragma once
 
-#include <CLI/CLI.hpp>
+#include "tactus/shared/cli.h"
 
 #include <cerrno>
 #include <cmath>
