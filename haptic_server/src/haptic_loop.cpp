@@ -379,7 +379,9 @@ void HapticLoop::takeSnapshot(std::int64_t now, std::int64_t deadline_ns,
       live = live || (ch.have_pose && !ch.device_fault);
     }
     SnapshotPreparer& preparer = link_->preparer;
-    preparer.publishPoses(DevicePoses(poses.data(), static_cast<std::size_t>(device_count_)));
+    // (read at or after the tick's start, on the real clock)
+    preparer.publishPoses(DevicePoses(poses.data(), static_cast<std::size_t>(device_count_)),
+                          out.started_ns);
     // without a preparer thread the tick prepares (tests, offline tools: not real-time)
     if (!preparer.threaded()) (void)preparer.prepareNewest(model_settings_);
     bool fresh = false;

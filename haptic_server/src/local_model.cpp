@@ -30,9 +30,15 @@ constexpr int kMaxCols = 6 * shared::kMaxInstruments;
 inline double norm2(double a, double b) noexcept { return std::sqrt(a * a + b * b); }
 
 bool finiteAll(const double* v, std::size_t n) noexcept {
-  double acc = 0.0;   // NaN/Inf propagate through the product with zero
-  for (std::size_t i = 0; i < n; ++i) acc += v[i] * 0.0;
-  return acc == 0.0;
+  // NaN/Inf propagate through the product with zero; eight independent sums, so that the
+  // additions do not wait on each other (one sum costs an addition's latency per element)
+  double acc[8] = {};
+  std::size_t i = 0;
+  for (; i + 8 <= n; i += 8) {
+    for (std::size_t j = 0; j < 8; ++j) acc[j] += v[i + j] * 0.0;
+  }
+  for (; i < n; ++i) acc[0] += v[i] * 0.0;
+  return ((acc[0] + acc[1]) + (acc[2] + acc[3])) + ((acc[4] + acc[5]) + (acc[6] + acc[7])) == 0.0;
 }
 
 // A pose sample as a pose; false when it is not finite or its quaternion is not usable.
@@ -346,6 +352,8 @@ void LocalModelSettings::validate() const {
   checkRange("max_rotation_rad", max_rotation_rad, 0.0, false, L::kMaxRotationRad);
   checkRange("prepare_tolerance_factor", prepare_tolerance_factor, 0.0, true, 1.0);
   checkRange("prepare_max_sweeps", prepare_max_sweeps, 1.0, false, L::kMaxSweeps);
+  checkRange("prepare_coarse_factor", prepare_coarse_factor, 0.0, false,
+             L::kMaxPrepareCoarseFactor);
   if (kind != LocalModelKind::kFull && kind != LocalModelKind::kLinearized &&
       kind != LocalModelKind::kAutomatic) {
     throw Error("local model settings: unknown kind");
@@ -414,6 +422,10 @@ SnapshotPreparation::SnapshotPreparation(int max_rows, int max_contacts)
       A_(static_cast<std::size_t>(std::max(max_rows, 0)) * static_cast<std::size_t>(std::max(max_rows, 0)), 0.0),
       B_(static_cast<std::size_t>(std::max(max_rows, 0)) * kMaxCols, 0.0),
       X_(static_cast<std::size_t>(std::max(max_rows, 0)) * kMaxCols, 0.0),
+      Xt_(static_cast<std::size_t>(std::max(max_rows, 0)) * kMaxCols, 0.0),
+      f_coarse_(static_cast<std::size_t>(std::max(max_rows, 0)), 0.0),
+      polish_res_(static_cast<std::size_t>(std::max(max_rows, 0)), 0.0),
+      polish_y_(static_cast<std::size_t>(std::max(max_rows, 0)), 0.0),
       swap_(static_cast<std::size_t>(std::max(max_rows, 0)), 0),
       sort_(static_cast<std::size_t>(std::max(max_contacts, 0))) {}
 
@@ -432,6 +444,7 @@ bool SnapshotPreparation::copyAndCheck(const shared::SnapshotView& snap,
   out.linearized_ = false;
   out.ordered_count_ = 0;
   out.prepared_converged_ = false;
+  out.prepared_polished_ = false;
   out.prepared_sweeps_ = 0;
   const bool usable = (hdr.flags & shared::kSnapshotValid) != 0 &&
                       (hdr.flags & shared::kSnapshotShuttingDown) == 0;
@@ -483,8 +496,12 @@ bool SnapshotPreparation::copyAndCheck(const shared::SnapshotView& snap,
   const auto nn = static_cast<std::size_t>(nc);
   const double* W = snap.W();
   const auto ld = static_cast<std::size_t>(snap.ld());
-  for (std::size_t r = 0; r < mm; ++r) {
-    std::copy_n(W + r * ld, mm, out.W_.data() + r * mm);
+  // W row by row, each row checked while it is in the cache (one pass over W, not two)
+  bool finite = true;
+  for (std::size_t r = 0; r < mm && finite; ++r) {
+    double* dst = out.W_.data() + r * mm;
+    std::copy_n(W + r * ld, mm, dst);
+    finite = finiteAll(dst, mm);
   }
   std::copy_n(snap.deltaFree(), mm, out.delta_free_.data());
   std::copy_n(snap.f(), mm, out.f_star_.data());
@@ -498,7 +515,7 @@ bool SnapshotPreparation::copyAndCheck(const shared::SnapshotView& snap,
   std::copy_n(snap.contactPoint(), 3 * nn, out.point_.data());
   std::copy_n(snap.contactNormal(), 3 * nn, out.normal_.data());
   std::copy_n(snap.contactTangent(), 6 * nn, out.tangent_.data());
-  bool finite = finiteAll(out.W_.data(), mm * mm) && finiteAll(out.delta_free_.data(), mm) &&
+  finite = finite && finiteAll(out.delta_free_.data(), mm) &&
                 finiteAll(out.f_star_.data(), mm) && finiteAll(out.J_.data(), 6 * mm) &&
                 finiteAll(out.mu_.data(), nn) && finiteAll(out.point_.data(), 3 * nn) &&
                 finiteAll(out.normal_.data(), 3 * nn) && finiteAll(out.tangent_.data(), 6 * nn);
@@ -585,45 +602,91 @@ PrepareStatus SnapshotPreparation::prepare(const shared::SnapshotView& snap,
     warm_start_.adopt(nc, m, out.row_offset_.data(), out.contact_id_.data(),
                       out.f_star_.data(), have_last_ ? last_f_.data() : nullptr, out.f0_.data());
   }
+  // the linearisation is wanted: the solve stops at the coarse tolerance, and the
+  // linearisation's Newton step on its active set takes the solution to the tight one
+  const bool wanted = settings.kind == LocalModelKind::kLinearized ||
+                      (settings.kind == LocalModelKind::kAutomatic &&
+                       m >= settings.automatic_min_rows);
+  const double tight = settings.tolerance * settings.prepare_tolerance_factor;
+  const double coarse = settings.tolerance * settings.prepare_coarse_factor;
+  const bool polish = wanted && coarse > tight;
   shared::NsgsSettings ns;
-  ns.tolerance = settings.tolerance * settings.prepare_tolerance_factor;
+  ns.tolerance = polish ? coarse : tight;
   ns.max_sweeps = settings.prepare_max_sweeps;
   ns.coupling = out.coupling_;
   ns.anderson_depth = shared::kMaxAndersonDepth;
   double* f = out.f0_.data() + r_begin;
-  shared::NsgsResult res = shared::solveNsgs(problem, ns, workspace_, f);
+  // NSGS to ns.tolerance from f (Anderson, then plain where Anderson stalls)
+  auto solve = [&]() {
+    shared::NsgsResult r = shared::solveNsgs(problem, ns, workspace_, f);
+    int n = r.sweeps;
+    if (r.status == shared::NsgsStatus::kMaxSweeps) {   // Anderson may stall: plain NSGS
+      ns.anderson_depth = 0;
+      r = shared::solveNsgs(problem, ns, workspace_, f);
+      n += r.sweeps;
+      ns.anderson_depth = shared::kMaxAndersonDepth;
+    }
+    r.sweeps = n;
+    return r;
+  };
+  shared::NsgsResult res = solve();
   int sweeps = res.sweeps;
-  if (res.status == shared::NsgsStatus::kMaxSweeps) {   // Anderson may stall: plain NSGS
-    ns.anderson_depth = 0;
-    res = shared::solveNsgs(problem, ns, workspace_, f);
-    sweeps += res.sweeps;
+  out.prepared_polished_ = false;
+  auto failed = [&](const shared::NsgsResult& r) {
+    if (r.status != shared::NsgsStatus::kIllPosed && r.status != shared::NsgsStatus::kEmpty &&
+        r.status != shared::NsgsStatus::kNonFinite) {
+      return false;
+    }
+    out.status_ = r.status == shared::NsgsStatus::kIllPosed ? PrepareStatus::kIllPosed
+                  : r.status == shared::NsgsStatus::kEmpty  ? PrepareStatus::kInconsistent
+                                                             : PrepareStatus::kNonFinite;
+    out.prepare_ns_ = shared::monotonicNs() - t0;
+    reset();
+    return true;
+  };
+  if (failed(res)) return out.status_;
+  const int reached_rows = r_end - r_begin;
+  auto keepDelta = [&]() {
+    std::fill(out.delta0_.begin(), out.delta0_.begin() + m, 0.0);
+    std::copy_n(workspace_.delta.data(), reached_rows, out.delta0_.data() + r_begin);
+  };
+  keepDelta();
+  std::int64_t t3 = shared::monotonicNs();
+  std::int64_t linearize_ns = 0;
+  if (polish && res.status == shared::NsgsStatus::kConverged) {
+    // the linearisation at the coarse solution, with the Newton step to the tight tolerance;
+    // where that does not reach it, NSGS goes on from the coarse solution and the solution
+    // it converges to is linearised
+    std::copy_n(f, reached_rows, f_coarse_.data());
+    linearize(settings, out, &problem, tight);
+    const std::int64_t t = shared::monotonicNs();
+    linearize_ns += t - t3;
+    t3 = t;
+    if (!out.prepared_polished_) {
+      std::copy_n(f_coarse_.data(), reached_rows, f);
+      ns.tolerance = tight;
+      res = solve();
+      sweeps += res.sweeps;
+      if (failed(res)) return out.status_;
+      keepDelta();
+      out.linearized_ = false;
+    }
   }
   out.prepared_sweeps_ = sweeps;
-  out.prepared_converged_ = res.status == shared::NsgsStatus::kConverged;
-  const std::int64_t t3 = shared::monotonicNs();
-  out.solve_ns_ = t3 - t2;
-  if (res.status == shared::NsgsStatus::kIllPosed || res.status == shared::NsgsStatus::kEmpty ||
-      res.status == shared::NsgsStatus::kNonFinite) {
-    out.status_ = res.status == shared::NsgsStatus::kIllPosed ? PrepareStatus::kIllPosed
-                  : res.status == shared::NsgsStatus::kEmpty  ? PrepareStatus::kInconsistent
-                                                               : PrepareStatus::kNonFinite;
-    out.prepare_ns_ = t3 - t0;
-    reset();
-    return out.status_;
-  }
-  std::fill(out.delta0_.begin(), out.delta0_.begin() + m, 0.0);
-  std::copy_n(workspace_.delta.data(), r_end - r_begin, out.delta0_.data() + r_begin);
+  out.prepared_converged_ = out.prepared_polished_ ||
+                            (res.status == shared::NsgsStatus::kConverged && ns.tolerance == tight);
+  const std::int64_t t3b = shared::monotonicNs();
+  out.solve_ns_ = t3b - t2 - linearize_ns;
   // carried into the next snapshot only from a converged solve (as the haptic warm start)
   have_last_ = out.prepared_converged_;
   if (have_last_) std::copy_n(out.f0_.data(), m, last_f_.data());
   out.status_ = PrepareStatus::kReady;
-  const bool wanted = settings.kind == LocalModelKind::kLinearized ||
-                      (settings.kind == LocalModelKind::kAutomatic &&
-                       m >= settings.automatic_min_rows);
-  if (wanted && out.prepared_converged_) linearize(settings, out);
+  if (wanted && out.prepared_converged_ && !out.prepared_polished_) {
+    linearize(settings, out, nullptr, tight);
+  }
   if (out.linearized_) orderForReducedFallback(settings, out);
   const std::int64_t t4 = shared::monotonicNs();
-  out.linearize_ns_ = t4 - t3;
+  out.linearize_ns_ = t4 - t3b + linearize_ns;
   out.prepare_ns_ = t4 - t0;
   return out.status_;
 }
@@ -631,10 +694,12 @@ PrepareStatus SnapshotPreparation::prepare(const shared::SnapshotView& snap,
 // The active-set linearisation (local_model.h): A df = B dx over the active rows of the reached
 // contacts, A inverted (kept for the tick's active-set correction), F = A^-1 B and G = W F + J.
 // Allocation-free: everything lives in storage sized for the capacity.
-void SnapshotPreparation::linearize(const LocalModelSettings& settings,
-                                    PreparedSnapshot& out) noexcept {
+void SnapshotPreparation::linearize(const LocalModelSettings& settings, PreparedSnapshot& out,
+                                    const shared::ContactProblemView* polish,
+                                    double tolerance) noexcept {
   (void)settings;
   out.linearized_ = false;
+  out.prepared_polished_ = false;
   const int m = out.rows_;
   const int nc = out.contacts_;
   const int c_begin = out.reach_only_ ? out.reach_begin_ : 0;
@@ -680,6 +745,7 @@ void SnapshotPreparation::linearize(const LocalModelSettings& settings,
   double* A = A_.data();   // na x na, row-major: row eq is equation eq
   double* B = B_.data();   // na x kMaxCols, row-major
   double* X = X_.data();   // na x kMaxCols: df/dx on the active rows
+  double* Xt = Xt_.data();  // cols x na: X transposed
   if (na > 0) {
     std::fill_n(A, NA * NA, 0.0);
     std::fill_n(B, NA * kMaxCols, 0.0);
@@ -735,24 +801,29 @@ void SnapshotPreparation::linearize(const LocalModelSettings& settings,
       for (int j = 0; j < na; ++j) Ainv[j * NA + i] = A[i * NA + j];
     }
     if (!invertInPlace(Ainv, na, swap_.data())) return;
-    // X = A^-1 B, checked against A X = B
-    std::fill_n(X, NA * kMaxCols, 0.0);
-    for (int p = 0; p < na; ++p) {
-      const double* col = Ainv + p * NA;
-      const double* bp = B + p * kMaxCols;
-      for (int i = 0; i < na; ++i) {
-        double* xi = X + i * kMaxCols;
-        for (int k = 0; k < cols; ++k) xi[k] += col[i] * bp[k];
+    if (polish != nullptr && !polishSolution(*polish, tolerance, out)) return;
+    // X = A^-1 B, checked against A X = B: column by column of B (Xt row k = column k of X, so
+    // that every product runs over contiguous storage)
+    for (int k = 0; k < cols; ++k) {
+      double* xk = Xt + k * NA;
+      std::fill_n(xk, na, 0.0);
+      for (int p = 0; p < na; ++p) {
+        const double b = B[p * kMaxCols + k];
+        if (b != 0.0) g_kernels.axpy(b, Ainv + p * NA, xk, na);
       }
+    }
+    std::fill_n(X, NA * kMaxCols, 0.0);
+    for (int k = 0; k < cols; ++k) {
+      for (int i = 0; i < na; ++i) X[i * kMaxCols + k] = Xt[k * NA + i];
     }
     double r2 = 0.0, b2 = 0.0;
     for (int i = 0; i < na; ++i) {
       const double* ai = A + i * NA;
       for (int k = 0; k < cols; ++k) {
-        double v = -B[i * kMaxCols + k];
-        for (int j = 0; j < na; ++j) v += ai[j] * X[j * kMaxCols + k];
+        const double b = B[i * kMaxCols + k];
+        const double v = g_kernels.dot(ai, Xt + k * NA, na) - b;
         r2 += v * v;
-        b2 += B[i * kMaxCols + k] * B[i * kMaxCols + k];
+        b2 += b * b;
       }
     }
     if (!finiteAll(X, static_cast<std::size_t>(NA * kMaxCols)) ||
@@ -763,26 +834,107 @@ void SnapshotPreparation::linearize(const LocalModelSettings& settings,
       std::copy_n(X + i * kMaxCols, cols, out.F_.data() + static_cast<std::ptrdiff_t>(act[i]) * kMaxCols);
     }
   }
+  if (na == 0 && polish != nullptr && !polishSolution(*polish, tolerance, out)) return;
   // W on the reached rows and the active columns; G = W F + J over the reached rows
   const int r_begin = ro[c_begin];
   const int r_end = ro[c_end];
+  const int reached = r_end - r_begin;
   double* WA = out.WA_.data();
-  for (int r = r_begin; r < r_end; ++r) {
-    const double* wr = W + static_cast<std::ptrdiff_t>(r) * m;
-    double* dst = WA + static_cast<std::ptrdiff_t>(r - r_begin) * NA;
-    for (int p = 0; p < na; ++p) dst[p] = wr[act[p]];
-    out.wa_norm_[static_cast<std::size_t>(r - r_begin)] = std::sqrt(dotGeneric(dst, dst, na));
-    double* g = out.G_.data() + static_cast<std::ptrdiff_t>(r) * kMaxCols;
-    for (int p = 0; p < na; ++p) {
-      const double w = dst[p];
-      const double* xp = X + p * kMaxCols;
-      for (int k = 0; k < cols; ++k) g[k] += w * xp[k];
+  if (out.coupling_ == shared::NsgsCoupling::kSymmetricRowUpdate) {
+    // W = W^T: W(r, act[p]) = W(act[p], r), read from the active rows (contiguous, a quarter of
+    // W on a grasp) rather than gathered from every row; transposed in blocks of reached rows
+    constexpr int kBlock = 64;
+    for (int i0 = 0; i0 < reached; i0 += kBlock) {
+      const int i1 = std::min(i0 + kBlock, reached);
+      for (int p = 0; p < na; ++p) {
+        const double* wr = W + static_cast<std::ptrdiff_t>(act[p]) * m + r_begin;
+        for (int i = i0; i < i1; ++i) WA[static_cast<std::ptrdiff_t>(i) * NA + p] = wr[i];
+      }
     }
+  } else {
+    for (int i = 0; i < reached; ++i) {
+      const double* wr = W + static_cast<std::ptrdiff_t>(r_begin + i) * m;
+      double* dst = WA + static_cast<std::ptrdiff_t>(i) * NA;
+      for (int p = 0; p < na; ++p) dst[p] = wr[act[p]];
+    }
+  }
+  for (int r = r_begin; r < r_end; ++r) {
+    const double* wa = WA + static_cast<std::ptrdiff_t>(r - r_begin) * NA;
+    out.wa_norm_[static_cast<std::size_t>(r - r_begin)] = std::sqrt(dotGeneric(wa, wa, na));
+    double* g = out.G_.data() + static_cast<std::ptrdiff_t>(r) * kMaxCols;
+    for (int k = 0; k < cols; ++k) g[k] += g_kernels.dot(wa, Xt + k * NA, na);
     const int t = out.row_tool_[static_cast<std::size_t>(r)];
     if (t == kNoTool) continue;
     for (int k = 0; k < 6; ++k) g[6 * t + k] += out.J_[static_cast<std::size_t>(6 * r + k)];
   }
   out.linearized_ = finiteAll(out.G_.data(), static_cast<std::size_t>(m) * kMaxCols);
+}
+
+// The Newton step of the preparation (LocalModelSettings::prepare_coarse_factor): the active
+// set's equations (linearize(): delta = 0 on sticking and normal-only rows and sliding contacts'
+// normal rows; f_t + mu f_n delta_t / |delta_t| = 0 on sliding contacts' tangential rows) solved
+// through the inverse of their Jacobian at the coarse solution, f0 -= A^-1 residual, then
+// delta0 = W f0 + q afresh and the natural-map error over the reached contacts. Up to
+// kPolishSteps steps (exact in one for sticking and separated contacts, where the equations are
+// linear; sliding ones converge at the chord's rate); true when the error is within
+// `tolerance`, then f0 and delta0 hold the polished solution.
+bool SnapshotPreparation::polishSolution(const shared::ContactProblemView& problem,
+                                         double tolerance, PreparedSnapshot& out) noexcept {
+  constexpr int kPolishSteps = 3;
+  const int c_begin = out.reach_only_ ? out.reach_begin_ : 0;
+  const int c_end = out.reach_only_ ? out.reach_end_ : out.contacts_;
+  const int* ro = out.row_offset_.data();
+  const int r_begin = ro[c_begin];
+  const int reached = ro[c_end] - r_begin;
+  const int na = out.active_rows_;
+  const auto NA = static_cast<std::ptrdiff_t>(na);
+  const int* act = out.active_row_.data();
+  const int* pos = out.active_pos_.data();
+  const double* Ainv = out.Ainv_.data();
+  double* f0 = out.f0_.data();
+  double* d0 = out.delta0_.data();
+  double* res = polish_res_.data();
+  double* y = polish_y_.data();
+  double* delta = workspace_.delta.data();
+  // (the coarse solution's own error is above the tolerance unless nothing is active: the first
+  // look is at the first step's)
+  for (int step = na > 0 ? 1 : 0; step <= kPolishSteps; ++step) {
+    if (step > 0) {
+      for (int c = c_begin; c < c_end; ++c) {
+        const ContactState st = out.state_[static_cast<std::size_t>(c)];
+        const int r = ro[c];
+        switch (st) {
+          case ContactState::kSeparated:
+            break;
+          case ContactState::kNormalOnly:
+            res[pos[r]] = d0[r];
+            break;
+          case ContactState::kSticking:
+            for (int a = 0; a < 3; ++a) res[pos[r + a]] = d0[r + a];
+            break;
+          case ContactState::kSliding: {
+            const double slip = norm2(d0[r + 1], d0[r + 2]);
+            if (!(slip > 0.0)) return false;
+            const double mu = out.mu_[static_cast<std::size_t>(c)];
+            res[pos[r]] = d0[r];
+            for (int t = 1; t < 3; ++t) res[pos[r + t]] = f0[r + t] + mu * f0[r] * d0[r + t] / slip;
+            break;
+          }
+        }
+      }
+      std::fill_n(y, na, 0.0);
+      for (int p = 0; p < na; ++p) g_kernels.axpy(res[p], Ainv + p * NA, y, na);
+      for (int i = 0; i < na; ++i) f0[act[i]] -= y[i];
+    }
+    const double err = shared::naturalMapError(problem, f0 + r_begin, delta);
+    if (!std::isfinite(err)) return false;
+    std::copy_n(delta, reached, d0 + r_begin);
+    if (err <= tolerance) {
+      out.prepared_polished_ = true;
+      return true;
+    }
+  }
+  return false;
 }
 
 // The reduced fallback's order (local_model.h): the reached contacts by the device displacement
@@ -828,11 +980,22 @@ void SnapshotPreparation::orderForReducedFallback(const LocalModelSettings& sett
     for (int r = ro[c]; r < ro[c + 1]; ++r) out.ordered_row_[static_cast<std::size_t>(rows++)] = r;
   }
   out.ordered_row_offset_[static_cast<std::size_t>(n)] = rows;
+  // W in that order, contact by contact within a row (a contact's rows are contiguous in both)
   const double* W = out.W_.data();
+  const int* orow = out.ordered_row_.data();
+  const int* oro = out.ordered_row_offset_.data();
   for (int i = 0; i < rows; ++i) {
-    const double* src = W + static_cast<std::ptrdiff_t>(out.ordered_row_[static_cast<std::size_t>(i)]) * m;
+    const double* src = W + static_cast<std::ptrdiff_t>(orow[i]) * m;
     double* dst = out.Wo_.data() + static_cast<std::ptrdiff_t>(i) * rows;
-    for (int j = 0; j < rows; ++j) dst[j] = src[out.ordered_row_[static_cast<std::size_t>(j)]];
+    for (int j = 0; j < n; ++j) {
+      const double* sj = src + orow[oro[j]];
+      double* dj = dst + oro[j];
+      dj[0] = sj[0];
+      if (oro[j + 1] - oro[j] == 3) {
+        dj[1] = sj[1];
+        dj[2] = sj[2];
+      }
+    }
   }
   out.ordered_rows_ = rows;
   out.ordered_count_ = n;

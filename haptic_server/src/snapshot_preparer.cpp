@@ -39,7 +39,7 @@ void SnapshotPreparer::start(const LocalModelSettings& settings, int fifo_priori
     if (fifo_priority > 0) (void)shared::setFifoPriority(fifo_priority);   // best effort
     // relaxed: the stop request only needs to be seen eventually
     while (!stop_.load(std::memory_order_relaxed)) {
-      if (!prepareNewest(settings_, true)) {
+      if (!prepareNewest(settings_, true, true)) {
         shared::sleepUntilNs(shared::monotonicNs() + kPollNs);
       }
     }
@@ -51,13 +51,24 @@ void SnapshotPreparer::stop() noexcept {
   if (thread_.joinable()) thread_.join();
 }
 
-bool SnapshotPreparer::prepareNewest(const LocalModelSettings& settings, bool repeat) noexcept {
+bool SnapshotPreparer::prepareNewest(const LocalModelSettings& settings, bool repeat,
+                                     bool fresh_poses) noexcept {
   if (!snapshots_.attached()) return false;
   shared::SnapshotView snap;
   if (snapshots_.hasNew()) {
     bool fresh = false;
     snap = snapshots_.latest(&fresh);
     if (!fresh || snap.header().seq == 0 || snap.header().seq == last_seq_) return false;
+    if (fresh_poses) {
+      // the poses of a tick that read its devices after the snapshot arrived: the ticks that
+      // will use this preparation start from there, not from where the hand was a tick ago
+      const std::int64_t seen = shared::monotonicNs();
+      for (;;) {
+        const std::int64_t now = shared::monotonicNs();
+        if (hint_reader_.latest().read_ns >= seen || now - seen >= kFreshPoseWaitNs) break;
+        shared::sleepUntilNs(now + kFreshPosePollNs);
+      }
+    }
   } else if (repeat && relinearize_.load(std::memory_order_relaxed) && last_seq_ != 0 &&
              shared::monotonicNs() - last_end_ns_ >=
                  kRepeatIdleFactor * last_prepare_ns_.load(std::memory_order_relaxed)) {
@@ -102,8 +113,9 @@ const PreparedSnapshot* SnapshotPreparer::latest(bool* fresh) noexcept {
   return &slots_[static_cast<std::size_t>(index)];
 }
 
-void SnapshotPreparer::publishPoses(DevicePoses poses) noexcept {
+void SnapshotPreparer::publishPoses(DevicePoses poses, std::int64_t read_ns) noexcept {
   PoseHint& h = hint_writer_.buffer();
+  h.read_ns = read_ns > 0 ? read_ns : shared::monotonicNs();
   h.count = static_cast<std::int32_t>(std::min<std::size_t>(poses.size(), shared::kMaxInstruments));
   for (int i = 0; i < h.count; ++i) {
     const auto k = static_cast<std::size_t>(i);

@@ -171,6 +171,68 @@ TEST(LocalModelTest, WithSlidingContactsTheLinearisationIsFirstOrderAccurate) {
   EXPECT_LT(worst, 1e-3);
 }
 
+// The preparation's Newton step (LocalModelSettings::prepare_coarse_factor): NSGS stops at the
+// coarse tolerance and one or more steps on the solution's active set take it to the tight one.
+// With sliding, sticking and separated contacts, whatever the coarse factor (0: NSGS alone;
+// 1000: an active set the step may not confirm, where NSGS solves on), the prepared solution is
+// at least as close to the problem's solution (NSGS to 1e-11) as NSGS's own at the tight
+// tolerance, and the ticks render the full problem's force as the linearisation does.
+TEST(LocalModelTest, ThePreparationsNewtonStepIsAtLeastAsAccurateAsNsgsAlone) {
+  Slot slot(90, 30);
+  fillProblem(slot, 30, 0.3, [](int c) { return c < 24 ? 1.5e-4 + 2e-6 * c : -5e-5; },
+              [](int c) { return 2e-5 * ((c % 5) - 2) + 1e-6; });
+  const shared::Pose origin = at(0, 0, 0);
+  const shared::Pose* start[] = {&origin};
+  LocalModelSettings exact = settingsFor(LocalModelKind::kFull);
+  exact.tolerance = 1e-10;
+  exact.prepare_max_sweeps = 100'000;
+  OfflineLocalModel solution(90, 30, exact);
+  ASSERT_EQ(solution.adopt(slot.view(), start), PrepareStatus::kReady);
+  ASSERT_TRUE(solution.prepared().preparedConverged());
+  const double* f_exact = solution.prepared().preparedForces();
+  auto distance = [&](const OfflineLocalModel& m) {
+    double d2 = 0.0;
+    for (int r = 0; r < 90; ++r) d2 += std::pow(m.prepared().preparedForces()[r] - f_exact[r], 2);
+    return std::sqrt(d2);
+  };
+  LocalModelSettings alone = settingsFor(LocalModelKind::kLinearized);
+  alone.tolerance = 1e-6;
+  alone.max_sweeps = 2000;
+  alone.prepare_coarse_factor = 0.0;
+  OfflineLocalModel nsgs(90, 30, alone);
+  ASSERT_EQ(nsgs.adopt(slot.view(), start), PrepareStatus::kReady);
+  ASSERT_TRUE(nsgs.prepared().linearized());
+  EXPECT_FALSE(nsgs.prepared().preparedPolished());
+  EXPECT_GT(nsgs.prepared().slidingContacts(), 0);
+  const double nsgs_distance = distance(nsgs);
+  for (const double factor : {1.0, 10.0, 1000.0}) {
+    LocalModelSettings s = alone;
+    s.prepare_coarse_factor = factor;
+    OfflineLocalModel model(90, 30, s);
+    ASSERT_EQ(model.adopt(slot.view(), start), PrepareStatus::kReady);
+    ASSERT_TRUE(model.prepared().preparedConverged()) << factor;
+    ASSERT_TRUE(model.prepared().linearized()) << factor;
+    if (factor == 1.0) {
+      EXPECT_TRUE(model.prepared().preparedPolished());
+    }
+    EXPECT_LE(distance(model), 1.5 * nsgs_distance + 1e-12) << "factor " << factor;
+    for (int i = 0; i < 10; ++i) {
+      const double a = 0.628 * i;
+      const shared::Pose p = at(1e-6 * std::cos(a), 1e-6 * std::sin(a), -5e-7 * std::sin(2 * a));
+      const shared::Pose* poses[] = {&p};
+      const LocalModelResult r = model.solve(poses);
+      ASSERT_TRUE(r.converged());
+      const LocalModelResult ref = reference(slot, p);
+      for (int k = 0; k < 3; ++k) {
+        EXPECT_NEAR(r.force_n[0][k], ref.force_n[0][k], 1e-3 * norm3(ref.force_n[0]))
+            << "factor " << factor << " pose " << i;
+      }
+    }
+  }
+  std::printf("distance to the solution: NSGS alone %.3g, with the Newton step as above\n",
+              nsgs_distance);
+}
+
 // A contact that separates (or closes) changes the active set: the tick falls back to the full
 // re-solve, whose force is the full problem's.
 TEST(LocalModelTest, ItFallsBackToTheReSolveWhenTheActiveSetChanges) {
@@ -498,6 +560,9 @@ TEST(LocalModelTest, SettingsAreValidated) {
   s = {};
   s.tolerance = std::nan("");
   EXPECT_THROW(s.validate(), Error);
+  s = {};
+  s.prepare_coarse_factor = -1.0;
+  EXPECT_THROW(s.validate(), Error);
   EXPECT_EQ(parseLocalModelKind("linearized"), LocalModelKind::kLinearized);
   EXPECT_FALSE(parseLocalModelKind("reduced").has_value());
 }
@@ -525,8 +590,12 @@ TEST(LocalModelTest, OnRecordedGraspProblemsTheRenderedForceIsTheFullProblemsWit
   fast.max_sweeps = 500;
   OfflineLocalModel model(max_rows, max_contacts, fast);
   OfflineLocalModel full(max_rows, max_contacts, settingsFor(LocalModelKind::kFull));
-  int linearized = 0, corrected = 0, ticks = 0;
-  double worst = 0.0, worst_corrected = 0.0;
+  // the same preparation without its Newton step (NSGS to the tight tolerance)
+  LocalModelSettings alone = fast;
+  alone.prepare_coarse_factor = 0.0;
+  OfflineLocalModel nsgs(max_rows, max_contacts, alone);
+  int linearized = 0, corrected = 0, ticks = 0, polished = 0, sweeps = 0, sweeps_alone = 0;
+  double worst = 0.0, worst_corrected = 0.0, worst_alone = 0.0;
   for (std::size_t i = 0; i < snaps.size(); ++i) {
     shared::SnapshotWriter slot(base, layout);
     ASSERT_TRUE(snaps[i].writeTo(slot, i + 1, 1));
@@ -539,6 +608,11 @@ TEST(LocalModelTest, OnRecordedGraspProblemsTheRenderedForceIsTheFullProblemsWit
     const shared::Pose* hint[] = {&centre};
     ASSERT_EQ(model.adopt(view, hint), PrepareStatus::kReady);
     ASSERT_EQ(full.adopt(view, hint), PrepareStatus::kReady);
+    ASSERT_EQ(nsgs.adopt(view, hint), PrepareStatus::kReady);
+    ASSERT_TRUE(model.prepared().preparedConverged());
+    polished += model.prepared().preparedPolished() ? 1 : 0;
+    sweeps += model.prepared().preparedSweeps();
+    sweeps_alone += nsgs.prepared().preparedSweeps();
     for (int k = 0; k < 20; ++k) {
       const double a = 0.6 * k;
       const double radius = k < 10 ? 2e-4 : 5e-4;
@@ -548,8 +622,13 @@ TEST(LocalModelTest, OnRecordedGraspProblemsTheRenderedForceIsTheFullProblemsWit
       const shared::Pose* poses[] = {&p};
       const LocalModelResult r = model.solve(poses);
       const LocalModelResult ref = full.solve(poses);
+      const LocalModelResult ra = nsgs.solve(poses);
       ASSERT_TRUE(ref.converged());
       ASSERT_TRUE(r.converged());
+      ASSERT_TRUE(ra.converged());
+      double a2 = 0.0;
+      for (int j = 0; j < 3; ++j) a2 += std::pow(ra.force_n[0][j] - ref.force_n[0][j], 2);
+      worst_alone = std::max(worst_alone, std::sqrt(a2) / std::max(norm3(ref.force_n[0]), 1e-3));
       ++ticks;
       if (r.used == LocalModelUsed::kLinearized) ++linearized;
       double d2 = 0.0;
@@ -563,11 +642,16 @@ TEST(LocalModelTest, OnRecordedGraspProblemsTheRenderedForceIsTheFullProblemsWit
     }
   }
   EXPECT_LT(worst, 0.02);
+  EXPECT_LT(worst_alone, 0.02);
+  EXPECT_GT(polished, 0);   // the Newton step is exercised on real problems
+  EXPECT_LT(sweeps, sweeps_alone);
   EXPECT_GT(linearized, 0);
   EXPECT_GT(corrected, 0);   // the active-set correction is exercised on real problems
   std::printf("recorded grasp: %d of %d evaluations linearised, %d corrected; worst force error "
-              "%.3g %% (corrected %.3g %%)\n",
-              linearized, ticks, corrected, 100.0 * worst, 100.0 * worst_corrected);
+              "%.3g %% (corrected %.3g %%; without the preparation's Newton step %.3g %%); %d of "
+              "%zu preparations polished, %d sweeps (%d without the step)\n",
+              linearized, ticks, corrected, 100.0 * worst, 100.0 * worst_corrected,
+              100.0 * worst_alone, polished, snaps.size(), sweeps, sweeps_alone);
 }
 
 }  // namespace

@@ -12,8 +12,10 @@
 //    (counts within the capacity, row offsets stepping by 1 or 3 up to the rows, instruments,
 //    finiteness of every number, mu >= 0), chooses W's storage (dense or blocks), finds the
 //    contacts a device can reach, solves the problem to a tight tolerance at the devices'
-//    latest poses (warm-started from the previous snapshot's solution carried by contact id),
-//    and linearises that solution in the device displacement (below).
+//    latest poses (warm-started from the previous snapshot's solution carried by contact id;
+//    NSGS to the tick's tolerance, then Newton steps on the solution's active set through the
+//    linearisation's inverse, LocalModelSettings::prepare_coarse_factor), and linearises that
+//    solution in the device displacement (below).
 //  - LocalModel::adopt (real-time, O(rows)) takes a PreparedSnapshot; LocalModel::solve
 //    (real-time, allocation-free) evaluates the model for the devices' poses under an absolute
 //    deadline.
@@ -120,6 +122,7 @@ struct LocalModelLimits {
   static constexpr int kMaxAutomaticMinRows = 1'000'000;
   static constexpr double kMaxTranslationM = 0.1;
   static constexpr double kMaxRotationRad = 1.0;
+  static constexpr double kMaxPrepareCoarseFactor = 1000.0;
 };
 
 struct LocalModelSettings {
@@ -137,6 +140,13 @@ struct LocalModelSettings {
   /// The preparation's solve: tolerance x this factor, at most prepare_max_sweeps sweeps.
   double prepare_tolerance_factor = 0.1;
   int prepare_max_sweeps = 3000;
+  /// Where a linearisation is wanted, the preparation's NSGS stops at tolerance x this factor
+  /// and a Newton step on the solution's active set, through the linear system's inverse the
+  /// linearisation computes anyway, takes it to tolerance x prepare_tolerance_factor (checked
+  /// by the natural-map error; where it does not get there, NSGS goes on to that tolerance and
+  /// its solution is linearised). 0, or at most prepare_tolerance_factor: NSGS to the tight
+  /// tolerance (docs/design.md, "The preparation's Newton step").
+  double prepare_coarse_factor = 1.0;
   /// The linearisation's fallback re-solves only the contacts that can carry force (above);
   /// false: all the reached contacts.
   bool reduced_fallback = true;
@@ -197,6 +207,9 @@ class PreparedSnapshot {
   /// The preparation's solve at its poses converged (to tolerance x prepare_tolerance_factor).
   bool preparedConverged() const noexcept { return prepared_converged_; }
   int preparedSweeps() const noexcept { return prepared_sweeps_; }
+  /// The solution is the Newton step's from the coarse solve (LocalModelSettings::
+  /// prepare_coarse_factor), not NSGS's at the tight tolerance.
+  bool preparedPolished() const noexcept { return prepared_polished_; }
   /// A linearisation is available (kind is not kFull, the solve converged, the system solved).
   bool linearized() const noexcept { return linearized_; }
   /// Contacts sliding in the linearisation, and the active rows of its system.
@@ -264,6 +277,7 @@ class PreparedSnapshot {
   std::vector<double> delta0_;    ///< W f0 + delta_free + J dx0
   bool prepared_converged_ = false;
   int prepared_sweeps_ = 0;
+  bool prepared_polished_ = false;
   // the linearisation
   bool linearized_ = false;
   std::vector<ContactState> state_;
@@ -311,7 +325,12 @@ class SnapshotPreparation {
 
  private:
   bool copyAndCheck(const shared::SnapshotView& snap, PreparedSnapshot& out) noexcept;
-  void linearize(const LocalModelSettings& settings, PreparedSnapshot& out) noexcept;
+  /// With `polish`, first the Newton step from the coarse solution to `tolerance`
+  /// (polishSolution); when it does not get there, nothing is linearised.
+  void linearize(const LocalModelSettings& settings, PreparedSnapshot& out,
+                 const shared::ContactProblemView* polish, double tolerance) noexcept;
+  bool polishSolution(const shared::ContactProblemView& problem, double tolerance,
+                      PreparedSnapshot& out) noexcept;
   void orderForReducedFallback(const LocalModelSettings& settings, PreparedSnapshot& out) noexcept;
 
   int max_rows_ = 0;
@@ -326,6 +345,9 @@ class SnapshotPreparation {
   std::vector<double> dq_;       ///< moved delta_free
   std::vector<double> A_, B_;    ///< the linear system A df = B dx (row-major, active rows)
   std::vector<double> X_;        ///< its solution df/dx (active rows x 6 instruments)
+  std::vector<double> Xt_;       ///< the same transposed (6 instruments x active rows)
+  std::vector<double> f_coarse_;   ///< the coarse solve's solution (reached rows)
+  std::vector<double> polish_res_, polish_y_;   ///< the Newton step's residual and A^-1 r
   std::vector<int> swap_;        ///< the inversion's row swaps
   std::vector<std::pair<double, int>> sort_;   ///< (reach, contact) while ordering
 };

@@ -13,7 +13,9 @@
 //
 // The tick publishes its devices' latest poses (publishPoses, wait-free); the preparation solves
 // and linearises each snapshot at them, so the tick evaluates the model close to where it was
-// prepared.
+// prepared. The thread waits (at most kFreshPoseWaitNs) for poses a tick read after a new
+// snapshot arrived, not the ones read a tick before it (docs/design.md, "The preparation's
+// poses").
 
 #include <array>
 #include <atomic>
@@ -33,6 +35,11 @@ class SnapshotPreparer {
   /// A snapshot is prepared again (requestRelinearization) only after the thread was idle this
   /// many times the last preparation's duration: at most a third of a core.
   static constexpr std::int64_t kRepeatIdleFactor = 2;
+  /// The thread prepares a new snapshot at poses the tick read after the snapshot arrived: it
+  /// waits for them (polling every kFreshPosePollNs) at most this long [ns], a tick period at
+  /// rates from 500 Hz (docs/design.md, "The preparation's poses").
+  static constexpr std::int64_t kFreshPoseWaitNs = 2'000'000;
+  static constexpr std::int64_t kFreshPosePollNs = 50'000;
 
   /// `snapshots` must outlive the preparer. Sizes everything for the capacity (allocates).
   SnapshotPreparer(shared::SnapshotSubscriber& snapshots, int max_rows, int max_contacts);
@@ -59,14 +66,18 @@ class SnapshotPreparer {
   /// one thread only (the preparer thread when started, else the tick).
   /// `repeat`: also honour requestRelinearization() (the thread does; the tick preparing inline
   /// does not, so a test's tick prepares only new snapshots).
-  bool prepareNewest(const LocalModelSettings& settings, bool repeat = false) noexcept;
+  /// `fresh_poses`: before preparing a new snapshot, wait (at most kFreshPoseWaitNs) for poses
+  /// the tick read after it arrived (the thread does; a tick preparing inline cannot).
+  bool prepareNewest(const LocalModelSettings& settings, bool repeat = false,
+                     bool fresh_poses = false) noexcept;
 
   /// The tick: the newest prepared snapshot (seq() 0 before the first); `fresh` tells whether
   /// it is new since the last call. Unchanged until the next call. Wait-free.
   const PreparedSnapshot* latest(bool* fresh) noexcept;
 
-  /// The tick: its devices' poses (nullptr: none), for the next preparation. Wait-free.
-  void publishPoses(DevicePoses poses) noexcept;
+  /// The tick: its devices' poses (nullptr: none), for the next preparation, and when they were
+  /// read (CLOCK_MONOTONIC, shared::monotonicNs(); 0: now). Wait-free.
+  void publishPoses(DevicePoses poses, std::int64_t read_ns = 0) noexcept;
   /// The tick: the linearisation did not hold; prepare the current snapshot again at the
   /// newest poses when no new snapshot is waiting (wait-free: one relaxed store).
   void requestRelinearization() noexcept {
@@ -82,6 +93,7 @@ class SnapshotPreparer {
  private:
   struct PoseHint {
     std::int32_t count = 0;
+    std::int64_t read_ns = 0;   ///< when the tick read them (0: never published)
     std::array<std::int32_t, shared::kMaxInstruments> have{};
     std::array<shared::PoseSample, shared::kMaxInstruments> pose{};
   };
