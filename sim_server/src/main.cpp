@@ -68,6 +68,10 @@ int main(int argc, char** argv) {
                  "Stop recording snapshots (the run goes on) before the file passes this size "
                  "[MiB]; 2048 is what tactus-jitter --replay reads")
       ->check(CLI::Range(1, tactus::sim::kMaxRecordingMiB))->capture_default_str();
+  app.add_option("--record-snapshots-from-step", opt.record_snapshots_from_step,
+                 "Record the snapshots from this step on (1: every step), e.g. a long run's "
+                 "hold without the approach before it")
+      ->check(CLI::Range(1L, 1L << 40))->capture_default_str();
   app.add_flag("--overwrite", opt.overwrite,
                "Replace existing --stats-json / --export-trajectory / --record-snapshots files "
                "and an earlier "

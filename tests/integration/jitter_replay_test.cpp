@@ -452,6 +452,26 @@ TEST(JitterReplay, SimServerRecordsEveryStepAndKeepsAnExistingFile) {
   EXPECT_EQ(runBounded(base + " --overwrite > '" + log.string() + "' 2>&1", 120), 0)
       << readAll(log);
   EXPECT_EQ(shared::readSnapshotFile(snap).size(), 60u);
+  // a part of the run: steps 41-60, on the same timeline as the whole recording
+  const fs::path part = dir.path() / "part.snap";
+  const std::string part_cmd =
+      std::string(TACTUS_BINARY_DIR) + "/sim_server/sim_server --steps 60 --record-snapshots '" +
+      part.string() + "' --record-snapshots-from-step 41 '" + scene.string() + "'";
+  ASSERT_EQ(runBounded(part_cmd + " > '" + log.string() + "' 2>&1", 120), 0) << readAll(log);
+  const auto part_snaps = shared::readSnapshotFile(part);
+  ASSERT_EQ(part_snaps.size(), 20u);
+  EXPECT_EQ(part_snaps.front().t_ns, 410'000'000);
+  EXPECT_EQ(part_snaps.back().t_ns, snaps.back().t_ns);
+  EXPECT_EQ(part_snaps.back().contacts(), snaps.back().contacts());
+  // a first step below 1 is refused before anything runs
+  const fs::path none = dir.path() / "none.snap";
+  EXPECT_NE(runBounded(std::string(TACTUS_BINARY_DIR) + "/sim_server/sim_server --steps 5 "
+                       "--record-snapshots '" + none.string() +
+                       "' --record-snapshots-from-step 0 '" + scene.string() + "' > '" +
+                       log.string() + "' 2>&1", 120),
+            0);
+  EXPECT_NE(readAll(log).find("--record-snapshots-from-step"), std::string::npos) << readAll(log);
+  EXPECT_FALSE(fs::exists(none));
 }
 
 TEST(JitterReplay, RecordedPressReplaysThroughTheHapticLoop) {

@@ -191,6 +191,11 @@ SnapshotRecorder::SnapshotRecorder(const SceneSpec& spec, const SnapshotRecordin
                             "--replay reads)",
                             options.max_mb, kMaxRecordingMiB));
   }
+  if (options.first_step < 1) {
+    throw Error(fmt::format("--record-snapshots-from-step {}: must be 1 or more (the first step "
+                            "is 1)",
+                            options.first_step));
+  }
   writer_ = std::make_unique<shared::SnapshotFileWriter>(
       options.path,
       shared::OutputOptions{.overwrite = options.overwrite,
@@ -208,6 +213,7 @@ std::uint64_t SnapshotRecorder::count() const { return writer_->count(); }
 
 void SnapshotRecorder::record(const Simulation& sim, std::uint64_t seq) {
   if (full_ || !sim.hasInstrument()) return;
+  if (seq < static_cast<std::uint64_t>(options_.first_step)) return;
   const std::int64_t t_ns = std::llround(sim.time() * 1e9);
   shared::SnapshotWriter slot(slot_.data(), layout_);
   writeSnapshot(sim, max_opening_rad_, seq, t_ns, 0, slot);
@@ -361,7 +367,8 @@ int runSimulation(const RunOptions& options, const std::atomic<bool>& stop) {
     recorder = std::make_unique<SnapshotRecorder>(
         spec, SnapshotRecordingOptions{.path = options.record_snapshots,
                                        .max_mb = options.record_snapshots_max_mb,
-                                       .overwrite = options.overwrite});
+                                       .overwrite = options.overwrite,
+                                       .first_step = options.record_snapshots_from_step});
   }
 
   Simulation sim(spec);

@@ -27,11 +27,14 @@ namespace tactus::sim {
 /// (shared::kMaxSnapshotFileBytes).
 inline constexpr int kMaxRecordingMiB = 2048;
 
-/// sim_server's --record-snapshots and --record-snapshots-max-mb.
+/// sim_server's --record-snapshots, --record-snapshots-max-mb and --record-snapshots-from-step.
 struct SnapshotRecordingOptions {
   std::filesystem::path path;        ///< empty: nothing recorded
   int max_mb = kMaxRecordingMiB;     ///< 1..kMaxRecordingMiB
   bool overwrite = false;            ///< replace an existing file
+  /// The first step recorded (1: every step): a part of a long run (the hold of a 23k grasp,
+  /// whose whole run passes the file cap) without the steps before it.
+  long first_step = 1;
 };
 
 struct RunOptions {
@@ -54,6 +57,8 @@ struct RunOptions {
   /// The recording stops (with a warning; the run goes on) before the file passes this size
   /// [MiB]; at most kMaxRecordingMiB.
   int record_snapshots_max_mb = kMaxRecordingMiB;
+  /// The first step recorded (1-based; SnapshotRecordingOptions::first_step).
+  long record_snapshots_from_step = 1;
 };
 
 /// Writes the scene's instrument trajectory in the replay device's CSV format
