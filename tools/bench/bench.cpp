@@ -154,7 +154,8 @@ int run(const BenchOptions& o) {
   std::vector<Series> stages = {{"free_motion", {}},       {"detect_collisions", {}},
                                 {"update_compliance", {}}, {"build_w", {}},
                                 {"solve_contacts", {}},    {"constrained_motion", {}},
-                                {"publish", {}},           {"total", {}}};
+                                {"publish", {}},           {"total", {}},
+                                {"step_cpu", {}}};
   std::vector<Series> busy = stages;   // the steps with at least o.min_contacts contacts
   std::vector<double> busy_contacts;
   std::vector<double> contacts, rows, sim_sweeps, tick_us, tick_cpu_us, tick_sweeps_v, tick_err, passes,
@@ -175,7 +176,11 @@ int run(const BenchOptions& o) {
   }
   const std::int64_t t0 = shared::monotonicNs();
   // each step of the headless runner: publish, the figures, the haptic tick on the snapshot
-  const auto afterStep = [&](long k, const sim::StepReport& r) {
+  // step_cpu: the CPU time of this thread from the end of one afterStep to the start of the
+  // next (the step alone: steadier than the wall times on a shared machine)
+  std::int64_t cpu_mark = threadCpuNs();
+  double step_cpu_s = 0.0;
+  const auto afterStepInner = [&](long k, const sim::StepReport& r) {
     const std::int64_t tp = shared::monotonicNs();
     publishProblem(sim, pub, static_cast<std::uint64_t>(k + 1), spec.instrument.max_opening_rad);
     seg.beat(shared::Side::kSim);
@@ -190,6 +195,7 @@ int run(const BenchOptions& o) {
     stages[5].v.push_back(r.times.constrained_motion_s);
     stages[6].v.push_back(publish_s);
     stages[7].v.push_back(r.times.total_s + publish_s);
+    stages[8].v.push_back(step_cpu_s);
     if (o.min_contacts > 0 && r.contacts >= o.min_contacts) {
       for (std::size_t i = 0; i < stages.size(); ++i) busy[i].v.push_back(stages[i].v.back());
       busy_contacts.push_back(r.contacts);
@@ -254,6 +260,11 @@ int run(const BenchOptions& o) {
                    1e-3 * static_cast<double>(res.elapsed_ns), res.sweeps, r.contact_groups,
                    1e3 * r.times.solve_contacts_s);
     }
+  };
+  const auto afterStep = [&](long k, const sim::StepReport& r) {
+    step_cpu_s = 1e-9 * static_cast<double>(threadCpuNs() - cpu_mark);
+    afterStepInner(k, r);
+    cpu_mark = threadCpuNs();
   };
   const sim::HeadlessResult run =
       sim::runHeadless(sim, {.steps = steps, .after_step = afterStep});

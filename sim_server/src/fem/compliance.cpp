@@ -158,8 +158,9 @@ public:
            sizeof(double) * diag_.size() +
            sizeof(Eigen::Matrix3d) * rot_.size() +
            sizeof(double) *
-               static_cast<std::size_t>(cuu_.size() + g_.size() + gt_.size() +
-                                        wd_.size() + r_.size());
+               static_cast<std::size_t>(cuu_.size() + prev_cuu_.size() +
+                                        g_.size() + gt_.size() + wd_.size() +
+                                        r_.size());
   }
 
   ComplianceBuildInfo buildInfo() const override { return info_; }
@@ -368,8 +369,9 @@ private:
   // factorisation (exact).
   void gatherCuu(int u) {
     const int du = 3 * u;
-    cuu_.resize(du, du);
     if (active_ == ComplianceKind::kExact) {
+      forgetPreviousCuu();
+      cuu_.resize(du, du);
       const int n = body_->nodeCount();
       e_.setZero(3 * n, du);
       for (int a = 0; a < u; ++a)
@@ -380,13 +382,44 @@ private:
         cuu_.middleRows<3>(3 * b) = x_.middleRows<3>(3 * touched_[b]);
       return;
     }
+    // C0's blocks of the nodes the previous call touched too come from that call's C_UU (kept
+    // in prev_cuu_: small, in cache), the others from C0 itself (a 3x3 block is three cache
+    // lines in three columns of a matrix of gigabytes): the touched nodes change little from
+    // one contact pass or step to the next. The same values either way.
+    // (swapped before any resize: the previous values are read below)
+    std::swap(cuu_, prev_cuu_);
+    cuu_.resize(du, du);
+    prev_index_.resize(static_cast<std::size_t>(u));
+    for (int a = 0; a < u; ++a)
+      prev_index_[a] = prev_local_.empty() ? -1 : prev_local_[touched_[a]];
     for (int b = 0; b < u; ++b) {
       const int sb = blk_.local[touched_[b]];
+      const int pb = prev_index_[b];
       for (int a = 0; a < u; ++a) {
-        const int sa = blk_.local[touched_[a]];
-        cuu_.block<3, 3>(3 * a, 3 * b) = blk_.block(sa, sb);
+        const int pa = prev_index_[a];
+        if (pa >= 0 && pb >= 0)
+          cuu_.block<3, 3>(3 * a, 3 * b) =
+              prev_cuu_.block<3, 3>(3 * pa, 3 * pb);
+        else
+          cuu_.block<3, 3>(3 * a, 3 * b) =
+              blk_.block(blk_.local[touched_[a]], sb);
       }
     }
+    // this call's nodes for the next one
+    if (prev_local_.empty())
+      prev_local_.assign(static_cast<std::size_t>(body_->nodeCount()), -1);
+    for (int node : prev_touched_)
+      prev_local_[node] = -1;
+    prev_touched_ = touched_;
+    for (int a = 0; a < u; ++a)
+      prev_local_[touched_[a]] = a;
+  }
+
+  // The exact model's C_UU is not C0's: the next gather starts afresh.
+  void forgetPreviousCuu() {
+    for (int node : prev_touched_)
+      prev_local_[node] = -1;
+    prev_touched_.clear();
   }
 
   // Model, state and scratch (docs/design.md, "Model, state, scratch"):
@@ -407,6 +440,10 @@ private:
   std::vector<int> touched_;
   std::vector<RowTerms> terms_;
   Eigen::MatrixXd cuu_, g_, gt_, wd_, e_, x_;
+  // the previous gather of C0's blocks (gatherCuu): its C_UU, its nodes and their index in it
+  // (node -> index, -1 otherwise; empty before the first gather), and the current nodes' index
+  Eigen::MatrixXd prev_cuu_;
+  std::vector<int> prev_touched_, prev_local_, prev_index_;
   Eigen::VectorXd r_;
 };
 

@@ -259,6 +259,27 @@ TEST_F(LiverCompliance, WarpedBeatsRestUnderLargeRotation) {
   EXPECT_GT(e_rest, 0.3);  // rotation by 75 degrees: the rest model is badly wrong
 }
 
+// W from C0's blocks is the same, bit for bit, whether the nodes the rows touch were gathered
+// by an earlier call (addW keeps the last C_UU) or not: calls whose row sets overlap, grow,
+// shrink and change order give a fresh model's W.
+TEST_F(LiverCompliance, WarpedWDoesNotDependOnTheCallsBefore) {
+  auto body = deformedBody();
+  auto kept = makeCompliance(ComplianceKind::kWarped, *body, quietOptions(h_));
+  kept->update(*body);
+  const auto a = randomRows(*body, 30, 11);
+  auto b = randomRows(*body, 20, 12);
+  b.insert(b.end(), a.begin(), a.begin() + 45);          // half of a's contacts, after new ones
+  const std::vector<TissueRow> c(a.begin() + 30, a.end()); // a subset of a
+  const std::array<const std::vector<TissueRow>*, 5> calls = {&a, &b, &c, &a, &b};
+  for (const std::vector<TissueRow>* rows : calls) {
+    auto fresh = makeCompliance(ComplianceKind::kWarped, *body, quietOptions(h_));
+    fresh->update(*body);
+    const Eigen::MatrixXd w_fresh = buildW(*fresh, *rows);
+    EXPECT_GT(w_fresh.norm(), 0.0);
+    EXPECT_EQ(buildW(*kept, *rows), w_fresh);
+  }
+}
+
 TEST_F(LiverCompliance, CorrectionIsConsistentWithW) {
   auto body = deformedBody();
   const auto rows = randomRows(*body, 30, 3);
