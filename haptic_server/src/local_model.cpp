@@ -631,7 +631,6 @@ PrepareStatus SnapshotPreparation::prepare(const shared::SnapshotView& snap,
   };
   shared::NsgsResult res = solve();
   int sweeps = res.sweeps;
-  out.prepared_polished_ = false;
   auto failed = [&](const shared::NsgsResult& r) {
     if (r.status != shared::NsgsStatus::kIllPosed && r.status != shared::NsgsStatus::kEmpty &&
         r.status != shared::NsgsStatus::kNonFinite) {

@@ -39,7 +39,7 @@ void SnapshotPreparer::start(const LocalModelSettings& settings, int fifo_priori
     if (fifo_priority > 0) (void)shared::setFifoPriority(fifo_priority);   // best effort
     // relaxed: the stop request only needs to be seen eventually
     while (!stop_.load(std::memory_order_relaxed)) {
-      if (!prepareNewest(settings_, true, true)) {
+      if (!prepareNewest(settings_, true)) {
         shared::sleepUntilNs(shared::monotonicNs() + kPollNs);
       }
     }
@@ -51,15 +51,15 @@ void SnapshotPreparer::stop() noexcept {
   if (thread_.joinable()) thread_.join();
 }
 
-bool SnapshotPreparer::prepareNewest(const LocalModelSettings& settings, bool repeat,
-                                     bool fresh_poses) noexcept {
+bool SnapshotPreparer::prepareNewest(const LocalModelSettings& settings,
+                                     bool from_thread) noexcept {
   if (!snapshots_.attached()) return false;
   shared::SnapshotView snap;
   if (snapshots_.hasNew()) {
     bool fresh = false;
     snap = snapshots_.latest(&fresh);
     if (!fresh || snap.header().seq == 0 || snap.header().seq == last_seq_) return false;
-    if (fresh_poses) {
+    if (from_thread) {
       // the poses of a tick that read its devices after the snapshot arrived: the ticks that
       // will use this preparation start from there, not from where the hand was a tick ago
       const std::int64_t seen = shared::monotonicNs();
@@ -69,7 +69,7 @@ bool SnapshotPreparer::prepareNewest(const LocalModelSettings& settings, bool re
         shared::sleepUntilNs(now + kFreshPosePollNs);
       }
     }
-  } else if (repeat && relinearize_.load(std::memory_order_relaxed) && last_seq_ != 0 &&
+  } else if (from_thread && relinearize_.load(std::memory_order_relaxed) && last_seq_ != 0 &&
              shared::monotonicNs() - last_end_ns_ >=
                  kRepeatIdleFactor * last_prepare_ns_.load(std::memory_order_relaxed)) {
     // (at most a third of a core: idle twice as long as the last preparation took)

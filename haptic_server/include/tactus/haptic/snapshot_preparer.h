@@ -64,12 +64,11 @@ class SnapshotPreparer {
   /// current one again, at the newest poses, after requestRelinearization()), and publishes it
   /// to latest(). Returns true when it prepared one. Not real-time; call it from
   /// one thread only (the preparer thread when started, else the tick).
-  /// `repeat`: also honour requestRelinearization() (the thread does; the tick preparing inline
-  /// does not, so a test's tick prepares only new snapshots).
-  /// `fresh_poses`: before preparing a new snapshot, wait (at most kFreshPoseWaitNs) for poses
-  /// the tick read after it arrived (the thread does; a tick preparing inline cannot).
-  bool prepareNewest(const LocalModelSettings& settings, bool repeat = false,
-                     bool fresh_poses = false) noexcept;
+  /// `from_thread`: the preparer thread's call, which also honours requestRelinearization()
+  /// and, before preparing a new snapshot, waits (at most kFreshPoseWaitNs) for poses the tick
+  /// read after it arrived. A tick preparing inline does neither (it cannot wait for itself, and
+  /// a test's tick prepares only new snapshots).
+  bool prepareNewest(const LocalModelSettings& settings, bool from_thread = false) noexcept;
 
   /// The tick: the newest prepared snapshot (seq() 0 before the first); `fresh` tells whether
   /// it is new since the last call. Unchanged until the next call. Wait-free.
