@@ -978,6 +978,27 @@ class BlockingDevice : public ScriptedDevice {
   bool haltable = true;
 };
 
+// One tick of `loop` on a thread of its own (as the real-time thread runs it), which sets
+// `returned` once the tick comes back: the watchdog tests' tick blocks.
+std::thread tickOnItsOwnThread(HapticLoop& loop, std::atomic<bool>& returned) {
+  return std::thread([&loop, &returned] {
+    const std::int64_t now = shared::monotonicNs();
+    loop.tick(now, now);
+    returned.store(true);
+  });
+}
+
+// Polls `done` every millisecond for up to 5 s; returns its last value.
+template <class Done>
+bool pollFor5s(Done done) {
+  bool d = false;
+  for (int i = 0; i < 5000 && !d; ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    d = done();
+  }
+  return d;
+}
+
 // The supervisor's watchdog: a tick stuck in a device read past the watchdog is reported and the
 // device asked to halt, which lets the tick return (the force then fades like on any fault); a
 // device that cannot be halted is reported as such. No durations are asserted: the watchdog is
@@ -994,16 +1015,8 @@ TEST(HapticWatchdog, ATickStuckInADeviceReadIsReportedAndTheDeviceHalted) {
     EXPECT_FALSE(supervisor.watchTick(shared::monotonicNs())) << "no tick runs";
     device.block.store(true);
     std::atomic<bool> returned{false};
-    std::thread rt([&] {
-      const std::int64_t now = shared::monotonicNs();
-      loop.tick(now, now);
-      returned.store(true);
-    });
-    bool stuck = false;
-    for (int i = 0; i < 5000 && !stuck; ++i) {
-      std::this_thread::sleep_for(std::chrono::milliseconds(1));
-      stuck = supervisor.watchTick(shared::monotonicNs());
-    }
+    std::thread rt = tickOnItsOwnThread(loop, returned);
+    const bool stuck = pollFor5s([&] { return supervisor.watchTick(shared::monotonicNs()); });
     EXPECT_TRUE(stuck);
     if (!haltable) {
       EXPECT_EQ(loop.tickProgress(shared::monotonicNs()).device, 0) << "stuck in device 0";
@@ -1048,16 +1061,9 @@ TEST(HapticWatchdog, ATickFirstStuckOutsideADeviceCallIsHaltedOnceInOne) {
   loop.offerLink(link.get());
   device.block.store(true);
   std::atomic<bool> returned{false};
-  std::thread rt([&] {
-    const std::int64_t now = shared::monotonicNs();
-    loop.tick(now, now);
-    returned.store(true);
-  });
-  bool stuck_outside = false;
-  for (int i = 0; i < 5000 && !stuck_outside; ++i) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(1));
-    stuck_outside = gate.entered.load() && supervisor.watchTick(shared::monotonicNs());
-  }
+  std::thread rt = tickOnItsOwnThread(loop, returned);
+  const bool stuck_outside = pollFor5s(
+      [&] { return gate.entered.load() && supervisor.watchTick(shared::monotonicNs()); });
   EXPECT_TRUE(stuck_outside);
   EXPECT_EQ(loop.tickProgress(shared::monotonicNs()).device, -1) << "held before the read";
   EXPECT_FALSE(device.halted.load()) << "no device call to halt yet";
