@@ -2,8 +2,10 @@
 #include "tactus/haptic/snapshot_preparer.h"
 
 #include <cstring>
+#include <string>
 
 #include "tactus/shared/clock.h"
+#include "tactus/shared/error.h"
 #include "tactus/shared/rt.h"
 
 namespace tactus::haptic {
@@ -30,10 +32,17 @@ SnapshotPreparer::SnapshotPreparer(shared::SnapshotSubscriber& snapshots, int ma
 
 SnapshotPreparer::~SnapshotPreparer() { stop(); }
 
-void SnapshotPreparer::start(const LocalModelSettings& settings, int fifo_priority) {
+void SnapshotPreparer::start(const LocalModelSettings& settings, int fifo_priority,
+                             std::int64_t fresh_pose_wait_ns) {
   if (thread_.joinable()) return;
   settings.validate();
+  if (fresh_pose_wait_ns < 0 || fresh_pose_wait_ns > kMaxFreshPoseWaitNs) {
+    throw Error("snapshot preparer: the fresh-pose wait must be 0 to " +
+                std::to_string(kMaxFreshPoseWaitNs) + " ns, not " +
+                std::to_string(fresh_pose_wait_ns));
+  }
   settings_ = settings;
+  fresh_pose_wait_ns_ = fresh_pose_wait_ns;
   stop_.store(false, std::memory_order_relaxed);
   thread_ = std::thread([this, fifo_priority] {
     if (fifo_priority > 0) (void)shared::setFifoPriority(fifo_priority);   // best effort
@@ -65,7 +74,10 @@ bool SnapshotPreparer::prepareNewest(const LocalModelSettings& settings,
       const std::int64_t seen = shared::monotonicNs();
       for (;;) {
         const std::int64_t now = shared::monotonicNs();
-        if (hint_reader_.latest().read_ns >= seen || now - seen >= kFreshPoseWaitNs) break;
+        if (hint_reader_.latest().read_ns >= seen || now - seen >= fresh_pose_wait_ns_ ||
+            stop_.load(std::memory_order_relaxed)) {
+          break;
+        }
         shared::sleepUntilNs(now + kFreshPosePollNs);
       }
     }

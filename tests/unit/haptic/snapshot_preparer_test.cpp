@@ -10,6 +10,7 @@
 
 #include "tactus/haptic/local_model.h"
 #include "tactus/shared/clock.h"
+#include "tactus/shared/error.h"
 #include "tactus/shared/triple_buffer.h"
 
 namespace tactus::haptic {
@@ -62,7 +63,9 @@ shared::Pose preparerPose(double z) {
 
 // The replay's device jumps to a new snapshot's pose when the snapshot is published: a
 // preparation at the poses published before it arrived would linearise where the hand no longer
-// is. The thread waits for a tick that read its device after the snapshot arrived.
+// is. The thread waits for a tick that read its device after the snapshot arrived. The test waits
+// up to 10 s for them (not the daemons' 2 ms), so a loaded machine that delays this thread's next
+// "tick" does not decide the outcome.
 TEST(SnapshotPreparerTest, TheThreadPreparesANewSnapshotAtPosesReadAfterItArrived) {
   const shared::SnapshotLayout layout =
       shared::SnapshotLayout::forCapacity(kPreparerRows, kPreparerContacts);
@@ -77,7 +80,7 @@ TEST(SnapshotPreparerTest, TheThreadPreparesANewSnapshotAtPosesReadAfterItArrive
   preparer.publishPoses(before_poses, shared::monotonicNs());
   LocalModelSettings settings;
   settings.kind = LocalModelKind::kLinearized;
-  preparer.start(settings, 0);
+  preparer.start(settings, 0, 10'000'000'000);
   writePreparerSnapshot(shared::SnapshotWriter(writer.buffer(), layout));
   writer.publish();
   // the next tick, half a tick later: its device has moved with the snapshot
@@ -109,6 +112,21 @@ TEST(SnapshotPreparerTest, TheThreadPreparesANewSnapshotAtPosesReadAfterItArrive
     moved = std::max(moved, std::abs(expected - at_before.prepared().preparedForces()[r]));
   }
   EXPECT_GT(moved, 1e-3);   // the two poses give different solutions
+}
+
+TEST(SnapshotPreparerTest, AFreshPoseWaitOutOfRangeIsRefused) {
+  const shared::SnapshotLayout layout =
+      shared::SnapshotLayout::forCapacity(kPreparerRows, kPreparerContacts);
+  shared::TripleBufferStorage storage(layout.total_bytes);
+  shared::SnapshotSubscriber subscriber(storage.control(), layout);
+  SnapshotPreparer preparer(subscriber, kPreparerRows, kPreparerContacts);
+  LocalModelSettings settings;
+  EXPECT_THROW(preparer.start(settings, 0, -1), Error);
+  EXPECT_THROW(preparer.start(settings, 0, SnapshotPreparer::kMaxFreshPoseWaitNs + 1), Error);
+  EXPECT_FALSE(preparer.threaded());
+  preparer.start(settings, 0, 0);
+  EXPECT_TRUE(preparer.threaded());
+  preparer.stop();
 }
 
 }  // namespace

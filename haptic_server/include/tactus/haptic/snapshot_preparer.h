@@ -40,6 +40,9 @@ class SnapshotPreparer {
   /// rates from 500 Hz (docs/design.md, "The preparation's poses").
   static constexpr std::int64_t kFreshPoseWaitNs = 2'000'000;
   static constexpr std::int64_t kFreshPosePollNs = 50'000;
+  /// Longest wait start() accepts [ns] (a test that must not depend on its thread's scheduling
+  /// waits long; the daemons use kFreshPoseWaitNs).
+  static constexpr std::int64_t kMaxFreshPoseWaitNs = 60'000'000'000;
 
   /// `snapshots` must outlive the preparer. Sizes everything for the capacity (allocates).
   SnapshotPreparer(shared::SnapshotSubscriber& snapshots, int max_rows, int max_contacts);
@@ -54,8 +57,11 @@ class SnapshotPreparer {
   static constexpr int kFifoPriority = 1;
 
   /// Starts the preparer thread with these settings (validated; throws tactus::Error) at
-  /// `fifo_priority` (0: a normal thread). Not real-time. Idempotent.
-  void start(const LocalModelSettings& settings, int fifo_priority = kFifoPriority);
+  /// `fifo_priority` (0: a normal thread), waiting at most `fresh_pose_wait_ns` for fresh poses
+  /// (0 to kMaxFreshPoseWaitNs, else throws tactus::Error; stop() ends a wait at once). Not
+  /// real-time. Idempotent.
+  void start(const LocalModelSettings& settings, int fifo_priority = kFifoPriority,
+             std::int64_t fresh_pose_wait_ns = kFreshPoseWaitNs);
   /// Stops and joins the thread (idempotent; the destructor calls it).
   void stop() noexcept;
   bool threaded() const noexcept { return thread_.joinable(); }
@@ -65,7 +71,7 @@ class SnapshotPreparer {
   /// to latest(). Returns true when it prepared one. Not real-time; call it from
   /// one thread only (the preparer thread when started, else the tick).
   /// `from_thread`: the preparer thread's call, which also honours requestRelinearization()
-  /// and, before preparing a new snapshot, waits (at most kFreshPoseWaitNs) for poses the tick
+  /// and, before preparing a new snapshot, waits (at most the wait given to start()) for poses the tick
   /// read after it arrived. A tick preparing inline does neither (it cannot wait for itself, and
   /// a test's tick prepares only new snapshots).
   bool prepareNewest(const LocalModelSettings& settings, bool from_thread = false) noexcept;
@@ -113,6 +119,7 @@ class SnapshotPreparer {
   std::atomic<std::uint64_t> prepared_count_{0};
   std::atomic<std::int64_t> last_prepare_ns_{0};
   LocalModelSettings settings_;
+  std::int64_t fresh_pose_wait_ns_ = kFreshPoseWaitNs;
   std::atomic<bool> stop_{false};
   std::thread thread_;
 };
