@@ -55,5 +55,6 @@ if(TACTUS_BUILD_TESTS)
                         ".*haptic local model \\(ready\\): force on the tool")
   set_tests_properties(example_cpp_installed PROPERTIES LABELS "unit;install" TIMEOUT 600
                        PASS_REGULAR_EXPRESSION "${_expect}"
-                       FAIL_REGULAR_EXPRESSION "(^|[^a-z])(nan|inf)([^a-z]|$)")
+                       FAIL_REGULAR_EXPRESSION "(^|[^a-z])(nan|inf)([^a-z]|$)"
+                       ${TACTUS_TEST_ON_A_CORE})
 endif()

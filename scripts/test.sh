@@ -7,5 +7,13 @@ source "$root/scripts/env.sh"
 build="${TACTUS_BUILD_DIR:-$root/build}"
 "$root/scripts/build.sh"
 cd "$build"
-# Tests that own a core or spawn daemons are RUN_SERIAL; the rest run two at a time.
-ctest --output-on-failure -j "${TACTUS_TEST_JOBS:-2}" --timeout 900 "$@"
+# ctest schedules by cores (tests/CMakeLists.txt, TACTUS_TEST_ON_A_CORE): a resource "cores"
+# with one slot per usable core (env -u: scripts/env.sh sets OMP_NUM_THREADS=1, which GNU nproc
+# honours), held by every test that computes, and twice as many jobs, so that the tests that
+# wait on their daemons run beside them. RUN_SERIAL tests (they act at fixed times) run alone.
+cores="${TACTUS_TEST_CORES:-$(env -u OMP_NUM_THREADS -u OMP_THREAD_LIMIT nproc)}"
+((cores >= 2)) || cores=2   # the live view's test holds two slots
+printf '{"version": {"major": 1, "minor": 0}, "local": [{"cores": [{"id": "0", "slots": %d}]}]}\n' \
+  "$cores" > ctest_resources.json
+ctest --output-on-failure --resource-spec-file ctest_resources.json \
+  -j "${TACTUS_TEST_JOBS:-$((2 * cores))}" --timeout 900 "$@"

@@ -1,8 +1,9 @@
 // Test fixture: a device plugin that misbehaves on request, for the fault suite of the hand
 // (tests/security/hand_fault_test.cpp) and the loader's tests. Its hand follows a scripted path
-// and, from fault_at_ms after open() for fault_ms, breaks the device contract in one way:
+// and, from fault_at_ms into its path for fault_ms, breaks the device contract in one way:
 //
-//   path=T:x,y,z;T:x,y,z;...   positions (m) at times (ms after open), linear in between, the
+//   path=T:x,y,z;T:x,y,z;...   positions (m) at path times (ms after open() while no gate has
+//                              held the hand, below), linear in between, the
 //                              last one held (default: the origin)
 //   fault=KIND                 none (default), silent (read: no data), fault (read: fault),
 //                              stall (one read sleeps stall_ms), block (read blocks until halt),
@@ -15,7 +16,16 @@
 //                              driver that cannot be interrupted)
 //   create_error=unterminated  create() fails and fills the whole error buffer without a NUL
 //   report=FILE                open() writes its time (the path's origin, CLOCK_MONOTONIC ns)
-//                              to FILE
+//                              to FILE, one line; each gate passed (below) appends a line with
+//                              the path's origin from then on (the moment it passed, minus the
+//                              gate's path time)
+//   gates=T,T,...              path times (ms, increasing) at which the hand waits, holding
+//                              its pose, until gate_file has more lines than the gates passed:
+//                              a test lets the hand go on once the state it needs is there (the
+//                              press rendered), however slowly a loaded machine got there.
+//                              Times above (the path, fault_at_ms) are the path's, which
+//                              stands still while the hand waits at a gate
+//   gate_file=FILE             the file a test appends a line to for each gate it opens
 //
 // Everything here is deliberately outside the real-time contract when a fault asks for it.
 #include "tactus/device/plugin_abi.h"
@@ -48,6 +58,11 @@ struct Hand {
   bool honour_halt = true;
   std::string report;                       ///< where open() writes t0_ns
   std::int64_t t0_ns = 0;
+  std::vector<double> gates;                ///< path times (ms) at which the hand waits
+  std::string gate_file;                    ///< a line per gate opened
+  std::size_t gates_passed = 0;
+  double waited_ms = 0.0;                   ///< time spent waiting at gates
+  double path_ms = 0.0;                     ///< the path's time at the last read()
   bool stalled = false;                     ///< the one stall happened
   std::atomic<bool> halted{false};
   std::atomic<std::int64_t> halted_ns{0};
@@ -108,6 +123,17 @@ TactusDeviceHandle faultCreate(const TactusKeyValue* options, size_t count, char
       h->honour_halt = value != "0";
     } else if (key == "report") {
       h->report = value;
+    } else if (key == "gates") {
+      const char* at = value.c_str();
+      while (ok && *at != '\0') {
+        char* end = nullptr;
+        const double t = std::strtod(at, &end);
+        ok = end != at && (h->gates.empty() || t > h->gates.back());
+        if (ok) h->gates.push_back(t);
+        at = end != nullptr && *end == ',' ? end + 1 : end;
+      }
+    } else if (key == "gate_file") {
+      h->gate_file = value;
     } else if (key == "create_error" && value == "unterminated") {
       if (error != nullptr) std::memset(error, 'E', error_size);   // no terminating NUL
       delete h;
@@ -122,6 +148,11 @@ TactusDeviceHandle faultCreate(const TactusKeyValue* options, size_t count, char
     }
   }
   if (h->path.empty()) h->path.push_back({0.0, {0.0, 0.0, 0.0}});
+  if (!h->gates.empty() && h->gate_file.empty()) {
+    setError(error, error_size, "fault plugin: gates need gate_file");
+    delete h;
+    return nullptr;
+  }
   return h;
 }
 
@@ -159,6 +190,41 @@ void position(const Hand& h, double t_ms, double* p) {
   std::memcpy(p, k.back().p, sizeof(k.back().p));
 }
 
+// Lines in the gate file (the gates the test has opened so far).
+std::size_t gatesOpened(const Hand& h) {
+  std::FILE* f = std::fopen(h.gate_file.c_str(), "r");
+  if (f == nullptr) return 0;
+  std::size_t lines = 0;
+  for (int c = std::fgetc(f); c != EOF; c = std::fgetc(f)) lines += c == '\n' ? 1 : 0;
+  std::fclose(f);
+  return lines;
+}
+
+// The path's time now (ms): the time since open() less the time spent waiting at gates; at a
+// closed gate it stays at the gate's time.
+double pathMs(Hand& h) {
+  const std::int64_t now = nowNs();
+  const double since_open_ms = 1e-6 * static_cast<double>(now - h.t0_ns);
+  double t = since_open_ms - h.waited_ms;
+  if (h.gates_passed < h.gates.size() && t >= h.gates[h.gates_passed]) {
+    const double gate = h.gates[h.gates_passed];
+    h.waited_ms = since_open_ms - gate;
+    t = gate;
+    if (gatesOpened(h) > h.gates_passed) {
+      ++h.gates_passed;
+      if (!h.report.empty()) {   // the path's origin from now on
+        if (std::FILE* f = std::fopen(h.report.c_str(), "a"); f != nullptr) {
+          std::fprintf(f, "%lld\n",
+                       static_cast<long long>(now - static_cast<std::int64_t>(gate * 1e6)));
+          std::fclose(f);
+        }
+      }
+    }
+  }
+  h.path_ms = t;
+  return t;
+}
+
 void sleepMs(double ms) {
   timespec ts{static_cast<time_t>(ms / 1000.0),
               static_cast<long>(std::fmod(ms, 1000.0) * 1e6)};
@@ -167,7 +233,7 @@ void sleepMs(double ms) {
 
 int faultRead(TactusDeviceHandle handle, TactusDeviceState* out) {
   Hand& h = *static_cast<Hand*>(handle);
-  const double t_ms = 1e-6 * static_cast<double>(nowNs() - h.t0_ns);
+  const double t_ms = pathMs(h);
   const std::int64_t halted_ns = h.halted_ns.load();
   if (halted_ns != 0) {   // after a halt: faulty for fault_ms, then usable again
     if (1e-6 * static_cast<double>(nowNs() - halted_ns) < h.fault_ms) return TACTUS_IO_FAULT;
@@ -205,7 +271,7 @@ int faultRead(TactusDeviceHandle handle, TactusDeviceState* out) {
 
 int faultWrite(TactusDeviceHandle handle, const TactusDeviceCommand*) {
   Hand& h = *static_cast<Hand*>(handle);
-  const double t_ms = 1e-6 * static_cast<double>(nowNs() - h.t0_ns);
+  const double t_ms = h.path_ms;   // read()'s, just before this write
   if (h.fault == Fault::kThrowWrite && t_ms >= h.fault_at_ms && t_ms < h.fault_at_ms + h.fault_ms) {
     throw std::runtime_error("fault plugin: write() throws on purpose");
   }

@@ -70,7 +70,7 @@ StepPrint print(const Simulation& sim, const StepReport& r) {
   return out;
 }
 
-std::vector<StepPrint> run(Simulation& sim, int steps) {
+std::vector<StepPrint> runPrinting(Simulation& sim, int steps) {
   std::vector<StepPrint> out;
   for (int k = 0; k < steps; ++k) {
     for (int i = 0; i < sim.instrumentCount(); ++i) {
@@ -117,7 +117,7 @@ TEST(SimulationStateTest, LiverGraspContinuesBitForBitOver200ContactSteps) {
   test_support::TestDir dir("tactus_state");
   shared::writeFileChecked(dir.path / "grasp.state", saved, "state");
 
-  const std::vector<StepPrint> original = run(sim, 200);
+  const std::vector<StepPrint> original = runPrinting(sim, 200);
   for (std::size_t k = 0; k < original.size(); ++k) {
     ASSERT_GT(original[k].contacts, 0) << "step " << k << " after the save is not in contact";
   }
@@ -128,12 +128,12 @@ TEST(SimulationStateTest, LiverGraspContinuesBitForBitOver200ContactSteps) {
   other.restoreState(shared::readFileChecked(dir.path / "grasp.state", "state", 1u << 30),
                      "grasp.state");
   EXPECT_EQ(other.stepIndex(), sim.stepIndex() - 200);
-  expectSameRun(original, run(other, 200), "a new simulation");
+  expectSameRun(original, runPrinting(other, 200), "a new simulation");
   EXPECT_TRUE(other.saveState() == end) << "the states after the 200 steps differ";
 
   // the same simulation, rewound
   sim.restoreState(saved);
-  expectSameRun(original, run(sim, 200), "the simulation rewound");
+  expectSameRun(original, runPrinting(sim, 200), "the simulation rewound");
 }
 
 TEST(SimulationStateTest, ObstaclesAndTissueContactContinueBitForBit) {
@@ -141,9 +141,9 @@ TEST(SimulationStateTest, ObstaclesAndTissueContactContinueBitForBit) {
   ASSERT_FALSE(spec.obstacles.empty());
   ASSERT_FALSE(spec.tissue_contacts.empty());
   Simulation sim(spec);
-  run(sim, 20);
+  runPrinting(sim, 20);
   const std::string saved = sim.saveState();
-  const std::vector<StepPrint> original = run(sim, 30);
+  const std::vector<StepPrint> original = runPrinting(sim, 30);
   for (const StepPrint& p : original) ASSERT_GT(p.contacts, 0);
   // the run compared holds both kinds: the support carries the stomach, the organs press
   const ReactionForces r = sim.reactions();
@@ -152,7 +152,7 @@ TEST(SimulationStateTest, ObstaclesAndTissueContactContinueBitForBit) {
   EXPECT_GT(r.tissues[1].from_tissues_n.norm(), 0.01) << "the liver does not press the stomach";
   Simulation other(spec);
   other.restoreState(saved);
-  expectSameRun(original, run(other, 30), "a new simulation");
+  expectSameRun(original, runPrinting(other, 30), "a new simulation");
 }
 
 // The other linear solves carry their own warm starts (PCG: the last dv) or none (CHOLMOD).
@@ -161,19 +161,19 @@ TEST(SimulationStateTest, EveryLinearSolverContinuesBitForBit) {
     SceneSpec spec = scene("liver_grasp.yaml");
     spec.solver.linear = kind;
     Simulation sim(spec);
-    run(sim, 165);
+    runPrinting(sim, 165);
     const std::string saved = sim.saveState();
-    const std::vector<StepPrint> original = run(sim, 25);
+    const std::vector<StepPrint> original = runPrinting(sim, 25);
     Simulation other(spec);
     other.restoreState(saved);
-    expectSameRun(original, run(other, 25),
+    expectSameRun(original, runPrinting(other, 25),
                   kind == LinearSolverKind::kPcg ? "pcg" : "cholmod");
   }
 }
 
 TEST(SimulationStateTest, ForeignTruncatedOrCorruptStatesAreRefusedAndChangeNothing) {
   Simulation grasp(scene("liver_grasp.yaml"));
-  run(grasp, 3);
+  runPrinting(grasp, 3);
   const std::string before = grasp.saveState();
   const auto refused = [&](const std::string& bytes, const std::string& expected) {
     try {
