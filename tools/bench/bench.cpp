@@ -293,19 +293,22 @@ int run(const BenchOptions& o) {
   } else if (o.min_contacts > 0) {
     std::printf("no step had >= %d contacts\n", o.min_contacts);
   }
-  long background_factorisations = 0, background_waits = 0;
+  long background_factorisations = 0, background_waits = 0, background_not_ready = 0;
   double background_wait_max_s = 0.0;
   for (int i = 0; i < sim.tissueCount(); ++i) {
     const sim::FemBody::Counters& c = sim.tissue(i).counters();
     background_factorisations += c.background_factorisations;
     background_waits += c.background_waits;
+    background_not_ready += c.background_not_ready;
     background_wait_max_s = std::max(background_wait_max_s, c.background_wait_max_s);
   }
   std::printf("free motion linear solve: %ld CHOLMOD factorisations on the step's thread and %ld "
               "in the background in %ld steps (%ld steps waited for the background one, at most "
-              "%.2f ms); PCG iterations per step median %.0f, p90 %.0f, max %.0f\n",
+              "%.2f ms; %ld went on without it, not ready); PCG iterations per step median %.0f, "
+              "p90 %.0f, max %.0f\n",
               fem_factorisations, background_factorisations, steps, background_waits,
-              1e3 * background_wait_max_s, pct(fem_cg, 0.5), pct(fem_cg, 0.9), pct(fem_cg, 1.0));
+              1e3 * background_wait_max_s, background_not_ready, pct(fem_cg, 0.5), pct(fem_cg, 0.9),
+              pct(fem_cg, 1.0));
   const sim::BlasLockFigures blas_lock = sim::blasLockFigures();
   std::printf("CHOLMOD calls that waited for the BLAS lock (another thread's supernodal "
               "factorisation or solve): %ld, %.1f ms in all\n", blas_lock.contended_calls,

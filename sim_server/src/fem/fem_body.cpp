@@ -44,7 +44,8 @@ void FemBody::Impl::init(const TetMesh& m, const FemMaterial& mat,
     throw Error("FemBody: background_refactor_lag_steps must be >= 0");
   reuse = fem_detail::ReusedFactorSolver({opt.cg_tolerance, opt.refactor_iterations,
                                           opt.refactor_every_steps,
-                                          opt.background_refactor_lag_steps});
+                                          opt.background_refactor_lag_steps,
+                                          opt.background_refactor_when_ready});
   if (opt.linear == LinearSolverKind::kCholmodReuse && opt.background_refactor_lag_steps > 0) {
     // the worker runs BLAS (CHOLMOD's supernodal factorisation) while the steps go on: the
     // step's own solves use simplicial factors, which make no BLAS call (linear_solver.h)

@@ -73,6 +73,7 @@ bool FemBody::Impl::solveStep(double h, FemStepStats& stats) {
       dv = 2.0 * dv_prev - dv_prev2;  // warm start
       double background_factor_s = 0.0;
       const bool taken = reuse.adoptDue(chol, stats.factor_wait_s, background_factor_s);
+      counters.background_not_ready = reuse.notReadySteps();
       if (stats.factor_wait_s > 1e-4) {
         ++counters.background_waits;
         counters.background_wait_max_s = std::max(counters.background_wait_max_s, stats.factor_wait_s);

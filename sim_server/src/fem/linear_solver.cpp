@@ -320,6 +320,11 @@ bool ReusedFactorSolver::adoptDue(CholmodSolver& factor, double& waited_s,
   if (background_ == nullptr || !background_->busy()) return false;
   ++job_steps_;
   if (job_steps_ < policy_.background_lag_steps) return false;
+  if (policy_.background_when_ready && !background_->finished()) {
+    // not ready: this step goes on with the factor it has; the next one looks again
+    ++not_ready_steps_;
+    return false;
+  }
   if (job_stale_) {
     // a newer factor was made since the job started: drop it (at the same step as it would
     // have been taken, so that what runs when does not depend on the worker's speed)

@@ -197,6 +197,11 @@ struct FactorReusePolicy {
   /// > 0: refresh in the background (see ReusedFactorSolver), the new factor taking over this
   /// many steps after the step whose matrix it factorises; 0: refresh synchronously
   int background_lag_steps = 0;
+  /// background mode: the new factor takes over at the first step at least background_lag_steps
+  /// after its start at which the worker has finished, and no step ever waits for the worker
+  /// (the steps at which the factor changes then depend on the worker's speed); false: exactly
+  /// background_lag_steps steps after, waiting for the worker if it has not finished
+  bool background_when_ready = false;
 };
 
 /// Figures of one ReusedFactorSolver::solve.
@@ -230,7 +235,11 @@ struct ReuseSolveResult {
 /// caller). A PCG that misses refactor_iterations goes on to 3 x refactor_iterations (and starts
 /// a background factorisation); only one that misses those too refreshes synchronously. The
 /// factor changes at steps fixed by the iteration counts, not by the worker's speed: the results
-/// do not depend on timing.
+/// do not depend on timing. With background_when_ready the factor instead takes over at the
+/// first step, L or more steps after the start, at which the worker has finished: adoptDue()
+/// never waits (a job not finished yet is looked at again at the next step, the step going on
+/// with PCG on the factor it has), so refactorisation is off the step's critical path, at the
+/// price of results that depend on the worker's timing (each still meets the tolerance).
 class ReusedFactorSolver {
  public:
   using Sparse = CholmodSolver::Sparse;
@@ -241,7 +250,12 @@ class ReusedFactorSolver {
   /// background_lag_steps steps old, swaps its factor into `factor` (waiting for it if it still
   /// runs; `waited_s`) and returns true: the factor is then that of the matrix of the step that
   /// started the job. A job made stale by a newer factor is dropped at that step instead.
+  /// With background_when_ready: the same when the job has finished, nothing (no wait) when it
+  /// has not (counted by notReadySteps()).
   bool adoptDue(CholmodSolver& factor, double& waited_s, double& factorisation_s);
+  /// background_when_ready: steps at which a job was due and had not finished (each went on with
+  /// the factor it had instead of waiting).
+  long notReadySteps() const { return not_ready_steps_; }
   /// x holds the warm start (the previous step's solution) on entry, the solution on exit.
   /// `block_rotation` (null: none) warps the preconditioner to T A_f^-1 T^T with T block
   /// diagonal, one 3x3 rotation per 3 consecutive unknowns (size / 3 of them): the rotation of
@@ -281,6 +295,7 @@ class ReusedFactorSolver {
   int age_steps_ = -1;
   int last_iterations_ = 0;
   long refreshes_ = 0;
+  long not_ready_steps_ = 0;
   BackgroundFactoriser* background_ = nullptr;
   int job_steps_ = 0;        // steps since the worker's job started (while it is busy)
   bool job_stale_ = false;   // a newer factor than the job's was made since it started

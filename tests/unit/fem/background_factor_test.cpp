@@ -9,7 +9,11 @@
 
 #include <Eigen/Core>
 #include <algorithm>
+#include <chrono>
+#include <condition_variable>
+#include <mutex>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "../../../sim_server/src/fem/linear_solver.h"
@@ -142,6 +146,110 @@ TEST(BackgroundFactorTest, TwoWorkersAndTheCallersFactorisationsNeverCorruptAFac
   }
   EXPECT_LT(worst, 1e-12);
   RecordProperty("worst_relative_residual", std::to_string(worst));
+}
+
+// The factor taken when ready (FactorReusePolicy::background_when_ready): no step waits for the
+// worker. Another thread holds the BLAS lock, so the worker's supernodal factorisation cannot
+// finish; the steps go on with PCG on the factor they have, every one returns, matches the direct
+// solve and takes no factor, and each due step is counted as not ready. Once the lock is released
+// and the worker has finished, the next step takes its factor. A step that waited for the worker
+// (or factorised on its own thread, which needs the lock too) would hang until the holder gives up
+// after kHoldLimit, which the test then reports: it counts, it does not time.
+TEST(BackgroundFactorTest, AStepNeverWaitsForTheWorkerWhenTheFactorIsTakenWhenReady) {
+  constexpr int kSteps = 12;
+  constexpr double kTolerance = 1e-10;
+  constexpr auto kHoldLimit = std::chrono::seconds(120);
+  std::vector<LowerMatrix> a(kSteps);
+  for (int k = 0; k < kSteps; ++k) a[k] = gridLaplacianLower(kGrid, 0.5 + 0.03 * k);
+  const Eigen::VectorXd b = rampRhs(a[0].rows());
+  // the direct solves, before the lock is held
+  std::vector<Eigen::VectorXd> direct(kSteps, Eigen::VectorXd(b.size()));
+  {
+    CholmodSolver exact;
+    exact.analyze(a[0]);
+    for (int k = 0; k < kSteps; ++k) {
+      ASSERT_TRUE(exact.factorize(a[k]));
+      exact.solve(b.data(), direct[k].data(), 1);
+    }
+  }
+  auto relativeError = [&](const Eigen::VectorXd& x, int k) {
+    return (x - direct[k]).norm() / direct[k].norm();
+  };
+
+  CholmodSolver factor;
+  factor.setBlasFreeSolves(true);
+  BackgroundFactoriser worker;
+  FactorReusePolicy policy;
+  policy.tolerance = kTolerance;
+  policy.refactor_iterations = 6;
+  policy.background_lag_steps = 1;
+  policy.background_when_ready = true;
+  ReusedFactorSolver reuse(policy);
+  reuse.setBackground(&worker);
+  Eigen::VectorXd x = Eigen::VectorXd::Zero(b.size());
+  double waited_s = 0.0, factorisation_s = 0.0;
+  // the first step factorises on its own thread (there is no factor yet)
+  ASSERT_FALSE(reuse.adoptDue(factor, waited_s, factorisation_s));
+  ReuseSolveResult r = reuse.solve(factor, a[0], b, x);
+  ASSERT_TRUE(r.ok && r.refreshed);
+  {
+    // the worker's factor is supernodal until it hands it over: its factorisation needs the lock
+    CholmodSolver probe;
+    probe.analyzeLike(factor);
+    ASSERT_TRUE(probe.factorize(a[0]));
+    ASSERT_TRUE(probe.supernodal()) << "the grid must be large enough for CHOLMOD's BLAS path";
+  }
+
+  std::mutex m;
+  std::condition_variable cv;
+  bool held = false, release = false, gave_up = false;
+  std::thread holder([&] {
+    auto blas = lockCholmodBlas();
+    std::unique_lock<std::mutex> lock(m);
+    held = true;
+    cv.notify_all();
+    gave_up = !cv.wait_for(lock, kHoldLimit, [&] { return release; });
+  });
+  {
+    std::unique_lock<std::mutex> lock(m);
+    cv.wait(lock, [&] { return held; });
+  }
+  int started = 0, taken = 0;
+  double worst = 0.0;
+  for (int k = 1; k < kSteps; ++k) {
+    if (reuse.adoptDue(factor, waited_s, factorisation_s)) ++taken;
+    r = reuse.solve(factor, a[k], b, x);
+    EXPECT_TRUE(r.ok) << "step " << k;
+    EXPECT_FALSE(r.refreshed) << "step " << k;
+    EXPECT_LE(r.residual, kTolerance) << "step " << k;
+    if (r.background_started) ++started;
+    worst = std::max(worst, relativeError(x, k));
+  }
+  {
+    std::lock_guard<std::mutex> lock(m);
+    release = true;
+  }
+  cv.notify_all();
+  holder.join();
+  EXPECT_FALSE(gave_up) << "a step waited for the worker while it could not finish";
+  EXPECT_EQ(started, 1);   // the drift started one job, which could not finish
+  EXPECT_EQ(taken, 0);
+  EXPECT_GT(reuse.notReadySteps(), 0);
+  EXPECT_LT(worst, 1e-8);
+
+  // released: once the worker has finished, the next step takes its factor
+  const auto until = std::chrono::steady_clock::now() + kHoldLimit;
+  while (!worker.finished() && std::chrono::steady_clock::now() < until)
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  ASSERT_TRUE(worker.finished());
+  const long not_ready = reuse.notReadySteps();
+  EXPECT_TRUE(reuse.adoptDue(factor, waited_s, factorisation_s));
+  EXPECT_EQ(reuse.notReadySteps(), not_ready);
+  EXPECT_FALSE(factor.supernodal());   // handed over simplicial
+  r = reuse.solve(factor, a[kSteps - 1], b, x);
+  EXPECT_TRUE(r.ok && !r.refreshed);
+  EXPECT_LT(relativeError(x, kSteps - 1), 1e-8);
+  RecordProperty("worst_relative_error_while_held", std::to_string(worst));
 }
 
 }  // namespace

@@ -249,12 +249,14 @@ TEST(Scene, LinearSolverStrategies) {
   EXPECT_EQ(def.solver.refactor_iterations, 8);
   EXPECT_EQ(def.solver.refactor_every_steps, 0);
   EXPECT_EQ(def.solver.background_refactor_lag_steps, 0);
+  EXPECT_FALSE(def.solver.background_refactor_when_ready);
   const SceneSpec s = parseScene(
       kFullHead +
           "solver: {linear: cholmod_reuse, refactor_iterations: 12, refactor_every_steps: 50,\n"
-          "         background_refactor_lag_steps: 2}\n",
+          "         background_refactor_lag_steps: 2, background_refactor_when_ready: true}\n",
       "s.yaml", kSceneFiles);
   EXPECT_EQ(s.solver.background_refactor_lag_steps, 2);
+  EXPECT_TRUE(s.solver.background_refactor_when_ready);
   EXPECT_EQ(s.solver.linear, LinearSolverKind::kCholmodReuse);
   EXPECT_EQ(s.solver.refactor_iterations, 12);
   EXPECT_EQ(s.solver.refactor_every_steps, 50);

@@ -96,6 +96,12 @@ enum class PcgPreconditioner {
 ///    it has not finished: FemStepStats::factor_wait_s). Only the first step, and a PCG that
 ///    misses 3 x refactor_iterations, factorise on the step's thread. The steps at which the
 ///    factor changes do not depend on the worker's speed: the results do not depend on timing.
+///    With background_refactor_when_ready as well (scene key
+///    solver.background_refactor_when_ready) no step waits for the worker: the new factor takes
+///    over at the first step, background_refactor_lag_steps or more after its start, at which the
+///    worker has finished (Counters::background_not_ready counts the steps that went on with the
+///    old factor instead); each step still meets cg_tolerance, but which factor preconditions
+///    which step then depends on the worker's timing.
 struct FemSolverOptions {
   LinearSolverKind linear = LinearSolverKind::kCholmod;
   double cg_tolerance = 1e-8;                   ///< relative residual ||A dv - b|| / ||b||
@@ -107,6 +113,10 @@ struct FemSolverOptions {
   /// its factor (0, the default and the scenes' setting: refresh synchronously, on the step's
   /// thread; 2 is the value the background refresh was measured with)
   int background_refactor_lag_steps = 0;
+  /// kCholmodReuse in the background: the new factor takes over as soon as it is ready (no step
+  /// waits for the worker; timing-dependent results) instead of exactly
+  /// background_refactor_lag_steps steps after its start (reproducible; waits if not ready)
+  bool background_refactor_when_ready = false;
 };
 
 /// Per-stage wall times of the last step [s] and solver figures. freeMotion allocates nothing
@@ -267,6 +277,9 @@ class FemBody {
     /// steps that waited more than 0.1 ms for the worker (factor_wait_s), and the longest wait
     long background_waits = 0;
     double background_wait_max_s = 0.0;
+    /// background_refactor_when_ready: steps at which a background factor was due and not
+    /// ready (they went on with the factor they had instead of waiting)
+    long background_not_ready = 0;
     /// integration domains evaluated by the general element loop: 0 unless the material asks
     /// for the consistent tangent, the invertible law or edge-smoothed strain
     long general_domain_evaluations = 0;

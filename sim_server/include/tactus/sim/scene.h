@@ -182,6 +182,9 @@ struct SolverSpec {
   /// kCholmodReuse: > 0 refreshes the factor on a worker thread, the new factor taking over this
   /// many steps later (FemSolverOptions::background_refactor_lag_steps); 0: on the step's thread
   int background_refactor_lag_steps = 0;
+  /// kCholmodReuse in the background: the new factor takes over as soon as the worker has
+  /// finished, no step waiting for it (FemSolverOptions::background_refactor_when_ready)
+  bool background_refactor_when_ready = false;
   double nsgs_tolerance = 1e-6;
   int nsgs_max_sweeps = 500;
   double nsgs_sor = 1.0;                        ///< over-relaxation factor in (0, 2)
