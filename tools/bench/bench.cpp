@@ -42,6 +42,12 @@ using namespace tactus;
 double pct(const std::vector<double>& v, double q) { return shared::percentile(v, q); }
 
 // CPU time of the calling thread (excludes time the benchmark was preempted on a busy machine).
+std::int64_t processCpuNs() {
+  timespec ts{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+  return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+}
+
 std::int64_t threadCpuNs() {
   timespec ts{};
   clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
@@ -179,6 +185,9 @@ int run(const BenchOptions& o) {
   // step_cpu: the CPU time of this thread from the end of one afterStep to the start of the
   // next (the step alone: steadier than the wall times on a shared machine)
   std::int64_t cpu_mark = threadCpuNs();
+  // the other threads' CPU over the run (the background factorisations): the process's less
+  // this thread's
+  const std::int64_t run_process_cpu0 = processCpuNs(), run_thread_cpu0 = threadCpuNs();
   double step_cpu_s = 0.0;
   const auto afterStepInner = [&](long k, const sim::StepReport& r) {
     const std::int64_t tp = shared::monotonicNs();
@@ -268,6 +277,9 @@ int run(const BenchOptions& o) {
   };
   const sim::HeadlessResult run =
       sim::runHeadless(sim, {.steps = steps, .after_step = afterStep});
+  const double other_threads_cpu_s =
+      1e-9 * static_cast<double>((processCpuNs() - run_process_cpu0) -
+                                 (threadCpuNs() - run_thread_cpu0));
   if (trace != nullptr) std::fclose(trace);
   if (run.end == sim::RunEnd::kNonFinite) {
     throw NumericalError(fmt::format("step {}: the state became non-finite", run.steps - 1));
@@ -309,6 +321,9 @@ int run(const BenchOptions& o) {
               fem_factorisations, background_factorisations, steps, background_waits,
               1e3 * background_wait_max_s, background_not_ready, pct(fem_cg, 0.5), pct(fem_cg, 0.9),
               pct(fem_cg, 1.0));
+  std::printf("CPU of the run's other threads (the background factorisations): %.2f s, %.2f ms "
+              "per step\n", other_threads_cpu_s,
+              1e3 * other_threads_cpu_s / static_cast<double>(std::max(1L, steps)));
   const sim::BlasLockFigures blas_lock = sim::blasLockFigures();
   std::printf("CHOLMOD calls that waited for the BLAS lock (another thread's supernodal "
               "factorisation or solve): %ld, %.1f ms in all\n", blas_lock.contended_calls,

@@ -673,3 +673,37 @@ void FemBody::Impl::evaluate(const Eigen::VectorXd& q, const Eigen::VectorXd* v,
 }
 
 }  // namespace tactus::sim
+
+namespace tactus::sim {
+
+void FemBody::Impl::rotationsAt(const Eigen::VectorXd& x, std::vector<RotationBatch>& out) {
+  out = rotation;   // the warm starts (same size: no allocation after the first call)
+  const int ne = mesh.tetCount();
+  BatchLoop loop;
+  loop.batches = batches.data();
+  loop.rotation = out.data();
+  loop.elems = assembly_elems.data();
+  loop.block_offset = block_offset.data();
+  loop.elements = ne;
+  loop.q = x.data();
+  loop.rotate = true;
+  loop.keep = true;   // into `out`
+  fallback_slots.resize(static_cast<std::size_t>(ne));
+  loop.fallback = fallback_slots.data();
+  const BatchKernel kernel = chosenKernel().fn;
+  if (kernel != nullptr) {
+    kernel(loop);
+  } else {
+    for (int slot = 0; slot < ne; ++slot) loop.fallback[loop.fallback_count++] = slot;
+  }
+  for (int i = 0; i < loop.fallback_count; ++i) {
+    const int slot = loop.fallback[i];
+    const Eigen::Matrix3d r =
+        elementStep(slot, loop.q, nullptr, 0.0, 0.0, nullptr, nullptr, 0.0, true);
+    RotationBatch& rb = out[static_cast<std::size_t>(slot / 4)];
+    for (int a = 0; a < 3; ++a)
+      for (int b = 0; b < 3; ++b) rb.r[a][b][slot % 4] = r(a, b);
+  }
+}
+
+}  // namespace tactus::sim

@@ -160,6 +160,9 @@ struct FemScratch {
   Eigen::VectorXd cg_t, jacobi_inv;
   fem_detail::CgBuffers cg;
   std::vector<Eigen::Matrix3d> node_rot, node_acc;  // warped preconditioner
+  // nodeRotations: the element rotations at q (batched layout, then mesh order)
+  std::vector<FemState::RotationBatch> query_rotation;
+  std::vector<Eigen::Matrix3d> query_element_rot;
   // kCholmodReuse: this step's node rotations relative to the factor's (the preconditioner's warp)
   std::vector<Eigen::Matrix3d> relative_rot;
   std::vector<Eigen::Matrix3d> group_acc;           // sumNodeRotations' per-group sums
@@ -224,6 +227,12 @@ struct FemBody::Impl : FemModel, FemState, FemScratch {
   // rotation.
   Eigen::Matrix3d elementStep(int slot, const double* q, const double* v, double h, double beta,
                               double* f_out, double* vals, double c_k, bool rotate) const;
+  // The element rotations at positions x into `out` (the batched layout, slot order), each
+  // polar decomposition warm-started from the kept rotations (`rotation`, the last element
+  // loop's): the batched kernel's Newton steps on the rotation alone (no force, no tangent), the
+  // elements it cannot finish through the reference path. `rotation` is left alone. Not for the
+  // general element loop.
+  void rotationsAt(const Eigen::VectorXd& x, std::vector<RotationBatch>& out);
   Eigen::Matrix3d slotRotation(int slot) const {
     const RotationBatch& b = rotation[static_cast<std::size_t>(slot / 4)];
     Eigen::Matrix3d r;

@@ -14,10 +14,27 @@ void FemBody::nodeRotations(std::vector<Eigen::Matrix3d>& out, std::vector<doubl
   out.assign(m.n, Eigen::Matrix3d::Identity());
   if (coherence != nullptr) coherence->assign(m.n, 1.0);
   if (!m.corotational) return;
-  std::vector<Eigen::Matrix3d> element_rot(m.mesh.tetCount()), acc;
-  for (int e = 0; e < m.mesh.tetCount(); ++e)
-    element_rot[e] = fem_detail::polarRotation(m.elementF(e, m.q));
+  std::vector<Eigen::Matrix3d>& element_rot = m.query_element_rot;
+  element_rot.resize(static_cast<std::size_t>(m.mesh.tetCount()));
+  if (!m.general_loop && !m.rotation.empty()) {
+    // each element's polar factor by the element loop's Newton steps from the rotation the last
+    // element loop kept (the step's linearisation point q + h v, close to q): two or three
+    // steps instead of a cold decomposition, the same factors (the reference path where F is
+    // ill-conditioned or the steps do not converge); summed in the mesh's order as the cold path
+    // does (docs/design.md, "The rotation, warm-started")
+    m.rotationsAt(m.q, m.query_rotation);
+    for (std::size_t slot = 0; slot < m.assembly_elems.size(); ++slot) {
+      const FemBody::Impl::RotationBatch& b = m.query_rotation[slot / 4];
+      Eigen::Matrix3d& r = element_rot[static_cast<std::size_t>(m.assembly_elems[slot].index)];
+      for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) r(i, j) = b.r[i][j][slot % 4];
+    }
+  } else {
+    for (int e = 0; e < m.mesh.tetCount(); ++e)
+      element_rot[e] = fem_detail::polarRotation(m.elementF(e, m.q));
+  }
   m.counters.rotation_extractions += m.mesh.tetCount();
+  std::vector<Eigen::Matrix3d> acc;
   std::vector<double> weight;
   m.sumNodeRotations(&element_rot, acc, weight);
   m.finishNodeRotations(acc, weight, out, smoothing_passes);

@@ -237,7 +237,10 @@ class FemBody {
   /// (group, smoothing passes) the average uses: 1 when they all rotate alike, smaller as their
   /// rotations spread (about 1 - theta^2/3 for a spread of theta rad). The warped compliance's
   /// error grows like the spread squared (docs/measurements.md, "Accuracy against time": elements crushed by a
-  /// grasp). Throws tactus::Error when smoothing_passes < 0.
+  /// grasp). Throws tactus::Error when smoothing_passes < 0. Each element's polar factor is
+  /// taken by the element loop's Newton steps from the rotation the last step kept (a cold
+  /// decomposition on the general element loop or before any step): the same factors to
+  /// rounding. Works in the body's scratch: not for concurrent calls on one body.
   void nodeRotations(std::vector<Eigen::Matrix3d>& out,
                      std::vector<double>* coherence = nullptr, int smoothing_passes = 0) const;
   /// The same node rotations from the element rotations of the last free motion's element loop,
