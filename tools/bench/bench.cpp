@@ -93,6 +93,8 @@ struct BenchOptions {
   int instruments = 0;                 ///< > 0: keep only the scene's first N instruments
   std::string split_contact_groups;    ///< "true"/"false": overrides solver.split_contact_groups
   std::string local_model;             ///< non-empty: overrides haptics.local_model
+  int background_lag = -1;             ///< >= 0: overrides solver.background_refactor_lag_steps
+  std::string when_ready;              ///< "true"/"false": overrides ..._refactor_when_ready
 };
 
 int run(const BenchOptions& o) {
@@ -112,6 +114,8 @@ int run(const BenchOptions& o) {
   if (!o.split_contact_groups.empty()) {
     spec.solver.split_contact_groups = o.split_contact_groups == "true";
   }
+  if (o.background_lag >= 0) spec.solver.background_refactor_lag_steps = o.background_lag;
+  if (!o.when_ready.empty()) spec.solver.background_refactor_when_ready = o.when_ready == "true";
   if (o.linear == "cholmod") spec.solver.linear = sim::LinearSolverKind::kCholmod;
   if (o.linear == "pcg") spec.solver.linear = sim::LinearSolverKind::kPcg;
   if (o.linear == "cholmod_reuse") spec.solver.linear = sim::LinearSolverKind::kCholmodReuse;
@@ -467,6 +471,14 @@ int main(int argc, char** argv) {
   app.add_option("--local-model", o.local_model,
                  "Override the scene's haptics.local_model (full, linearized, automatic)")
       ->check(CLI::IsMember({"full", "linearized", "automatic"}));
+  app.add_option("--background-refactor-lag-steps", o.background_lag,
+                 "Override the scene's solver.background_refactor_lag_steps (> 0: refactorise "
+                 "on a worker thread)")
+      ->check(CLI::Range(0, 1000));
+  app.add_option("--background-refactor-when-ready", o.when_ready,
+                 "Override the scene's solver.background_refactor_when_ready (true: no step "
+                 "waits for the worker)")
+      ->check(CLI::IsMember({"true", "false"}));
   app.add_option("--linear", o.linear, "Override the scene's solver.linear")
       ->check(CLI::IsMember({"cholmod", "pcg", "cholmod_reuse"}));
   app.add_option("--log-level", o.log_level, "spdlog level of the simulation library")
