@@ -330,8 +330,9 @@ int run(const BenchOptions& o) {
               1e3 * other_threads_cpu_s / static_cast<double>(std::max(1L, steps)));
   const sim::BlasLockFigures blas_lock = sim::blasLockFigures();
   std::printf("CHOLMOD calls that waited for the BLAS lock (another thread's supernodal "
-              "factorisation or solve): %ld, %.1f ms in all\n", blas_lock.contended_calls,
-              1e3 * blas_lock.waited_s);
+              "factorisation or solve): %ld, %.1f ms in all; solves that found it taken and used "
+              "a simplicial copy instead: %ld\n", blas_lock.contended_calls,
+              1e3 * blas_lock.waited_s, blas_lock.simplicial_instead_of_waiting);
   std::printf(
       "steps in contact: %zu of %ld; over those: contacts median %.0f, max %.0f (rows "
       "median %.0f, max %.0f); sim NSGS sweeps median %.0f\n",

@@ -51,8 +51,16 @@ void FemBody::Impl::init(const TetMesh& m, const FemMaterial& mat,
     // step's own solves use simplicial factors, which make no BLAS call (linear_solver.h)
     background = std::make_unique<fem_detail::BackgroundFactoriser>();
     reuse.setBackground(background.get());
-    chol.setBlasFreeSolves(true);
-    chol_rest.setBlasFreeSolves(true);
+    if (opt.background_refactor_when_ready) {
+      // no solve waits for the worker's BLAS: each takes the supernodal factor when the lock is
+      // free and its simplicial copy when the worker holds it (timing-dependent rounding, as the
+      // takeover already is)
+      chol.setDualForms(true);
+      chol_rest.setDualForms(true);
+    } else {
+      chol.setBlasFreeSolves(true);
+      chol_rest.setBlasFreeSolves(true);
+    }
   }
   corotational = mat.law != MaterialLaw::kLinear;
   rotation_stiffness =

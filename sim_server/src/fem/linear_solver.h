@@ -62,21 +62,40 @@ class CholmodSolver {
   /// See the class comment; turning it on converts a supernodal numeric factor held now.
   void setBlasFreeSolves(bool on);
   bool blasFreeSolves() const { return blas_free_solves_; }
+  /// Both forms: a supernodal numeric factor is kept and a simplicial copy of it made after each
+  /// factorisation (cholmod_copy_factor, then cholmod_change_factor on the copy); solve() uses the
+  /// supernodal one when it gets cholmodBlasMutex() at once (std::try_to_lock) and the simplicial
+  /// copy, without BLAS, when another thread holds it: a solve never waits for the lock, and is
+  /// the faster supernodal one whenever no worker is in BLAS. The two forms round differently,
+  /// so which one solved depends on timing. Turning it on copies a supernodal factor held now.
+  /// Exclusive with setBlasFreeSolves (which wins).
+  void setDualForms(bool on);
+  bool dualForms() const { return dual_forms_; }
   /// The numeric factor is supernodal (its solves use BLAS and take the lock).
   bool supernodal() const { return factor_ != nullptr && factor_->is_super; }
 
  private:
   cholmod_sparse view(Sparse& lower) const;
   void toSimplicial();
+  void makeSimplicialCopy();
   cholmod_common common_;
   cholmod_factor* factor_ = nullptr;
+  cholmod_factor* simplicial_ = nullptr;   // dual forms: the simplicial copy of factor_
   cholmod_factor* symbolic_ = nullptr;   // the supernodal analysis (null when simplicial)
   cholmod_dense* x_ = nullptr;
   cholmod_dense* y_ = nullptr;
   cholmod_dense* e_ = nullptr;
+  cholmod_dense* x2_ = nullptr;   // the simplicial copy's solve workspaces
+  cholmod_dense* y2_ = nullptr;
+  cholmod_dense* e2_ = nullptr;
   bool factorized_ = false;
   bool blas_free_solves_ = false;
+  bool dual_forms_ = false;
 };
+
+/// Solves of dual-form factors (CholmodSolver::setDualForms) that found the BLAS lock taken and
+/// used the simplicial copy instead of waiting.
+long dualFormSimplicialSolves();
 
 /// Work vectors of conjugateGradient, kept between calls (no allocation once sized).
 struct CgBuffers {
@@ -151,7 +170,10 @@ CgResult conjugateGradient(const CholmodSolver::Sparse& lower, const Eigen::Vect
 /// the factor to the simplicial form outside the lock (CholmodSolver::setBlasFreeSolves), so the
 /// factor handed over is solved without BLAS. The caller's solver must be set so too: then
 /// nothing on the step's thread runs BLAS while the worker does, except a factorisation there,
-/// which waits for the worker's. The worker runs at the process's priority: a lower one would
+/// which waits for the worker's. With a caller's solver set to dual forms
+/// (CholmodSolver::setDualForms) the worker keeps the supernodal factor and hands over its
+/// simplicial copy with it (made outside the lock), and the caller's solves take whichever the
+/// lock allows without waiting. The worker runs at the process's priority: a lower one would
 /// make such a factorisation wait longer whenever the machine is busy.
 class BackgroundFactoriser {
  public:

@@ -101,7 +101,9 @@ enum class PcgPreconditioner {
 ///    over at the first step, background_refactor_lag_steps or more after its start, at which the
 ///    worker has finished (Counters::background_not_ready counts the steps that went on with the
 ///    old factor instead); each step still meets cg_tolerance, but which factor preconditions
-///    which step then depends on the worker's timing.
+///    which step then depends on the worker's timing. The body's factors then keep both forms:
+///    a solve uses the supernodal one (BLAS) when no worker is in BLAS and its simplicial copy
+///    when one is, never waiting (BlasLockFigures::simplicial_instead_of_waiting).
 struct FemSolverOptions {
   LinearSolverKind linear = LinearSolverKind::kCholmod;
   double cg_tolerance = 1e-8;                   ///< relative residual ||A dv - b|| / ||b||
@@ -353,6 +355,9 @@ NumericThreads queryNumericThreads();
 struct BlasLockFigures {
   long contended_calls = 0;
   double waited_s = 0.0;
+  /// solves that found the lock taken and used a factor's simplicial copy instead of waiting
+  /// (FemSolverOptions::background_refactor_when_ready)
+  long simplicial_instead_of_waiting = 0;
 };
 BlasLockFigures blasLockFigures();
 
