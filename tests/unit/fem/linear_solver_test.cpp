@@ -207,26 +207,31 @@ TEST(CholmodReuse, BackgroundRefreshMatchesTheDirectSolve) {
 }
 
 // Background refreshes taken when ready: no step waits for the worker (each takes a finished
-// factor or goes on with the one it has), each step's dv still matches the direct solve, and no
-// step after the first factorises on its own thread. Which steps a factor preconditions depends
-// on the worker's timing here, so the test holds what holds whatever the timing.
+// factor or goes on with the one it has), and each step's dv still matches the direct solve.
+// Which steps a factor preconditions depends on the worker's timing, so the test holds what
+// holds whatever the timing: every job started but the last is taken, the run goes on until one
+// was (at most kMaxSteps steps: a worker that never finishes fails it), and a step whose PCG
+// missed its bound while the worker was slow may have factorised on its own thread (counted,
+// each one a direct solve). How many jobs start depends on the timing too: the drift that starts
+// them ends as the tumbling settles, and a slow worker lets fewer start while it lasts.
 TEST(CholmodReuse, BackgroundRefreshTakenWhenReadyMatchesTheDirectSolve) {
   const double tol = 1e-10;
-  const int steps = 200;
+  constexpr int kMinSteps = 200, kMaxSteps = 5000;
   FemSolverOptions o = options(LinearSolverKind::kCholmodReuse, tol, 1);
   o.background_refactor_when_ready = true;
   FemBody reuse(beamMesh(), softMaterial(), {}, nullptr, o);
   FemBody exact(beamMesh(), softMaterial(), {}, nullptr, options(LinearSolverKind::kCholmod));
   tumble(reuse, 4.0);
-  int started = 0, taken = 0, synchronous = 0;
+  int started = 0, taken = 0, synchronous = 0, steps = 0;
   double worst = 0.0;
-  for (int s = 0; s < steps; ++s) {
+  for (; steps < kMaxSteps && (steps < kMinSteps || taken < 1); ++steps) {
+    const int s = steps;
     exact.positions() = reuse.positions();
     exact.velocities() = reuse.velocities();
     const Eigen::VectorXd v0 = reuse.velocities();
     const FemStepStats sr = reuse.freeMotion(kSolverTimeStep);
-    EXPECT_TRUE(exact.freeMotion(kSolverTimeStep).ok);
-    EXPECT_TRUE(sr.ok) << "step " << s;
+    ASSERT_TRUE(exact.freeMotion(kSolverTimeStep).ok) << "step " << s;
+    ASSERT_TRUE(sr.ok) << "step " << s;
     if (s > 0 && sr.factor_refreshed) ++synchronous;
     if (sr.background_factor_taken) ++taken;
     if (sr.background_factorisation_started) ++started;
@@ -237,14 +242,16 @@ TEST(CholmodReuse, BackgroundRefreshTakenWhenReadyMatchesTheDirectSolve) {
     worst = std::max(worst, (dv_r - dv_e).norm() / dv_e.norm());
   }
   EXPECT_LT(worst, 1e-6);
-  EXPECT_GE(started, 3);
+  EXPECT_GE(taken, 1) << "in " << steps << " steps";
+  EXPECT_LE(taken, started);
   EXPECT_GE(taken, started - 1);
-  EXPECT_EQ(synchronous, 0);
-  EXPECT_EQ(reuse.counters().factorisations, 1);   // the first step's
+  EXPECT_EQ(reuse.counters().factorisations, 1 + synchronous);   // the first step's, and those
   EXPECT_EQ(reuse.counters().background_factorisations, taken);
   EXPECT_EQ(reuse.counters().background_waits, 0);
   RecordProperty("worst_relative_dv_error", std::to_string(worst));
+  RecordProperty("steps", steps);
   RecordProperty("steps_not_ready", std::to_string(reuse.counters().background_not_ready));
+  RecordProperty("synchronous_refreshes", synchronous);
 }
 
 // solveCompliance after a step that reused an old factor factorises the current A: the same
