@@ -93,10 +93,11 @@ bool Segment::remove(const std::string& name) noexcept {
 
 namespace {
 
-// The stale object under `name`, opened and with its ownership lock taken, while the name still
-// refers to it; nullopt when it vanished, was replaced, or another process holds its lock (it is
-// replacing it right now).
-std::optional<bip::shared_memory_object> claimStale(const std::string& name) {
+// The stale object `inspected` judged stale, opened and with its ownership lock taken, while the
+// name still refers to it; nullopt when it vanished, was replaced (by a new object another
+// creator has not locked yet, say), or another process holds its lock (it is replacing it now).
+std::optional<bip::shared_memory_object> claimStale(const std::string& name,
+                                                    const Existing& inspected) {
   std::optional<bip::shared_memory_object> shm;
   try {
     shm.emplace(bip::open_only, name.c_str(), bip::read_write);
@@ -106,8 +107,9 @@ std::optional<bip::shared_memory_object> claimStale(const std::string& name) {
   const int fd = shm->get_mapping_handle().handle;
   if (!takeOwnerLock(fd)) return std::nullopt;
   struct stat held {}, named {};
-  if (::fstat(fd, &held) != 0 || ::stat(Segment::pathOf(name).c_str(), &named) != 0 ||
-      held.st_dev != named.st_dev || held.st_ino != named.st_ino) {
+  if (::fstat(fd, &held) != 0 || held.st_dev != inspected.dev || held.st_ino != inspected.ino ||
+      ::stat(Segment::pathOf(name).c_str(), &named) != 0 || held.st_dev != named.st_dev ||
+      held.st_ino != named.st_ino) {
     return std::nullopt;
   }
   return shm;
@@ -166,10 +168,11 @@ Segment Segment::create(const std::string& name, SegmentCapacity capacity,
     const Existing ex = inspectExisting(name, options.stale_after_ns);
     if (ex.live) throw SegmentError(ex.message);
     if (!ex.vanished) {
-      // Claim the stale object (take its ownership lock, free since its creator is gone) and
-      // remove the name only while it still refers to that object: of two creators replacing
-      // it at once one claims it, and neither can remove the other's new segment.
-      std::optional<bip::shared_memory_object> stale = claimStale(name);
+      // Claim the object judged stale (take its ownership lock, free since its creator is gone)
+      // and remove the name only while it still refers to that object: of two creators
+      // replacing it at once one claims it, and neither can remove the other's new segment,
+      // not even in the moment before the other locks it.
+      std::optional<bip::shared_memory_object> stale = claimStale(name, ex);
       if (!stale) continue;   // gone, replaced or being replaced: look again
       generation = ex.generation + 1;
       impl->note = "replaced a stale segment '" + name + "' (generation " +

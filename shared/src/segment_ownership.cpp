@@ -176,7 +176,12 @@ Existing inspectExisting(const std::string& name, std::int64_t stale_after_ns) {
   }
   // a directory (or anything else) under the name is not a segment being created
   struct stat st {};
-  if (::fstat(fd, &st) == 0 && !S_ISREG(st.st_mode)) {
+  const bool have_stat = ::fstat(fd, &st) == 0;
+  if (have_stat) {
+    ex.dev = st.st_dev;
+    ex.ino = st.st_ino;
+  }
+  if (have_stat && !S_ISREG(st.st_mode)) {
     ex.live = true;
     ex.message = "'" + path + "' exists and is not a shared-memory object (" +
                  (S_ISDIR(st.st_mode) ? "a directory" : "not a regular file") +

@@ -49,6 +49,8 @@ struct Existing {
   std::string message;         ///< why it is refused (live) or what was replaced (stale)
   std::uint64_t generation = 0;
   std::string creator = "unknown";   ///< "dead process N", "process N, silent for X s", ...
+  dev_t dev = 0;   ///< the inspected object's identity: only that object may be claimed as stale
+  ino_t ino = 0;
 };
 /// Inspects the object `name` (a creator that stopped beating for stale_after_ns is stale
 /// unless it still holds the ownership lock).
