@@ -641,6 +641,8 @@ std::array<double, 3> lastPrintedForce(const std::string& out) {
 TEST(BridgeClientTimeout, TheReferenceClientRendersZeroOnceTheServerIsGone) {
   FakeBridgeServer server;
   const auto dir = std::filesystem::path(::testing::TempDir());
+  // an earlier run's output must not open the gate before this client has written its own
+  std::filesystem::remove(dir / "bridge_client.out");
   ChildProcess client({kBin + "/tools/bridge_client/tactus-bridge-client", "--port",
                        std::to_string(server.port()), "--status", "--duration", "4"},
                       dir / "bridge_client.out", dir / "bridge_client.err");
