@@ -9,6 +9,7 @@
 #include "simulation_impl.h"
 #include "reactions_stage.h"
 #include "step_stages.h"
+#include "strain_limit.h"
 #include "tactus/shared/clock.h"
 
 namespace tactus::sim {
@@ -17,6 +18,28 @@ namespace tactus::sim {
 // and the compliance at the free state, W, NSGS and the constrained motion, repeated from the
 // free state while the contact passes (solver.contact_iterations) find the corrected state still
 // penetrating.
+namespace {
+
+// strain limiting (strain_limit.h) after each pass's correction, before the next detection
+// looks at the corrected state: the contacts' nodes keep their corrected positions where the
+// tet has another node to move
+void limitStrain(const SimulationModel& m, SimulationState& s, StepScratch& x, StepReport& report) {
+  report.strain_limited_elements = 0;
+  report.strain_limit_unresolved = 0;
+  for (std::size_t t = 0; t < s.tissues.size(); ++t) {
+    const TissueModel& tm = m.tissues[t];
+    if (tm.min_volume_ratio <= 0.0) continue;
+    TissueScratch& tx = x.tissues[t];
+    const StrainLimitResult limited = limitVolumes(*s.tissues[t].body, tm.rest_volume6,
+                                                   tm.min_volume_ratio, m.h_s, tx.rows.tissue,
+                                                   tx.strain_limit);
+    report.strain_limited_elements += limited.limited;
+    report.strain_limit_unresolved += limited.unresolved;
+  }
+}
+
+}  // namespace
+
 StepReport Simulation::step() {
   const SimulationModel& m = impl_->model;
   SimulationState& s = impl_->state;
@@ -47,6 +70,7 @@ StepReport Simulation::step() {
                                : FoundAt::kFreeState);
       solveContacts(m, s, x, report, counters);
       constrainedMotion(m, s, x, report, pass > 0);
+      limitStrain(m, s, x, report);
       report.contact_passes = pass + 1;
       if (!nextContactPass(m, s, x, report, counters, pass, previous_gap)) break;
     }
@@ -55,7 +79,6 @@ StepReport Simulation::step() {
     }
     if (!s.instruments.empty()) x.problem.tool_pose = s.instruments[0].pose();
   }
-
   s.t_s += m.h_s;
   ++s.step;
   x.problem.step = s.step;

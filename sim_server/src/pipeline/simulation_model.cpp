@@ -11,6 +11,7 @@
 #include "tactus/sim/instrument.h"
 #include "tactus/sim/node_regions.h"
 #include "obstacle_stage.h"
+#include "strain_limit.h"
 #include "tissue_contact_stage.h"
 
 namespace tactus::sim {
@@ -61,6 +62,8 @@ TissueModel buildTissueModel(const SceneSpec& spec, const TissueSpec& ts) {
   if (spec.instrument.present || !spec.obstacles.empty() || !spec.tissue_contacts.empty()) {
     tissue.surface = extractSurface(tissue.mesh);
   }
+  tissue.min_volume_ratio = ts.min_volume_ratio;
+  if (ts.min_volume_ratio > 0.0) tissue.rest_volume6 = restVolumes6(tissue.mesh);
   return tissue;
 }
 

@@ -36,6 +36,9 @@ struct TissueModel {
   std::vector<int> fixed_nodes;    ///< Dirichlet nodes: the listed ones and those in the boxes
                                    ///< and regions, and those a displacement load moves
   std::vector<TissueLoad> loads;   ///< forces, pressures, displacements (loads.h)
+  /// strain_limit.min_volume_ratio (0: off) and, when on, six times each tet's rest volume
+  double min_volume_ratio = 0.0;
+  std::vector<double> rest_volume6;
 };
 
 struct SimulationModel {

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "contact_groups.h"
+#include "strain_limit.h"
 #include "tactus/shared/nsgs.h"
 #include "tactus/shared/pose.h"
 #include "tactus/sim/collision.h"
@@ -38,6 +39,7 @@ struct TissueScratch {
   Eigen::MatrixXd coupled_w;             ///< H C H^T over the coupled rows
   std::vector<double> coupled_f;         ///< f on the coupled rows
   std::vector<int> group_begin;          ///< coupled rows of one global row (addCoupledTissueW)
+  StrainLimitScratch strain_limit;       ///< the volume limiter's (strain_limit.h)
 };
 
 /// The rows of the contacts between tissues, after every tissue's own rows.

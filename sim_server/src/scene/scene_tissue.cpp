@@ -45,7 +45,7 @@ void SceneParser::readTissues(const YAML::Node& root, SceneSpec* spec) {
 
 void SceneParser::readTissue(const YAML::Node& t, const std::string& path, TissueSpec* tissue) {
   checkKeys(t, path, {"name", "mesh", "transform", "material", "element", "damping", "fixed",
-                      "compliance", "loads"});
+                      "compliance", "loads", "strain_limit"});
   if (t["loads"].IsDefined()) readLoads(t["loads"], join(path, "loads"), &tissue->loads);
   string(t, path, "name", &tissue->name);
   require(t, path, "mesh");
@@ -123,6 +123,12 @@ void SceneParser::readTissue(const YAML::Node& t, const std::string& path, Tissu
            kAtMost(1.0), kNonNegativeUpTo(1.0));
     integer(n, p, "rotation_smoothing", &tissue->rotation_smoothing_passes, 0,
             kMaxRotationSmoothingPasses, 4);
+  }
+  if (section(t, path, "strain_limit", &n)) {
+    const std::string p = join(path, "strain_limit");
+    checkKeys(n, p, {"min_volume_ratio"});
+    number(n, p, "min_volume_ratio", &tissue->min_volume_ratio, kNonNegative, kAtMost(0.95),
+           kNonNegativeUpTo(0.9));
   }
 }
 

@@ -101,6 +101,9 @@ struct TissueSpec {
   double exact_below_coherence = 0.0;
   /// compliance.rotation_smoothing -> ComplianceOptions::rotation_smoothing_passes (0: off)
   int rotation_smoothing_passes = 0;
+  /// strain_limit.min_volume_ratio: after the constrained motion no tet keeps less than this
+  /// share of its rest volume (docs/design.md, "Strain limiting"; 0: off)
+  double min_volume_ratio = 0.0;
 };
 
 /// A pose: position [m] and orientation (unit quaternion), world frame.

@@ -1,0 +1,113 @@
+// Strain limiting on volume (strain_limit.h).
+#include "strain_limit.h"
+
+#include <algorithm>
+
+namespace tactus::sim {
+
+namespace {
+
+// the limiter aims this far above the bound, so that a tet it has lifted is not pulled back
+// below by its neighbours' projections in the same sweep
+constexpr double kStrainLimitSlack = 0.02;
+constexpr int kStrainLimitMaxSweeps = 20;
+
+double volume6At(const Eigen::VectorXd& q, const std::array<int, 4>& t) {
+  const Eigen::Vector3d a = q.segment<3>(3 * t[0]);
+  return (q.segment<3>(3 * t[1]) - a).dot((q.segment<3>(3 * t[2]) - a).cross(q.segment<3>(3 * t[3]) - a));
+}
+
+// the tets below min_ratio at q, into active
+void collectBelow(const FemBody& body, const std::vector<double>& rest6, double min_ratio,
+                  std::vector<int>& active) {
+  active.clear();
+  const Eigen::VectorXd& q = body.positions();
+  const auto& tets = body.mesh().tets;
+  for (std::size_t i = 0; i < tets.size(); ++i) {
+    if (volume6At(q, tets[i]) < min_ratio * rest6[i]) active.push_back(static_cast<int>(i));
+  }
+}
+
+}  // namespace
+
+std::vector<double> restVolumes6(const TetMesh& mesh) {
+  std::vector<double> out(mesh.tets.size());
+  for (std::size_t i = 0; i < mesh.tets.size(); ++i) {
+    const auto& t = mesh.tets[i];
+    const Eigen::Vector3d a = mesh.nodes.col(t[0]);
+    out[i] = (mesh.nodes.col(t[1]) - a).dot((mesh.nodes.col(t[2]) - a).cross(mesh.nodes.col(t[3]) - a));
+  }
+  return out;
+}
+
+StrainLimitResult limitVolumes(FemBody& body, const std::vector<double>& rest6, double min_ratio,
+                               double h, std::span<const TissueRow> rows,
+                               StrainLimitScratch& scratch) {
+  StrainLimitResult out;
+  collectBelow(body, rest6, min_ratio, scratch.active);
+  out.limited = static_cast<int>(scratch.active.size());
+  if (scratch.active.empty()) return out;
+  const int n = body.nodeCount();
+  scratch.pinned.assign(static_cast<std::size_t>(n), 0);
+  const std::vector<bool>& fixed = body.fixedMask();
+  // 2: fixed, never moves; 1: in a contact row, moves only with no free node in its tet
+  for (int i = 0; i < n; ++i) scratch.pinned[static_cast<std::size_t>(i)] = fixed[static_cast<std::size_t>(i)] ? 2 : 0;
+  for (const TissueRow& r : rows) {
+    for (int k = 0; k < 3; ++k) {
+      const int node = r.node[static_cast<std::size_t>(k)];
+      if (node >= 0 && r.weight[static_cast<std::size_t>(k)] != 0.0 && scratch.pinned[static_cast<std::size_t>(node)] == 0) {
+        scratch.pinned[static_cast<std::size_t>(node)] = 1;
+      }
+    }
+  }
+  Eigen::VectorXd& q = body.positions();
+  Eigen::VectorXd& v = body.velocities();
+  const Eigen::VectorXd& mass = body.lumpedMass();
+  const auto& tets = body.mesh().tets;
+  const double target = min_ratio + kStrainLimitSlack;
+  for (out.sweeps = 1; out.sweeps <= kStrainLimitMaxSweeps; ++out.sweeps) {
+    for (int e : scratch.active) {
+      const std::array<int, 4>& t = tets[static_cast<std::size_t>(e)];
+      const double c = volume6At(q, t) - target * rest6[static_cast<std::size_t>(e)];
+      if (c >= 0.0) continue;
+      const Eigen::Vector3d x0 = q.segment<3>(3 * t[0]);
+      const Eigen::Vector3d d1 = q.segment<3>(3 * t[1]) - x0;
+      const Eigen::Vector3d d2 = q.segment<3>(3 * t[2]) - x0;
+      const Eigen::Vector3d d3 = q.segment<3>(3 * t[3]) - x0;
+      std::array<Eigen::Vector3d, 4> g;
+      g[1] = d2.cross(d3);
+      g[2] = d3.cross(d1);
+      g[3] = d1.cross(d2);
+      g[0] = -(g[1] + g[2] + g[3]);
+      // the free nodes move; a tet whose nodes are all in contact (or fixed) moves its contact
+      // nodes, and the next contact pass or step sees what that did to the gaps
+      std::array<double, 4> w{};
+      double denom = 0.0;
+      for (int pass = 0; pass < 2 && !(denom > 0.0); ++pass) {
+        for (int k = 0; k < 4; ++k) {
+          const auto node = static_cast<std::size_t>(t[static_cast<std::size_t>(k)]);
+          const bool moves = pass == 0 ? scratch.pinned[node] == 0 : scratch.pinned[node] == 1;
+          w[static_cast<std::size_t>(k)] = moves ? 1.0 / mass[static_cast<Eigen::Index>(3 * node)] : 0.0;
+          denom += w[static_cast<std::size_t>(k)] * g[static_cast<std::size_t>(k)].squaredNorm();
+        }
+      }
+      if (!(denom > 0.0)) continue;   // fixed nodes only
+      const double lambda = -c / denom;
+      for (int k = 0; k < 4; ++k) {
+        const double wk = w[static_cast<std::size_t>(k)];
+        if (wk == 0.0) continue;
+        const Eigen::Vector3d dx = lambda * wk * g[static_cast<std::size_t>(k)];
+        const int node = t[static_cast<std::size_t>(k)];
+        q.segment<3>(3 * node) += dx;
+        v.segment<3>(3 * node) += dx / h;
+      }
+    }
+    collectBelow(body, rest6, min_ratio, scratch.active);
+    if (scratch.active.empty()) break;
+  }
+  out.sweeps = std::min(out.sweeps, kStrainLimitMaxSweeps);
+  out.unresolved = static_cast<int>(scratch.active.size());
+  return out;
+}
+
+}  // namespace tactus::sim
