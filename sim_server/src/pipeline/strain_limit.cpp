@@ -10,7 +10,11 @@ namespace {
 // the limiter aims this far above the bound, so that a tet it has lifted is not pulled back
 // below by its neighbours' projections in the same sweep
 constexpr double kStrainLimitSlack = 0.02;
-constexpr int kStrainLimitMaxSweeps = 20;
+constexpr int kStrainLimitMaxSweeps = 40;
+// after this many sweeps the contact nodes move too: the tets left below the bound are held
+// between contact nodes (a bite squeezed across its whole thickness), and only the contact
+// nodes can give them their volume back (the next contact pass or step sees the gaps)
+constexpr int kStrainLimitFreeNodeSweeps = 10;
 
 double volume6At(const Eigen::VectorXd& q, const std::array<int, 4>& t) {
   const Eigen::Vector3d a = q.segment<3>(3 * t[0]);
@@ -86,7 +90,9 @@ StrainLimitResult limitVolumes(FemBody& body, const std::vector<double>& rest6, 
       for (int pass = 0; pass < 2 && !(denom > 0.0); ++pass) {
         for (int k = 0; k < 4; ++k) {
           const auto node = static_cast<std::size_t>(t[static_cast<std::size_t>(k)]);
-          const bool moves = pass == 0 ? scratch.pinned[node] == 0 : scratch.pinned[node] == 1;
+          const bool contact_moves = out.sweeps > kStrainLimitFreeNodeSweeps;
+          const bool moves = pass == 0 ? scratch.pinned[node] == 0 || (contact_moves && scratch.pinned[node] == 1)
+                                       : scratch.pinned[node] == 1;
           w[static_cast<std::size_t>(k)] = moves ? 1.0 / mass[static_cast<Eigen::Index>(3 * node)] : 0.0;
           denom += w[static_cast<std::size_t>(k)] * g[static_cast<std::size_t>(k)].squaredNorm();
         }
