@@ -207,6 +207,17 @@ TEST(Scene, RotationSmoothing) {
   EXPECT_THROW(parse("{model: warped, rotation_smoothing: 1.5}"), SceneError);
 }
 
+TEST(Scene, StrainLimit) {
+  const auto parse = [](const std::string& limit) {
+    return parseScene(kFullHead + "    strain_limit: " + limit + "\n", "s.yaml", kSceneFiles);
+  };
+  EXPECT_EQ(parseScene(kFullHead, "s.yaml", kSceneFiles).tissues.at(0).min_volume_ratio, 0.0);
+  EXPECT_EQ(parse("{min_volume_ratio: 0.5}").tissues.at(0).min_volume_ratio, 0.5);
+  EXPECT_THROW(parse("{min_volume_ratio: -0.1}"), SceneError);
+  EXPECT_THROW(parse("{min_volume_ratio: 1.0}"), SceneError);
+  EXPECT_THROW(parse("{min_ratio: 0.5}"), SceneError);
+}
+
 TEST(Scene, LawTangentAndElement) {
   const auto tissue = [](const std::string& lines) {
     return parseScene(kFullHead + lines, "s.yaml", kSceneFiles).tissues.at(0);
