@@ -2,6 +2,7 @@
 #include "strain_limit.h"
 
 #include <algorithm>
+#include <cmath>
 
 namespace tactus::sim {
 
@@ -11,6 +12,8 @@ namespace {
 // below by its neighbours' projections in the same sweep
 constexpr double kStrainLimitSlack = 0.02;
 constexpr int kStrainLimitMaxSweeps = 40;
+// the longest move of a node in one projection, in units of the tet's size (cbrt of 6 V_rest)
+constexpr double kStrainLimitMaxStep = 0.25;
 // after this many sweeps the contact nodes move too: the tets left below the bound are held
 // between contact nodes (a bite squeezed across its whole thickness), and only the contact
 // nodes can give them their volume back (the next contact pass or step sees the gaps)
@@ -98,7 +101,16 @@ StrainLimitResult limitVolumes(FemBody& body, const std::vector<double>& rest6, 
         }
       }
       if (!(denom > 0.0)) continue;   // fixed nodes only
-      const double lambda = -c / denom;
+      double lambda = -c / denom;
+      // a flat tet's gradient is small and the linear step long: no node moves more than a
+      // quarter of the tet's size in one projection, so that the step does not invert the tets
+      // around the node it moves (the sweeps take it the rest of the way)
+      double longest = 0.0;
+      for (int k = 0; k < 4; ++k) {
+        longest = std::max(longest, w[static_cast<std::size_t>(k)] * g[static_cast<std::size_t>(k)].norm());
+      }
+      const double reach = kStrainLimitMaxStep * std::cbrt(rest6[static_cast<std::size_t>(e)]);
+      if (lambda * longest > reach) lambda = reach / longest;
       for (int k = 0; k < 4; ++k) {
         const double wk = w[static_cast<std::size_t>(k)];
         if (wk == 0.0) continue;
