@@ -103,9 +103,11 @@ TEST(Grip, AFiniteGripStopsTheJawsWhereTheTissuePushesBackInsteadOfCrushingIt) {
 // (2 (1 + 1e-12 i), i = 0..15) ends at a smallest volume ratio between -0.035 and 0.566, a tet
 // at a contact node flipping for one step (0.747, -0.035, 0.282, 0.816 on four steps in a row)
 // where the correction pushes that node by its rest response (docs/design.md, "Strain
-// limiting"). With strain limiting at 0.5 (the liver grasp scenes' bound) every one of the 16
-// ends at 0.500-0.566. Four of them here (i = 0, 4, 6, 13: 0.542, 0.423, -0.035 and 0.492
-// without the limiter; 0.542, 0.508, 0.516 and 0.520 with it).
+// limiting"; measured with the node rotations by a cold polar decomposition, before they were
+// taken by Newton steps). With strain limiting at 0.5 (the liver grasp scenes' bound) every one
+// of the 16 ended at 0.500-0.566. Four of them here (i = 0, 4, 6, 13: 0.542, 0.423, -0.035 and
+// 0.492 without the limiter; with it 0.542, 0.508, 0.516 and 0.520 then, 0.537, 0.551, 0.500 and
+// 0.520 with the Newton-step rotations).
 TEST(Grip, StrainLimitingTakesTheClosingOffItsKnifeEdge) {
   for (int i : {0, 4, 6, 13}) {
     const double k = 2.0 * (1.0 + 1e-12 * i);
