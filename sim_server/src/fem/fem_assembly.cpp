@@ -522,6 +522,29 @@ ChosenKernel& chosenKernel() {
   return k;
 }
 
+// Runs the CPU's batch kernel over `loop` (its fallback list sized for loop.elements in
+// `fallback_slots`); without one, lists every element for the reference path. True when a kernel
+// ran.
+bool runBatchKernel(BatchLoop& loop, std::vector<int>& fallback_slots) {
+  fallback_slots.resize(static_cast<std::size_t>(loop.elements));
+  loop.fallback = fallback_slots.data();
+  const BatchKernel kernel = chosenKernel().fn;
+  if (kernel != nullptr) {
+    kernel(loop);
+    return true;
+  }
+  for (int slot = 0; slot < loop.elements; ++slot) loop.fallback[loop.fallback_count++] = slot;
+  return false;
+}
+
+// Element `slot`'s rotation into its batch's lane.
+void storeElementRotation(std::vector<RotationBatch>& rotation, int slot,
+                          const Eigen::Matrix3d& r) {
+  RotationBatch& rb = rotation[static_cast<std::size_t>(slot / 4)];
+  for (int a = 0; a < 3; ++a)
+    for (int b = 0; b < 3; ++b) rb.r[a][b][slot % 4] = r(a, b);
+}
+
 }  // namespace
 
 bool setFemElementKernel(const char* name) { return choose(chosenKernel(), name); }
@@ -628,35 +651,24 @@ void FemBody::Impl::evaluate(const Eigen::VectorXd& q, const Eigen::VectorXd* v,
   loop.rotate = rotate;
   loop.keep = rotate;
   loop.count_inverted = inverted_at_q != nullptr;
-  fallback_slots.resize(static_cast<std::size_t>(ne));
-  loop.fallback = fallback_slots.data();
-  const BatchKernel kernel = chosenKernel().fn;
-  if (kernel != nullptr) {
-    kernel(loop);
-  } else {
-    // the reference path for every element
-    for (int slot = 0; slot < ne; ++slot) loop.fallback[loop.fallback_count++] = slot;
-    if (inverted_at_q)
-      for (const AssemblyElement& el : assembly_elems) {
-        Eigen::Matrix3d fq = Eigen::Matrix3d::Zero();
-        for (int k = 1; k < 4; ++k)
-          fq.noalias() += (q.segment<3>(3 * el.node[k]) - q.segment<3>(3 * el.node[0])) *
-                          el.g.col(k).transpose();
-        loop.inverted += !(fq.determinant() > 0.0);
-      }
+  const bool batched = runBatchKernel(loop, fallback_slots);
+  if (!batched && inverted_at_q) {   // the reference path for every element: count here
+    for (const AssemblyElement& el : assembly_elems) {
+      Eigen::Matrix3d fq = Eigen::Matrix3d::Zero();
+      for (int k = 1; k < 4; ++k)
+        fq.noalias() += (q.segment<3>(3 * el.node[k]) - q.segment<3>(3 * el.node[0])) *
+                        el.g.col(k).transpose();
+      loop.inverted += !(fq.determinant() > 0.0);
+    }
   }
   // the elements the batches left: the reference path, in slot order
   for (int i = 0; i < loop.fallback_count; ++i) {
     const int slot = loop.fallback[i];
     const Eigen::Matrix3d r = elementStep(slot, loop.q, loop.v, h, loop.beta, loop.force, vals,
                                           c_k, rotate);
-    if (rotate) {
-      RotationBatch& rb = (*rot)[static_cast<std::size_t>(slot / 4)];
-      for (int a = 0; a < 3; ++a)
-        for (int b = 0; b < 3; ++b) rb.r[a][b][slot % 4] = r(a, b);
-    }
+    if (rotate) storeElementRotation(*rot, slot, r);
   }
-  if (kernel != nullptr) counters.fallback_elements += loop.fallback_count;
+  if (batched) counters.fallback_elements += loop.fallback_count;
   if (inverted_at_q) *inverted_at_q = loop.inverted;
   if (rotate) {
     counters.rotation_extractions += ne;
@@ -688,21 +700,11 @@ void FemBody::Impl::rotationsAt(const Eigen::VectorXd& x, std::vector<RotationBa
   loop.q = x.data();
   loop.rotate = true;
   loop.keep = true;   // into `out`
-  fallback_slots.resize(static_cast<std::size_t>(ne));
-  loop.fallback = fallback_slots.data();
-  const BatchKernel kernel = chosenKernel().fn;
-  if (kernel != nullptr) {
-    kernel(loop);
-  } else {
-    for (int slot = 0; slot < ne; ++slot) loop.fallback[loop.fallback_count++] = slot;
-  }
+  (void)runBatchKernel(loop, fallback_slots);
   for (int i = 0; i < loop.fallback_count; ++i) {
     const int slot = loop.fallback[i];
-    const Eigen::Matrix3d r =
-        elementStep(slot, loop.q, nullptr, 0.0, 0.0, nullptr, nullptr, 0.0, true);
-    RotationBatch& rb = out[static_cast<std::size_t>(slot / 4)];
-    for (int a = 0; a < 3; ++a)
-      for (int b = 0; b < 3; ++b) rb.r[a][b][slot % 4] = r(a, b);
+    storeElementRotation(
+        out, slot, elementStep(slot, loop.q, nullptr, 0.0, 0.0, nullptr, nullptr, 0.0, true));
   }
 }
 
