@@ -239,6 +239,8 @@ PYBIND11_MODULE(tactus, m) {
                              [](const tactus::StepReport& r) { return tactus::Vector6d(r.tool_wrench); })
       .def_readonly("finite", &tactus::StepReport::finite)
       .def_readonly("inverted_elements", &tactus::StepReport::inverted_elements)
+      .def_readonly("strain_limited_elements", &tactus::StepReport::strain_limited_elements)
+      .def_readonly("strain_limit_unresolved", &tactus::StepReport::strain_limit_unresolved)
       .def_readonly("fem_factorisations", &tactus::StepReport::fem_factorisations)
       .def_readonly("fem_cg_iterations", &tactus::StepReport::fem_cg_iterations)
       .def_readonly("times", &tactus::StepReport::times);

@@ -23,6 +23,8 @@ struct CloseResult {
   double contact_torque_nm = 0.0;  ///< grip . f of the last problem (its rows' dir . dp/dphi)
   double grip_rate = 0.0;
   int contacts = 0;
+  int strain_limited = 0;   ///< tets the strain limiter lifted, summed over the steps
+  int strain_unresolved = 0;   ///< and those it left below its bound
 };
 
 double minVolumeRatio(const FemBody& body) {
@@ -59,6 +61,8 @@ CloseResult closeOnTheLobe(double grip_k, double min_volume_ratio = 0.0) {
     sim.setDeviceTarget(target);
     const StepReport r = sim.step();
     EXPECT_TRUE(r.finite) << "step " << k;
+    out.strain_limited += r.strain_limited_elements;
+    out.strain_unresolved += r.strain_limit_unresolved;
     if (sim.time() > 2.0) out.min_volume_ratio = std::min(out.min_volume_ratio, minVolumeRatio(sim.tissue(0)));
     out.target_opening = target.gripper_opening;
     out.contacts = r.contacts;
@@ -97,6 +101,8 @@ TEST(Grip, AFiniteGripStopsTheJawsWhereTheTissuePushesBackInsteadOfCrushingIt) {
   EXPECT_NEAR(grip.spring_torque_nm + damping_torque + grip.contact_torque_nm, 0.0,
               0.01 * grip.contact_torque_nm);
   EXPECT_GT(grip.min_volume_ratio, 0.4);
+  // no strain_limit in the scene: the limiter is not run
+  EXPECT_EQ(kinematic.strain_limited + grip.strain_limited, 0);
 }
 
 // The closing above sits on a knife edge: the grip changed by a few units of its last digits
@@ -109,6 +115,7 @@ TEST(Grip, AFiniteGripStopsTheJawsWhereTheTissuePushesBackInsteadOfCrushingIt) {
 // 0.492 without the limiter; with it 0.542, 0.508, 0.516 and 0.520 then, 0.537, 0.551, 0.500 and
 // 0.520 with the Newton-step rotations).
 TEST(Grip, StrainLimitingTakesTheClosingOffItsKnifeEdge) {
+  int limited_tets = 0;
   for (int i : {0, 4, 6, 13}) {
     const double k = 2.0 * (1.0 + 1e-12 * i);
     const CloseResult limited = closeOnTheLobe(k, 0.5);
@@ -117,7 +124,10 @@ TEST(Grip, StrainLimitingTakesTheClosingOffItsKnifeEdge) {
     EXPECT_GE(limited.min_volume_ratio, 0.5) << "i = " << i;
     EXPECT_GT(limited.contacts, 50) << "i = " << i;
     EXPECT_GT(limited.opening, limited.target_opening + 1e-3) << "i = " << i;
+    EXPECT_EQ(limited.strain_unresolved, 0) << "i = " << i;   // the step reports what it did
+    limited_tets += limited.strain_limited;
   }
+  EXPECT_GT(limited_tets, 0);   // i = 6 fell to -0.035 without it: the limiter acted
 }
 
 }  // namespace
