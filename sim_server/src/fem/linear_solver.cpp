@@ -176,10 +176,7 @@ void CholmodSolver::makeSimplicialCopy() {
   if (!factor_->is_super) return;
   simplicial_ = cholmod_copy_factor(factor_, &common_);
   if (!simplicial_) throw NumericalError("CHOLMOD: copying a factor failed (out of memory?)");
-  const int ok = cholmod_change_factor(CHOLMOD_REAL, 1, 0, 1, 1, simplicial_, &common_);
-  if (!ok || common_.status < CHOLMOD_OK)
-    throw NumericalError("CHOLMOD: converting a factor to the simplicial form failed (status " +
-                         std::to_string(common_.status) + ")");
+  simplicialInPlace(simplicial_);
 }
 
 void CholmodSolver::setDualForms(bool on) {
@@ -189,9 +186,12 @@ void CholmodSolver::setDualForms(bool on) {
 }
 
 void CholmodSolver::toSimplicial() {
-  if (!factor_->is_super) return;
+  if (factor_->is_super) simplicialInPlace(factor_);
+}
+
+void CholmodSolver::simplicialInPlace(cholmod_factor* factor) {
   // LL' kept (the values are moved, no square roots), packed, monotonic
-  const int ok = cholmod_change_factor(CHOLMOD_REAL, 1, 0, 1, 1, factor_, &common_);
+  const int ok = cholmod_change_factor(CHOLMOD_REAL, 1, 0, 1, 1, factor, &common_);
   if (!ok || common_.status < CHOLMOD_OK)
     throw NumericalError("CHOLMOD: converting a factor to the simplicial form failed (status " +
                          std::to_string(common_.status) + ")");

@@ -78,6 +78,8 @@ class CholmodSolver {
   cholmod_sparse view(Sparse& lower) const;
   void toSimplicial();
   void makeSimplicialCopy();
+  /// `factor` (supernodal, of this solver's common) converted to the simplicial LL' form.
+  void simplicialInPlace(cholmod_factor* factor);
   cholmod_common common_;
   cholmod_factor* factor_ = nullptr;
   cholmod_factor* simplicial_ = nullptr;   // dual forms: the simplicial copy of factor_
