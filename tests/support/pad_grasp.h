@@ -18,8 +18,16 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <set>
+#include <stdexcept>
 #include <string>
+#include <string_view>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
@@ -172,6 +180,142 @@ inline SettledStart settle(const sim::SceneSpec& scene) {
   SettledStart s;
   s.so_far = runPadGrasp(scene, {}, 1.0, nullptr, &s.state);
   return s;
+}
+
+/// Calls f(field) on every field of a PadGraspResult, in one fixed order: what a settled start's
+/// file (writeSettledStart) holds of it. A new field must be added here too (the static_assert
+/// on the struct's size below says so).
+template <class Result, class F>
+void forEachField(Result& r, F&& f) {
+  f(r.tool_rise_m), f(r.held_rise_m), f(r.held_nodes), f(r.min_volume_ratio);
+  f(r.min_volume_ratio_t_s), f(r.min_volume_tet), f(r.min_volume_tet_in_tool_m);
+  f(r.min_volume_ratio_anywhere), f(r.min_volume_tet_anywhere);
+  f(r.min_volume_ratio_anywhere_t_s), f(r.inverted_steps), f(r.rise_ratio_trace);
+  f(r.opening_closed), f(r.min_contacts_one_jaw_held), f(r.max_friction_use_held);
+  f(r.max_sliding_fraction_held), f(r.step_s_by_phase), f(r.min_patch_volume_ratio);
+  f(r.contact_steps), f(r.unconverged_steps), f(r.sweeps), f(r.max_contacts);
+  f(r.max_distinct_nodes), f(r.max_distinct_points), f(r.max_points_held_by_both_jaws);
+  f(r.max_contacts_held), f(r.max_distinct_nodes_held), f(r.max_total_normal_n), f(r.max_load_n);
+  f(r.max_geometric_penetration_m), f(r.geometric_penetration_m), f(r.trace);
+}
+static_assert(sizeof(PadGraspResult) == 336,
+              "PadGraspResult changed: list its new field in forEachField (pad_grasp.h)");
+
+namespace settled_detail {
+constexpr char kMagic[8] = {'T', 'A', 'C', 'T', 'S', 'E', 'T', '1'};
+
+// Plain values as their bytes, vectors as their length then their elements.
+struct Writer {
+  std::string& out;
+  template <class T>
+  void operator()(const T& v) {
+    if constexpr (std::is_same_v<T, std::string>) {
+      (*this)(static_cast<std::uint64_t>(v.size()));
+      out.append(v);
+    } else if constexpr (std::is_same_v<T, Eigen::Vector3d>) {
+      (*this)(v.x()), (*this)(v.y()), (*this)(v.z());
+    } else if constexpr (std::is_same_v<T, std::pair<double, double>>) {
+      (*this)(v.first), (*this)(v.second);
+    } else if constexpr (std::is_same_v<T, PadGraspResult::Tenth>) {
+      (*this)(v.t_s), (*this)(v.opening), (*this)(v.min_jaw_ratio), (*this)(v.max_normal_n);
+    } else if constexpr (requires { v.size(); v.begin(); }) {
+      (*this)(static_cast<std::uint64_t>(v.size()));
+      for (const auto& x : v) (*this)(x);
+    } else {
+      static_assert(std::is_arithmetic_v<T>);
+      out.append(reinterpret_cast<const char*>(&v), sizeof(v));
+    }
+  }
+};
+
+struct Reader {
+  std::string_view in;
+  std::size_t at = 0;
+  void bytes(void* p, std::size_t n) {
+    if (in.size() - at < n) throw std::runtime_error("truncated");
+    std::memcpy(p, in.data() + at, n);
+    at += n;
+  }
+  std::uint64_t length() {
+    std::uint64_t n = 0;
+    (*this)(n);
+    if (n > in.size() - at) throw std::runtime_error("corrupt length");
+    return n;
+  }
+  template <class T>
+  void operator()(T& v) {
+    if constexpr (std::is_same_v<T, std::string>) {
+      v.resize(length());
+      bytes(v.data(), v.size());
+    } else if constexpr (std::is_same_v<T, Eigen::Vector3d>) {
+      (*this)(v.x()), (*this)(v.y()), (*this)(v.z());
+    } else if constexpr (std::is_same_v<T, std::pair<double, double>>) {
+      (*this)(v.first), (*this)(v.second);
+    } else if constexpr (std::is_same_v<T, PadGraspResult::Tenth>) {
+      (*this)(v.t_s), (*this)(v.opening), (*this)(v.min_jaw_ratio), (*this)(v.max_normal_n);
+    } else if constexpr (requires { v.resize(0); }) {
+      v.resize(length());
+      for (auto& x : v) (*this)(x);
+    } else if constexpr (requires { v.size(); v.begin(); }) {
+      if (length() != v.size()) throw std::runtime_error("corrupt length");
+      for (auto& x : v) (*this)(x);
+    } else {
+      static_assert(std::is_arithmetic_v<T>);
+      bytes(&v, sizeof(v));
+    }
+  }
+};
+}  // namespace settled_detail
+
+/// Writes a settled start (the state and what the settling measured) to `path`, through a
+/// temporary file and a rename; false (with `why`) if it could not.
+inline bool writeSettledStart(const std::filesystem::path& path, const SettledStart& s,
+                              std::string& why) {
+  std::string bytes(settled_detail::kMagic, sizeof(settled_detail::kMagic));
+  settled_detail::Writer w{bytes};
+  forEachField(s.so_far, w);
+  w(s.state);
+  const std::filesystem::path tmp = path.string() + ".tmp";
+  {
+    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+    out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+    out.close();
+    if (!out) {
+      why = tmp.string() + ": write failed";
+      return false;
+    }
+  }
+  std::error_code ec;
+  std::filesystem::rename(tmp, path, ec);
+  if (ec) why = path.string() + ": " + ec.message();
+  return !ec;
+}
+
+/// Reads what writeSettledStart wrote; false (with `why`) for a missing, truncated or foreign
+/// file. (Simulation::restoreState checks that the state is one of the scene's model.)
+inline bool readSettledStart(const std::filesystem::path& path, SettledStart& s,
+                             std::string& why) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) {
+    why = path.string() + ": cannot be read";
+    return false;
+  }
+  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  if (bytes.compare(0, sizeof(settled_detail::kMagic),
+                    std::string_view(settled_detail::kMagic, sizeof(settled_detail::kMagic))) != 0) {
+    why = path.string() + ": not a settled start";
+    return false;
+  }
+  try {
+    settled_detail::Reader r{bytes, sizeof(settled_detail::kMagic)};
+    forEachField(s.so_far, r);
+    r(s.state);
+    if (r.at != bytes.size()) throw std::runtime_error("trailing bytes");
+  } catch (const std::runtime_error& e) {
+    why = path.string() + ": " + e.what();
+    return false;
+  }
+  return true;
 }
 
 /// The scripted grasp with the perturbation `p` to end_s; from `start` (settle(scene)) instead of
