@@ -671,15 +671,23 @@ TEST(BridgeClientTimeout, TheReadmesPythonClientRendersZeroOnceTheServerIsGone) 
   const auto script = dir / "readme_bridge_client.py";
   std::ofstream(script) << readme.substr(begin + 10, end - begin - 10);
   FakeBridgeServer server;
-  ChildProcess client({"/usr/bin/python3", script.string(), "2.5", std::to_string(server.port())},
+  // a run long enough for any machine: the test ends it once the client has printed
+  ChildProcess client({"/usr/bin/python3", script.string(), "120", std::to_string(server.port())},
                       dir / "py_client.out", dir / "py_client.err");
-  // commands for the client's first 500 states (about 0.5 s of them, however late a loaded
-  // machine starts it), then silence: the client prints its force every 1000 states (> 1 s)
+  // commands for the client's first 500 states, then silence. The client prints its force every
+  // 1000 states, so its first line (state 1000) comes at least 500 states (> 0.5 s, five times
+  // its 100 ms timeout) after the last command, however slowly a loaded machine runs it.
   EXPECT_EQ(server.answerWhile([&](int sent) { return sent < 500 && client.running(); }), 500)
       << client.out() << client.err();
+  ASSERT_TRUE(test::waitFor(
+      [&] { return client.out().find("force") != std::string::npos || !client.running(); },
+      std::chrono::seconds(60)))
+      << "the client printed no force line\n" << client.out() << client.err();
+  ASSERT_TRUE(client.running()) << "the client ended early\n" << client.out() << client.err();
+  client.signal(SIGTERM);
   ASSERT_TRUE(client.waitExit(30s)) << "the client did not end";
   const std::string out = client.out();
-  EXPECT_NE(out.find("force"), std::string::npos) << out << client.err();
+  EXPECT_NE(out.find("1000 states sent, force"), std::string::npos) << out << client.err();
   EXPECT_EQ(lastPrintedForce(out), (std::array<double, 3>{0.0, 0.0, 0.0})) << out;
 }
 
