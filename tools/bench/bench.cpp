@@ -77,6 +77,7 @@ struct BenchOptions {
   long steps = 0;
   std::string json;
   std::string trace;
+  std::string state_out;
   double budget_us = 0.0;
   int tick_sweeps = 0;
   double displacement_mm = 0.2;
@@ -182,7 +183,9 @@ int run(const BenchOptions& o) {
   if (!o.trace.empty()) {
     trace = std::fopen(o.trace.c_str(), "w");
     if (trace == nullptr) throw Error("cannot write " + o.trace);
-    std::fprintf(trace, "step,t_s,contacts,rows,sim_sweeps,step_ms,tick_solve_us,tick_sweeps,groups,solve_ms\n");
+    std::fprintf(trace, "step,t_s,contacts,rows,sim_sweeps,step_ms,tick_solve_us,tick_sweeps,groups,solve_ms,"
+                        "free_ms,detect_ms,compliance_ms,build_w_ms,constrained_ms,cpu_ms,passes,"
+                        "factorisations,cg_iterations\n");
   }
   const std::int64_t t0 = shared::monotonicNs();
   // each step of the headless runner: publish, the figures, the haptic tick on the snapshot
@@ -193,6 +196,14 @@ int run(const BenchOptions& o) {
   // this thread's
   const std::int64_t run_process_cpu0 = processCpuNs(), run_thread_cpu0 = threadCpuNs();
   double step_cpu_s = 0.0;
+  // the trace's per-step stage times [ms], the step's thread CPU, passes and the linear solve
+  const auto traceStages = [&](const sim::StepReport& r) {
+    std::fprintf(trace, "%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%d,%d,%d\n", 1e3 * r.times.free_motion_s,
+                 1e3 * r.times.detect_collisions_s, 1e3 * r.times.update_compliance_s,
+                 1e3 * r.times.build_w_s, 1e3 * r.times.constrained_motion_s, 1e3 * step_cpu_s,
+                 r.contact_passes, static_cast<int>(r.fem_factorisations),
+                 static_cast<int>(r.fem_cg_iterations));
+  };
   const auto afterStepInner = [&](long k, const sim::StepReport& r) {
     const std::int64_t tp = shared::monotonicNs();
     publishProblem(sim, pub, static_cast<std::uint64_t>(k + 1), spec.instrument.max_opening_rad);
@@ -238,7 +249,8 @@ int run(const BenchOptions& o) {
       }
     }
     if (trace != nullptr && r.contacts <= 0) {
-      std::fprintf(trace, "%ld,%.4f,0,0,0,%.4f,0,0,0,0\n", k, sim.time(), 1e3 * stages[7].v.back());
+      std::fprintf(trace, "%ld,%.4f,0,0,0,%.4f,0,0,0,0,", k, sim.time(), 1e3 * stages[7].v.back());
+      traceStages(r);
     }
 
     // the haptic side's tick on this snapshot, read back from the slot
@@ -268,10 +280,12 @@ int run(const BenchOptions& o) {
     if (res.used == haptic::LocalModelUsed::kCorrected) ++tick_corrected;
     if (res.used == haptic::LocalModelUsed::kFallback) ++tick_fallbacks;
     if (trace != nullptr) {
-      std::fprintf(trace, "%ld,%.4f,%d,%d,%d,%.4f,%.3f,%d,%d,%.4f\n", k, sim.time(),
+      std::fprintf(trace, "%ld,%.4f,%d,%d,%d,%.4f,%.3f,%d,%d,%.4f", k, sim.time(),
                    r.contacts, r.rows, r.nsgs.sweeps, 1e3 * stages[7].v.back(),
                    1e-3 * static_cast<double>(res.elapsed_ns), res.sweeps, r.contact_groups,
                    1e3 * r.times.solve_contacts_s);
+      std::fputc(',', trace);
+      traceStages(r);
     }
   };
   const auto afterStep = [&](long k, const sim::StepReport& r) {
@@ -285,6 +299,17 @@ int run(const BenchOptions& o) {
       1e-9 * static_cast<double>((processCpuNs() - run_process_cpu0) -
                                  (threadCpuNs() - run_thread_cpu0));
   if (trace != nullptr) std::fclose(trace);
+  if (!o.state_out.empty()) {
+    // the state after the run (Simulation::saveState): two builds that step alike write the same
+    // bytes
+    const std::string bytes = sim.saveState();
+    std::FILE* out = std::fopen(o.state_out.c_str(), "wb");
+    if (out == nullptr || std::fwrite(bytes.data(), 1, bytes.size(), out) != bytes.size()) {
+      if (out != nullptr) std::fclose(out);
+      throw Error("cannot write " + o.state_out);
+    }
+    std::fclose(out);
+  }
   if (run.end == sim::RunEnd::kNonFinite) {
     throw NumericalError(fmt::format("step {}: the state became non-finite", run.steps - 1));
   }
@@ -438,6 +463,8 @@ int main(int argc, char** argv) {
   app.add_option("--steps", o.steps, "Steps to run (default: the scene's duration / time step)");
   app.add_option("--json", o.json, "Write the results as JSON");
   app.add_option("--trace", o.trace, "Write one CSV row per step (contacts, sweeps, timings)");
+  app.add_option("--state-out", o.state_out,
+                 "Write the simulation's state after the run (Simulation::saveState) to this file");
   app.add_option("--budget-us", o.budget_us,
                  "Haptic solve time budget [us] (default: 40 % of the scene's haptic period)");
   app.add_option("--tick-sweeps", o.tick_sweeps,
