@@ -59,8 +59,9 @@ StepReport Simulation::step() {
   freeMotion(m, s, x, report);
 
   if (m.has_contacts) {
-    updateCompliance(s, report);
+    // the compliance at the free state, updated when a pass first has rows (ensureCompliance)
     keepFreeState(s, x);
+    x.compliance_pending = true;
     if (!detect_at_start) detectCollisions(m, s, x, report, counters);
     double previous_gap = std::numeric_limits<double>::infinity();
     for (int pass = 0;; ++pass) {
@@ -159,6 +160,8 @@ std::span<const Contact> Simulation::contacts(int i) const {
   return *ts.found;
 }
 TissueCompliance* Simulation::compliance(int i) {
+  // at the last step's free state, also after a step without contact rows (ensureCompliance)
+  ensureCompliance(impl_->state, impl_->scratch, nullptr);
   return impl_->state.tissues.at(i).compliance.get();
 }
 Instrument* Simulation::instrument() {

@@ -7,6 +7,7 @@
 #include <cstring>
 
 #include "simulation_impl.h"
+#include "step_stages.h"
 #include "tactus/sim/state_archive.h"
 
 namespace tactus::sim {
@@ -109,6 +110,9 @@ std::string Simulation::saveState() const {
   put(out, static_cast<std::int64_t>(impl_->state.step));
   put(out, impl_->state.t_s);
   out.append(name, 0, kMaxModelNameBytes);
+  // the compliance's rotations are state: those of the last step's free state even when that
+  // step had no contact rows and left them for later (ensureCompliance)
+  ensureCompliance(impl_->state, impl_->scratch, nullptr);
   StateArchive ar(out);
   // the writer only reads the members
   transferState(ar, const_cast<SimulationState&>(impl_->state));

@@ -68,6 +68,9 @@ struct StepScratch {
   ToolRows b_tool;                       ///< H_tool L, C6 = L L^T (the row's instrument's L)
   std::vector<int> row_instrument;       ///< per row: the instrument of its contact
   std::vector<std::int64_t> node_keys;   ///< countDistinctNodes
+  /// The compliance update of this step's free state has not run yet: updateCompliance runs when
+  /// a pass first has rows (ensureCompliance), so a step without contact rows skips it
+  bool compliance_pending = false;
   // per instrument:
   std::vector<shared::Pose> tool_begin;  ///< god object pose at the start of the step
   std::vector<Instrument> tool_free;     ///< god object after its free motion

@@ -118,6 +118,22 @@ void updateCompliance(SimulationState& state, StepReport& report) {
   report.times.update_compliance_s += shared::secondsSinceNs(t0);
 }
 
+void ensureCompliance(SimulationState& state, StepScratch& scratch, StepReport* report) {
+  if (!scratch.compliance_pending) return;
+  scratch.compliance_pending = false;
+  const std::int64_t t0 = shared::monotonicNs();
+  // the free state's positions in place for the update (a pass's correction or the strain
+  // limiter may have moved the nodes since): the buffers are swapped, not copied, and back
+  for (std::size_t t = 0; t < state.tissues.size(); ++t) {
+    state.tissues[t].body->positions().swap(scratch.tissues[t].q_free);
+  }
+  for (TissueState& ts : state.tissues) ts.compliance->update(*ts.body);
+  for (std::size_t t = 0; t < state.tissues.size(); ++t) {
+    state.tissues[t].body->positions().swap(scratch.tissues[t].q_free);
+  }
+  if (report != nullptr) report->times.update_compliance_s += shared::secondsSinceNs(t0);
+}
+
 void keepFreeState(SimulationState& state, StepScratch& scratch) {
   for (std::size_t t = 0; t < state.tissues.size(); ++t) {
     scratch.tissues[t].q_free = state.tissues[t].body->positions();

@@ -38,6 +38,14 @@ double queryContacts(const SimulationModel& model, SimulationState& state, StepS
 /// (exact); rest and uncoupled keep C0.
 void updateCompliance(SimulationState& state, StepReport& report);
 
+/// updateCompliance at the step's free state (scratch.q_free) if scratch.compliance_pending: the
+/// step calls it when a pass first has contact rows (buildW), so a step without any skips the
+/// update (on liver_grasp_23k the warped model's node rotations, 5-9 ms); the rotations are
+/// those of the free state whichever pass first needs them, as if updated right after the free
+/// motion. Simulation::saveState and Simulation::compliance call it too, so the compliance's
+/// state after a step is always that of its free state. `report` may be null (no timing).
+void ensureCompliance(SimulationState& state, StepScratch& scratch, StepReport* report);
+
 /// Copies the free state (positions, velocities, god object), which every contact pass corrects.
 void keepFreeState(SimulationState& state, StepScratch& scratch);
 

@@ -97,6 +97,9 @@ class Simulation {
   int tissueCount() const;
   FemBody& tissue(int i);
   const FemBody& tissue(int i) const;
+  /// Tissue i's compliance model, its state (the warped model's rotations) that of the last
+  /// step's free state. A step without contact rows leaves the update to the first call that
+  /// needs it (a later pass's rows, this, saveState), which then makes it at that free state.
   TissueCompliance* compliance(int i);
   /// Instrument 0 (nullptr without one), or instrument i.
   Instrument* instrument();
