@@ -136,6 +136,31 @@ TEST(SimulationStateTest, LiverGraspContinuesBitForBitOver200ContactSteps) {
   expectSameRun(original, runPrinting(sim, 200), "the simulation rewound");
 }
 
+// The compliance update waits for a pass with contact rows (ensureCompliance, docs/design.md,
+// "The compliance update only when a pass has rows"): a run that forces it after every step
+// (Simulation::compliance makes a pending one) steps bit for bit as one that leaves it, through
+// the approach (steps without contact) into the grasp, and both save the same state.
+TEST(SimulationStateTest, TheDeferredComplianceUpdateChangesNothing) {
+  const SceneSpec spec = scene("liver_grasp.yaml");
+  Simulation deferred(spec);
+  Simulation eager(spec);
+  int without = 0, with = 0;
+  for (int k = 0; k < 400 && with < 30; ++k) {
+    deferred.setDeviceTarget(deferred.scriptedTarget(deferred.time()));
+    eager.setDeviceTarget(eager.scriptedTarget(eager.time()));
+    const StepReport a = deferred.step();
+    const StepReport b = eager.step();
+    ASSERT_NE(eager.compliance(0), nullptr);   // the update at this step's free state, now
+    const StepPrint pa = print(deferred, a), pb = print(eager, b);
+    ASSERT_EQ(pa.contacts, pb.contacts) << "step " << k;
+    ASSERT_EQ(pa.hash, pb.hash) << "step " << k;
+    (a.rows > 0 ? with : without) += 1;
+  }
+  EXPECT_GT(without, 10) << "no approach without contact rows";
+  EXPECT_EQ(with, 30) << "the grasper never touched the lobe";
+  EXPECT_TRUE(deferred.saveState() == eager.saveState());
+}
+
 TEST(SimulationStateTest, ObstaclesAndTissueContactContinueBitForBit) {
   const SceneSpec spec = scene("liver_on_stomach.yaml");
   ASSERT_FALSE(spec.obstacles.empty());
