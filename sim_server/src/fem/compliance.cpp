@@ -24,23 +24,6 @@ using c0_detail::RestBlock;
 
 namespace {
 
-// tile of the blocked transposes below (three 32 x 32 double tiles fit in L1)
-constexpr int kTile = 32;
-
-// dst = src^T in tiles: on liver_grasp_23k's contact steps (546 x 846) the plain transposed
-// copy's strided reads missed the cache on every element
-void transposeInto(const Eigen::MatrixXd &src, Eigen::MatrixXd &dst) {
-  const Eigen::Index r = src.rows(), c = src.cols();
-  dst.resize(c, r);
-  for (Eigen::Index j0 = 0; j0 < c; j0 += kTile)
-    for (Eigen::Index i0 = 0; i0 < r; i0 += kTile) {
-      const Eigen::Index j1 = std::min<Eigen::Index>(j0 + kTile, c);
-      const Eigen::Index i1 = std::min<Eigen::Index>(i0 + kTile, r);
-      for (Eigen::Index i = i0; i < i1; ++i)
-        for (Eigen::Index j = j0; j < j1; ++j) dst(j, i) = src(i, j);
-    }
-}
-
 // Row-to-node expansion of H: (local node, 3-vector p) pairs per row.
 struct RowTerms {
   int count = 0;
@@ -108,7 +91,7 @@ public:
     // W = G^T P (symmetric): lower triangle only, through G^T so every column
     // is one fused pass over contiguous memory, then added to both triangles of
     // w
-    transposeInto(g_, gt_);
+    gt_ = g_.transpose();
     wd_.resize(m, m);
     // (a run of rows shares the start row l; entries above the diagonal are
     // overwritten below)
@@ -120,15 +103,8 @@ public:
       combineRun(gt_, l, g, l, m - l, out);
       l += g;
     }
-    // w += wd_ with wd_'s upper triangle its lower's transpose, in tiles (the transposed reads
-    // stay in cache; the same sums as forming the upper triangle first)
-    for (int j0 = 0; j0 < m; j0 += kTile)
-      for (int i0 = 0; i0 < m; i0 += kTile) {
-        const int j1 = std::min(j0 + kTile, m), i1 = std::min(i0 + kTile, m);
-        for (int j = j0; j < j1; ++j)
-          for (int i = i0; i < i1; ++i)
-            w(i, j) += i >= j ? wd_(i, j) : wd_(j, i);
-      }
+    wd_.triangularView<Eigen::StrictlyUpper>() = wd_.transpose();
+    w += wd_;
     release();
   }
 

@@ -120,25 +120,16 @@ void addToolCompliance(const SimulationModel& model, const SimulationState& stat
     }
   }
   const double c_grip = tool.gripCompliance(h);
-  // each pair (i <= j) once, in tiles of rows and columns so that the mirrored writes W(j, i)
-  // stay in cache (row by row they missed it on every element of a large W)
-  constexpr int kTile = 32;
-  for (int i0 = 0; i0 < rows; i0 += kTile) {
-    const int i1 = std::min(i0 + kTile, rows);
-    for (int j0 = i0; j0 < rows; j0 += kTile) {
-      const int j1 = std::min(j0 + kTile, rows);
-      for (int i = i0; i < i1; ++i) {
-        if (!owns(i)) continue;
-        const auto bi = scratch.b_tool.row(i);
-        double* wi = p.W.row(i).data();
-        const double gi = c_grip * p.grip[i];
-        for (int j = std::max(i, j0); j < j1; ++j) {
-          if (!owns(j)) continue;
-          const double w = bi.dot(scratch.b_tool.row(j)) + gi * p.grip[j];
-          wi[j] += w;
-          if (j != i) p.W(j, i) += w;
-        }
-      }
+  for (int i = 0; i < rows; ++i) {
+    if (!owns(i)) continue;
+    const auto bi = scratch.b_tool.row(i);
+    double* wi = p.W.row(i).data();
+    const double gi = c_grip * p.grip[i];
+    for (int j = i; j < rows; ++j) {
+      if (!owns(j)) continue;
+      const double w = bi.dot(scratch.b_tool.row(j)) + gi * p.grip[j];
+      wi[j] += w;
+      if (j != i) p.W(j, i) += w;
     }
   }
   // contact compliance (collision.h): W + c I, penetration c f_n per contact
