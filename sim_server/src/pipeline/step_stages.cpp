@@ -121,17 +121,16 @@ void updateCompliance(SimulationState& state, StepReport& report) {
 void ensureCompliance(SimulationState& state, StepScratch& scratch, StepReport* report) {
   if (!scratch.compliance_pending) return;
   scratch.compliance_pending = false;
-  const std::int64_t t0 = shared::monotonicNs();
   // the free state's positions in place for the update (a pass's correction or the strain
   // limiter may have moved the nodes since): the buffers are swapped, not copied, and back
   for (std::size_t t = 0; t < state.tissues.size(); ++t) {
     state.tissues[t].body->positions().swap(scratch.tissues[t].q_free);
   }
-  for (TissueState& ts : state.tissues) ts.compliance->update(*ts.body);
+  StepReport untimed;
+  updateCompliance(state, report != nullptr ? *report : untimed);
   for (std::size_t t = 0; t < state.tissues.size(); ++t) {
     state.tissues[t].body->positions().swap(scratch.tissues[t].q_free);
   }
-  if (report != nullptr) report->times.update_compliance_s += shared::secondsSinceNs(t0);
 }
 
 void keepFreeState(SimulationState& state, StepScratch& scratch) {

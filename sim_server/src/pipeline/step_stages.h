@@ -3,7 +3,8 @@
 // after the paper's stage and timed under its own StageTimes field. Simulation::step()
 // (pipeline.cpp) calls them in this order:
 //
-//   freeMotion -> detectCollisions -> updateCompliance -> buildW -> solveContacts
+//   freeMotion -> detectCollisions -> [updateCompliance, when a pass first has rows] buildW
+//   -> solveContacts
 //   -> constrainedMotion [-> nextContactPass: detectCollisions, back to buildW]
 //
 // Each reads the model, changes the state, reuses the scratch and records into the report (times,
