@@ -5,6 +5,7 @@
 #include <unistd.h>
 
 #include <spdlog/spdlog.h>
+#include "tactus/shared/format.h"
 
 namespace tactus::haptic {
 

@@ -4,6 +4,7 @@
 #include "tactus/haptic/haptic_loop.h"
 
 #include <spdlog/spdlog.h>
+#include "tactus/shared/format.h"
 
 #include <algorithm>
 #include <cmath>

@@ -2,6 +2,7 @@
 // polls a device backend and re-solves the simulation's last contact problem every period.
 #include "tactus/shared/cli.h"
 #include <spdlog/spdlog.h>
+#include "tactus/shared/format.h"
 
 #include <atomic>
 #include <chrono>

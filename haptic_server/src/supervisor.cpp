@@ -2,6 +2,7 @@
 #include "tactus/haptic/supervisor.h"
 
 #include <spdlog/spdlog.h>
+#include "tactus/shared/format.h"
 
 #include <chrono>
 #include <thread>

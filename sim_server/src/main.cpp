@@ -4,6 +4,7 @@
 #include "tactus/shared/cli.h"
 #include <new>
 #include <spdlog/spdlog.h>
+#include "tactus/shared/format.h"
 
 #include <atomic>
 #include <csignal>

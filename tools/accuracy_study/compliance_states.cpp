@@ -1,6 +1,6 @@
 // Part 1b of the accuracy study: the compliance models on the same states of one exact reference
 // trajectory (see study.h, StateComparison).
-#include <fmt/format.h>
+#include "tactus/shared/format.h"
 
 #include <Eigen/SVD>
 #include <algorithm>

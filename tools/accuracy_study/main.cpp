@@ -1,7 +1,7 @@
 // tactus-accuracy: the study's plans (quick and full), its run cache, the output files and the
 // command line (what is measured and how: study.h).
 #include "tactus/shared/cli.h"
-#include <fmt/format.h>
+#include "tactus/shared/format.h"
 #include <fmt/ranges.h>
 #include <spdlog/spdlog.h>
 

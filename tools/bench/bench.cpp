@@ -9,7 +9,7 @@
 // shared/warm_start.h; the loop's sweep and time budget). --json writes everything for comparison
 // between commits. The scene runs through the headless runner (tactus/sim/runner.h), as
 // sim_server --steps does; sim_server --record-snapshots records the same snapshots.
-#include <fmt/format.h>
+#include "tactus/shared/format.h"
 #include <spdlog/spdlog.h>
 #include <unistd.h>
 

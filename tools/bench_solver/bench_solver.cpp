@@ -5,6 +5,7 @@
 // tool only: nothing else in the project links Siconos.
 
 #include <spdlog/spdlog.h>
+#include "tactus/shared/format.h"
 
 #include "tactus/shared/cli.h"
 #include <algorithm>

@@ -4,6 +4,7 @@
 // problem with an unusable diagonal of W, status ill_posed).
 
 #include <spdlog/spdlog.h>
+#include "tactus/shared/format.h"
 
 #include "tactus/shared/cli.h"
 #include <cmath>

@@ -16,7 +16,7 @@
 // inflated: use --baseline-mode after (synthetic only), which runs the bare loop alone on the
 // same core for as many ticks once the haptic loop has stopped (same core, different moment).
 #include "tactus/shared/cli.h"
-#include <fmt/format.h>
+#include "tactus/shared/format.h"
 #include <unistd.h>
 
 #include <atomic>

@@ -1,7 +1,7 @@
 // VTK frames and the .pvd series of a run.
 #include "output_writer.h"
 
-#include <fmt/format.h>
+#include "tactus/shared/format.h"
 #include <spdlog/spdlog.h>
 
 #include <algorithm>

@@ -2,11 +2,11 @@
 #include "tactus/sim/runner.h"
 
 #include <spdlog/spdlog.h>
+#include "tactus/shared/format.h"
 
 #include <algorithm>
 #include <functional>
 #include <cmath>
-#include <fmt/format.h>
 #include <memory>
 #include <sstream>
 #include <vector>

@@ -1,6 +1,6 @@
 // VTK output: ASCII .vtu files and ParaView .pvd collections.
 
-#include <spdlog/fmt/fmt.h>
+#include "tactus/shared/format.h"
 
 #include <charconv>
 #include <string>

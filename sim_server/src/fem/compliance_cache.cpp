@@ -3,6 +3,7 @@
 #include <unistd.h>
 
 #include <spdlog/spdlog.h>
+#include "tactus/shared/format.h"
 
 #include <algorithm>
 #include <cstring>

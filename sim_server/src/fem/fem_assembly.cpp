@@ -15,6 +15,7 @@
 #include <limits>
 
 #include <spdlog/spdlog.h>
+#include "tactus/shared/format.h"
 
 #include "fem_body_impl.h"
 

@@ -13,6 +13,7 @@
 #include <string>
 
 #include <spdlog/spdlog.h>
+#include "tactus/shared/format.h"
 
 #include "tactus/shared/clock.h"
 #include "tactus/shared/error.h"

@@ -6,7 +6,7 @@
 #include <cstdio>
 #include <string>
 
-#include <fmt/format.h>
+#include "tactus/shared/format.h"
 
 #include "rest_compliance_block.h"
 #include "tactus/shared/error.h"

@@ -1,6 +1,6 @@
 // Gmsh physical groups: from the file's node ids to sorted node sets of the mesh (NodeGroup).
 
-#include <spdlog/fmt/fmt.h>
+#include "tactus/shared/format.h"
 
 #include <algorithm>
 #include <map>

@@ -1,6 +1,6 @@
 // The legacy VTK reader (ASCII and binary unstructured grids).
 
-#include <spdlog/fmt/fmt.h>
+#include "tactus/shared/format.h"
 #include <spdlog/spdlog.h>
 
 #include <Eigen/Geometry>

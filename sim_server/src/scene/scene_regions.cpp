@@ -1,6 +1,6 @@
 // Scene parsing: node regions (fixed.regions; the selectors of scene_regions.h).
 
-#include <spdlog/fmt/fmt.h>
+#include "tactus/shared/format.h"
 #include <yaml-cpp/yaml.h>
 
 #include "scene_parser.h"

@@ -3,6 +3,7 @@
 // message and exit status 1.
 
 #include <spdlog/spdlog.h>
+#include "tactus/shared/format.h"
 
 #include <exception>
 
