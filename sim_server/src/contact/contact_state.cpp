@@ -13,6 +13,8 @@ void Instrument::transferState(StateArchive& ar) {
   ar("target_twist", target_twist_);
   ar("opening", opening_);
   ar("grip_rate", grip_rate_);
+  ar("grip_held_open", grip_held_open_);
+  ar("grip_torque_last", grip_torque_last_nm_);
   ar("h", h_s_);
   ar("theta0", theta0_);
   ar("rot_step", rot_step_);

@@ -156,6 +156,7 @@ Instrument::Instrument(const InstrumentSpec& spec) : spec_(spec) {
                          : static_cast<std::size_t>(2 * spec.jaw_rows * (spec.jaw_samples + 1)));
     requireNonNegative(spec.grip_k_nmprad, "grip_k_nmprad");
     requireNonNegative(spec.grip_b_nmsprad, "grip_b_nmsprad");
+    requireNonNegative(spec.grip_squeeze_nm, "grip_squeeze_nm");
     grip_dynamic_ = spec.grip_k_nmprad > 0.0;
     if (grip_dynamic_) {
       requirePositive(spec.grip_inertia_kgm2, "grip_inertia_kgm2");
@@ -174,6 +175,8 @@ void Instrument::reset(const shared::Pose& pose, double gripper_opening) {
   target_twist_.setZero();
   opening_ = std::clamp(gripper_opening, 0.0, 1.0);
   grip_rate_ = 0.0;
+  grip_held_open_ = false;
+  grip_torque_last_nm_ = 0.0;
   theta0_.setZero();
   rot_step_.setZero();
   updateFeatures();
@@ -212,10 +215,22 @@ void Instrument::freeMotion(double h_s, const shared::Pose& target, const Vector
     // jaw angle, toward phi_h at rest
     const double phi_max = spec_.max_opening_rad;
     const double phi = opening_ * phi_max;
-    const double phi_h = std::clamp(gripper_opening, 0.0, 1.0) * phi_max;
+    const double gripper = std::clamp(gripper_opening, 0.0, 1.0);
+    // a closing handle squeezes by (1 - gripper) grip_squeeze beyond the spring: as a target
+    // that far past closed
+    const double phi_h =
+        gripper * phi_max - (1.0 - gripper) * spec_.grip_squeeze_nm / spec_.grip_k_nmprad;
     grip_rate_ = implicitPdRate(spec_.grip_inertia_kgm2, spec_.grip_b_nmsprad, spec_.grip_k_nmprad,
                                 h, grip_rate_, phi_h - phi, 0.0);
-    const double next = std::clamp(phi + h * grip_rate_, 0.0, phi_max);
+    const double unheld = phi + h * grip_rate_;
+    // the open stop holds the jaws in this step when the last correction's contact torque
+    // would open the free jaws to it (so does the free motion alone past the stop)
+    grip_held_open_ = unheld + freeGripCompliance(h) * grip_torque_last_nm_ >= phi_max;
+    grip_torque_last_nm_ = 0.0;   // this step's correction sets it
+    // not held at 0 here: a squeezing handle's free motion may carry the jaws past closed, and
+    // the tissue's torque in the correction opens them (applyGripCorrection clamps to [0, max];
+    // the step calls it with or without contacts)
+    const double next = grip_held_open_ ? phi_max : std::min(unheld, phi_max);
     grip_rate_ = (next - phi) / h;
     opening_ = next / phi_max;
   } else {
@@ -268,6 +283,11 @@ Vector6d Instrument::applyCorrection(const Vector6d& wrench) {
 }
 
 double Instrument::gripCompliance(double h_s) const {
+  if (grip_held_open_) return 0.0;   // at the stop: the jaws do not yield to the tissue
+  return freeGripCompliance(h_s);
+}
+
+double Instrument::freeGripCompliance(double h_s) const {
   if (!grip_dynamic_ || !(h_s > 0.0)) return 0.0;
   return pdCompliance(spec_.grip_inertia_kgm2, spec_.grip_b_nmsprad, spec_.grip_k_nmprad, h_s);
 }
@@ -285,6 +305,9 @@ double Instrument::applyGripCorrection(double torque_nm) {
   if (!grip_dynamic_ || !(h_s_ > 0.0)) return 0.0;
   const double phi_max = spec_.max_opening_rad;
   const double phi = opening_ * phi_max;
+  grip_torque_last_nm_ = torque_nm;   // the next free motion's test of the stop
+  // held at the open stop: rigid in this step's W, the jaws stay there
+  if (grip_held_open_) return 0.0;
   const double next = std::clamp(phi + gripCompliance(h_s_) * torque_nm, 0.0, phi_max);
   const double dphi = next - phi;
   opening_ = next / phi_max;

@@ -271,6 +271,8 @@ void constrainedMotion(const SimulationModel& model, SimulationState& state, Ste
     for (std::size_t i = 0; i < tools; ++i) {
       scratch.wrench[i].setZero();
       scratch.grip_torque[i] = 0.0;
+      // no contact torque: the jaws' range still bounds what the free motion left
+      if (state.instruments[i].dynamicGrip()) state.instruments[i].applyGripCorrection(0.0);
     }
   }
   report.tool_wrenches = scratch.wrench;

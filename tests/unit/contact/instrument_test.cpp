@@ -335,6 +335,82 @@ TEST(Instrument, DynamicGripFollowsTheTargetAndItsJacobianIsTheDerivative) {
   EXPECT_DOUBLE_EQ(kinematic.gripperOpening(), 0.3);
 }
 
+// The open stop in the solve: a correction whose contact torque pushes the jaws past their full
+// opening is clamped there, and the next free motion leaves them at the stop with no grip
+// compliance (W counts on no yield) while that torque would open the free jaws to the stop; once
+// the torque falls below that, the stop lets go and the jaws close toward the device's value.
+TEST(Instrument, TheOpenStopHoldsTheJawsWhileTheTissuePushesThemOpen) {
+  InstrumentSpec spec = grasperSpec();
+  spec.grip_k_nmprad = 0.015;
+  spec.grip_b_nmsprad = 0.005;
+  Instrument tool(spec);
+  const double h = 0.01;
+  const Pose pose = targetPose();
+  tool.reset(pose, 1.0);
+  const double c = tool.freeGripCompliance(h);
+  // closing from the stop, a contact torque that more than undoes the free motion's closing
+  tool.freeMotion(h, pose, Vector6d::Zero(), 0.5);
+  EXPECT_FALSE(tool.gripHeldOpen());
+  EXPECT_LT(tool.gripperOpening(), 1.0);
+  EXPECT_EQ(tool.gripCompliance(h), c);
+  const double push = 2.0 * (1.0 - tool.gripperOpening()) * spec.max_opening_rad / c;
+  tool.applyGripCorrection(push);
+  EXPECT_EQ(tool.gripperOpening(), 1.0);   // clamped at the stop
+  // the next step: held at the stop, rigid in W, the correction moves nothing
+  tool.freeMotion(h, pose, Vector6d::Zero(), 0.5);
+  EXPECT_TRUE(tool.gripHeldOpen());
+  EXPECT_EQ(tool.gripperOpening(), 1.0);
+  EXPECT_EQ(tool.gripRate(), 0.0);
+  EXPECT_EQ(tool.gripCompliance(h), 0.0);
+  EXPECT_EQ(tool.applyGripCorrection(push), 0.0);
+  EXPECT_EQ(tool.gripperOpening(), 1.0);
+  // the tissue lets go: held for the step that learns it, then the jaws close
+  tool.freeMotion(h, pose, Vector6d::Zero(), 0.5);
+  EXPECT_TRUE(tool.gripHeldOpen());
+  tool.applyGripCorrection(0.0);
+  tool.freeMotion(h, pose, Vector6d::Zero(), 0.5);
+  EXPECT_FALSE(tool.gripHeldOpen());
+  EXPECT_LT(tool.gripperOpening(), 1.0);
+  EXPECT_EQ(tool.gripCompliance(h), c);
+}
+
+// grip_squeeze: a closed handle pulls with the spring plus the squeeze, so the jaws close on
+// nothing as fast as on a thick bite's far side and end at 0 (the correction bounds the angle
+// where the free motion carried it past closed); half-closed, half the squeeze.
+TEST(Instrument, AClosedHandleSqueezesBeyondTheSpring) {
+  InstrumentSpec spec = grasperSpec();
+  spec.grip_k_nmprad = 0.015;
+  spec.grip_b_nmsprad = 0.005;
+  const double h = 0.01;
+  const Pose pose = targetPose();
+  Instrument spring(spec);
+  spec.grip_squeeze_nm = 0.035;
+  Instrument squeeze(spec);
+  spring.reset(pose, 0.2);
+  squeeze.reset(pose, 0.2);
+  spring.freeMotion(h, pose, Vector6d::Zero(), 0.0);
+  squeeze.freeMotion(h, pose, Vector6d::Zero(), 0.0);
+  // the squeeze's extra rate: S / (I/h + B + h K) over the spring's
+  const double extra = 0.035 / (spec.grip_inertia_kgm2 / h + 0.005 + h * 0.015);
+  EXPECT_NEAR(squeeze.gripRate() - spring.gripRate(), -extra, 1e-9);
+  // with nothing between them the jaws end closed, at 0, not beyond
+  for (int k = 0; k < 50; ++k) {
+    squeeze.freeMotion(h, pose, Vector6d::Zero(), 0.0);
+    squeeze.applyGripCorrection(0.0);
+    EXPECT_GE(squeeze.gripperOpening(), 0.0);
+  }
+  EXPECT_EQ(squeeze.gripperOpening(), 0.0);
+  // an open handle adds nothing
+  InstrumentSpec k_only = spec;
+  k_only.grip_squeeze_nm = 0.0;
+  Instrument open_spring(k_only), open_squeeze(spec);
+  open_spring.reset(pose, 0.2);
+  open_squeeze.reset(pose, 0.2);
+  open_spring.freeMotion(h, pose, Vector6d::Zero(), 1.0);
+  open_squeeze.freeMotion(h, pose, Vector6d::Zero(), 1.0);
+  EXPECT_EQ(open_squeeze.gripRate(), open_spring.gripRate());
+}
+
 TEST(Instrument, RejectsBadSpec) {
   InstrumentSpec spec = probeSpec();
   spec.mass_kg = 0.0;

@@ -368,6 +368,8 @@ TEST(Scene, EachKindOfErrorHasItsExactMessage) {
             "s.yaml:4:31: instrument.grasper.width: must be >= 0 (got -0.001)");
   EXPECT_EQ(sceneError(kFullHead + "instrument: {grasper: {grip_stiffness: -1}}\n"),
             "s.yaml:4:40: instrument.grasper.grip_stiffness: must be >= 0 (got -1)");
+  EXPECT_EQ(sceneError(kFullHead + "instrument: {grasper: {grip_squeeze: -0.01}}\n"),
+            "s.yaml:4:38: instrument.grasper.grip_squeeze: must be >= 0 (got -0.01)");
   EXPECT_EQ(sceneError(kFullHead + "instrument: {grasper: {width_samples: 0}}\n"),
             "s.yaml:4:39: instrument.grasper.width_samples: must be >= 1 (got 0)");
   EXPECT_EQ(sceneError(kFullHead + "instrument: {initial_pose: {quaternion: [2, 0, 0, 0]}}\n"),

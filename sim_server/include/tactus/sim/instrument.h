@@ -61,11 +61,20 @@
 //  without limit). With grip_k_nmprad > 0 the jaw half-angle phi = opening * max_opening_rad is
 //  a DOF of the god object, pulled toward the device's phi_h by a PD law and integrated like the
 //  rotation (implicit Euler, coupling linearised at the start of the step):
-//      (I_g/h + B_g + h K_g) w+ = I_g w/h + K_g (phi_h - phi),  phi+ = phi + h w+,
-//  clamped to [0, max_opening_rad]. Its compliance c_g = (I_g/h^2 + B_g/h + K_g)^-1 enters W with
+//      (I_g/h + B_g + h K_g) w+ = I_g w/h + K_g (phi_h - phi) - (1 - g) S,  phi+ = phi + h w+,
+//  with g the device's gripper value (phi_h = g max_opening_rad) and S the squeeze of a closed
+//  handle (grip_squeeze_nm: the spring alone pulls with K_g phi, which vanishes as the jaws close
+//  on a thin bite); phi+ is kept at most max_opening_rad, and the correction (called every step,
+//  with or without contacts) clamps the angle to [0, max_opening_rad], so that a squeeze's free
+//  motion past closed is opened by the tissue's torque. Its compliance c_g = (I_g/h^2 + B_g/h + K_g)^-1 enters W with
 //  the contact rows' column g_r = dir_r . dp/dphi (gripJacobian), and the correction turns the
 //  contact torque g^T f into dphi = c_g g^T f: the jaws stop where the tissue pushes back as
-//  hard as the grip spring pulls, as a real grasper's finite grip force does.
+//  hard as the grip spring pulls, as a real grasper's finite grip force does. The open stop:
+//  when the last correction's contact torque tau would open this step's free jaws to
+//  max_opening_rad (phi_free + c_g tau >= max_opening_rad), the stop holds them there for the
+//  step: the free motion leaves them at the stop and c_g = 0 in W (the solve counts on no
+//  yield where the jaws cannot yield; a clamp after the solve left the contacts penetrating by
+//  what the jaws failed to open).
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
@@ -190,8 +199,15 @@ class Instrument {
 
   /// Grip (see the header comment): true when the jaw angle is a DOF (grasper, grip_k > 0).
   bool dynamicGrip() const { return grip_dynamic_; }
-  /// c_g = (I_g/h^2 + B_g/h + K_g)^-1 [rad / (N m)]; 0 for kinematic jaws.
+  /// c_g = (I_g/h^2 + B_g/h + K_g)^-1 [rad / (N m)]: what W counts on the jaws yielding per
+  /// unit contact torque; 0 for kinematic jaws and while the jaws are held at their open stop
+  /// (gripHeldOpen).
   double gripCompliance(double h_s) const;
+  /// c_g whether or not the stop holds the jaws.
+  double freeGripCompliance(double h_s) const;
+  /// The open stop holds the jaws in this step (see the header comment): the last
+  /// correction's contact torque would open the free jaws to it.
+  bool gripHeldOpen() const { return grip_held_open_; }
   /// d(point)/d(phi) [m / rad] of a point attached to feature `feature_id` (zero for the probe and
   /// for kinematic jaws).
   Eigen::Vector3d gripJacobian(int feature_id, const Eigen::Vector3d& point_m) const;
@@ -251,6 +267,8 @@ class Instrument {
   double opening_ = 1.0;
   bool grip_dynamic_ = false;
   double grip_rate_ = 0.0;                              ///< d phi / dt [rad/s]
+  bool grip_held_open_ = false;                         ///< the open stop holds the jaws
+  double grip_torque_last_nm_ = 0.0;   ///< the last correction's contact torque on the jaws
   double h_s_ = 0.0;
   Eigen::Vector3d theta0_ = Eigen::Vector3d::Zero();   ///< log(R_h R^-1) at the last free motion
   Eigen::Vector3d rot_step_ = Eigen::Vector3d::Zero(); ///< h w+ of the last free motion

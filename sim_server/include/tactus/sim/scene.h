@@ -169,6 +169,10 @@ struct InstrumentSpec {
   double grip_k_nmprad = 0.0;                   ///< grip stiffness [N m / rad]
   double grip_b_nmsprad = 0.0;                  ///< grip damping [N m s / rad]
   double grip_inertia_kgm2 = 1e-6;              ///< inertia of the jaw angle [kg m^2]
+  /// The closing torque on the jaw angle of a fully closed handle beyond the spring's pull
+  /// [N m]: (1 - gripper) times it is added, so a closed handle squeezes a thin bite too (the
+  /// spring alone pulls with k phi, which vanishes as the jaws close); with grip_k_nmprad > 0
+  double grip_squeeze_nm = 0.0;
   PoseSpec initial_pose;
   std::vector<TrajectoryKey> trajectory;        ///< scripted device target when no device drives it
   /// Where the device target may be (instrument.workspace {min, max}); absent: a box around the
