@@ -7,8 +7,8 @@ Each GRID.csv is what `pad_grasp_study --grid --csv` writes (one row per approac
 two panels per file: left, each approach's held nodes' rise against the tool's and the smallest
 tet volume ratio in the jaws (the goal's box shaded: rise >= 90 %, ratio >= 0.3; ratios below
 the axis drawn on its floor); right, the approaches on the offset plane (the roll and the grip
-shift the marker a little), filled when the approach met all three conditions. Circles: the scenes' grip,
-squares: the firm one; red: a tet inverted somewhere. --table also prints the summary and the
+shift the marker a little), filled when the approach met all three conditions. One marker per grip
+(spring, and a closed handle's squeeze when the CSV has the column); red: a tet inverted somewhere. --table also prints the summary and the
 per-approach table (Markdown) that docs/measurements.md quotes. Run it with /usr/bin/python3 (Debian's
 python3-matplotlib); no other dependency.
 """
@@ -25,6 +25,16 @@ def read_rows(path):
     if not rows:
         sys.exit(f"{path}: no approaches")
     return rows
+
+
+def grip(row):
+    """The approach's grip: (spring [N m/rad], a closed handle's squeeze [N m]; 0 in CSVs from
+    before the squeeze column)."""
+    return (row["grip_nmprad"], row.get("grip_squeeze_nm", 0.0))
+
+
+def grip_text(g):
+    return f"{g[0]:g}" + (f" + {g[1]:g} N m" if g[1] > 0.0 else "")
 
 
 def holds(row):
@@ -55,7 +65,7 @@ def main():
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    grips = sorted({r["grip_nmprad"] for _, rows in grids for r in rows})
+    grips = sorted({grip(r) for _, rows in grids for r in rows})
     markers = ["o", "s", "^", "D"]
     fig, axes = plt.subplots(len(grids), 2, figsize=(12, 5 * len(grids)), squeeze=False)
     for (label, rows), (ax_o, ax_m) in zip(grids, axes):
@@ -64,7 +74,7 @@ def main():
         ax_o.axvspan(90.0, 110.0, ymin=0.0, ymax=1.0, color="0.93")
         ax_o.fill_between([90.0, 110.0], 0.3, 1.05, color="#c8e6c9")
         for r in rows:
-            marker = markers[grips.index(r["grip_nmprad"]) % len(markers)]
+            marker = markers[grips.index(grip(r)) % len(markers)]
             colour = "tab:red" if r["inverted_steps"] > 0 else "tab:blue"
             y = max(r["min_jaw_ratio"], RATIO_FLOOR)
             x = min(max(r["rise_pct"], -30.0), 110.0)
@@ -79,9 +89,9 @@ def main():
         ax_o.set_title(f"{label}: {n_hold} of {len(rows)} hold, {n_met} meet all three")
 
         for r in rows:
-            marker = markers[grips.index(r["grip_nmprad"]) % len(markers)]
+            marker = markers[grips.index(grip(r)) % len(markers)]
             colour = "tab:red" if r["inverted_steps"] > 0 else "tab:blue"
-            dx = 0.6 if grips.index(r["grip_nmprad"]) else -0.6
+            dx = 0.6 if grips.index(grip(r)) % 2 else -0.6
             dy = 0.05 * r["roll_deg"]
             ax_m.plot(r["x_mm"] + dx, r["y_mm"] + dy, marker, color=colour,
                       fillstyle="full" if met(r) else "none", markersize=9)
@@ -97,7 +107,9 @@ def main():
         ax_m.set_title(f"{label}: approaches (label: rise)")
 
     handles = [plt.Line2D([], [], marker=markers[i % len(markers)], ls="", color="0.3",
-                          label=f"grip {g:g} N m/rad") for i, g in enumerate(grips)]
+                          label=f"grip {g[0]:g} N m/rad" +
+                          (f" + squeeze {g[1]:g} N m" if g[1] > 0.0 else ""))
+               for i, g in enumerate(grips)]
     handles += [plt.Line2D([], [], marker="o", ls="", color="tab:red", label="a tet inverted"),
                 plt.Line2D([], [], marker="o", ls="", color="tab:blue", fillstyle="none",
                            label="open: fails a condition")]
@@ -109,7 +121,7 @@ def main():
 
 
 def key(r):
-    return (r["grip_nmprad"], r["x_mm"], r["y_mm"], r["roll_deg"])
+    return (grip(r), r["x_mm"], r["y_mm"], r["roll_deg"])
 
 
 def ratio_text(ratio):
@@ -136,7 +148,7 @@ def print_tables(grids):
     labels = [label for label, _ in grids]
     by_key = [{key(r): r for r in rows} for _, rows in grids]
     keys = sorted(set().union(*[set(k) for k in by_key]))
-    print("| grip [N m/rad] | x, y [mm] | roll [deg] | " +
+    print("| grip [N m/rad (+ squeeze)] | x, y [mm] | roll [deg] | " +
           " | ".join(f"{label}: rise, smallest tet in the jaws, inverted steps" for label in labels)
           + " |")
     print("| --- | --- | --- | " + " | ".join("---" for _ in labels) + " |")
@@ -150,7 +162,7 @@ def print_tables(grids):
             mark = "**" if met(r) else ""
             cells.append(f"{mark}{r['rise_pct']:.0f} %, {ratio_text(r['min_jaw_ratio'])}, "
                          f"{int(r['inverted_steps'])}{mark}")
-        print(f"| {k[0]:g} | {k[1]:+g}, {k[2]:+g} | {k[3]:+g} | " + " | ".join(cells) + " |")
+        print(f"| {grip_text(k[0])} | {k[1]:+g}, {k[2]:+g} | {k[3]:+g} | " + " | ".join(cells) + " |")
 
 
 if __name__ == "__main__":

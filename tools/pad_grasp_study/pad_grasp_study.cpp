@@ -33,10 +33,10 @@ int main(int argc, char** argv) {
       "  pad_grasp_study --scene scenes/liver_grasp.yaml --nominal-only\n"
       "  pad_grasp_study --scene scenes/liver_grasp_20k.yaml --grid --end-s 5 --csv grid_20k.csv");
   std::string scene = std::string(TACTUS_SOURCE_DIR) + "/scenes/liver_grasp.yaml";
-  double yaw_deg = 0.0, deeper_mm = 0.0, grip = -1.0, roll_deg = 0.0;
+  double yaw_deg = 0.0, deeper_mm = 0.0, grip = -1.0, roll_deg = 0.0, squeeze = -1.0;
   std::vector<double> offset_mm_arg{0.0, 0.0, 0.0};
   bool nominal_only = false, grid = false, settle_each = false, settle_only = false;
-  int grid_skip = 0;
+  int grid_skip = 0, grid_count = 0;
   std::string csv_path;
   double end_s = 5.8;
   app.add_option("--scene", scene, "Scene file")->check(CLI::ExistingFile);
@@ -47,6 +47,10 @@ int main(int argc, char** argv) {
   app.add_option("--grip", grip,
                  "Grip stiffness [N m/rad] (default: the scene's); with --grid: run the grid's "
                  "approaches at that grip only")
+      ->check(CLI::Range(0.0, 1.0));
+  app.add_option("--squeeze", squeeze,
+                 "A closed handle's squeeze beyond the grip's spring [N m] (grasper.grip_squeeze; "
+                 "default: the scene's), for every approach")
       ->check(CLI::Range(0.0, 1.0));
   app.add_option("--roll-deg", roll_deg, "Roll the jaws about their axis after the settling [deg]")
       ->check(CLI::Range(-90.0, 90.0));
@@ -60,6 +64,9 @@ int main(int argc, char** argv) {
       ->excludes("--nominal-only");
   app.add_option("--grid-skip", grid_skip, "With --grid: skip its first N approaches")
       ->check(CLI::Range(0, 1000))
+      ->needs("--grid");
+  app.add_option("--grid-count", grid_count, "With --grid: run at most N approaches (after --grid-skip)")
+      ->check(CLI::Range(1, 1000))
       ->needs("--grid");
   app.add_flag("--settle-each", settle_each,
                "Settle each approach from t = 0 instead of starting all from one settled state");
@@ -86,6 +93,7 @@ int main(int argc, char** argv) {
     for (auto& k : keys) turn(k.pose);
     turn(spec.instrument.initial_pose);
     if (grip >= 0.0) spec.instrument.grip_k_nmprad = grip;
+    if (squeeze >= 0.0) spec.instrument.grip_squeeze_nm = squeeze;
     // the jaws point along the tool's -z: deeper is along it, added to the test's offsets
     const Eigen::Vector3d deeper = (yaw * r0) * Eigen::Vector3d(0, 0, -1e-3 * deeper_mm);
     // the nominal approach, then pad_grasp_test's five; or the grid
@@ -102,6 +110,9 @@ int main(int argc, char** argv) {
       const auto skip = std::min(approaches.size(), static_cast<std::size_t>(grid_skip));
       approaches.erase(approaches.begin(), approaches.begin() + static_cast<long>(skip));
       if (approaches.empty()) throw tactus::Error("--grid-skip: no approach left");
+      if (grid_count > 0 && approaches.size() > static_cast<std::size_t>(grid_count)) {
+        approaches.resize(static_cast<std::size_t>(grid_count));
+      }
     } else {
       if (!nominal_only) approaches = tactus::test_support::testApproaches();
       approaches.insert(approaches.begin(), ApproachPerturbation{});
@@ -111,7 +122,7 @@ int main(int argc, char** argv) {
       if (std::filesystem::exists(csv_path)) throw tactus::Error(csv_path + ": exists (not overwritten)");
       csv.open(csv_path);
       if (!csv) throw tactus::Error(csv_path + ": cannot be written");
-      csv << "x_mm,y_mm,z_mm,roll_deg,grip_nmprad,rise_pct,held_nodes,min_jaw_ratio,min_jaw_tet,"
+      csv << "x_mm,y_mm,z_mm,roll_deg,grip_nmprad,grip_squeeze_nm,rise_pct,held_nodes,min_jaw_ratio,min_jaw_tet,"
              "min_jaw_t_s,min_jaw_tool_x_mm,min_jaw_tool_y_mm,min_jaw_tool_z_mm,min_any_ratio,"
              "min_any_tet,min_any_t_s,inverted_steps,unconverged_steps,sweeps_median,"
              "normal_force_max_n,load_max_n,rise_pct_at_4_5_s,rise_pct_min_after_4_5_s,opening_closed,"
@@ -146,12 +157,13 @@ int main(int argc, char** argv) {
       }
       const double rise = r.held_rise_m / r.tool_rise_m;
       std::printf(
-          "offset (%+.0f %+.0f %+.0f) mm roll %+3.0f deg grip %.3f: rise %6.1f %% (%d held "
+          "offset (%+.0f %+.0f %+.0f) mm roll %+3.0f deg grip %.3f squeeze %.3f: rise %6.1f %% (%d held "
           "nodes; %.1f %% at 4.5 s), smallest tet in the jaws %.3f (tet %d at t = %.2f s, at "
           "(%+.1f %+.1f %+.1f) mm in the tool's frame), anywhere %.3f (tet %d at t = %.2f s, %d "
           "steps inverted), contacts max %d (%d distinct nodes held), unconverged %d, sweeps "
           "median %.0f, normal force max %.2f N, load max %.2f N, %.0f s\n",
-          offset_mm.x(), offset_mm.y(), offset_mm.z(), a.roll_deg, a.grip_k_nmprad, 100.0 * rise,
+          offset_mm.x(), offset_mm.y(), offset_mm.z(), a.roll_deg, a.grip_k_nmprad,
+          spec.instrument.grip_squeeze_nm, 100.0 * rise,
           r.held_nodes, 100.0 * rise_at_lift_end, r.min_volume_ratio, r.min_volume_tet,
           r.min_volume_ratio_t_s, 1e3 * r.min_volume_tet_in_tool_m.x(),
           1e3 * r.min_volume_tet_in_tool_m.y(), 1e3 * r.min_volume_tet_in_tool_m.z(),
@@ -178,7 +190,8 @@ int main(int argc, char** argv) {
       if (csv.is_open()) {
         const Eigen::Vector3d& at = r.min_volume_tet_in_tool_m;
         csv << offset_mm.x() << ',' << offset_mm.y() << ',' << offset_mm.z() << ',' << a.roll_deg
-            << ',' << a.grip_k_nmprad << ',' << 100.0 * rise << ',' << r.held_nodes << ','
+            << ',' << a.grip_k_nmprad << ',' << spec.instrument.grip_squeeze_nm << ','
+            << 100.0 * rise << ',' << r.held_nodes << ','
             << r.min_volume_ratio << ',' << r.min_volume_tet << ',' << r.min_volume_ratio_t_s
             << ',' << 1e3 * at.x() << ',' << 1e3 * at.y() << ',' << 1e3 * at.z() << ','
             << r.min_volume_ratio_anywhere << ',' << r.min_volume_tet_anywhere << ','
