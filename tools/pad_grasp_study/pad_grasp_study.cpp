@@ -65,7 +65,8 @@ int main(int argc, char** argv) {
   app.add_option("--grid-skip", grid_skip, "With --grid: skip its first N approaches")
       ->check(CLI::Range(0, 1000))
       ->needs("--grid");
-  app.add_option("--grid-count", grid_count, "With --grid: run at most N approaches (after --grid-skip)")
+  app.add_option("--grid-count", grid_count,
+                 "With --grid: run at most N approaches (after --grid-skip)")
       ->check(CLI::Range(1, 1000))
       ->needs("--grid");
   app.add_flag("--settle-each", settle_each,
@@ -122,7 +123,8 @@ int main(int argc, char** argv) {
       if (std::filesystem::exists(csv_path)) throw tactus::Error(csv_path + ": exists (not overwritten)");
       csv.open(csv_path);
       if (!csv) throw tactus::Error(csv_path + ": cannot be written");
-      csv << "x_mm,y_mm,z_mm,roll_deg,grip_nmprad,grip_squeeze_nm,rise_pct,held_nodes,min_jaw_ratio,min_jaw_tet,"
+      csv << "x_mm,y_mm,z_mm,roll_deg,grip_nmprad,grip_squeeze_nm,rise_pct,held_nodes,"
+             "min_jaw_ratio,min_jaw_tet,"
              "min_jaw_t_s,min_jaw_tool_x_mm,min_jaw_tool_y_mm,min_jaw_tool_z_mm,min_any_ratio,"
              "min_any_tet,min_any_t_s,inverted_steps,unconverged_steps,sweeps_median,"
              "normal_force_max_n,load_max_n,rise_pct_at_4_5_s,rise_pct_min_after_4_5_s,opening_closed,"

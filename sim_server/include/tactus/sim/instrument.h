@@ -66,10 +66,11 @@
 //  handle (grip_squeeze_nm: the spring alone pulls with K_g phi, which vanishes as the jaws close
 //  on a thin bite); phi+ is kept at most max_opening_rad, and the correction (called every step,
 //  with or without contacts) clamps the angle to [0, max_opening_rad], so that a squeeze's free
-//  motion past closed is opened by the tissue's torque. Its compliance c_g = (I_g/h^2 + B_g/h + K_g)^-1 enters W with
-//  the contact rows' column g_r = dir_r . dp/dphi (gripJacobian), and the correction turns the
-//  contact torque g^T f into dphi = c_g g^T f: the jaws stop where the tissue pushes back as
-//  hard as the grip spring pulls, as a real grasper's finite grip force does. The open stop:
+//  motion past closed is opened by the tissue's torque. Its compliance
+//  c_g = (I_g/h^2 + B_g/h + K_g)^-1 enters W with the contact rows' column
+//  g_r = dir_r . dp/dphi (gripJacobian), and the correction turns the contact torque g^T f into
+//  dphi = c_g g^T f: the jaws stop where the tissue pushes back as hard as the grip spring
+//  pulls, as a real grasper's finite grip force does. The open stop:
 //  when the last correction's contact torque tau would open this step's free jaws to
 //  max_opening_rad (phi_free + c_g tau >= max_opening_rad), the stop holds them there for the
 //  step: the free motion leaves them at the stop and c_g = 0 in W (the solve counts on no
