@@ -225,7 +225,8 @@ void Instrument::freeMotion(double h_s, const shared::Pose& target, const Vector
     const double unheld = phi + h * grip_rate_;
     // the open stop holds the jaws in this step when the last correction's contact torque
     // would open the free jaws to it (so does the free motion alone past the stop)
-    grip_held_open_ = unheld + freeGripCompliance(h) * grip_torque_last_nm_ >= phi_max;
+    grip_held_open_ = spec_.grip_hold_open_stop &&
+                      unheld + freeGripCompliance(h) * grip_torque_last_nm_ >= phi_max;
     grip_torque_last_nm_ = 0.0;   // this step's correction sets it
     // not held at 0 here: a squeezing handle's free motion may carry the jaws past closed, and
     // the tissue's torque in the correction opens them (applyGripCorrection clamps to [0, max];

@@ -59,7 +59,7 @@ void SceneParser::readInstrument(const YAML::Node& n, const std::string& p, Inst
     const std::string q = join(p, "grasper");
     checkKeys(s, q, {"jaw_length", "jaw_radius", "max_opening_deg", "samples", "width",
                      "width_samples", "pad_width", "pad_columns", "grip_stiffness", "grip_damping",
-                     "grip_inertia", "grip_squeeze"});
+                     "grip_inertia", "grip_squeeze", "grip_hold_open_stop"});
     number(s, q, "jaw_length", &in->jaw_length_m, kPositive, kAtMost(1.0), Range{1e-4, 0.2});
     number(s, q, "jaw_radius", &in->jaw_radius_m, kPositive, kAtMost(0.5), Range{1e-5, 0.02});
     double deg = 0.0;
@@ -79,6 +79,7 @@ void SceneParser::readInstrument(const YAML::Node& n, const std::string& p, Inst
            kPositiveUpTo(1e-2));
     number(s, q, "grip_squeeze", &in->grip_squeeze_nm, kNonNegative, kAtMost(100.0),
            kNonNegativeUpTo(1.0));
+    boolean(s, q, "grip_hold_open_stop", &in->grip_hold_open_stop);
   }
   if (section(n, p, "initial_pose", &s)) {
     const std::string q = join(p, "initial_pose");

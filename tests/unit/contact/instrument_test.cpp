@@ -343,6 +343,7 @@ TEST(Instrument, TheOpenStopHoldsTheJawsWhileTheTissuePushesThemOpen) {
   InstrumentSpec spec = grasperSpec();
   spec.grip_k_nmprad = 0.015;
   spec.grip_b_nmsprad = 0.005;
+  spec.grip_hold_open_stop = true;
   Instrument tool(spec);
   const double h = 0.01;
   const Pose pose = targetPose();
@@ -372,6 +373,16 @@ TEST(Instrument, TheOpenStopHoldsTheJawsWhileTheTissuePushesThemOpen) {
   EXPECT_FALSE(tool.gripHeldOpen());
   EXPECT_LT(tool.gripperOpening(), 1.0);
   EXPECT_EQ(tool.gripCompliance(h), c);
+  // without grip_hold_open_stop the stop never holds: clamped after the solve
+  spec.grip_hold_open_stop = false;
+  Instrument clamp(spec);
+  clamp.reset(pose, 1.0);
+  clamp.freeMotion(h, pose, Vector6d::Zero(), 0.5);
+  clamp.applyGripCorrection(push);
+  EXPECT_EQ(clamp.gripperOpening(), 1.0);
+  clamp.freeMotion(h, pose, Vector6d::Zero(), 0.5);
+  EXPECT_FALSE(clamp.gripHeldOpen());
+  EXPECT_EQ(clamp.gripCompliance(h), c);
 }
 
 // grip_squeeze: a closed handle pulls with the spring plus the squeeze, so the jaws close on

@@ -70,7 +70,8 @@
 //  c_g = (I_g/h^2 + B_g/h + K_g)^-1 enters W with the contact rows' column
 //  g_r = dir_r . dp/dphi (gripJacobian), and the correction turns the contact torque g^T f into
 //  dphi = c_g g^T f: the jaws stop where the tissue pushes back as hard as the grip spring
-//  pulls, as a real grasper's finite grip force does. The open stop:
+//  pulls, as a real grasper's finite grip force does. The open stop, with grip_hold_open_stop
+//  (else the angle is clamped after the solve):
 //  when the last correction's contact torque tau would open this step's free jaws to
 //  max_opening_rad (phi_free + c_g tau >= max_opening_rad), the stop holds them there for the
 //  step: the free motion leaves them at the stop and c_g = 0 in W (the solve counts on no

@@ -173,6 +173,9 @@ struct InstrumentSpec {
   /// [N m]: (1 - gripper) times it is added, so a closed handle squeezes a thin bite too (the
   /// spring alone pulls with k phi, which vanishes as the jaws close); with grip_k_nmprad > 0
   double grip_squeeze_nm = 0.0;
+  /// The open stop holds the jaws in the solve (instrument.h) instead of clamping them after
+  /// it; with grip_k_nmprad > 0 (grasper.grip_hold_open_stop)
+  bool grip_hold_open_stop = false;
   PoseSpec initial_pose;
   std::vector<TrajectoryKey> trajectory;        ///< scripted device target when no device drives it
   /// Where the device target may be (instrument.workspace {min, max}); absent: a box around the
