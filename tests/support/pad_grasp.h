@@ -204,6 +204,23 @@ static_assert(sizeof(PadGraspResult) == 336,
 namespace settled_detail {
 constexpr char kMagic[8] = {'T', 'A', 'C', 'T', 'S', 'E', 'T', '1'};
 
+// The small composite values a result holds, stored as their parts in this order.
+template <class T>
+constexpr bool kIsComposite = std::is_same_v<T, Eigen::Vector3d> ||
+                              std::is_same_v<T, std::pair<double, double>> ||
+                              std::is_same_v<T, PadGraspResult::Tenth>;
+template <class V, class F>
+void forEachPart(V& v, F& f) {
+  using T = std::remove_const_t<V>;
+  if constexpr (std::is_same_v<T, Eigen::Vector3d>) {
+    f(v.coeffRef(0)), f(v.coeffRef(1)), f(v.coeffRef(2));
+  } else if constexpr (std::is_same_v<T, std::pair<double, double>>) {
+    f(v.first), f(v.second);
+  } else {
+    f(v.t_s), f(v.opening), f(v.min_jaw_ratio), f(v.max_normal_n);
+  }
+}
+
 // Plain values as their bytes, vectors as their length then their elements.
 struct Writer {
   std::string& out;
@@ -212,12 +229,8 @@ struct Writer {
     if constexpr (std::is_same_v<T, std::string>) {
       (*this)(static_cast<std::uint64_t>(v.size()));
       out.append(v);
-    } else if constexpr (std::is_same_v<T, Eigen::Vector3d>) {
-      (*this)(v.x()), (*this)(v.y()), (*this)(v.z());
-    } else if constexpr (std::is_same_v<T, std::pair<double, double>>) {
-      (*this)(v.first), (*this)(v.second);
-    } else if constexpr (std::is_same_v<T, PadGraspResult::Tenth>) {
-      (*this)(v.t_s), (*this)(v.opening), (*this)(v.min_jaw_ratio), (*this)(v.max_normal_n);
+    } else if constexpr (kIsComposite<T>) {
+      forEachPart(v, *this);
     } else if constexpr (requires { v.size(); v.begin(); }) {
       (*this)(static_cast<std::uint64_t>(v.size()));
       for (const auto& x : v) (*this)(x);
@@ -247,12 +260,8 @@ struct Reader {
     if constexpr (std::is_same_v<T, std::string>) {
       v.resize(length());
       bytes(v.data(), v.size());
-    } else if constexpr (std::is_same_v<T, Eigen::Vector3d>) {
-      (*this)(v.x()), (*this)(v.y()), (*this)(v.z());
-    } else if constexpr (std::is_same_v<T, std::pair<double, double>>) {
-      (*this)(v.first), (*this)(v.second);
-    } else if constexpr (std::is_same_v<T, PadGraspResult::Tenth>) {
-      (*this)(v.t_s), (*this)(v.opening), (*this)(v.min_jaw_ratio), (*this)(v.max_normal_n);
+    } else if constexpr (kIsComposite<T>) {
+      forEachPart(v, *this);
     } else if constexpr (requires { v.resize(0); }) {
       v.resize(length());
       for (auto& x : v) (*this)(x);
