@@ -81,10 +81,7 @@ StepReport Simulation::step() {
     }
     if (!s.instruments.empty()) x.problem.tool_pose = s.instruments[0].pose();
   } else {
-    // no contact problem: the jaws' range bounds what the free motion left (instrument.h)
-    for (Instrument& tool : s.instruments) {
-      if (tool.dynamicGrip()) tool.applyGripCorrection(0.0);
-    }
+    boundGripsWithoutContactTorque(s);
   }
   s.t_s += m.h_s;
   ++s.step;

@@ -202,6 +202,12 @@ void restoreFreeState(SimulationState& state, const StepScratch& scratch) {
 
 }  // namespace
 
+void boundGripsWithoutContactTorque(SimulationState& state) {
+  for (Instrument& tool : state.instruments) {
+    if (tool.dynamicGrip()) tool.applyGripCorrection(0.0);
+  }
+}
+
 void constrainedMotion(const SimulationModel& model, SimulationState& state, StepScratch& scratch,
                        StepReport& report, bool restore_free) {
   const double h = model.h_s;
@@ -271,9 +277,8 @@ void constrainedMotion(const SimulationModel& model, SimulationState& state, Ste
     for (std::size_t i = 0; i < tools; ++i) {
       scratch.wrench[i].setZero();
       scratch.grip_torque[i] = 0.0;
-      // no contact torque: the jaws' range still bounds what the free motion left
-      if (state.instruments[i].dynamicGrip()) state.instruments[i].applyGripCorrection(0.0);
     }
+    boundGripsWithoutContactTorque(state);
   }
   report.tool_wrenches = scratch.wrench;
   report.times.constrained_motion_s += shared::secondsSinceNs(t0);

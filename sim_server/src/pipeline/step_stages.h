@@ -64,6 +64,10 @@ void buildW(const SimulationModel& model, SimulationState& state, StepScratch& s
 void solveContacts(const SimulationModel& model, SimulationState& state, StepScratch& scratch,
                    StepReport& report, PipelineCounters& counters);
 
+/// With no contact torque on the jaws (no contact problem, or a pass without rows): each dynamic
+/// grip's range [0, max opening] still bounds what the free motion left (instrument.h).
+void boundGripsWithoutContactTorque(SimulationState& state);
+
 /// Tissue dq = C H^T f (per model), tool dx = C6 H_tool^T f, from the free state (restored first
 /// when `restore_free`, a later pass); the largest penetration and complementarity it leaves.
 void constrainedMotion(const SimulationModel& model, SimulationState& state, StepScratch& scratch,
