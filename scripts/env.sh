@@ -31,3 +31,10 @@ unset -f tactus_cpu_has
 # steals from it. sim_server also sets this itself (openblas_set_num_threads(1)).
 export OPENBLAS_NUM_THREADS="${OPENBLAS_NUM_THREADS:-1}"
 export OMP_NUM_THREADS="${OMP_NUM_THREADS:-1}"
+# glibc's malloc: blocks up to 32 MiB from the heap, and the heap's free top kept up to 1 GiB.
+# The simulation's steps allocate and free the same large temporaries every step (CHOLMOD's
+# solve buffers, W, the rows' right-hand sides: MBs at organ scale); by default each of those above
+# glibc's mmap threshold was a fresh mmap, its pages faulted in and zeroed again every step, which
+# cost a third of the CPU of the exact-compliance contact tests (docs/measurements.md, "Build and
+# test time"). A setting already in the environment is kept.
+export GLIBC_TUNABLES="${GLIBC_TUNABLES:-glibc.malloc.mmap_threshold=33554432:glibc.malloc.trim_threshold=1073741824}"
