@@ -55,9 +55,15 @@ public:
   void update(FemBody &body) override {
     body_ = &body;
     active_ = kind_;
-    if (kind_ == ComplianceKind::kWarped)
-      body.nodeRotations(rot_, opt_.exact_below_coherence > 0.0 ? &coherence_ : nullptr,
-                         opt_.rotation_smoothing_passes);
+    if (kind_ != ComplianceKind::kWarped)
+      return;
+    // the rotations closest to the free state's deformation gradients: the element loop's polar
+    // decomposition stays the step's only one per element (docs/design.md, "The warped
+    // compliance's rotations from the deformation gradients"); the coherence bound reads the
+    // element rotations' spread, which costs their decompositions again
+    if (opt_.exact_below_coherence > 0.0)
+      body.nodeRotations(coherence_rot_, &coherence_, opt_.rotation_smoothing_passes);
+    body.fittedNodeRotations(rot_, opt_.rotation_smoothing_passes);
   }
 
   void addW(std::span<const TissueRow> rows,
@@ -440,6 +446,7 @@ private:
   std::vector<int> local_;           // node -> index in touched_, -1 otherwise
   std::vector<int> touched_;
   std::vector<RowTerms> terms_;
+  std::vector<Eigen::Matrix3d> coherence_rot_;  // update(): the rotations coherence_ reads
   Eigen::MatrixXd cuu_, g_, gt_, wd_, e_, x_;
   // the previous gather of C0's blocks (gatherCuu): its C_UU, its nodes and their index in it
   // (node -> index, -1 otherwise; empty before the first gather), and the current nodes' index

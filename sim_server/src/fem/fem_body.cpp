@@ -232,6 +232,24 @@ void FemBody::Impl::sumNodeRotations(const std::vector<Eigen::Matrix3d>* element
       }
     }
   }
+  sumRotationGroups(acc, w);
+}
+
+void FemBody::Impl::sumNodeGradients(const Eigen::VectorXd& x, std::vector<Eigen::Matrix3d>& acc,
+                                     std::vector<double>& w) {
+  acc.assign(n, Eigen::Matrix3d::Zero());
+  w.assign(static_cast<std::size_t>(n), 0.0);
+  for (int e = 0; e < mesh.tetCount(); ++e) {
+    const Eigen::Matrix3d vf = volume[e] * elementF(e, x);
+    for (int k = 0; k < 4; ++k) {
+      acc[mesh.tets[e][k]] += vf;
+      w[mesh.tets[e][k]] += volume[e];
+    }
+  }
+  sumRotationGroups(acc, w);
+}
+
+void FemBody::Impl::sumRotationGroups(std::vector<Eigen::Matrix3d>& acc, std::vector<double>& w) {
   if (!rot_group.empty()) {
     // every member of a group gets the group's sum
     group_acc.assign(rot_group_count, Eigen::Matrix3d::Zero());

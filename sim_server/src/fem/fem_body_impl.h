@@ -275,6 +275,13 @@ struct FemBody::Impl : FemModel, FemState, FemScratch {
                         std::vector<Eigen::Matrix3d>& acc, std::vector<double>& w);
   void finishNodeRotations(std::vector<Eigen::Matrix3d>& acc, std::vector<double>& w,
                            std::vector<Eigen::Matrix3d>& out, int smoothing_passes);
+  // The same sums of the elements' deformation gradients at positions x, in the mesh's order
+  // (FemBody::fittedNodeRotations): no polar decomposition per element.
+  void sumNodeGradients(const Eigen::VectorXd& x, std::vector<Eigen::Matrix3d>& acc,
+                        std::vector<double>& w);
+  // sumNodeRotations' and sumNodeGradients' last part: every member of a rotation group gets the
+  // group's sums.
+  void sumRotationGroups(std::vector<Eigen::Matrix3d>& acc, std::vector<double>& w);
   // The node sums of `rotation` (step_acc, step_w), computed once per element loop that kept
   // its rotations.
   void ensureStepNodeSums();

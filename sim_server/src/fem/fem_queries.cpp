@@ -63,6 +63,17 @@ void FemBody::stepNodeRotations(std::vector<Eigen::Matrix3d>& out,
         m.work_w[i] > 0.0 ? m.work_acc[i].norm() / (std::sqrt(3.0) * m.work_w[i]) : 1.0;
 }
 
+void FemBody::fittedNodeRotations(std::vector<Eigen::Matrix3d>& out, int smoothing_passes) const {
+  Impl& m = *impl_;
+  if (smoothing_passes < 0) throw Error("fittedNodeRotations: smoothing_passes must be >= 0");
+  if (!m.corotational) {
+    out.assign(m.n, Eigen::Matrix3d::Identity());
+    return;
+  }
+  m.sumNodeGradients(m.q, m.work_acc, m.work_w);
+  m.finishNodeRotations(m.work_acc, m.work_w, out, smoothing_passes);
+}
+
 void FemBody::stresses(std::vector<Eigen::Matrix3d>& out) const {
   const Impl& m = *impl_;
   out.resize(m.mesh.tetCount());

@@ -61,6 +61,8 @@ struct EffectsRun {
   bool rows_equal_contacts = true;
   bool rows_three_per_contact = true;
   int max_contacts = 0;
+  int contact_steps = 0;            ///< steps whose report had contact rows
+  long elements = 0;                ///< tetrahedra of the first tissue
 };
 
 EffectsRun run(const SceneSpec& spec, int steps = 5) {
@@ -75,11 +77,13 @@ EffectsRun run(const SceneSpec& spec, int steps = 5) {
     out.rows_equal_contacts = out.rows_equal_contacts && r.rows == r.contacts;
     out.rows_three_per_contact = out.rows_three_per_contact && r.rows == 3 * r.contacts;
     out.max_contacts = std::max(out.max_contacts, r.contacts);
+    out.contact_steps += r.rows > 0;
     output.writeIfDue(sim);
   }
   output.finish(spec);
   out.vtk_frames = output.frames();
   out.counters = sim.counters();
+  out.elements = sim.tissue(0).mesh().tetCount();
   return out;
 }
 
@@ -134,6 +138,17 @@ TEST(EffectsTest, EveryEffectAScenePutsInRuns) {
     EXPECT_TRUE(anyContains(r.stages, present)) << present;
   }
   EXPECT_TRUE(anyContains(r.stages, "vertex and face contacts, at the free state"));
+}
+
+// A corotational tissue in contact makes one polar decomposition per element and step, the
+// element loop's: the warped compliance of the contact steps takes its node rotations from the
+// free state's deformation gradients (FemBody::fittedNodeRotations), not from a second
+// decomposition. (No output here: the VTK frames' reaction forces evaluate the elastic force.)
+TEST(EffectsTest, OnePolarDecompositionPerElementAndStep) {
+  const EffectsRun r = run(parse(cubeScene(true, true, true, 0.5)));
+  EXPECT_EQ(r.contact_steps, 5);   // the warped compliance updated on every step
+  EXPECT_GT(r.counters.w_builds, 0);
+  EXPECT_EQ(r.counters.rotation_extractions, 5 * r.elements);
 }
 
 // Detection at the start of the step still queries once per step (before the free motion instead

@@ -13,8 +13,10 @@
 //                CHOLMOD: one factorisation, one solve per surface DOF, progress shown),
 //                cached on disk (header: magic, version, hash of mesh+material+h, sizes; a stale
 //                or corrupt file is rebuilt, never trusted). R: per-node rotations
-//                (FemBody::nodeRotations at the free state: the linearisation point's
-//                rotations crushed the finite grip; nodes tied by very short edges share one).
+//                (FemBody::fittedNodeRotations at the free state: the polar factor of each
+//                node's sum of v_e F_e, no second polar decomposition per element; the
+//                linearisation point's rotations crushed the finite grip; nodes tied by very
+//                short edges share one).
 //  * rest      : C0 without rotation.
 //  * uncoupled : diagonal per-node compliance (diag of C0, isotropic 3x3 per node).
 // Constrained motion (paper 3.3): r0 = (H R)^T f, dq0 = C0 r0 (all DOFs, one solve with the
@@ -83,7 +85,7 @@ struct ComplianceOptions {
   /// factorisation); ComplianceBuildInfo::exact_fallbacks counts those calls. 0.9995 keeps
   /// liver2's grasp under 7 % (probe W error).
   double exact_below_coherence = 0.0;
-  /// Warped model: smoothing passes of the node rotations R (FemBody::nodeRotations; 0: the
+  /// Warped model: smoothing passes of the node rotations R (FemBody::fittedNodeRotations; 0: the
   /// rotation of each node's own elements, the paper's scheme). The warp is exact only where R
   /// is uniform; where jaws crush elements their polar factors scatter from one element to the
   /// next, and the correction R_i dq0_i moves neighbours apart by |R_i - R_j| |dq0|. On
@@ -117,8 +119,9 @@ class TissueCompliance {
  public:
   virtual ~TissueCompliance() = default;
   virtual ComplianceKind kind() const = 0;
-  /// Once per step, after free motion: refresh rotations (warped: FemBody::nodeRotations at
-  /// the free state, a second polar decomposition per element) / nothing (rest).
+  /// Once per step, after free motion: refresh rotations (warped: FemBody::fittedNodeRotations
+  /// at the free state, one pass over the elements and a polar factor per node; with
+  /// exact_below_coherence also FemBody::nodeRotations for the coherence) / nothing (rest).
   virtual void update(FemBody& body) = 0;
   /// W += H C H^T for the given rows (W is rows.size() square, row-major or column-major alike:
   /// the result is symmetric).

@@ -252,6 +252,18 @@ class FemBody {
   /// cholmod_reuse preconditioner's warp uses them (not the warped compliance: see design.md).
   void stepNodeRotations(std::vector<Eigen::Matrix3d>& out,
                          std::vector<double>* coherence = nullptr, int smoothing_passes = 0) const;
+  /// Node rotations without a polar decomposition per element: per node the rotation closest to
+  /// its elements' deformation gradients at the current positions, i.e. the polar factor of
+  /// sum v_e F_e (which minimises sum v_e |F_e - R|_F^2), over the same elements (rotation
+  /// group, `smoothing_passes` passes) as nodeRotations. Where the elements rotate alike
+  /// (F_e = R S_e, S_e symmetric positive definite) it is that R whatever their stretch, as
+  /// nodeRotations; where they scatter, elements weigh with their stretch (a crushed element
+  /// less along its crushed axis). One pass over the elements (F_e and the node sums) and one
+  /// polar factor per node. The warped compliance's rotations at the free state (docs/design.md,
+  /// "The warped compliance's rotations from the deformation gradients"). Throws tactus::Error
+  /// when smoothing_passes < 0. Works in the body's scratch: not for concurrent calls on one
+  /// body.
+  void fittedNodeRotations(std::vector<Eigen::Matrix3d>& out, int smoothing_passes = 0) const;
 
   /// Per-element volume ratio det F = current signed volume / rest volume at the current
   /// positions (<= 0: inverted).
