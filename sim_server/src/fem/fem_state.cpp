@@ -48,8 +48,7 @@ void FemBody::Impl::transferState(StateArchive& ar) {
   ar.resizable("factor_values", old_factor_read ? factor_values : none,
                static_cast<std::size_t>(a.nonZeros()));
   // background refreshes: the node rotations and values of the A of a job started and not yet
-  // taken (ReusedFactorSolver refuses to save while one is in flight, so they are only read
-  // back as kept)
+  // taken; a loaded job in flight is started again from them (below)
   ar.resizable("background_node_rot", background_node_rot, static_cast<std::size_t>(n_free / 3));
   ar.resizable("background_factor_values", background_factor_values,
                static_cast<std::size_t>(a.nonZeros()));
@@ -74,7 +73,15 @@ void FemBody::Impl::transferState(StateArchive& ar) {
     }
     if (!ok) ar.fail("chol", "the factor of record could not be rebuilt (not positive definite)");
   }
-  // Not state: the background worker (`background`, a thread; idle when a state is saved), the
+  if (reuse.jobToRestart()) {
+    if (background_factor_values.size() != a.nonZeros())
+      ar.fail("background_factor_values", "missing: the background job cannot be restarted");
+    if (!chol.analyzed()) chol.analyze(a);
+    Sparse source = a;
+    Eigen::Map<Eigen::VectorXd>(source.valuePtr(), source.nonZeros()) = background_factor_values;
+    reuse.restartJob(source, chol);
+  }
+  // Not state: the background worker (`background`, a thread; its job restarted above), the
   // model (FemModel, with the rest factor built from it on demand), the step's
   // buffers (FemScratch, written before they are read, but node_rot above) and the statistics
   // (counters, inversion_warned).

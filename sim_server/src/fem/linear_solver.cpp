@@ -167,8 +167,7 @@ bool CholmodSolver::factorize(Sparse& lower) {
   }
   factorized_ = ok && common_.status == CHOLMOD_OK && factor_->minor == factor_->n;
   if (simplicial_) cholmod_free_factor(&simplicial_, &common_);   // of the previous values
-  if (factorized_ && blas_free_solves_) toSimplicial();
-  else if (factorized_ && dual_forms_) makeSimplicialCopy();
+  if (factorized_ && dual_forms_ && !blas_free_solves_) makeSimplicialCopy();
   return factorized_;
 }
 
@@ -186,9 +185,6 @@ void CholmodSolver::setDualForms(bool on) {
   if (!on && simplicial_) cholmod_free_factor(&simplicial_, &common_);
 }
 
-void CholmodSolver::toSimplicial() {
-  if (factor_->is_super) simplicialInPlace(factor_);
-}
 
 void CholmodSolver::simplicialInPlace(cholmod_factor* factor) {
   // LL' kept (the values are moved, no square roots), packed, monotonic
@@ -200,7 +196,81 @@ void CholmodSolver::simplicialInPlace(cholmod_factor* factor) {
 
 void CholmodSolver::setBlasFreeSolves(bool on) {
   blas_free_solves_ = on;
-  if (on && factorized_) toSimplicial();
+  if (on && simplicial_) cholmod_free_factor(&simplicial_, &common_);
+}
+
+namespace {
+
+// One sweep pair of CholmodSolver::supernodalSolveWithoutBlas over the permuted right-hand sides
+// `y` (n x ncols, or a vector: Eigen's matrix-vector kernels for one column), `e` its scratch.
+template <class Y, class E>
+void supernodalSweeps(const cholmod_factor& f, Y& y, E& e) {
+  const int* super = static_cast<const int*>(f.super);
+  const int* pi = static_cast<const int*>(f.pi);
+  const int* px = static_cast<const int*>(f.px);
+  const int* ls = static_cast<const int*>(f.s);
+  const double* lx = static_cast<const double*>(f.x);
+  const auto nsuper = static_cast<Eigen::Index>(f.nsuper);
+  const Eigen::Index ncols = y.cols();
+  using Block = Eigen::Map<const Eigen::MatrixXd, 0, Eigen::OuterStride<>>;
+  for (Eigen::Index s = 0; s < nsuper; ++s) {   // L y = P b
+    const int k1 = super[s], nscol = super[s + 1] - k1;
+    const int psi = pi[s], nsrow = pi[s + 1] - psi, nsrow2 = nsrow - nscol;
+    const Block l(lx + px[s], nsrow, nscol, Eigen::OuterStride<>(nsrow));
+    auto y1 = y.middleRows(k1, nscol);
+    l.topRows(nscol).template triangularView<Eigen::Lower>().solveInPlace(y1);
+    if (nsrow2 == 0) continue;
+    auto e2 = e.topRows(nsrow2);
+    e2.noalias() = l.bottomRows(nsrow2) * y1;
+    const int* rows = ls + psi + nscol;
+    for (Eigen::Index c = 0; c < ncols; ++c)
+      for (int i = 0; i < nsrow2; ++i) y(rows[i], c) -= e2(i, c);
+  }
+  for (Eigen::Index s = nsuper - 1; s >= 0; --s) {   // L^T z = y
+    const int k1 = super[s], nscol = super[s + 1] - k1;
+    const int psi = pi[s], nsrow = pi[s + 1] - psi, nsrow2 = nsrow - nscol;
+    const Block l(lx + px[s], nsrow, nscol, Eigen::OuterStride<>(nsrow));
+    auto y1 = y.middleRows(k1, nscol);
+    if (nsrow2 > 0) {
+      auto e2 = e.topRows(nsrow2);
+      const int* rows = ls + psi + nscol;
+      for (Eigen::Index c = 0; c < ncols; ++c)
+        for (int i = 0; i < nsrow2; ++i) e2(i, c) = y(rows[i], c);
+      y1.noalias() -= l.bottomRows(nsrow2).transpose() * e2;
+    }
+    l.topRows(nscol).template triangularView<Eigen::Lower>().transpose().solveInPlace(y1);
+  }
+}
+
+}  // namespace
+
+void CholmodSolver::supernodalSolveWithoutBlas(const double* b, double* x, int ncols) {
+  // x = P^T L^-T L^-1 P b on CHOLMOD's supernodal LL' factor: cholmod_super_lsolve's and
+  // cholmod_super_ltsolve's sweeps, their dtrsv/dgemv (dtrsm/dgemm) by Eigen's kernels
+  const cholmod_factor& f = *factor_;
+  const auto n = static_cast<Eigen::Index>(f.n);
+  const int* perm = static_cast<const int*>(f.Perm);
+  const auto esize = static_cast<Eigen::Index>(f.maxesize);
+  auto gather = [&](double* y, int c) {
+    for (Eigen::Index k = 0; k < n; ++k) y[k] = b[c * n + (perm ? perm[k] : k)];
+  };
+  auto scatter = [&](const double* y, int c) {
+    for (Eigen::Index k = 0; k < n; ++k) x[c * n + (perm ? perm[k] : k)] = y[k];
+  };
+  if (ncols == 1) {
+    own_y_.resize(n, 1);
+    own_e_.resize(esize, 1);
+    Eigen::Map<Eigen::VectorXd> y(own_y_.data(), n), e(own_e_.data(), esize);
+    gather(y.data(), 0);
+    supernodalSweeps(f, y, e);
+    scatter(y.data(), 0);
+    return;
+  }
+  own_y_.resize(n, ncols);
+  own_e_.resize(esize, ncols);
+  for (int c = 0; c < ncols; ++c) gather(own_y_.col(c).data(), c);
+  supernodalSweeps(f, own_y_, own_e_);
+  for (int c = 0; c < ncols; ++c) scatter(own_y_.col(c).data(), c);
 }
 
 void CholmodSolver::solve(const double* b, double* x, int ncols) {
@@ -214,6 +284,10 @@ void CholmodSolver::solve(const double* b, double* x, int ncols) {
   bd.z = nullptr;
   bd.xtype = CHOLMOD_REAL;
   bd.dtype = CHOLMOD_DOUBLE;
+  if (factor_->is_super && blas_free_solves_) {
+    supernodalSolveWithoutBlas(b, x, ncols);
+    return;
+  }
   if (factor_->is_super && simplicial_ != nullptr) {
     // dual forms: the supernodal solve when the lock is free, else the simplicial copy's
     std::unique_lock<std::mutex> lock(cholmodBlasMutex(), std::try_to_lock);

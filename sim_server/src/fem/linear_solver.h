@@ -76,7 +76,8 @@ class CholmodSolver {
 
  private:
   cholmod_sparse view(Sparse& lower) const;
-  void toSimplicial();
+  /// setBlasFreeSolves: solve() on the supernodal factor by Eigen's dense kernels
+  void supernodalSolveWithoutBlas(const double* b, double* x, int ncols);
   void makeSimplicialCopy();
   /// `factor` (supernodal, of this solver's common) converted to the simplicial LL' form.
   void simplicialInPlace(cholmod_factor* factor);
@@ -90,6 +91,7 @@ class CholmodSolver {
   cholmod_dense* x2_ = nullptr;   // the simplicial copy's solve workspaces
   cholmod_dense* y2_ = nullptr;
   cholmod_dense* e2_ = nullptr;
+  Eigen::MatrixXd own_y_, own_e_;   // supernodalSolveWithoutBlas's workspaces
   bool factorized_ = false;
   bool blas_free_solves_ = false;
   bool dual_forms_ = false;
@@ -300,17 +302,32 @@ class ReusedFactorSolver {
   /// Steps since the factor was computed (-1: none yet).
   int ageSteps() const { return age_steps_; }
   long refreshes() const { return refreshes_; }
-  /// The factor's age and the last PCG's iterations (what decides the next refresh) are state;
-  /// refreshes_ counts, cg_ and warp_ are scratch.
+  /// The factor's age and the last PCG's iterations (what decides the next refresh) are state,
+  /// and in background mode whether a job is in flight, its age and whether it is stale: a job
+  /// is a factor being computed on another thread from an earlier step's A, whose values the
+  /// caller keeps in its state; after loading, jobToRestart() says that the caller must start it
+  /// again from them (restartJob), so that a restored run takes the same factor at the same
+  /// step as the run that saved it. refreshes_ counts, cg_ and warp_ are scratch.
   void transferState(StateArchive& ar) {
     ar("age_steps", age_steps_);
     ar("last_iterations", last_iterations_);
-    // background mode: a job in flight is a factor being computed from an earlier step's A on
-    // another thread, which a state cannot hold: saving is refused until it is taken
-    if (!ar.loading() && background_ != nullptr && background_->busy())
-      ar.fail("background job", "a background factorisation is in flight (not saved)");
-    if (ar.loading() && background_ != nullptr && background_->busy()) background_->discard();
+    bool job = background_ != nullptr && background_->busy();
+    ar("background_job", job);
+    ar("background_job_steps", job_steps_);
+    ar("background_job_stale", job_stale_);
+    if (!ar.loading()) return;
+    if (background_ != nullptr && background_->busy()) background_->discard();
+    restart_job_ = job && background_ != nullptr;
   }
+  /// After transferState loaded a state with a job in flight: true (once).
+  bool jobToRestart() {
+    const bool r = restart_job_;
+    restart_job_ = false;
+    return r;
+  }
+  /// Starts the loaded job again on the worker: `a` holds the values of the job's A, `like` is
+  /// the analysed factor of record. The job keeps its loaded age.
+  void restartJob(const Sparse& a, const CholmodSolver& like) { background_->start(a, like); }
 
  private:
   FactorReusePolicy policy_;
@@ -323,6 +340,7 @@ class ReusedFactorSolver {
   BackgroundFactoriser* background_ = nullptr;
   int job_steps_ = 0;        // steps since the worker's job started (while it is busy)
   bool job_stale_ = false;   // a newer factor than the job's was made since it started
+  bool restart_job_ = false; // a loaded state had a job in flight (jobToRestart)
 };
 
 }  // namespace tactus::sim::fem_detail
