@@ -355,6 +355,10 @@ double FemBody::lastStepH() const { return impl_->last_h; }
 std::uint64_t FemBody::restHash() const { return impl_->hash; }
 std::size_t FemBody::factorNonzeros() const { return impl_->chol.factorNonzeros(); }
 
+bool FemBody::backgroundFactorisationInFlight() const {
+  return impl_->background != nullptr && impl_->background->busy();
+}
+
 const std::vector<int>& FemBody::surfaceNodes() const {
   if (!impl_->surface_ready) {
     impl_->surface = fem_detail::boundaryNodes(impl_->mesh);

@@ -180,6 +180,40 @@ TEST(SimulationStateTest, ObstaclesAndTissueContactContinueBitForBit) {
   expectSameRun(original, runPrinting(other, 30), "a new simulation");
 }
 
+// The factor refreshed in the background at a fixed lag (solver.background_refactor_lag_steps,
+// not when ready): a state saved while the worker factorises holds the values it factorises, and
+// the restore starts that job again, so the factor takes over at the same step and the run
+// continues bit for bit (without the job's restart the restored run kept its old factor longer).
+TEST(SimulationStateTest, ABackgroundFactorisationInFlightContinuesBitForBit) {
+  SceneSpec spec = scene("liver_grasp.yaml");
+  spec.solver.background_refactor_lag_steps = 2;
+  spec.solver.background_refactor_when_ready = false;
+  Simulation sim(spec);
+  // into the grasp, to a step that leaves a job in flight
+  int pressed = 0;
+  for (int k = 0; k < 600; ++k) {
+    sim.setDeviceTarget(sim.scriptedTarget(sim.time()));
+    pressed = sim.step().total_normal_force_n > 0.5 ? pressed + 1 : 0;
+    if (pressed >= 5 && sim.tissue(0).backgroundFactorisationInFlight()) break;
+  }
+  ASSERT_GE(pressed, 5) << "the grasper never pressed the lobe";
+  ASSERT_TRUE(sim.tissue(0).backgroundFactorisationInFlight());
+  const long taken_before = sim.tissue(0).counters().background_factorisations;
+  const std::string saved = sim.saveState();
+  const std::vector<StepPrint> original = runPrinting(sim, 60);
+  EXPECT_GT(sim.tissue(0).counters().background_factorisations, taken_before);
+  const std::string end = sim.saveState();
+
+  Simulation other(spec);
+  other.restoreState(saved);
+  EXPECT_TRUE(other.tissue(0).backgroundFactorisationInFlight());
+  expectSameRun(original, runPrinting(other, 60), "a new simulation");
+  EXPECT_TRUE(other.saveState() == end) << "the states after the 60 steps differ";
+
+  sim.restoreState(saved);
+  expectSameRun(original, runPrinting(sim, 60), "the simulation rewound");
+}
+
 // The other linear solves carry their own warm starts (PCG: the last dv) or none (CHOLMOD).
 TEST(SimulationStateTest, EveryLinearSolverContinuesBitForBit) {
   for (const LinearSolverKind kind : {LinearSolverKind::kPcg, LinearSolverKind::kCholmod}) {

@@ -310,6 +310,9 @@ class FemBody {
   /// system matrix (0 before the first factorisation).
   int freeDofCount() const;
   std::size_t factorNonzeros() const;
+  /// kCholmodReuse in the background: a factorisation started on the worker thread and not yet
+  /// taken (a state saved now holds it: the restore starts it again)
+  bool backgroundFactorisationInFlight() const;
   /// Sorted unique boundary nodes (faces that belong to one tetrahedron), computed once.
   const std::vector<int>& surfaceNodes() const;
   /// Hash of everything the rest compliance depends on except h: node positions at rest, tets,
