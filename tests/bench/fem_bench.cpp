@@ -202,14 +202,15 @@ void BM_Settle_Liver23k_CholmodReuse(benchmark::State& s) {
 }
 // The factor solves of the liver_grasp_23k scene's system matrix (its tissue, settled 5 steps
 // from rest), through solveComplianceBatch (reduce, CHOLMOD solve, expand): Arg 0 = 0 the
-// supernodal factor a synchronous refresh keeps (CHOLMOD's BLAS path), 1 the simplicial form the
-// background refresh solves with (no BLAS on the step's thread); Arg 1: right-hand sides per
-// solve (1: a PCG preconditioner solve).
+// supernodal factor solved by CHOLMOD (its BLAS path: a synchronous refresh's), 1 the same
+// factor solved without BLAS as the background refresh solves it on the step's thread
+// (CholmodSolver::setBlasFreeSolves); Arg 1: right-hand sides per solve (1: a PCG
+// preconditioner solve).
 //   fem_bench --benchmark_filter=FactorSolve
 void BM_FactorSolve_Liver23k(benchmark::State& state) {
   static std::map<int, std::unique_ptr<FemBody>> bodies;
-  const int simplicial = static_cast<int>(state.range(0));
-  auto& body = bodies[simplicial];
+  const int blas_free = static_cast<int>(state.range(0));
+  auto& body = bodies[blas_free];
   if (!body) {
     SceneSpec spec = loadScene(std::filesystem::path(TACTUS_SOURCE_DIR) / "scenes" /
                                "liver_grasp_23k.yaml");
@@ -218,8 +219,9 @@ void BM_FactorSolve_Liver23k(benchmark::State& state) {
     transformMesh(mesh, ts.scale, ts.rotation_deg, ts.translation_m);
     FemSolverOptions opt = femSolverOptions(spec.solver);
     opt.linear = LinearSolverKind::kCholmod;
-    // the background refresh's setting makes the body's factors simplicial
-    if (simplicial) {
+    // the background refresh's setting: the body's factors solved without BLAS (CHOLMOD's
+    // supernodal sweeps with Eigen's kernels)
+    if (blas_free) {
       opt.linear = LinearSolverKind::kCholmodReuse;
       opt.background_refactor_lag_steps = 2;
     }

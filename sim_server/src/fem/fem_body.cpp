@@ -49,7 +49,7 @@ void FemBody::Impl::init(const TetMesh& m, const FemMaterial& mat,
                                           opt.background_refactor_when_ready});
   if (opt.linear == LinearSolverKind::kCholmodReuse && opt.background_refactor_lag_steps > 0) {
     // the worker runs BLAS (CHOLMOD's supernodal factorisation) while the steps go on: the
-    // step's own solves use simplicial factors, which make no BLAS call (linear_solver.h)
+    // step's own solves make no BLAS call (CholmodSolver::setBlasFreeSolves, linear_solver.h)
     background = std::make_unique<fem_detail::BackgroundFactoriser>();
     reuse.setBackground(background.get());
     if (opt.background_refactor_when_ready) {

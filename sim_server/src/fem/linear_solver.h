@@ -31,11 +31,13 @@ std::mutex& cholmodBlasMutex();
 ///
 /// CHOLMOD chooses a supernodal factor for the large meshes (dense blocks, BLAS) and a simplicial
 /// one for the small. A supernodal factorisation or solve holds cholmodBlasMutex(). With
-/// setBlasFreeSolves(true) every numeric factor is converted to the simplicial form right after
-/// its factorisation (cholmod_change_factor, LL' kept: the values are moved, not recomputed), so
-/// that solve() is CHOLMOD's simplicial triangular solves, plain loops without BLAS and without
-/// the lock: the solvers a step's thread uses while a background factorisation runs are set so.
-/// The next factorize() starts again from the supernodal symbolic analysis kept by analyze().
+/// setBlasFreeSolves(true) solve() keeps the supernodal factor and runs CHOLMOD's supernodal
+/// sweeps itself (cholmod_super_lsolve's and cholmod_super_ltsolve's order, their dense
+/// triangular solves and matrix-vector products by Eigen's kernels): no BLAS and no lock, the
+/// same bits whatever another thread does, and one right-hand side as fast as CHOLMOD's BLAS
+/// solve (liver_grasp_23k: docs/measurements.md, "The background refresh as the default"). The
+/// solvers a step's thread uses while a background factorisation runs are set so. (A
+/// simplicial factor's solves make no BLAS call either way.)
 class CholmodSolver {
  public:
   using Sparse = Eigen::SparseMatrix<double, Eigen::ColMajor, int>;
@@ -170,11 +172,11 @@ CgResult conjugateGradient(const CholmodSolver::Sparse& lower, const Eigen::Vect
 /// The thread starts with the first job and is joined by the destructor; the stop signals are
 /// blocked in it (they reach the process's other threads), and OpenMP is limited in it as in the
 /// process. Its CHOLMOD state is its own; its factorisation holds cholmodBlasMutex() (several
-/// bodies' workers and the step's own factorisations never run BLAS at once) and then converts
-/// the factor to the simplicial form outside the lock (CholmodSolver::setBlasFreeSolves), so the
-/// factor handed over is solved without BLAS. The caller's solver must be set so too: then
-/// nothing on the step's thread runs BLAS while the worker does, except a factorisation there,
-/// which waits for the worker's. With a caller's solver set to dual forms
+/// bodies' workers and the step's own factorisations never run BLAS at once), and its solver is
+/// set to solve without BLAS (CholmodSolver::setBlasFreeSolves), so the factor handed over is
+/// solved without BLAS. The caller's solver must be set so too: then nothing on the step's
+/// thread runs BLAS while the worker does, except a factorisation there, which waits for the
+/// worker's. With a caller's solver set to dual forms
 /// (CholmodSolver::setDualForms) the worker keeps the supernodal factor and hands over its
 /// simplicial copy with it (made outside the lock), and the caller's solves take whichever the
 /// lock allows without waiting. The worker runs at the process's priority: a lower one would

@@ -86,16 +86,17 @@ enum class PcgPreconditioner {
 ///    refactor_iterations iterations, when the previous step needed more than half of them,
 ///    and every refactor_every_steps steps when that is > 0. Every step's dv meets cg_tolerance
 ///    (relative residual) or comes from a fresh factorisation. cg_max_iterations is not used.
-///    With background_refactor_lag_steps > 0 (opt-in, scene key
-///    solver.background_refactor_lag_steps; the default 0 refreshes synchronously, which the
-///    liver scenes keep: on the shared 2-core machine the background refresh made their median
-///    step slower, docs/design.md) the schedule and the drift refresh
+///    With background_refactor_lag_steps > 0 (scene key solver.background_refactor_lag_steps,
+///    2 in liver_grasp_20k and liver_grasp_23k; the default 0 refreshes synchronously, which the
+///    small scenes keep, docs/design.md) the schedule and the drift refresh
 ///    off the step's critical path: a worker thread factorises the step's A while the steps go
 ///    on with PCG on the old factor (up to 3 x refactor_iterations), and the new factor takes
 ///    over background_refactor_lag_steps steps later (that step waits for the worker only if
 ///    it has not finished: FemStepStats::factor_wait_s). Only the first step, and a PCG that
 ///    misses 3 x refactor_iterations, factorise on the step's thread. The steps at which the
-///    factor changes do not depend on the worker's speed: the results do not depend on timing.
+///    factor changes do not depend on the worker's speed: the results do not depend on timing
+///    (the step's solves run CHOLMOD's supernodal sweeps without BLAS, the same bits whatever
+///    the worker does), and a state saved with a factorisation in flight restarts it.
 ///    With background_refactor_when_ready as well (scene key
 ///    solver.background_refactor_when_ready) no step waits for the worker: the new factor takes
 ///    over at the first step, background_refactor_lag_steps or more after its start, at which the
@@ -112,8 +113,8 @@ struct FemSolverOptions {
   int refactor_iterations = 8;                  ///< kCholmodReuse: PCG iteration bound (>= 1)
   int refactor_every_steps = 0;                 ///< kCholmodReuse: refresh schedule (0: none)
   /// kCholmodReuse: steps between a background factorisation's start and the step that takes
-  /// its factor (0, the default and the scenes' setting: refresh synchronously, on the step's
-  /// thread; 2 is the value the background refresh was measured with)
+  /// its factor (0, the default: refresh synchronously, on the step's thread; liver_grasp_20k
+  /// and liver_grasp_23k set 2)
   int background_refactor_lag_steps = 0;
   /// kCholmodReuse in the background: the new factor takes over as soon as it is ready (no step
   /// waits for the worker; timing-dependent results) instead of exactly
