@@ -185,7 +185,6 @@ void CholmodSolver::setDualForms(bool on) {
   if (!on && simplicial_) cholmod_free_factor(&simplicial_, &common_);
 }
 
-
 void CholmodSolver::simplicialInPlace(cholmod_factor* factor) {
   // LL' kept (the values are moved, no square roots), packed, monotonic
   const int ok = cholmod_change_factor(CHOLMOD_REAL, 1, 0, 1, 1, factor, &common_);
