@@ -1,7 +1,7 @@
 // The contact solver and the problem files on ContactProblem (contact.h).
 #include "tactus/contact.h"
 
-#include "tactus/shared/format.h"
+#include <fmt/format.h>
 
 #include <algorithm>
 #include <cmath>

@@ -1,7 +1,7 @@
 // tactus::Model: a scene compiled once (model.h).
 #include "tactus/model.h"
 
-#include "tactus/shared/format.h"
+#include <fmt/format.h>
 
 #include <stdexcept>
 

@@ -2,7 +2,7 @@
 // sim::Simulation's (sim_server/include/tactus/sim/pipeline.h).
 #include "tactus/simulation.h"
 
-#include "tactus/shared/format.h"
+#include <fmt/format.h>
 
 #include <stdexcept>
 

@@ -5,7 +5,6 @@
 #include <unistd.h>
 
 #include <spdlog/spdlog.h>
-#include "tactus/shared/format.h"
 
 namespace tactus::haptic {
 

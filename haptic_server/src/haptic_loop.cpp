@@ -4,7 +4,6 @@
 #include "tactus/haptic/haptic_loop.h"
 
 #include <spdlog/spdlog.h>
-#include "tactus/shared/format.h"
 
 #include <algorithm>
 #include <cmath>

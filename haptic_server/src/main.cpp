@@ -2,7 +2,6 @@
 // polls a device backend and re-solves the simulation's last contact problem every period.
 #include "tactus/shared/cli.h"
 #include <spdlog/spdlog.h>
-#include "tactus/shared/format.h"
 
 #include <atomic>
 #include <chrono>
@@ -22,7 +21,6 @@
 #include "tactus/haptic/haptic_loop.h"
 #include "tactus/haptic/supervisor.h"
 #include "tactus/haptic/workspace_options.h"
-#include "tactus/shared/cli_checks.h"
 #include "tactus/shared/clock.h"
 #include "tactus/shared/file_io.h"
 #include "tactus/shared/nsgs_kernels.h"
@@ -43,7 +41,8 @@ void onSignal(int) {
 
 int main(int argc, char** argv) {
   using namespace tactus;
-  CLI::App app{"Tactus haptic server: renders contact forces at 1 kHz or more"};
+  namespace cli = tactus::shared::cli;
+  cli::App app{"Tactus haptic server: renders contact forces at 1 kHz or more"};
   app.footer(
       "Example:\n"
       "  haptic_server --segment tactus   (after sim_server; scripts/start.sh starts both)");
@@ -58,79 +57,79 @@ int main(int argc, char** argv) {
   bool status = false;
   std::string log_level = "info";
   haptic::HapticSettings settings;
-  app.add_option("--segment", segment, "Shared-memory segment name")->capture_default_str();
-  app.add_option("--device", device_names,
+  app.addOption("--segment", segment, "Shared-memory segment name")->captureDefault();
+  app.addOption("--device", device_names,
                  "Device backend: simulated, replay, null, bridge (network; device/README.md), "
                  "or a plugin .so path; repeat for several devices (device i drives the scene's "
                  "instrument i; default: one simulated device)");
-  app.add_option("--device-option", device_options,
+  app.addOption("--device-option", device_options,
                  "Backend option key=value (repeatable); I:key=value for device I (0-based), "
                  "key=value for device 0");
-  app.add_option("--rate", rate_hz, "Loop rate [Hz]")
-      ->check(shared::finiteRange(50.0, 4000.0, "Hz"))->capture_default_str();
-  app.add_option("--core", core, "CPU core to pin the loop to (-1: the last core)");
-  app.add_option("--priority", priority, "SCHED_FIFO priority (0: do not ask)")
-      ->check(CLI::Range(0, 99))->capture_default_str();
-  app.add_flag("--require-rt", require_rt, "Fail if pinning, SCHED_FIFO or mlockall is refused");
+  app.addOption("--rate", rate_hz, "Loop rate [Hz]")
+      ->check(cli::finiteRange(50.0, 4000.0, "Hz"))->captureDefault();
+  app.addOption("--core", core, "CPU core to pin the loop to (-1: the last core)");
+  app.addOption("--priority", priority, "SCHED_FIFO priority (0: do not ask)")
+      ->check(cli::range(0, 99))->captureDefault();
+  app.addFlag("--require-rt", require_rt, "Fail if pinning, SCHED_FIFO or mlockall is refused");
   using Limits = haptic::HapticSettingsLimits;
-  app.add_option("--max-force", settings.max_force_n, "Force clamp [N]")
-      ->check(shared::finiteAbove(0.0, Limits::kMaxForceN, "N"))->capture_default_str();
-  app.add_option("--force-scale", settings.force_scale, "Rendered force per contact force")
-      ->check(shared::finiteRange(0.0, Limits::kMaxForceScale))->capture_default_str();
-  app.add_option("--watchdog-ms", settings.watchdog_ms, "Fade out when the snapshot is older")
-      ->check(shared::finiteAbove(0.0, Limits::kMaxWatchdogMs, "ms"))->capture_default_str();
-  app.add_option("--fade-ms", settings.fade_ms, "Fade ramp [ms]")
-      ->check(shared::finiteRange(0.0, Limits::kMaxFadeMs, "ms"))->capture_default_str();
-  app.add_option("--snapshot-blend-ms", settings.snapshot_blend_ms,
+  app.addOption("--max-force", settings.max_force_n, "Force clamp [N]")
+      ->check(cli::finiteAbove(0.0, Limits::kMaxForceN, "N"))->captureDefault();
+  app.addOption("--force-scale", settings.force_scale, "Rendered force per contact force")
+      ->check(cli::finiteRange(0.0, Limits::kMaxForceScale))->captureDefault();
+  app.addOption("--watchdog-ms", settings.watchdog_ms, "Fade out when the snapshot is older")
+      ->check(cli::finiteAbove(0.0, Limits::kMaxWatchdogMs, "ms"))->captureDefault();
+  app.addOption("--fade-ms", settings.fade_ms, "Fade ramp [ms]")
+      ->check(cli::finiteRange(0.0, Limits::kMaxFadeMs, "ms"))->captureDefault();
+  app.addOption("--snapshot-blend-ms", settings.snapshot_blend_ms,
                  "Blend each new snapshot's force in over this time [ms] (0: off)")
-      ->check(shared::finiteRange(0.0, Limits::kMaxSnapshotBlendMs, "ms"))->capture_default_str();
-  app.add_option("--slew", settings.slew_n_per_s, "Force slew-rate limit [N/s]")
-      ->check(shared::finiteAbove(0.0, Limits::kMaxSlewNPerS, "N/s"))->capture_default_str();
-  app.add_option("--max-sweeps", settings.max_sweeps, "NSGS sweeps per tick")
-      ->check(CLI::Range(1, Limits::kMaxSweeps))->capture_default_str();
-  app.add_option("--tolerance", settings.tolerance, "NSGS tolerance")
-      ->check(shared::finiteAbove(0.0, Limits::kMaxTolerance))->capture_default_str();
-  app.add_option("--nsgs-anderson-depth", settings.anderson_depth,
+      ->check(cli::finiteRange(0.0, Limits::kMaxSnapshotBlendMs, "ms"))->captureDefault();
+  app.addOption("--slew", settings.slew_n_per_s, "Force slew-rate limit [N/s]")
+      ->check(cli::finiteAbove(0.0, Limits::kMaxSlewNPerS, "N/s"))->captureDefault();
+  app.addOption("--max-sweeps", settings.max_sweeps, "NSGS sweeps per tick")
+      ->check(cli::range(1, Limits::kMaxSweeps))->captureDefault();
+  app.addOption("--tolerance", settings.tolerance, "NSGS tolerance")
+      ->check(cli::finiteAbove(0.0, Limits::kMaxTolerance))->captureDefault();
+  app.addOption("--nsgs-anderson-depth", settings.anderson_depth,
                  "NSGS Anderson acceleration over this many past sweeps (0: off)")
-      ->check(CLI::Range(0, shared::kMaxAndersonDepth))->capture_default_str();
+      ->check(cli::range(0, shared::kMaxAndersonDepth))->captureDefault();
   std::string local_model = "automatic";
-  app.add_option("--local-model", local_model,
+  app.addOption("--local-model", local_model,
                  "Local model the tick solves: full (re-solve every tick), linearized (the "
                  "snapshot's solution linearised in the device pose, re-solve where it does not "
                  "hold) or automatic (linearized from the size where a re-solve costs more)")
-      ->check(CLI::IsMember({"full", "linearized", "automatic"}))->capture_default_str();
-  app.add_flag("--render-torque", settings.render_torque, "Render torques too");
+      ->check(cli::isMember({"full", "linearized", "automatic"}))->captureDefault();
+  app.addFlag("--render-torque", settings.render_torque, "Render torques too");
   // the device -> scene workspace mapping (docs/design.md, "Workspace mapping")
   shared::WorkspaceMappingParams workspace;
   std::vector<double> workspace_offset, workspace_rotation;
   bool clutch_key = false;
-  app.add_option("--workspace-scale", workspace.scale, "Scene metres per device metre")
-      ->check(shared::finiteRange(shared::WorkspaceMappingLimits::kMinScale,
+  app.addOption("--workspace-scale", workspace.scale, "Scene metres per device metre")
+      ->check(cli::finiteRange(shared::WorkspaceMappingLimits::kMinScale,
                                   shared::WorkspaceMappingLimits::kMaxScale))
-      ->capture_default_str();
-  app.add_option("--workspace-offset", workspace_offset,
+      ->captureDefault();
+  app.addOption("--workspace-offset", workspace_offset,
                  "Scene position of the device origin x,y,z [m]")
       ->delimiter(',')->expected(3);
-  app.add_option("--workspace-rotation", workspace_rotation,
+  app.addOption("--workspace-rotation", workspace_rotation,
                  "Device -> scene rotation, unit quaternion w,x,y,z")
       ->delimiter(',')->expected(4);
-  app.add_option("--clutch-button", workspace.clutch_button,
+  app.addOption("--clutch-button", workspace.clutch_button,
                  "Device button (bit) that clutches; -1: none")
-      ->check(CLI::Range(-1, shared::WorkspaceMappingLimits::kMaxButton))->capture_default_str();
+      ->check(cli::range(-1, shared::WorkspaceMappingLimits::kMaxButton))->captureDefault();
   std::vector<std::string> workspace_options;
-  app.add_option("--workspace-option", workspace_options,
+  app.addOption("--workspace-option", workspace_options,
                  "Device I's own mapping field, I:key=value (repeatable; keys scale, "
                  "offset=x,y,z, rotation=w,x,y,z, clutch_button; overrides --workspace-* for "
                  "device I only)");
-  app.add_flag("--clutch-key", clutch_key,
+  app.addFlag("--clutch-key", clutch_key,
                "On a terminal, the space bar toggles the clutch (devices without a button)");
-  app.add_option("--duration", duration_s,
+  app.addOption("--duration", duration_s,
                  "Stop after S seconds; 0 (the default): run until SIGINT, SIGTERM or SIGHUP")
-      ->check(shared::finiteRange(0.0, 1e7, "s"));
-  app.add_flag("--status", status, "Log a status line every second");
-  app.add_option("--log-level", log_level, "trace, debug, info, warn, error")
-      ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error"}));
-  CLI11_PARSE(app, argc, argv);
+      ->check(cli::finiteRange(0.0, 1e7, "s"));
+  app.addFlag("--status", status, "Log a status line every second");
+  app.addOption("--log-level", log_level, "trace, debug, info, warn, error")
+      ->check(cli::isMember({"trace", "debug", "info", "warn", "error"}));
+  TACTUS_CLI_PARSE(app, argc, argv);
   spdlog::set_level(spdlog::level::from_str(log_level));
   spdlog::set_pattern("[%H:%M:%S.%e] [haptic] [%^%l%$] %v");
   std::signal(SIGINT, onSignal);

@@ -2,7 +2,6 @@
 #include "tactus/haptic/supervisor.h"
 
 #include <spdlog/spdlog.h>
-#include "tactus/shared/format.h"
 
 #include <chrono>
 #include <thread>

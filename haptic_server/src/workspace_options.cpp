@@ -1,7 +1,7 @@
 // Workspace mapping per device from the command line (workspace_options.h).
 #include "tactus/haptic/workspace_options.h"
 
-#include "tactus/shared/format.h"
+#include <fmt/format.h>
 
 #include <cctype>
 #include <cerrno>

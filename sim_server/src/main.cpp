@@ -4,14 +4,12 @@
 #include "tactus/shared/cli.h"
 #include <new>
 #include <spdlog/spdlog.h>
-#include "tactus/shared/format.h"
 
 #include <atomic>
 #include <csignal>
 #include <cstdio>
 #include <optional>
 
-#include "tactus/shared/cli_checks.h"
 #include "tactus/sim/runner.h"
 #include "tactus/sim/scene.h"
 #include "tactus/shared/error.h"
@@ -29,57 +27,58 @@ void onSignal(int signo) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"Tactus simulation server: FEM tissue, contact and friction, god-object instrument"};
+  namespace cli = tactus::shared::cli;
+  cli::App app{"Tactus simulation server: FEM tissue, contact and friction, god-object instrument"};
   app.footer(
       "Examples:\n"
       "  sim_server scenes/liver_grasp.yaml   (scripts/start.sh starts it with haptic_server)\n"
       "  sim_server scenes/liver_grasp.yaml --steps 800 --record-snapshots grasp.snap");
   tactus::sim::RunOptions opt;
   std::string log_level = "info";
-  app.add_option("scene", opt.scene_path, "Scene file (YAML)")->required()->check(CLI::ExistingFile);
-  app.add_option("--steps", opt.steps, "Run N >= 1 steps offline as fast as possible, then exit")
-      ->check(CLI::Range(1L, 1'000'000'000L));
-  app.add_option("--duration", opt.duration_s,
+  app.addOption("scene", opt.scene_path, "Scene file (YAML)")->required()->check(cli::existingFile());
+  app.addOption("--steps", opt.steps, "Run N >= 1 steps offline as fast as possible, then exit")
+      ->check(cli::range(1L, 1'000'000'000L));
+  app.addOption("--duration", opt.duration_s,
                  "Stop after this simulated time [s]; 0 (the default): run until SIGINT, SIGTERM "
                  "or SIGHUP")
-      ->check(tactus::shared::finiteRange(0.0, 1e7, "s"));
-  app.add_option("--output", opt.output_dir, "Write a VTK series (.vtu + .pvd) into DIR");
-  app.add_option("--output-every", opt.output_every, "Write every N steps (with --output)");
-  app.add_option("--segment", opt.segment, "Shared-memory segment name (haptics)");
-  app.add_flag("--no-haptics", opt.no_haptics, "Do not publish to a segment even if enabled");
-  app.add_flag("--status", opt.status, "Log a status line every second (daemon mode)");
-  app.add_option("--stats-json", opt.stats_json, "Write per-stage statistics as JSON to FILE");
-  app.add_option("--export-trajectory", opt.export_trajectory,
+      ->check(cli::finiteRange(0.0, 1e7, "s"));
+  app.addOption("--output", opt.output_dir, "Write a VTK series (.vtu + .pvd) into DIR");
+  app.addOption("--output-every", opt.output_every, "Write every N steps (with --output)");
+  app.addOption("--segment", opt.segment, "Shared-memory segment name (haptics)");
+  app.addFlag("--no-haptics", opt.no_haptics, "Do not publish to a segment even if enabled");
+  app.addFlag("--status", opt.status, "Log a status line every second (daemon mode)");
+  app.addOption("--stats-json", opt.stats_json, "Write per-stage statistics as JSON to FILE");
+  app.addOption("--export-trajectory", opt.export_trajectory,
                  "Write the scene's scripted instrument trajectory as a device CSV and exit");
-  app.add_option("--export-instrument", opt.export_instrument,
+  app.addOption("--export-instrument", opt.export_instrument,
                  "Whose trajectory --export-trajectory writes (0-based instrument index)")
-      ->check(CLI::Range(0, tactus::shared::kMaxInstruments - 1));
+      ->check(cli::range(0, tactus::shared::kMaxInstruments - 1));
   bool print_instrument_count = false;
-  app.add_flag("--print-instrument-count", print_instrument_count,
+  app.addFlag("--print-instrument-count", print_instrument_count,
                "Print the scene's number of instruments (devices haptic_server serves) and exit");
   bool print_haptic_options = false;
-  app.add_flag("--print-haptic-options", print_haptic_options,
+  app.addFlag("--print-haptic-options", print_haptic_options,
                "Print haptic_server's options for the scene's haptics section (workspace "
                "mapping), one per line, and exit");
-  app.add_option("--record-snapshots", opt.record_snapshots,
+  app.addOption("--record-snapshots", opt.record_snapshots,
                  "Record every step's contact snapshot (simulated time stamps) to a new FILE, "
                  "written at the end of the run, for tactus-jitter --replay FILE (offline with "
                  "--steps, or as a daemon)");
-  app.add_option("--record-snapshots-max-mb", opt.record_snapshots_max_mb,
+  app.addOption("--record-snapshots-max-mb", opt.record_snapshots_max_mb,
                  "Stop recording snapshots (the run goes on) before the file passes this size "
                  "[MiB]; 2048 is what tactus-jitter --replay reads")
-      ->check(CLI::Range(1, tactus::sim::kMaxRecordingMiB))->capture_default_str();
-  app.add_option("--record-snapshots-from-step", opt.record_snapshots_from_step,
+      ->check(cli::range(1, tactus::sim::kMaxRecordingMiB))->captureDefault();
+  app.addOption("--record-snapshots-from-step", opt.record_snapshots_from_step,
                  "Record the snapshots from this step on (1: every step), e.g. a long run's "
                  "hold without the approach before it")
-      ->check(CLI::Range(1L, 1L << 40))->capture_default_str();
-  app.add_flag("--overwrite", opt.overwrite,
+      ->check(cli::range(1L, 1L << 40))->captureDefault();
+  app.addFlag("--overwrite", opt.overwrite,
                "Replace existing --stats-json / --export-trajectory / --record-snapshots files "
                "and an earlier "
                "run's VTK series in the --output folder");
-  app.add_option("--log-level", log_level, "trace, debug, info, warn, error")
-      ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error"}));
-  CLI11_PARSE(app, argc, argv);
+  app.addOption("--log-level", log_level, "trace, debug, info, warn, error")
+      ->check(cli::isMember({"trace", "debug", "info", "warn", "error"}));
+  TACTUS_CLI_PARSE(app, argc, argv);
   spdlog::set_level(spdlog::level::from_str(log_level));
   spdlog::set_pattern("[%H:%M:%S.%e] [sim] [%^%l%$] %v");
 

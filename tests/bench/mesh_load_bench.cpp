@@ -2,7 +2,6 @@
 // meshes by size. Figures in docs/measurements.md ("Soft tissue").
 #include <benchmark/benchmark.h>
 #include <spdlog/spdlog.h>
-#include "tactus/shared/format.h"
 
 #include <filesystem>
 #include <string>

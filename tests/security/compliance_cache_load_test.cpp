@@ -6,7 +6,6 @@
 
 #include <gtest/gtest.h>
 #include <spdlog/spdlog.h>
-#include "tactus/shared/format.h"
 #include <unistd.h>
 
 #include <cstdint>

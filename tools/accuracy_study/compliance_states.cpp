@@ -1,6 +1,5 @@
 // Part 1b of the accuracy study: the compliance models on the same states of one exact reference
 // trajectory (see study.h, StateComparison).
-#include "tactus/shared/format.h"
 
 #include <Eigen/SVD>
 #include <algorithm>

@@ -10,7 +10,6 @@
 //  * energy into the hand: sum_j F_j . (x_j+1 - x_j) over the closed motion [mJ] (<= 0: the
 //    rendering took energy from the hand, passive; > 0: it gave energy, active);
 //  * time per tick: median [us] (R1, R2: the full step).
-#include "tactus/shared/format.h"
 
 #include <algorithm>
 #include <cmath>

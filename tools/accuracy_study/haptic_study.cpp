@@ -1,6 +1,5 @@
 // Part 2 of the accuracy study: the haptic loop's methods against R1 (the exact step at the
 // tick's pose from the snapshot's state) and R2 (the full model at the haptic rate); see study.h.
-#include "tactus/shared/format.h"
 #include <spdlog/spdlog.h>
 
 #include <algorithm>

@@ -1,7 +1,6 @@
 // tactus-accuracy: the study's plans (quick and full), its run cache, the output files and the
 // command line (what is measured and how: study.h).
 #include "tactus/shared/cli.h"
-#include "tactus/shared/format.h"
 #include <fmt/ranges.h>
 #include <spdlog/spdlog.h>
 
@@ -281,7 +280,8 @@ int run(Options& o) {
 }  // namespace tactus::study
 
 int main(int argc, char** argv) {
-  CLI::App app{"tactus-accuracy: accuracy against time of the contact pipeline (compliance "
+  namespace cli = tactus::shared::cli;
+  cli::App app{"tactus-accuracy: accuracy against time of the contact pipeline (compliance "
                "model, NSGS tolerance and sweeps, time step, mesh) and of the haptic local model "
                "(rate, sweeps per tick), each against a reference computed in the same run. "
                "Writes sim_accuracy.csv, haptic_accuracy.csv, *_timeseries.csv and meta.csv."};
@@ -296,51 +296,51 @@ int main(int argc, char** argv) {
   root = TACTUS_SOURCE_DIR;
 #endif
   std::string out, cache;
-  app.add_option("--out", out, "Output directory for the CSV files")->required();
-  app.add_flag("--overwrite", o.overwrite,
+  app.addOption("--out", out, "Output directory for the CSV files")->required();
+  app.addFlag("--overwrite", o.overwrite,
                "Replace the CSV files an earlier run left in --out (refused otherwise)");
-  app.add_flag("--quick", quick, "Quick mode (< 2 min): coarse liver, short spans, few points");
-  app.add_option("--part", o.part,
+  app.addFlag("--quick", quick, "Quick mode (< 2 min): coarse liver, short spans, few points");
+  app.addOption("--part", o.part,
                  "What to run: all, sim (the simulation step study), states (compliance models on "
                  "the same states), haptic (the haptic loop); the report covers what exists")
-      ->check(CLI::IsMember({"all", "sim", "states", "haptic"}))
-      ->capture_default_str();
-  app.add_flag("--with-23k", o.with_23k,
+      ->check(cli::isMember({"all", "sim", "states", "haptic"}))
+      ->captureDefault();
+  app.addFlag("--with-23k", o.with_23k,
                "Add liver_23k to the mesh study (precomputes a 1.6 GB warped compliance; slow)");
-  app.add_option("--root", root, "Repository root (scenes/ is read from it)")
-      ->capture_default_str();
-  app.add_option("--cache-dir", cache,
+  app.addOption("--root", root, "Repository root (scenes/ is read from it)")
+      ->captureDefault();
+  app.addOption("--cache-dir", cache,
                  "Compliance cache directory (default: <root>/.cache/accuracy)");
-  app.add_option("--duration", o.duration_s, "Seconds of the script per simulation run "
+  app.addOption("--duration", o.duration_s, "Seconds of the script per simulation run "
                                              "(default: 8 full, 3.5 quick)");
-  app.add_option("--duration-23k", o.duration_23k_s,
+  app.addOption("--duration-23k", o.duration_23k_s,
                  "Seconds of the script per liver_23k run (--with-23k)")
-      ->capture_default_str();
-  app.add_option("--early-until", o.early_until_s,
+      ->captureDefault();
+  app.addOption("--early-until", o.early_until_s,
                  "End of the second force-error window [s] (the grasp and the start of the lift, "
                  "before the exact reference's grasp slips)")
-      ->capture_default_str();
-  app.add_option("--ref-tolerance", o.ref_tolerance, "NSGS tolerance of the references")
-      ->capture_default_str();
-  app.add_option("--ref-sweeps", o.ref_sweeps, "NSGS sweep cap of the references")
-      ->capture_default_str();
-  app.add_option("--haptic-t0", o.haptic_t0_s, "Start of the haptic window on the script [s] "
+      ->captureDefault();
+  app.addOption("--ref-tolerance", o.ref_tolerance, "NSGS tolerance of the references")
+      ->captureDefault();
+  app.addOption("--ref-sweeps", o.ref_sweeps, "NSGS sweep cap of the references")
+      ->captureDefault();
+  app.addOption("--haptic-t0", o.haptic_t0_s, "Start of the haptic window on the script [s] "
                                                "(default 3: the jaws on the lobe)");
-  app.add_option("--coherence-bound", o.coherence_bound,
+  app.addOption("--coherence-bound", o.coherence_bound,
                  "exact_below_coherence of the bounded warped model in the state comparison")
-      ->capture_default_str()
-      ->check(CLI::Range(0.0, 1.0));
-  app.add_option("--latency-steps", o.latency_steps,
+      ->captureDefault()
+      ->check(cli::range(0.0, 1.0));
+  app.addOption("--latency-steps", o.latency_steps,
                  "Simulation periods between a step's device sample and its snapshot's use")
-      ->capture_default_str()
-      ->check(CLI::Range(0, 10));
-  app.add_option("--tremor-mm", o.tremor_mm, "Amplitude of the tremor motion [mm]")
-      ->capture_default_str();
-  app.add_option("--tremor-hz", o.tremor_hz, "Frequency of the tremor motion [Hz]")->capture_default_str();
-  app.add_option("--log-level", o.log_level, "spdlog level")
-      ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error"}))
-      ->capture_default_str();
-  CLI11_PARSE(app, argc, argv);
+      ->captureDefault()
+      ->check(cli::range(0, 10));
+  app.addOption("--tremor-mm", o.tremor_mm, "Amplitude of the tremor motion [mm]")
+      ->captureDefault();
+  app.addOption("--tremor-hz", o.tremor_hz, "Frequency of the tremor motion [Hz]")->captureDefault();
+  app.addOption("--log-level", o.log_level, "spdlog level")
+      ->check(cli::isMember({"trace", "debug", "info", "warn", "error"}))
+      ->captureDefault();
+  TACTUS_CLI_PARSE(app, argc, argv);
   spdlog::set_level(spdlog::level::from_str(o.log_level));
   o.mode = quick ? "quick" : "full";
   o.out = out;

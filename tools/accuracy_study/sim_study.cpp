@@ -1,6 +1,6 @@
 // Part 1 of the accuracy study: simulation runs, their errors against a reference, and the
 // compliance models' W compared with the exact one along a run (see study.h).
-#include "tactus/shared/format.h"
+#include <fmt/format.h>
 
 #include <algorithm>
 #include <cmath>

@@ -1,5 +1,5 @@
 // The accuracy study's shared pieces: scenes, configurations, the contact wrench, CSV helpers.
-#include "tactus/shared/format.h"
+#include <fmt/format.h>
 
 #include <algorithm>
 

@@ -9,7 +9,6 @@
 // shared/warm_start.h; the loop's sweep and time budget). --json writes everything for comparison
 // between commits. The scene runs through the headless runner (tactus/sim/runner.h), as
 // sim_server --steps does; sim_server --record-snapshots records the same snapshots.
-#include "tactus/shared/format.h"
 #include <spdlog/spdlog.h>
 #include <unistd.h>
 
@@ -446,7 +445,8 @@ int run(const BenchOptions& o) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{
+  namespace cli = tactus::shared::cli;
+  cli::App app{
       "tactus-bench: per-stage timing of a scene and the haptic tick's solve on its "
       "snapshots (headless, scripted instrument)"};
   app.footer(
@@ -458,61 +458,61 @@ int main(int argc, char** argv) {
   BenchOptions o;
   // the one --record-snapshots is sim_server's: a hidden option that says so
   std::string record_snapshots;
-  app.add_option("--record-snapshots", record_snapshots)->group("");
-  app.add_option("scene", o.scene, "Scene YAML file")->required()->check(CLI::ExistingFile);
-  app.add_option("--steps", o.steps, "Steps to run (default: the scene's duration / time step)");
-  app.add_option("--json", o.json, "Write the results as JSON");
-  app.add_option("--trace", o.trace, "Write one CSV row per step (contacts, sweeps, timings)");
-  app.add_option("--state-out", o.state_out,
+  app.addOption("--record-snapshots", record_snapshots)->group("");
+  app.addOption("scene", o.scene, "Scene YAML file")->required()->check(cli::existingFile());
+  app.addOption("--steps", o.steps, "Steps to run (default: the scene's duration / time step)");
+  app.addOption("--json", o.json, "Write the results as JSON");
+  app.addOption("--trace", o.trace, "Write one CSV row per step (contacts, sweeps, timings)");
+  app.addOption("--state-out", o.state_out,
                  "Write the simulation's state after the run (Simulation::saveState) to this file");
-  app.add_option("--budget-us", o.budget_us,
+  app.addOption("--budget-us", o.budget_us,
                  "Haptic solve time budget [us] (default: 40 % of the scene's haptic period)");
-  app.add_option("--tick-sweeps", o.tick_sweeps,
+  app.addOption("--tick-sweeps", o.tick_sweeps,
                  "Haptic sweeps per tick (default: the scene's haptics.max_sweeps_per_tick)");
-  app.add_option("--displacement-mm", o.displacement_mm,
+  app.addOption("--displacement-mm", o.displacement_mm,
                  "Device displacement applied to each snapshot before the haptic re-solve")
-      ->capture_default_str();
-  app.add_option("--jaw-samples", o.jaw_samples,
+      ->captureDefault();
+  app.addOption("--jaw-samples", o.jaw_samples,
                  "Override the grasper's samples per jaw (denser jaws: more contacts)");
-  app.add_option("--jaw-rows", o.jaw_rows,
+  app.addOption("--jaw-rows", o.jaw_rows,
                  "Override the grasper's rows of samples across each jaw pad");
-  app.add_option("--jaw-width-mm", o.jaw_width_mm,
+  app.addOption("--jaw-width-mm", o.jaw_width_mm,
                  "Override the grasper's pad width (span of the sample rows) [mm]");
-  app.add_option("--anderson-depth", o.anderson_depth,
+  app.addOption("--anderson-depth", o.anderson_depth,
                  "Override solver.nsgs_anderson_depth (NSGS Anderson acceleration, 0: off)")
-      ->check(CLI::Range(0, tactus::shared::kMaxAndersonDepth));
-  app.add_option("--grip-stiffness", o.grip_stiffness,
+      ->check(cli::range(0, tactus::shared::kMaxAndersonDepth));
+  app.addOption("--grip-stiffness", o.grip_stiffness,
                  "Override the grasper's grip stiffness [N m/rad] (0: kinematic jaws)");
-  app.add_option("--contact-compliance", o.contact_compliance,
+  app.addOption("--contact-compliance", o.contact_compliance,
                  "Override the instrument's contact compliance [m/N]");
-  app.add_option("--pad-width-mm", o.pad_width_mm,
+  app.addOption("--pad-width-mm", o.pad_width_mm,
                  "Override the grasper's flat pad width [mm] (0: round jaws)");
-  app.add_option("--min-contacts", o.min_contacts,
+  app.addOption("--min-contacts", o.min_contacts,
                  "Also report the stages over the steps with at least this many contacts");
-  app.add_option("--instruments", o.instruments,
+  app.addOption("--instruments", o.instruments,
                  "Keep only the scene's first N instruments (two hands against one)")
-      ->check(CLI::Range(1, shared::kMaxInstruments));
-  app.add_option("--split-contact-groups", o.split_contact_groups,
+      ->check(cli::range(1, shared::kMaxInstruments));
+  app.addOption("--split-contact-groups", o.split_contact_groups,
                  "Override the scene's solver.split_contact_groups (true: one NSGS per group of "
                  "coupled bodies; false: one over the whole W)")
-      ->check(CLI::IsMember({"true", "false"}));
-  app.add_option("--local-model", o.local_model,
+      ->check(cli::isMember({"true", "false"}));
+  app.addOption("--local-model", o.local_model,
                  "Override the scene's haptics.local_model (full, linearized, automatic)")
-      ->check(CLI::IsMember({"full", "linearized", "automatic"}));
-  app.add_option("--background-refactor-lag-steps", o.background_lag,
+      ->check(cli::isMember({"full", "linearized", "automatic"}));
+  app.addOption("--background-refactor-lag-steps", o.background_lag,
                  "Override the scene's solver.background_refactor_lag_steps (> 0: refactorise "
                  "on a worker thread)")
-      ->check(CLI::Range(0, 1000));
-  app.add_option("--background-refactor-when-ready", o.when_ready,
+      ->check(cli::range(0, 1000));
+  app.addOption("--background-refactor-when-ready", o.when_ready,
                  "Override the scene's solver.background_refactor_when_ready (true: no step "
                  "waits for the worker)")
-      ->check(CLI::IsMember({"true", "false"}));
-  app.add_option("--linear", o.linear, "Override the scene's solver.linear")
-      ->check(CLI::IsMember({"cholmod", "pcg", "cholmod_reuse"}));
-  app.add_option("--log-level", o.log_level, "spdlog level of the simulation library")
-      ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error"}))
-      ->capture_default_str();
-  CLI11_PARSE(app, argc, argv);
+      ->check(cli::isMember({"true", "false"}));
+  app.addOption("--linear", o.linear, "Override the scene's solver.linear")
+      ->check(cli::isMember({"cholmod", "pcg", "cholmod_reuse"}));
+  app.addOption("--log-level", o.log_level, "spdlog level of the simulation library")
+      ->check(cli::isMember({"trace", "debug", "info", "warn", "error"}))
+      ->captureDefault();
+  TACTUS_CLI_PARSE(app, argc, argv);
   if (!record_snapshots.empty()) {
     std::fprintf(stderr, "tactus-bench: snapshots are recorded by sim_server: sim_server %s "
                  "--steps N --record-snapshots %s\n", o.scene.c_str(), record_snapshots.c_str());

@@ -5,7 +5,6 @@
 // tool only: nothing else in the project links Siconos.
 
 #include <spdlog/spdlog.h>
-#include "tactus/shared/format.h"
 
 #include "tactus/shared/cli.h"
 #include <algorithm>
@@ -312,7 +311,8 @@ double ratio(double a, double b) {
 }
 
 int run(int argc, char** argv) {
-  CLI::App app{
+  namespace cli = tactus::shared::cli;
+  cli::App app{
       "Runs Tactus' NSGS (tactus::shared::solveNsgs, default settings) and Siconos' fc3d NSGS "
       "(SICONOS_FRICTION_3D_NSGS through fc3d_driver) alternately on the same FCLIB problems, "
       "cold start (r = 0), one untimed warm-up run then --reps timed runs each, and prints "
@@ -340,54 +340,54 @@ int run(int argc, char** argv) {
   std::vector<std::string> inputs;
   Settings s;
   std::string csv_path;
-  app.add_option("inputs", inputs,
+  app.addOption("inputs", inputs,
                  "FCLIB problem files (.fc3d.txt, .hdf5), directories (searched recursively "
                  "for .fc3d.txt, and .hdf5 without a text twin) or snapshot files (.snap, "
                  "see --snapshots-per-file); default tests/data/fclib");
-  app.add_option("--tol", s.tolerance, "tolerance of both solvers")
-      ->capture_default_str()
-      ->check(CLI::Range(1e-16, 1.0));
-  app.add_option("--max-sweeps", s.max_sweeps, "sweep (iteration) cap of both solvers")
-      ->capture_default_str()
-      ->check(CLI::Range(1, 1000000));
-  app.add_option("--reps", s.reps, "runs of each solver per problem (median time)")
-      ->capture_default_str()
-      ->check(CLI::Range(1, 1000));
-  app.add_option("--siconos-storage", s.siconos_storage,
+  app.addOption("--tol", s.tolerance, "tolerance of both solvers")
+      ->captureDefault()
+      ->check(cli::range(1e-16, 1.0));
+  app.addOption("--max-sweeps", s.max_sweeps, "sweep (iteration) cap of both solvers")
+      ->captureDefault()
+      ->check(cli::range(1, 1000000));
+  app.addOption("--reps", s.reps, "runs of each solver per problem (median time)")
+      ->captureDefault()
+      ->check(cli::range(1, 1000));
+  app.addOption("--siconos-storage", s.siconos_storage,
                  "W's storage for Siconos: auto (like for like: 3x3 sparse blocks on the problems "
                  "Tactus solves on blocks, dense on the others), dense or sparse-block; the "
                  "columns T W and S W say what each side used")
-      ->capture_default_str()
-      ->check(CLI::IsMember({"auto", "dense", "sparse-block"}));
-  app.add_flag_callback("--siconos-sparse-block", [&s] { s.siconos_storage = "sparse-block"; },
+      ->captureDefault()
+      ->check(cli::isMember({"auto", "dense", "sparse-block"}));
+  app.addFlagCallback("--siconos-sparse-block", [&s] { s.siconos_storage = "sparse-block"; },
                         "the same as --siconos-storage sparse-block");
-  app.add_flag("--siconos-light-error", s.light_error,
+  app.addFlag("--siconos-light-error", s.light_error,
                "keep Siconos' default error evaluation (incremental, full check at the end)");
-  app.add_option("--csv", csv_path, "also write the table to FILE (must not exist)");
-  app.add_option("--tactus-storage", s.tactus_storage,
+  app.addOption("--csv", csv_path, "also write the table to FILE (must not exist)");
+  app.addOption("--tactus-storage", s.tactus_storage,
                  "W's storage for Tactus: auto (tactus::shared::chooseStorage: 3x3 blocks when at "
                  "most kBlockSparseMaxFill of the blocks are non-zero), dense or blocks; the "
                  "conversion is done once per problem outside the timed solve (column conv ms)")
-      ->capture_default_str()
-      ->check(CLI::IsMember({"auto", "dense", "blocks"}));
+      ->captureDefault()
+      ->check(cli::isMember({"auto", "dense", "blocks"}));
   int snapshot_count = 3;
-  app.add_option("--snapshots-per-file", snapshot_count,
+  app.addOption("--snapshots-per-file", snapshot_count,
                  "for .snap inputs (sim_server --record-snapshots): how many of the file's "
                  "largest frictional problems to run")
-      ->capture_default_str()
-      ->check(CLI::Range(1, 100000));
+      ->captureDefault()
+      ->check(cli::range(1, 100000));
   int snapshot_max_contacts = 100000;
-  app.add_option("--snapshot-max-contacts", snapshot_max_contacts,
+  app.addOption("--snapshot-max-contacts", snapshot_max_contacts,
                  "for .snap inputs: only problems with at most this many contacts")
-      ->check(CLI::Range(1, 100000));
+      ->check(cli::range(1, 100000));
   std::vector<int> piles;
-  app.add_option("--sphere-piles", piles,
+  app.addOption("--sphere-piles", piles,
                  "also generate rigid sphere piles of these sphere counts (tests/support/"
                  "sphere_pile.h: 3 x 3 spheres per layer, seed 1, mu in [0.2, 0.3]; 60 -> 228 "
                  "contacts, 90 -> 354, 150 -> ~590; 4-7 % of W's blocks non-zero)")
       ->delimiter(',')
-      ->check(CLI::Range(2, 400));
-  CLI11_PARSE(app, argc, argv);
+      ->check(cli::range(2, 400));
+  TACTUS_CLI_PARSE(app, argc, argv);
 
   if (inputs.empty() && piles.empty()) inputs.push_back(TACTUS_DEFAULT_FCLIB_DIR);
   std::vector<fs::path> files, snapshot_files;

@@ -32,7 +32,8 @@ void onSignal(int) { g_stop.store(true); }
 int main(int argc, char** argv) {
   using namespace tactus;
   namespace bridge = device::bridge;
-  CLI::App app{"Tactus bridge client: plays the simulated hand over the network device bridge"};
+  namespace cli = tactus::shared::cli;
+  cli::App app{"Tactus bridge client: plays the simulated hand over the network device bridge"};
   app.footer(
       "Example (beside scripts/start.sh --device bridge):\n"
       "  tactus-bridge-client --duration 20 --device-option trajectory=traj.csv");
@@ -43,22 +44,22 @@ int main(int argc, char** argv) {
   std::vector<std::string> hand_options;
   bool status = false;
   double command_timeout_ms = 100.0;
-  app.add_option("--server", server, "haptic_server's bridge address (IPv4)")
-      ->capture_default_str();
-  app.add_option("--port", port, "its UDP port")->check(CLI::Range(1, 65535))
-      ->capture_default_str();
-  app.add_option("--rate", rate_hz, "States sent per second")->check(CLI::Range(10.0, 10000.0))
-      ->capture_default_str();
-  app.add_option("--duration", duration_s, "Stop after S seconds (0: until SIGINT/SIGTERM)")
-      ->check(CLI::Range(0.0, 1e7));
-  app.add_option("--device-option", hand_options,
+  app.addOption("--server", server, "haptic_server's bridge address (IPv4)")
+      ->captureDefault();
+  app.addOption("--port", port, "its UDP port")->check(cli::range(1, 65535))
+      ->captureDefault();
+  app.addOption("--rate", rate_hz, "States sent per second")->check(cli::range(10.0, 10000.0))
+      ->captureDefault();
+  app.addOption("--duration", duration_s, "Stop after S seconds (0: until SIGINT/SIGTERM)")
+      ->check(cli::range(0.0, 1e7));
+  app.addOption("--device-option", hand_options,
                  "Option of the simulated hand key=value (device/README.md), repeatable");
-  app.add_flag("--status", status, "Print the commands received once a second");
-  app.add_option("--command-timeout-ms", command_timeout_ms,
+  app.addFlag("--status", status, "Print the commands received once a second");
+  app.addOption("--command-timeout-ms", command_timeout_ms,
                  "No valid command for this long (haptic_server gone, the network down): "
                  "render zero force until commands return")
-      ->check(CLI::Range(1.0, 10'000.0))->capture_default_str();
-  CLI11_PARSE(app, argc, argv);
+      ->check(cli::range(1.0, 10'000.0))->captureDefault();
+  TACTUS_CLI_PARSE(app, argc, argv);
   std::signal(SIGINT, onSignal);
   std::signal(SIGTERM, onSignal);
 

@@ -4,7 +4,6 @@
 // problem with an unusable diagonal of W, status ill_posed).
 
 #include <spdlog/spdlog.h>
-#include "tactus/shared/format.h"
 
 #include "tactus/shared/cli.h"
 #include <cmath>
@@ -39,7 +38,8 @@ FclibProblem load(const std::filesystem::path& path) {
 }
 
 int run(int argc, char** argv) {
-  CLI::App app{
+  namespace cli = tactus::shared::cli;
+  cli::App app{
       "Solves an FCLIB local 3D frictional contact problem (u = W r + q, Coulomb cones) with "
       "Tactus' nonsmooth Gauss-Seidel. The error is Siconos' fc3d_compute_error: "
       "sqrt(sum_i ||r_i - P_K(r_i - u_hat_i)||^2) / max(||q||, ||r||, ||u||), "
@@ -53,26 +53,26 @@ int run(int argc, char** argv) {
   settings.max_sweeps = 10000;
   double budget_ms = 0.0;
   bool row_gather = false;
-  app.add_option("problem", problem_path, "problem file (.fc3d.txt, or .hdf5 in FCLIB layout)")
+  app.addOption("problem", problem_path, "problem file (.fc3d.txt, or .hdf5 in FCLIB layout)")
       ->required();
-  app.add_option("--tol", settings.tolerance, "tolerance on the normalised error")
-      ->capture_default_str();
-  app.add_option("--max-sweeps", settings.max_sweeps, "maximum number of sweeps")
-      ->capture_default_str()
-      ->check(CLI::PositiveNumber);
-  app.add_option("--sor", settings.sor, "over-relaxation factor in (0, 2)")
-      ->capture_default_str()
-      ->check(CLI::Range(0.01, 1.99));
-  app.add_option("--check-every", settings.check_every, "compute the error every k sweeps")
-      ->capture_default_str()
-      ->check(CLI::PositiveNumber);
-  app.add_option("--time-budget-ms", budget_ms, "stop after the sweep that crosses it (0: none)")
-      ->capture_default_str();
-  app.add_flag("--row-gather", row_gather, "gather b_i from W's rows instead of column updates");
-  app.add_option("--output", output_path, "write `r u` per row (reference format) to FILE");
+  app.addOption("--tol", settings.tolerance, "tolerance on the normalised error")
+      ->captureDefault();
+  app.addOption("--max-sweeps", settings.max_sweeps, "maximum number of sweeps")
+      ->captureDefault()
+      ->check(cli::positiveNumber());
+  app.addOption("--sor", settings.sor, "over-relaxation factor in (0, 2)")
+      ->captureDefault()
+      ->check(cli::range(0.01, 1.99));
+  app.addOption("--check-every", settings.check_every, "compute the error every k sweeps")
+      ->captureDefault()
+      ->check(cli::positiveNumber());
+  app.addOption("--time-budget-ms", budget_ms, "stop after the sweep that crosses it (0: none)")
+      ->captureDefault();
+  app.addFlag("--row-gather", row_gather, "gather b_i from W's rows instead of column updates");
+  app.addOption("--output", output_path, "write `r u` per row (reference format) to FILE");
   bool overwrite = false;
-  app.add_flag("--overwrite", overwrite, "replace an existing --output file");
-  CLI11_PARSE(app, argc, argv);
+  app.addFlag("--overwrite", overwrite, "replace an existing --output file");
+  TACTUS_CLI_PARSE(app, argc, argv);
 
   settings.time_budget_ns = static_cast<std::int64_t>(budget_ms * 1e6);
   if (row_gather) settings.coupling = tactus::shared::NsgsCoupling::kRowGather;

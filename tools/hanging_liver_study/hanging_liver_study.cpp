@@ -13,7 +13,8 @@
 
 int main(int argc, char** argv) {
   using tactus::sim::MaterialLaw;
-  CLI::App app{"hanging_liver_study: inverted tetrahedra of a liver hanging from its base"};
+  namespace cli = tactus::shared::cli;
+  cli::App app{"hanging_liver_study: inverted tetrahedra of a liver hanging from its base"};
   app.footer(
       "Example:\n"
       "  hanging_liver_study --mesh scenes/meshes/liver_23k.msh --law invertible_neo_hookean");
@@ -21,18 +22,18 @@ int main(int argc, char** argv) {
   std::vector<std::string> laws{"corotational", "invertible_neo_hookean"};
   tactus::test_support::HangingLiverOptions o;
   bool smoothed = false;
-  app.add_option("--mesh", meshes, "Mesh files (decimetres, z up)")
+  app.addOption("--mesh", meshes, "Mesh files (decimetres, z up)")
       ->required()
-      ->check(CLI::ExistingFile);
-  app.add_option("--law", laws, "corotational, consistent (its full tangent), "
+      ->check(cli::existingFile());
+  app.addOption("--law", laws, "corotational, consistent (its full tangent), "
                                 "invertible_neo_hookean")
-      ->check(CLI::IsMember({"corotational", "consistent", "invertible_neo_hookean"}));
-  app.add_option("--young", o.young_pa, "Young's modulus [Pa]")->check(CLI::Range(10.0, 1e9));
-  app.add_option("--hang-s", o.hang_s, "Time under gravity [s]")->check(CLI::Range(0.01, 100.0));
-  app.add_option("--release-s", o.release_s, "Time after [s]")->check(CLI::Range(0.0, 100.0));
-  app.add_option("--dt", o.h_s, "Time step [s]")->check(CLI::Range(1e-5, 0.1));
-  app.add_flag("--edge-smoothed", smoothed, "Edge-smoothed tetrahedra");
-  CLI11_PARSE(app, argc, argv);
+      ->check(cli::isMember({"corotational", "consistent", "invertible_neo_hookean"}));
+  app.addOption("--young", o.young_pa, "Young's modulus [Pa]")->check(cli::range(10.0, 1e9));
+  app.addOption("--hang-s", o.hang_s, "Time under gravity [s]")->check(cli::range(0.01, 100.0));
+  app.addOption("--release-s", o.release_s, "Time after [s]")->check(cli::range(0.0, 100.0));
+  app.addOption("--dt", o.h_s, "Time step [s]")->check(cli::range(1e-5, 0.1));
+  app.addFlag("--edge-smoothed", smoothed, "Edge-smoothed tetrahedra");
+  TACTUS_CLI_PARSE(app, argc, argv);
   if (smoothed) o.element = tactus::sim::ElementKind::kEdgeSmoothedTet;
   try {
     for (const std::string& mesh : meshes)

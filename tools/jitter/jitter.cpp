@@ -16,7 +16,7 @@
 // inflated: use --baseline-mode after (synthetic only), which runs the bare loop alone on the
 // same core for as many ticks once the haptic loop has stopped (same core, different moment).
 #include "tactus/shared/cli.h"
-#include "tactus/shared/format.h"
+#include <fmt/format.h>
 #include <unistd.h>
 
 #include <atomic>
@@ -32,7 +32,6 @@
 #include "jitter_core.h"
 #include "jitter_replay.h"
 #include "jitter_synthetic.h"
-#include "tactus/shared/cli_checks.h"
 #include "tactus/shared/haptic_limits.h"
 #include "tactus/shared/nsgs.h"
 #include "tactus/shared/nsgs_kernels.h"
@@ -414,7 +413,8 @@ int run(const Options& o) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{
+  namespace cli = tactus::shared::cli;
+  cli::App app{
       "tactus-jitter: haptic tick timing (period error, tick duration, solve time, sweeps) from "
       "a running haptic_server's stats ring (attach, read-only) or an in-process synthetic run"};
   app.footer(
@@ -426,95 +426,95 @@ int main(int argc, char** argv) {
       "--record-snapshots)\n"
       "  tactus-jitter --synthetic 450 --duration 7 --reader none   (vs --reader live / busy)");
   Options o;
-  app.add_option("--segment", o.segment, "Segment to attach to (attach mode)")
-      ->capture_default_str();
-  app.add_option("--duration", o.duration_s, "Seconds to measure")->capture_default_str();
-  app.add_option("--csv", o.csv, "Write one row per tick record to FILE");
-  app.add_option("--plot", o.plot,
+  app.addOption("--segment", o.segment, "Segment to attach to (attach mode)")
+      ->captureDefault();
+  app.addOption("--duration", o.duration_s, "Seconds to measure")->captureDefault();
+  app.addOption("--csv", o.csv, "Write one row per tick record to FILE");
+  app.addOption("--plot", o.plot,
                  "Write a PNG (period-error histogram, log scale, and time series) via "
                  "scripts/jitter_plot.py and /usr/bin/python3 (python3-matplotlib)");
-  app.add_flag("--baseline", o.baseline,
+  app.addFlag("--baseline", o.baseline,
                "Also run a bare timer loop on the haptic core (same priority, PeriodicTimer and "
                "period) and print the ratios");
-  app.add_option("--baseline-mode", o.baseline_mode,
+  app.addOption("--baseline-mode", o.baseline_mode,
                  "interleaved: during the measurement, deadlines half a period after the haptic "
                  "loop's; after: once the synthetic loop has stopped")
-      ->check(CLI::IsMember({"interleaved", "after"}))
-      ->capture_default_str();
-  app.add_option("--synthetic", o.synthetic_rows,
+      ->check(cli::isMember({"interleaved", "after"}))
+      ->captureDefault();
+  app.addOption("--synthetic", o.synthetic_rows,
                  "Synthetic mode: run the haptic loop in-process on snapshots of ROWS rows "
                  "(150, 450, 900 typical)")
-      ->check(CLI::Range(3, 3000));
-  app.add_option("--replay", o.replay,
+      ->check(cli::range(3, 3000));
+  app.addOption("--replay", o.replay,
                  "Replay mode: run the haptic loop in-process on the snapshots recorded in FILE "
                  "(sim_server SCENE --steps N --record-snapshots FILE), published at their recorded times")
-      ->check(CLI::ExistingFile);
-  app.add_flag("--loop", o.loop_replay,
+      ->check(cli::existingFile());
+  app.addFlag("--loop", o.loop_replay,
                "Replay: start the recording over after its end (the device jumps back to the "
                "first snapshot's pose)");
-  app.add_flag("--bounce", o.bounce_replay,
+  app.addFlag("--bounce", o.bounce_replay,
                "Replay: loop by playing the recording backwards from its end, then forwards "
                "again (the device moves only by recorded steps; implies --loop)");
-  app.add_option("--rate", o.rate_hz, "Synthetic/replay: haptic loop rate [Hz]")
-      ->check(CLI::Range(50.0, 4000.0))
-      ->capture_default_str();
-  app.add_option("--sim-rate", o.sim_rate_hz, "Synthetic: snapshot rate [Hz]")
-      ->check(CLI::Range(1.0, 1000.0))
-      ->capture_default_str();
-  app.add_option("--core", o.core,
+  app.addOption("--rate", o.rate_hz, "Synthetic/replay: haptic loop rate [Hz]")
+      ->check(cli::range(50.0, 4000.0))
+      ->captureDefault();
+  app.addOption("--sim-rate", o.sim_rate_hz, "Synthetic: snapshot rate [Hz]")
+      ->check(cli::range(1.0, 1000.0))
+      ->captureDefault();
+  app.addOption("--core", o.core,
                  "CPU of the haptic loop (synthetic) and of the baseline (-1: the last CPU, as "
                  "haptic_server)")
-      ->capture_default_str();
-  app.add_option("--priority", o.priority, "SCHED_FIFO priority (0: do not ask)")
-      ->check(CLI::Range(0, 99))
-      ->capture_default_str();
-  app.add_option("--anderson-depth", o.anderson_depth,
+      ->captureDefault();
+  app.addOption("--priority", o.priority, "SCHED_FIFO priority (0: do not ask)")
+      ->check(cli::range(0, 99))
+      ->captureDefault();
+  app.addOption("--anderson-depth", o.anderson_depth,
                  "Synthetic/replay: NSGS Anderson acceleration depth per tick (0: off)")
-      ->check(CLI::Range(0, shared::kMaxAndersonDepth));
-  app.add_option("--snapshot-blend-ms", o.snapshot_blend_ms,
+      ->check(cli::range(0, shared::kMaxAndersonDepth));
+  app.addOption("--snapshot-blend-ms", o.snapshot_blend_ms,
                  "Synthetic/replay: blend each new snapshot's force in over this time [ms] "
                  "(haptic_server --snapshot-blend-ms; 0: off)")
-      ->check(shared::finiteRange(0.0, shared::HapticLimits::kMaxSnapshotBlendMs, "ms"));
-  app.add_option("--local-model", o.local_model,
+      ->check(cli::finiteRange(0.0, shared::HapticLimits::kMaxSnapshotBlendMs, "ms"));
+  app.addOption("--local-model", o.local_model,
                  "Synthetic/replay: the local model (haptic_server --local-model)")
-      ->check(CLI::IsMember({"full", "linearized", "automatic"}))
-      ->capture_default_str();
-  app.add_flag("--full-fallback", o.full_fallback,
+      ->check(cli::isMember({"full", "linearized", "automatic"}))
+      ->captureDefault();
+  app.addFlag("--full-fallback", o.full_fallback,
                "Synthetic/replay: where the linearisation does not hold, re-solve every reached "
                "contact instead of the reduced problem (local_model.h)");
-  app.add_flag("--no-correction", o.no_correction,
+  app.addFlag("--no-correction", o.no_correction,
                "Synthetic/replay: where the linearisation does not hold, fall back at once "
                "instead of first correcting its active set (local_model.h)");
-  app.add_flag("--offline", o.offline,
+  app.addFlag("--offline", o.offline,
                "Replay: no real-time loop; tick the recording's timeline and compare the local "
                "model's force with the full problem solved to 1e-9 at the same poses");
-  app.add_option("--offline-latency-ms", o.offline_latency_ms,
+  app.addOption("--offline-latency-ms", o.offline_latency_ms,
                  "Offline replay: time from a snapshot to the tick adopting it [ms]")
-      ->check(CLI::Range(0.0, 1000.0))
-      ->capture_default_str();
-  app.add_flag("--offline-device-leads", o.offline_device_leads,
+      ->check(cli::range(0.0, 1000.0))
+      ->captureDefault();
+  app.addFlag("--offline-device-leads", o.offline_device_leads,
                "Offline replay: the device follows the newest published snapshot's pose, as in "
                "the loop, while the model adopts each snapshot --offline-latency-ms later");
-  app.add_option("--budget-fraction", o.budget_fraction,
+  app.addOption("--budget-fraction", o.budget_fraction,
                  "Synthetic/replay: the tick's deadline as a fraction of the period "
                  "(haptic_server uses 0.4)")
-      ->check(CLI::Range(0.01, 0.9))
-      ->capture_default_str();
-  app.add_option("--sweeps", o.sweeps, "Synthetic/replay: NSGS sweeps per tick")
-      ->check(CLI::Range(1, 10000))
-      ->capture_default_str();
-  app.add_option("--period-us", o.period_us,
+      ->check(cli::range(0.01, 0.9))
+      ->captureDefault();
+  app.addOption("--sweeps", o.sweeps, "Synthetic/replay: NSGS sweeps per tick")
+      ->check(cli::range(1, 10000))
+      ->captureDefault();
+  app.addOption("--period-us", o.period_us,
                  "Attach: the loop period (default: estimated from the records)");
-  app.add_option("--reader", o.reader,
+  app.addOption("--reader", o.reader,
                  "live: poll the ring every 100 ms; busy: poll it continuously; none: read it "
                  "only at the end (synthetic, <= 8192 records)")
-      ->check(CLI::IsMember({"live", "busy", "none"}))
-      ->capture_default_str();
-  app.add_option("--wait", o.wait_s, "Attach: seconds to wait for the segment")
-      ->capture_default_str();
-  app.add_option("--seed", o.seed, "Synthetic: problem seed")->capture_default_str();
-  app.add_flag("--quiet", o.quiet, "No per-second lines");
-  CLI11_PARSE(app, argc, argv);
+      ->check(cli::isMember({"live", "busy", "none"}))
+      ->captureDefault();
+  app.addOption("--wait", o.wait_s, "Attach: seconds to wait for the segment")
+      ->captureDefault();
+  app.addOption("--seed", o.seed, "Synthetic: problem seed")->captureDefault();
+  app.addFlag("--quiet", o.quiet, "No per-second lines");
+  TACTUS_CLI_PARSE(app, argc, argv);
   std::signal(SIGINT, onSignal);
   std::signal(SIGTERM, onSignal);
   try {

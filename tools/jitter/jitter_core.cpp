@@ -1,7 +1,7 @@
 // Statistics, CSV, ring follower and bare-loop baseline of the jitter tool.
 #include "jitter_core.h"
 
-#include "tactus/shared/format.h"
+#include <fmt/format.h>
 
 #include <algorithm>
 #include <cerrno>

@@ -1,7 +1,7 @@
 // Replay of recorded contact snapshots through the in-process haptic loop (jitter tool).
 #include "jitter_replay.h"
 
-#include "tactus/shared/format.h"
+#include <fmt/format.h>
 #include <unistd.h>
 
 #include <algorithm>

@@ -1,7 +1,7 @@
 // Synthetic snapshots, the scripted device and the in-process haptic loop of the jitter tool.
 #include "jitter_synthetic.h"
 
-#include "tactus/shared/format.h"
+#include <fmt/format.h>
 #include <unistd.h>
 
 #include <Eigen/Core>

@@ -13,7 +13,6 @@
 #include <thread>
 #include <vector>
 
-#include "tactus/shared/cli_checks.h"
 #include "tactus/shared/clock.h"
 #include "tactus/shared/percentiles.h"
 #include "tactus/shared/segment.h"
@@ -38,7 +37,8 @@ void sleepInterruptibly(double s) {
 
 int main(int argc, char** argv) {
   using namespace tactus::shared;
-  CLI::App app{"Tactus status monitor: one line per interval from a running segment"};
+  namespace cli = tactus::shared::cli;
+  cli::App app{"Tactus status monitor: one line per interval from a running segment"};
   app.footer(
       "Example:\n"
       "  tactus-monitor --segment tactus --interval 1   (beside scripts/start.sh)");
@@ -46,9 +46,9 @@ int main(int argc, char** argv) {
   double interval_s = 1.0;
   double duration_s = 0.0;
   double wait_s = 60.0;
-  app.add_option("--segment", name, "Segment name")
-      ->capture_default_str()
-      ->check(CLI::Validator(
+  app.addOption("--segment", name, "Segment name")
+      ->captureDefault()
+      ->check(cli::Validator(
           [](std::string& text) -> std::string {
             try {
               Segment::validateName(text);
@@ -58,17 +58,17 @@ int main(int argc, char** argv) {
             return {};
           },
           "NAME"));
-  app.add_option("--interval", interval_s, "Seconds between lines")
-      ->capture_default_str()
-      ->check(tactus::shared::finiteRange(0.05, 3600.0, "s"));
-  app.add_option("--duration", duration_s,
+  app.addOption("--interval", interval_s, "Seconds between lines")
+      ->captureDefault()
+      ->check(cli::finiteRange(0.05, 3600.0, "s"));
+  app.addOption("--duration", duration_s,
                  "Stop after S seconds; 0 (the default): run until SIGINT, SIGTERM or SIGHUP")
-      ->check(tactus::shared::finiteRange(0.0, 1e7, "s"));
-  app.add_option("--wait", wait_s,
+      ->check(cli::finiteRange(0.0, 1e7, "s"));
+  app.addOption("--wait", wait_s,
                  "Give up (exit 1) when no segment has been found for S seconds")
-      ->capture_default_str()
-      ->check(tactus::shared::finiteRange(0.1, 1e7, "s"));
-  CLI11_PARSE(app, argc, argv);
+      ->captureDefault()
+      ->check(cli::finiteRange(0.1, 1e7, "s"));
+  TACTUS_CLI_PARSE(app, argc, argv);
   std::signal(SIGINT, onSignal);
   std::signal(SIGTERM, onSignal);
   std::signal(SIGHUP, onSignal);

@@ -26,7 +26,8 @@
 using tactus::test_support::ApproachPerturbation;
 
 int main(int argc, char** argv) {
-  CLI::App app{"pad_grasp_study: the pad grasp over the nominal and five perturbed approaches, "
+  namespace cli = tactus::shared::cli;
+  cli::App app{"pad_grasp_study: the pad grasp over the nominal and five perturbed approaches, "
                "or over the grasp-anywhere grid"};
   app.footer(
       "Examples:\n"
@@ -39,44 +40,44 @@ int main(int argc, char** argv) {
   int grid_skip = 0, grid_count = 0;
   std::string csv_path;
   double end_s = 5.8;
-  app.add_option("--scene", scene, "Scene file")->check(CLI::ExistingFile);
-  app.add_option("--yaw-deg", yaw_deg, "Turn the script about the world's vertical [deg]")
-      ->check(CLI::Range(-180.0, 180.0));
-  app.add_option("--deeper-mm", deeper_mm, "Move the grasp along the jaws, into the tissue [mm]")
-      ->check(CLI::Range(-20.0, 20.0));
-  app.add_option("--grip", grip,
+  app.addOption("--scene", scene, "Scene file")->check(cli::existingFile());
+  app.addOption("--yaw-deg", yaw_deg, "Turn the script about the world's vertical [deg]")
+      ->check(cli::range(-180.0, 180.0));
+  app.addOption("--deeper-mm", deeper_mm, "Move the grasp along the jaws, into the tissue [mm]")
+      ->check(cli::range(-20.0, 20.0));
+  app.addOption("--grip", grip,
                  "Grip stiffness [N m/rad] (default: the scene's); with --grid: run the grid's "
                  "approaches at that grip only")
-      ->check(CLI::Range(0.0, 1.0));
-  app.add_option("--squeeze", squeeze,
+      ->check(cli::range(0.0, 1.0));
+  app.addOption("--squeeze", squeeze,
                  "A closed handle's squeeze beyond the grip's spring [N m] (grasper.grip_squeeze; "
                  "default: the scene's), for every approach")
-      ->check(CLI::Range(0.0, 1.0));
-  app.add_option("--roll-deg", roll_deg, "Roll the jaws about their axis after the settling [deg]")
-      ->check(CLI::Range(-90.0, 90.0));
-  app.add_option("--offset-mm", offset_mm_arg,
+      ->check(cli::range(0.0, 1.0));
+  app.addOption("--roll-deg", roll_deg, "Roll the jaws about their axis after the settling [deg]")
+      ->check(cli::range(-90.0, 90.0));
+  app.addOption("--offset-mm", offset_mm_arg,
                  "Move the whole script after the settling by x y z in the world frame [mm]")
       ->expected(3)
-      ->check(CLI::Range(-30.0, 30.0));
-  app.add_flag("--nominal-only", nominal_only, "Run the nominal approach only");
-  app.add_flag("--grid", grid,
+      ->check(cli::range(-30.0, 30.0));
+  app.addFlag("--nominal-only", nominal_only, "Run the nominal approach only");
+  app.addFlag("--grid", grid,
                "Run the grasp-anywhere grid (tests/support/pad_grasp.h) instead of the six")
       ->excludes("--nominal-only");
-  app.add_option("--grid-skip", grid_skip, "With --grid: skip its first N approaches")
-      ->check(CLI::Range(0, 1000))
+  app.addOption("--grid-skip", grid_skip, "With --grid: skip its first N approaches")
+      ->check(cli::range(0, 1000))
       ->needs("--grid");
-  app.add_option("--grid-count", grid_count,
+  app.addOption("--grid-count", grid_count,
                  "With --grid: run at most N approaches (after --grid-skip)")
-      ->check(CLI::Range(1, 1000))
+      ->check(cli::range(1, 1000))
       ->needs("--grid");
-  app.add_flag("--settle-each", settle_each,
+  app.addFlag("--settle-each", settle_each,
                "Settle each approach from t = 0 instead of starting all from one settled state");
-  app.add_flag("--settle-only", settle_only, "Settle, print what the settling measured and stop")
+  app.addFlag("--settle-only", settle_only, "Settle, print what the settling measured and stop")
       ->excludes("--settle-each");
-  app.add_option("--csv", csv_path, "Also write one row per approach to this new file");
-  app.add_option("--end-s", end_s, "End of the run [s] (the lift ends at 4.5 s)")
-      ->check(CLI::Range(3.5, 8.0));
-  CLI11_PARSE(app, argc, argv);
+  app.addOption("--csv", csv_path, "Also write one row per approach to this new file");
+  app.addOption("--end-s", end_s, "End of the run [s] (the lift ends at 4.5 s)")
+      ->check(cli::range(3.5, 8.0));
+  TACTUS_CLI_PARSE(app, argc, argv);
   try {
     tactus::sim::SceneSpec spec = tactus::sim::loadScene(scene);
     auto& keys = spec.instrument.trajectory;

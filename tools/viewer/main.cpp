@@ -17,6 +17,9 @@
 #include "tactus/shared/cli.h"
 #include <sys/resource.h>
 
+// Boost 1.74's asio/awaitable.hpp uses std::exchange without including <utility> itself.
+#include <utility>
+
 #include <boost/asio.hpp>
 #include <boost/beast/core.hpp>
 #include <boost/beast/http.hpp>
@@ -409,7 +412,8 @@ class Pump {
 
 int main(int argc, char** argv) {
   using namespace tactus::viewer;
-  CLI::App app{"Tactus live view: serves a browser page showing the running simulation "
+  namespace cli = tactus::shared::cli;
+  cli::App app{"Tactus live view: serves a browser page showing the running simulation "
                "(read-only)"};
   app.footer(
       "Example:\n"
@@ -421,27 +425,27 @@ int main(int argc, char** argv) {
   double rate = 60.0;
   std::string web = TACTUS_VIEWER_WEB_DIR;
   int nice_level = 10;
-  app.add_option("--segment", segment, "Segment name of the running simulation")
-      ->capture_default_str();
-  app.add_option("--port", port, "TCP port (0: any free port; the URL is printed)")
-      ->capture_default_str()
-      ->check(CLI::Range(0, 65535));
-  app.add_option("--bind", bind, "Address to listen on (loopback unless --allow-remote)")
-      ->capture_default_str();
-  app.add_flag("--allow-remote", allow_remote,
+  app.addOption("--segment", segment, "Segment name of the running simulation")
+      ->captureDefault();
+  app.addOption("--port", port, "TCP port (0: any free port; the URL is printed)")
+      ->captureDefault()
+      ->check(cli::range(0, 65535));
+  app.addOption("--bind", bind, "Address to listen on (loopback unless --allow-remote)")
+      ->captureDefault();
+  app.addFlag("--allow-remote", allow_remote,
                "Allow a non-loopback --bind address (anyone who can reach it sees the view)");
-  app.add_option("--rate", rate, "Frames per second streamed at most")
-      ->capture_default_str()
-      ->check(CLI::Range(1.0, 240.0));
-  app.add_option("--web-dir", web,
+  app.addOption("--rate", rate, "Frames per second streamed at most")
+      ->captureDefault()
+      ->check(cli::range(1.0, 240.0));
+  app.addOption("--web-dir", web,
                  "Directory of the built page: index.html, app.js, app.js.map and style.css are "
                  "read once at start-up (regular files only); nothing else is served")
-      ->capture_default_str();
-  app.add_option("--nice", nice_level, "Scheduling niceness of the viewer (it yields the CPU to "
+      ->captureDefault();
+  app.addOption("--nice", nice_level, "Scheduling niceness of the viewer (it yields the CPU to "
                  "the simulation)")
-      ->capture_default_str()
-      ->check(CLI::Range(0, 19));
-  CLI11_PARSE(app, argc, argv);
+      ->captureDefault()
+      ->check(cli::range(0, 19));
+  TACTUS_CLI_PARSE(app, argc, argv);
   // the view is best effort: never compete with the simulation for a core
   if (nice_level > 0 && ::setpriority(PRIO_PROCESS, 0, nice_level) != 0) {
     std::fprintf(stderr, "tactus-viewer: could not lower the priority (nice %d)\n", nice_level);

@@ -2,7 +2,6 @@
 #include "display_publisher.h"
 
 #include <spdlog/spdlog.h>
-#include "tactus/shared/format.h"
 
 #include <algorithm>
 #include <cmath>

@@ -1,7 +1,6 @@
 // VTK frames and the .pvd series of a run.
 #include "output_writer.h"
 
-#include "tactus/shared/format.h"
 #include <spdlog/spdlog.h>
 
 #include <algorithm>

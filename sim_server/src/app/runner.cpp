@@ -2,7 +2,6 @@
 #include "tactus/sim/runner.h"
 
 #include <spdlog/spdlog.h>
-#include "tactus/shared/format.h"
 
 #include <algorithm>
 #include <functional>

@@ -3,7 +3,6 @@
 #include "obstacle_stage.h"
 
 #include <spdlog/spdlog.h>
-#include "tactus/shared/format.h"
 
 #include <algorithm>
 #include <cmath>

@@ -1,6 +1,6 @@
 // VTK output: ASCII .vtu files and ParaView .pvd collections.
 
-#include "tactus/shared/format.h"
+#include <fmt/format.h>
 
 #include <charconv>
 #include <string>

@@ -1,7 +1,7 @@
 // Static obstacles and their contacts with tissue surface vertices (obstacles.h).
 #include "tactus/sim/obstacles.h"
 
-#include "tactus/shared/format.h"
+#include <fmt/format.h>
 
 #include <algorithm>
 #include <cmath>

@@ -1,7 +1,7 @@
 // Contact between tissues and of a tissue with itself (tissue_contact.h).
 #include "tactus/sim/tissue_contact.h"
 
-#include "tactus/shared/format.h"
+#include <fmt/format.h>
 
 #include <algorithm>
 #include <cmath>

@@ -3,7 +3,6 @@
 #include "tactus/sim/compliance.h"
 
 #include <spdlog/spdlog.h>
-#include "tactus/shared/format.h"
 
 #include <algorithm>
 #include <cstdio>

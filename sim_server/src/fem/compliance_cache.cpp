@@ -3,7 +3,6 @@
 #include <unistd.h>
 
 #include <spdlog/spdlog.h>
-#include "tactus/shared/format.h"
 
 #include <algorithm>
 #include <cstring>

@@ -15,7 +15,6 @@
 #include <limits>
 
 #include <spdlog/spdlog.h>
-#include "tactus/shared/format.h"
 
 #include "fem_body_impl.h"
 

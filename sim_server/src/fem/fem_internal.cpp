@@ -11,7 +11,6 @@
 #include <cstring>
 
 #include <spdlog/spdlog.h>
-#include "tactus/shared/format.h"
 
 #include "tactus/shared/error.h"
 #include "tactus/sim/fem.h"

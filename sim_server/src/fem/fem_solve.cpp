@@ -6,7 +6,6 @@
 #include <string>
 
 #include <spdlog/spdlog.h>
-#include "tactus/shared/format.h"
 
 #include "fem_body_impl.h"
 #include "tactus/shared/clock.h"

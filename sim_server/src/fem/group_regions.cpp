@@ -1,6 +1,6 @@
 // Node regions by physical group (RegionKind::kGroup): the group a region names, or an error
 // listing the mesh's groups.
-#include "tactus/shared/format.h"
+#include <fmt/format.h>
 
 #include <charconv>
 

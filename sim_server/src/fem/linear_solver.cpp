@@ -13,7 +13,6 @@
 #include <string>
 
 #include <spdlog/spdlog.h>
-#include "tactus/shared/format.h"
 
 #include "tactus/shared/clock.h"
 #include "tactus/shared/error.h"

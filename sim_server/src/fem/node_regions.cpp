@@ -1,7 +1,7 @@
 // Node regions: the selectors of scene_regions.h over a placed mesh.
 #include "tactus/sim/node_regions.h"
 
-#include "tactus/shared/format.h"
+#include <fmt/format.h>
 
 #include <Eigen/Geometry>
 

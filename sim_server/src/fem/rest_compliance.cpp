@@ -6,7 +6,7 @@
 #include <cstdio>
 #include <string>
 
-#include "tactus/shared/format.h"
+#include <fmt/format.h>
 
 #include "rest_compliance_block.h"
 #include "tactus/shared/error.h"

@@ -1,7 +1,6 @@
 // The Gmsh reader (ASCII 1.0, 2.x and 4.1), with the physical groups ($PhysicalNames, the
 // elements' physical tags, 4.1's $Entities); mesh_groups.cpp turns them into node sets.
 
-#include "tactus/shared/format.h"
 #include <spdlog/spdlog.h>
 
 #include <Eigen/Geometry>

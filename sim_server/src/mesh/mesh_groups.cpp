@@ -1,6 +1,6 @@
 // Gmsh physical groups: from the file's node ids to sorted node sets of the mesh (NodeGroup).
 
-#include "tactus/shared/format.h"
+#include <fmt/format.h>
 
 #include <algorithm>
 #include <map>

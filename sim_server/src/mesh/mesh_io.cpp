@@ -1,7 +1,6 @@
 // Mesh input: format detection and the entry points; one reader per format (gmsh_reader.cpp,
 // vtk_legacy_reader.cpp, vtu_reader.cpp), the common validation in mesh_validate.cpp.
 
-#include "tactus/shared/format.h"
 #include <spdlog/spdlog.h>
 
 #include <Eigen/Geometry>

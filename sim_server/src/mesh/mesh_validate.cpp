@@ -1,7 +1,6 @@
 // The readers' common ground: number parsing, tokens, and the validation every format goes
 // through (id resolution, unreferenced nodes, orientation, degeneracy).
 
-#include "tactus/shared/format.h"
 #include <spdlog/spdlog.h>
 
 #include <Eigen/Geometry>

@@ -1,5 +1,5 @@
 // OBJ and STL triangle surfaces (surface_io.h).
-#include "tactus/shared/format.h"
+#include <fmt/format.h>
 
 #include <Eigen/Geometry>
 #include <algorithm>

@@ -1,6 +1,5 @@
 // The legacy VTK reader (ASCII and binary unstructured grids).
 
-#include "tactus/shared/format.h"
 #include <spdlog/spdlog.h>
 
 #include <Eigen/Geometry>

@@ -3,7 +3,7 @@
 // base64) formats. Every size read from the file is checked before it is used.
 // (Over 500 lines on purpose: one format's reader, whose XML parser and decoders serve only it.)
 
-#include "tactus/shared/format.h"
+#include <fmt/format.h>
 #include <zlib.h>
 
 #include <algorithm>

@@ -1,7 +1,7 @@
 // Loads on a tissue: nodal forces, pressures, prescribed displacements (loads.h).
 #include "loads.h"
 
-#include "tactus/shared/format.h"
+#include <fmt/format.h>
 
 #include <algorithm>
 

@@ -2,7 +2,6 @@
 // accessors. The parts: simulation_model.h (model, state, scratch), step_stages.h (the stages),
 // simulation_build.cpp (construction), output_writer.h (VTK), scripted_target.cpp.
 #include <spdlog/spdlog.h>
-#include "tactus/shared/format.h"
 
 #include <cmath>
 #include <limits>

@@ -1,6 +1,5 @@
 // A Simulation built from a scene: the model, the physics objects at the initial state, the
 // step's scratch, and the list of the stages the scene runs.
-#include "tactus/shared/format.h"
 #include <spdlog/spdlog.h>
 
 #include "simulation_impl.h"

@@ -1,7 +1,7 @@
 // The model of a scene: meshes placed, fixed nodes collected, solver settings derived.
 #include "simulation_model.h"
 
-#include "tactus/shared/format.h"
+#include <fmt/format.h>
 
 #include <algorithm>
 #include <iterator>

@@ -2,7 +2,7 @@
 // "State: copy, save, restore"). The walk below names every member of SimulationState and
 // TissueState, as state or not with the reason; the objects inside walk their own
 // (FemBody, TissueCompliance, Collision, Instrument: their transferState).
-#include "tactus/shared/format.h"
+#include <fmt/format.h>
 
 #include <cstring>
 

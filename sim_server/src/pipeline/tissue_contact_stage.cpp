@@ -3,7 +3,7 @@
 
 #include "tactus/shared/error.h"
 
-#include "tactus/shared/format.h"
+#include <fmt/format.h>
 
 #include <algorithm>
 #include <limits>

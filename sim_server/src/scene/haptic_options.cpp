@@ -1,5 +1,5 @@
 // haptic_server options from a scene's haptics section (sim_server --print-haptic-options).
-#include "tactus/shared/format.h"
+#include <fmt/format.h>
 
 #include "tactus/sim/scene.h"
 

@@ -1,7 +1,7 @@
 // Scene parsing: the instrument section (mass, coupling, probe or grasper geometry, initial pose,
 // scripted trajectory, workspace).
 
-#include "tactus/shared/format.h"
+#include <fmt/format.h>
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>

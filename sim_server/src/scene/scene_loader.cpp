@@ -3,7 +3,6 @@
 // solver, haptics and output sections and the entry points; the parser and the other sections are
 // in scene_parser.h and scene_{values,tissue,instrument}.cpp.
 
-#include "tactus/shared/format.h"
 #include <spdlog/spdlog.h>
 #include <yaml-cpp/yaml.h>
 

@@ -1,6 +1,6 @@
 // Scene parsing: the obstacles and obstacle_contact sections (static obstacles).
 
-#include "tactus/shared/format.h"
+#include <fmt/format.h>
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>

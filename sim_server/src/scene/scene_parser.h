@@ -8,7 +8,7 @@
 //   scene_loader.cpp      the root, solver, haptics and output sections; parseScene, loadScene
 // Every problem is collected with file:line:col and field path and reported at once.
 
-#include "tactus/shared/format.h"
+#include <fmt/format.h>
 #include <yaml-cpp/yaml.h>
 
 #include <cmath>

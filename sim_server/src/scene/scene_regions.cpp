@@ -1,6 +1,6 @@
 // Scene parsing: node regions (fixed.regions; the selectors of scene_regions.h).
 
-#include "tactus/shared/format.h"
+#include <fmt/format.h>
 #include <yaml-cpp/yaml.h>
 
 #include "scene_parser.h"

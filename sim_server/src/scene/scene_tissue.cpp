@@ -1,6 +1,6 @@
 // Scene parsing: the tissues section (mesh, transform, material, damping, fixed nodes, compliance).
 
-#include "tactus/shared/format.h"
+#include <fmt/format.h>
 #include <yaml-cpp/yaml.h>
 
 #include <filesystem>

@@ -1,6 +1,6 @@
 // Scene parsing: the tissue_contact section (contact between tissues and self-contact).
 
-#include "tactus/shared/format.h"
+#include <fmt/format.h>
 #include <yaml-cpp/yaml.h>
 
 #include <set>

@@ -2,7 +2,7 @@
 // problem with file:line:col and the field path (errors), or a value outside its plausible range
 // (warnings).
 
-#include "tactus/shared/format.h"
+#include <fmt/format.h>
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>

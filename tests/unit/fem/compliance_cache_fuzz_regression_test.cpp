@@ -4,7 +4,6 @@
 #include <gtest/gtest.h>
 
 #include <spdlog/spdlog.h>
-#include "tactus/shared/format.h"
 
 #include "../../fuzz/feed_compliance.h"
 #include "../../fuzz/regression_inputs.h"

@@ -3,7 +3,6 @@
 #include <gtest/gtest.h>
 
 #include <spdlog/spdlog.h>
-#include "tactus/shared/format.h"
 
 #include "../../fuzz/feed_mesh.h"
 #include "../../fuzz/regression_inputs.h"

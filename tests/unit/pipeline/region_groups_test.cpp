@@ -1,7 +1,7 @@
 // Regions by physical group: `group: <name or tag>` fixes or loads exactly the
 // nodes of a Gmsh physical group (compared with the face nodes found from the coordinates), and a
 // group the mesh does not have is an error naming the region, the group and the mesh's groups.
-#include "tactus/shared/format.h"
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 
 #include <algorithm>

@@ -3,7 +3,6 @@
 // message and exit status 1.
 
 #include <spdlog/spdlog.h>
-#include "tactus/shared/format.h"
 
 #include <exception>
 
