@@ -35,7 +35,9 @@ int main(int argc, char** argv) {
       "  sim_server scenes/liver_grasp.yaml --steps 800 --record-snapshots grasp.snap");
   tactus::sim::RunOptions opt;
   std::string log_level = "info";
-  app.addOption("scene", opt.scene_path, "Scene file (YAML)")->required()->check(cli::existingFile());
+  app.addOption("scene", opt.scene_path, "Scene file (YAML)")
+      ->required()
+      ->check(cli::existingFile());
   app.addOption("--steps", opt.steps, "Run N >= 1 steps offline as fast as possible, then exit")
       ->check(cli::range(1L, 1'000'000'000L));
   app.addOption("--duration", opt.duration_s,

@@ -336,7 +336,8 @@ int main(int argc, char** argv) {
       ->check(cli::range(0, 10));
   app.addOption("--tremor-mm", o.tremor_mm, "Amplitude of the tremor motion [mm]")
       ->captureDefault();
-  app.addOption("--tremor-hz", o.tremor_hz, "Frequency of the tremor motion [Hz]")->captureDefault();
+  app.addOption("--tremor-hz", o.tremor_hz, "Frequency of the tremor motion [Hz]")
+      ->captureDefault();
   app.addOption("--log-level", o.log_level, "spdlog level")
       ->check(cli::isMember({"trace", "debug", "info", "warn", "error"}))
       ->captureDefault();
