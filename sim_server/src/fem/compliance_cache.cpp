@@ -1,5 +1,6 @@
-// The compliance cache file: header, payload checksum, checked chunked reads into C0's memory,
-// temp + fsync + rename writes (rest_compliance_block.h).
+// The compliance cache file: header, payload checksum, C0 checked in chunks where the file is
+// mapped (or read into C0's memory), temp + fsync + rename writes (rest_compliance_block.h).
+#include <sys/mman.h>
 #include <unistd.h>
 
 #include <spdlog/spdlog.h>
@@ -18,9 +19,13 @@ namespace {
 
 constexpr char kMagic[8] = {'T', 'A', 'C', 'T', 'C', '0', '\0', '\1'};
 // 2: payload checksum is PayloadChecksum (1 was byte-wise FNV-1a, too slow for GB files)
-constexpr std::uint32_t kVersion = 2;
-// Bytes read, checksummed and checked per step of a cache load (stays cache-resident).
+// 3: C0 starts at a multiple of kPayloadAlign, after zero padding (the file is mapped)
+constexpr std::uint32_t kVersion = 3;
+// Bytes checksummed and checked per step of a cache load (stays cache-resident).
 constexpr std::size_t kLoadChunkBytes = std::size_t{4} << 20;
+// C0 starts this many bytes (a page) into the file or a multiple of it: where the file is
+// mapped, at a page, its values are aligned.
+constexpr std::uint64_t kPayloadAlign = 4096;
 
 struct CacheHeader {
   char magic[8];
@@ -30,6 +35,23 @@ struct CacheHeader {
   std::uint64_t node_count;
   std::uint64_t surface_count;
 };
+
+// Where the parts of a cache file of s surface nodes and a d x d C0 start: the header, the
+// surface node list, zero bytes up to C0 (at a multiple of kPayloadAlign), C0 (column-major),
+// the checksum of everything between the header and it (PayloadChecksum; the padding is checked
+// only through it: its bytes mean nothing).
+struct CacheLayout {
+  std::uint64_t nodes_at, padding_at, c0_at, checksum_at, size;
+};
+CacheLayout cacheLayout(std::uint64_t s, std::uint64_t d, std::uint64_t scalar_bytes) {
+  CacheLayout at{};
+  at.nodes_at = sizeof(CacheHeader);
+  at.padding_at = at.nodes_at + s * sizeof(int);
+  at.c0_at = (at.padding_at + kPayloadAlign - 1) / kPayloadAlign * kPayloadAlign;
+  at.checksum_at = at.c0_at + d * d * scalar_bytes;
+  at.size = at.checksum_at + sizeof(std::uint64_t);
+  return at;
+}
 
 // Checksum of the cache payload (surface node list, then C0), fed in pieces of any
 // size. Four interleaved FNV-style lanes over 8-byte words: a change in any one word
@@ -101,10 +123,9 @@ bool readCache(const std::filesystem::path &path, std::uint64_t hash,
                const FemBody &body, RestBlock &blk, std::string &why) {
   const auto &surface = body.surfaceNodes();
   const std::uint64_t s = surface.size(), d = 3 * s;
-  const std::uint64_t expected =
-      sizeof(CacheHeader) + s * sizeof(int) + d * d * blk.scalarBytes() + 8;
+  const CacheLayout at = cacheLayout(s, d, blk.scalarBytes());
   try {
-    shared::InputFile in(path, "compliance cache", expected);
+    shared::InputFile in(path, "compliance cache", at.size);
     const std::uint64_t file_size = in.size();
     CacheHeader hdr{};
     if (file_size < sizeof(hdr)) {
@@ -135,55 +156,85 @@ bool readCache(const std::filesystem::path &path, std::uint64_t hash,
             "-byte values)";
       return false;
     }
-    if (file_size != expected) {
+    if (file_size != at.size) {
       why = "size " + std::to_string(file_size) + " bytes, expected " +
-            std::to_string(expected) + " (truncated or corrupt)";
+            std::to_string(at.size) + " (truncated or corrupt)";
       return false;
     }
-    // One pass: read a chunk straight into C0's storage, checksum it and check it
-    // while it is still in the CPU cache (no second copy, no per-element conversion).
-    std::vector<int> nodes(s);
-    blk.resize(static_cast<Eigen::Index>(d));
+    // C0 stays where the file is mapped (read-only, its pages the page cache's own): reading it
+    // into fresh anonymous memory cost the kernel's zeroing of every page first, most of a
+    // 1.6 GB load's time on a VM where fresh pages are dear (docs/measurements.md, "Build and test
+    // time"). The writer replaces a cache by a rename, never in place, so the file mapped is the
+    // one checked here. Where the file cannot be mapped it is read into C0's own memory.
+    const auto d_index = static_cast<Eigen::Index>(d);
+    void *const map = ::mmap(nullptr, at.size, PROT_READ, MAP_PRIVATE | MAP_POPULATE,
+                             in.descriptor(), 0);
+    const unsigned char *mapped = nullptr;
+    if (map != MAP_FAILED) {
+      blk.adopt(map, at.size, at.c0_at, d_index);
+      mapped = static_cast<const unsigned char *>(map);
+    } else {
+      blk.resize(d_index);
+    }
+    // The bytes after the header in order, `n` at a time: from the mapping (copied to `dest`
+    // when given), or read into `dest`.
+    std::uint64_t pos = sizeof(hdr);
+    const auto next = [&](void *dest, std::size_t n) -> const unsigned char * {
+      shared::throwIfStopRequested("reading " + in.name());
+      const unsigned char *p = nullptr;
+      if (mapped != nullptr) {
+        p = mapped + pos;
+        if (dest != nullptr)
+          std::memcpy(dest, p, n);
+      } else {
+        in.readExact(dest, n);
+        p = static_cast<const unsigned char *>(dest);
+      }
+      pos += n;
+      return p;
+    };
+    const auto reject = [&](std::string reason) {
+      blk.release();
+      why = std::move(reason);
+      return false;
+    };
+    // One pass, a chunk at a time: checksum and check it while it is still in the CPU cache.
     PayloadChecksum sum;
-    in.readExact(nodes.data(), s * sizeof(int));
-    sum.add(nodes.data(), s * sizeof(int));
+    std::vector<int> nodes(s);
+    sum.add(next(nodes.data(), s * sizeof(int)), s * sizeof(int));
+    // the padding: written as zeros, checked as part of the checksum's bytes
+    std::vector<unsigned char> padding(at.c0_at - at.padding_at);
+    sum.add(next(padding.data(), padding.size()), padding.size());
     auto *payload = static_cast<unsigned char *>(blk.data());
     const std::uint64_t payload_bytes = d * d * blk.scalarBytes();
     bool finite = true;
-    for (std::uint64_t at = 0; at < payload_bytes;) {
+    for (std::uint64_t done = 0; done < payload_bytes;) {
       const std::size_t n = static_cast<std::size_t>(
-          std::min<std::uint64_t>(kLoadChunkBytes, payload_bytes - at));
-      in.readExact(payload + at, n);
-      sum.add(payload + at, n);
+          std::min<std::uint64_t>(kLoadChunkBytes, payload_bytes - done));
+      const unsigned char *chunk = next(mapped != nullptr ? nullptr : payload + done, n);
+      sum.add(chunk, n);
       const auto count = static_cast<Eigen::Index>(n / blk.scalarBytes());
       if (blk.single)
         finite = finite && Eigen::Map<const Eigen::ArrayXf>(
-                               reinterpret_cast<const float *>(payload + at),
-                               count)
+                               reinterpret_cast<const float *>(chunk), count)
                                .allFinite();
       else
         finite = finite && Eigen::Map<const Eigen::ArrayXd>(
-                               reinterpret_cast<const double *>(payload + at),
-                               count)
+                               reinterpret_cast<const double *>(chunk), count)
                                .allFinite();
-      at += n;
+      done += n;
     }
     std::uint64_t checksum = 0;
-    in.readExact(&checksum, sizeof(checksum));
-    if (sum.finish() != checksum) {
-      why = "checksum mismatch (corrupt)";
-      return false;
-    }
-    if (nodes != surface) {
-      why = "surface nodes differ";
-      return false;
-    }
-    if (!finite) {
-      why = "non-finite values";
-      return false;
-    }
+    next(&checksum, sizeof(checksum));
+    if (sum.finish() != checksum)
+      return reject("checksum mismatch (corrupt)");
+    if (nodes != surface)
+      return reject("surface nodes differ");
+    if (!finite)
+      return reject("non-finite values");
     return true;
   } catch (const FileError &e) {
+    blk.release();
     why = e.what();
     return false;
   }
@@ -206,8 +257,11 @@ void writeCache(const std::filesystem::path &path, std::uint64_t hash,
     hdr.node_count = static_cast<std::uint64_t>(body.nodeCount());
     hdr.surface_count = blk.surface.size();
     const std::uint64_t d = 3 * hdr.surface_count;
+    const CacheLayout at = cacheLayout(hdr.surface_count, d, blk.scalarBytes());
+    const std::string padding(at.c0_at - at.padding_at, '\0');
     PayloadChecksum checksum;
     checksum.add(blk.surface.data(), blk.surface.size() * sizeof(int));
+    checksum.add(padding.data(), padding.size());
     checksum.add(blk.data(), d * d * blk.scalarBytes());
     const std::uint64_t sum = checksum.finish();
     const auto bytes = [](const void *p, std::size_t n) {
@@ -215,6 +269,7 @@ void writeCache(const std::filesystem::path &path, std::uint64_t hash,
     };
     out.write(bytes(&hdr, sizeof(hdr)));
     out.write(bytes(blk.surface.data(), blk.surface.size() * sizeof(int)));
+    out.write(padding);
     out.write(bytes(blk.data(), d * d * blk.scalarBytes()));
     out.write(bytes(&sum, sizeof(sum)));
     out.commit();

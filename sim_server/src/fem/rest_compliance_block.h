@@ -18,10 +18,11 @@
 
 namespace tactus::sim::c0_detail {
 
-// Page-aligned anonymous memory for the large C0 block, asked for in transparent
-// huge pages and populated in one call: filling 1.6 GB through 4 KiB page faults
-// (one trap each) cost more than reading the file itself. Falls back silently to
-// ordinary pages where huge pages or MADV_POPULATE_WRITE are not available.
+// The memory of the large C0 block: either page-aligned anonymous memory, asked for in
+// transparent huge pages and populated in one call (filling 1.6 GB through 4 KiB page faults, one
+// trap each, cost more than reading the file itself), or a read-only mapping of a checked cache
+// file (adopt: no fresh memory to zero, the page cache's own pages; compliance_cache.cpp). Falls
+// back silently to ordinary pages where huge pages or MADV_POPULATE_WRITE are not available.
 class LargeBuffer {
 public:
   LargeBuffer() = default;
@@ -45,18 +46,29 @@ public:
 #ifdef MADV_POPULATE_WRITE
     (void)::madvise(p, mapped, MADV_POPULATE_WRITE);
 #endif
+    base_ = p;
     data_ = p;
     mapped_ = mapped;
   }
+  // Takes over a mapping (mmap) of `mapped` bytes at `base`, unmapped by reset(); the data
+  // start `offset` bytes into it.
+  void adopt(void *base, std::size_t mapped, std::size_t offset) {
+    reset();
+    base_ = base;
+    data_ = static_cast<char *>(base) + offset;
+    mapped_ = mapped;
+  }
   void reset() {
-    if (data_ != nullptr)
-      ::munmap(data_, mapped_);
+    if (base_ != nullptr)
+      ::munmap(base_, mapped_);
+    base_ = nullptr;
     data_ = nullptr;
     mapped_ = 0;
   }
   void *data() const { return data_; }
 
 private:
+  void *base_ = nullptr;
   void *data_ = nullptr;
   std::size_t mapped_ = 0;
 };
@@ -86,7 +98,17 @@ struct RestBlock {
   void resize(Eigen::Index d) {
     release();
     storage.allocate(static_cast<std::size_t>(d * d) * scalarBytes());
-    // re-seating an Eigen::Map is done by placement new
+    seat(d);
+  }
+  // C0 (d x d) in a read-only mapping of a cache file, `offset` bytes into it (readCache): its
+  // values are never written (only computeRestBlock writes C0, into resize's memory).
+  void adopt(void *base, std::size_t mapped, std::size_t offset, Eigen::Index d) {
+    release();
+    storage.adopt(base, mapped, offset);
+    seat(d);
+  }
+  // The maps on the storage's d x d values (re-seating an Eigen::Map is done by placement new).
+  void seat(Eigen::Index d) {
     if (single)
       new (&c0f) Eigen::Map<Eigen::MatrixXf>(
           static_cast<float *>(storage.data()), d, d);
@@ -116,8 +138,10 @@ struct RestBlock {
 std::uint64_t cacheHash(const FemBody &body, double h);
 
 /// Reads and validates a cache file into `blk` (whose `single` selects the precision); returns
-/// false with a reason unless every check passes. The file must be a regular file of exactly the
-/// size the mesh implies (checked before reading). Throws tactus::Cancelled on a stop request.
+/// false with a reason (and `blk` empty) unless every check passes. The file must be a regular
+/// file of exactly the size the mesh implies (checked before reading). C0 is then the file's
+/// read-only mapping (the file read into anonymous memory where it cannot be mapped). Throws
+/// tactus::Cancelled on a stop request.
 bool readCache(const std::filesystem::path &path, std::uint64_t hash,
                const FemBody &body, RestBlock &blk, std::string &why);
 

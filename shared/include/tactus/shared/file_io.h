@@ -63,6 +63,9 @@ class InputFile {
   void readExact(void* buffer, std::size_t n);
   /// Everything from the current position to the end (at most the limit given at open).
   std::string readRest();
+  /// The open descriptor of the checked file, for mapping it (mmap): map at most size() bytes.
+  /// Reads through it bypass the position, the limit and the stop request above.
+  int descriptor() const noexcept { return fd_; }
 
  private:
   int fd_ = -1;
