@@ -140,8 +140,9 @@ class ComplianceCacheTarget {
     }
     return h;
   }
-  // The cache's payload checksum (format 2): four lanes over 8-byte words, lane i taking words
-  // i, i + 4, ...; the 0-31 tail bytes, and the byte count, folded in with FNV-1a.
+  // The cache's payload checksum (formats 2 and 3; in 3 it covers the padding before C0 too):
+  // four lanes over 8-byte words, lane i taking words i, i + 4, ...; the 0-31 tail bytes, and the
+  // byte count, folded in with FNV-1a.
   static std::uint64_t checksum(const char* data, std::size_t bytes) {
     std::uint64_t lane[4] = {0xcbf29ce484222325ull, 0x84222325cbf29ce4ull, 0x9e3779b97f4a7c15ull,
                              0xc2b2ae3d27d4eb4full};

@@ -1,5 +1,5 @@
-// Compliance cache loading (sim_server/src/fem/compliance.cpp, readCache): the chunked load
-// (read into C0's own memory, checksum and finiteness check per chunk) gives a C0 bit-identical
+// Compliance cache loading (sim_server/src/fem/compliance_cache.cpp, readCache): the chunked load
+// (the file mapped, checksum and finiteness check per chunk) gives a C0 bit-identical
 // to the precomputed one, and a truncated, padded, corrupt or old-format file is rejected and
 // rebuilt, never trusted. The box mesh is large enough (386 surface nodes: a 10.7 MB double and
 // a 5.4 MB float C0) for the payload to span several load chunks with a partial last one.
