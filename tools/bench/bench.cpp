@@ -95,6 +95,7 @@ struct BenchOptions {
   std::string local_model;             ///< non-empty: overrides haptics.local_model
   int background_lag = -1;             ///< >= 0: overrides solver.background_refactor_lag_steps
   std::string when_ready;              ///< "true"/"false": overrides ..._refactor_when_ready
+  std::string single_precondition;     ///< "true"/"false": overrides ..._precision_preconditioner
 };
 
 int run(const BenchOptions& o) {
@@ -116,6 +117,8 @@ int run(const BenchOptions& o) {
   }
   if (o.background_lag >= 0) spec.solver.background_refactor_lag_steps = o.background_lag;
   if (!o.when_ready.empty()) spec.solver.background_refactor_when_ready = o.when_ready == "true";
+  if (!o.single_precondition.empty())
+    spec.solver.single_precision_preconditioner = o.single_precondition == "true";
   if (o.linear == "cholmod") spec.solver.linear = sim::LinearSolverKind::kCholmod;
   if (o.linear == "pcg") spec.solver.linear = sim::LinearSolverKind::kPcg;
   if (o.linear == "cholmod_reuse") spec.solver.linear = sim::LinearSolverKind::kCholmodReuse;
@@ -506,6 +509,10 @@ int main(int argc, char** argv) {
   app.addOption("--background-refactor-when-ready", o.when_ready,
                  "Override the scene's solver.background_refactor_when_ready (true: no step "
                  "waits for the worker)")
+      ->check(cli::isMember({"true", "false"}));
+  app.addOption("--single-precision-preconditioner", o.single_precondition,
+                 "Override the scene's solver.single_precision_preconditioner (true: PCG's "
+                 "preconditioner solves in float)")
       ->check(cli::isMember({"true", "false"}));
   app.addOption("--linear", o.linear, "Override the scene's solver.linear")
       ->check(cli::isMember({"cholmod", "pcg", "cholmod_reuse"}));

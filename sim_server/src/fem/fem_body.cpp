@@ -61,6 +61,9 @@ void FemBody::Impl::init(const TetMesh& m, const FemMaterial& mat,
       chol.setBlasFreeSolves(true);
       chol_rest.setBlasFreeSolves(true);
     }
+    // PCG's preconditioner solves in float on a copy the worker makes (linear_solver.h); the
+    // compliance's and the direct solves stay in double
+    chol.setSinglePrecisionPreconditioner(opt.single_precision_preconditioner);
   }
   corotational = mat.law != MaterialLaw::kLinear;
   rotation_stiffness =

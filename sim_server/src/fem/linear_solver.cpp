@@ -127,6 +127,7 @@ void CholmodSolver::analyze(Sparse& lower) {
   if (factor_) cholmod_free_factor(&factor_, &common_);
   if (simplicial_) cholmod_free_factor(&simplicial_, &common_);
   if (symbolic_) cholmod_free_factor(&symbolic_, &common_);
+  single_current_ = false;
   cholmod_sparse a = view(lower);
   {
     const StopSignalsBlocked stop_signals_pending;
@@ -165,6 +166,8 @@ bool CholmodSolver::factorize(Sparse& lower) {
     ok = cholmod_factorize(&a, factor_, &common_);
   }
   factorized_ = ok && common_.status == CHOLMOD_OK && factor_->minor == factor_->n;
+  single_current_ = false;
+  if (factorized_ && single_precision_ && blas_free_solves_) makeSinglePrecisionCopy();
   if (simplicial_) cholmod_free_factor(&simplicial_, &common_);   // of the previous values
   if (factorized_ && dual_forms_ && !blas_free_solves_) makeSimplicialCopy();
   return factorized_;
@@ -195,22 +198,44 @@ void CholmodSolver::simplicialInPlace(cholmod_factor* factor) {
 void CholmodSolver::setBlasFreeSolves(bool on) {
   blas_free_solves_ = on;
   if (on && simplicial_) cholmod_free_factor(&simplicial_, &common_);
+  if (!on) single_current_ = false;
+  if (on && single_precision_ && factorized_ && !single_current_) makeSinglePrecisionCopy();
+}
+
+void CholmodSolver::setSinglePrecisionPreconditioner(bool on) {
+  single_precision_ = on;
+  if (!on) {
+    single_current_ = false;
+    single_x_ = {};
+  } else if (blas_free_solves_ && factorized_ && !single_current_) {
+    makeSinglePrecisionCopy();
+  }
+}
+
+void CholmodSolver::makeSinglePrecisionCopy() {
+  single_current_ = false;
+  if (factor_ == nullptr || !factor_->is_super) return;
+  const auto* lx = static_cast<const double*>(factor_->x);
+  single_x_.resize(factor_->xsize);
+  for (std::size_t k = 0; k < factor_->xsize; ++k) single_x_[k] = static_cast<float>(lx[k]);
+  single_current_ = true;
 }
 
 namespace {
 
 // One sweep pair of CholmodSolver::supernodalSolveWithoutBlas over the permuted right-hand sides
-// `y` (n x ncols, or a vector: Eigen's matrix-vector kernels for one column), `e` its scratch.
-template <class Y, class E>
-void supernodalSweeps(const cholmod_factor& f, Y& y, E& e) {
+// `y` (n x ncols, or a vector: Eigen's matrix-vector kernels for one column), `e` its scratch,
+// with the factor's values `lx` (f.x, or its float copy: then y and e are float too).
+template <class Scalar, class Y, class E>
+void supernodalSweeps(const cholmod_factor& f, const Scalar* lx, Y& y, E& e) {
   const int* super = static_cast<const int*>(f.super);
   const int* pi = static_cast<const int*>(f.pi);
   const int* px = static_cast<const int*>(f.px);
   const int* ls = static_cast<const int*>(f.s);
-  const double* lx = static_cast<const double*>(f.x);
   const auto nsuper = static_cast<Eigen::Index>(f.nsuper);
   const Eigen::Index ncols = y.cols();
-  using Block = Eigen::Map<const Eigen::MatrixXd, 0, Eigen::OuterStride<>>;
+  using Block = Eigen::Map<const Eigen::Matrix<Scalar, Eigen::Dynamic, Eigen::Dynamic>, 0,
+                           Eigen::OuterStride<>>;
   for (Eigen::Index s = 0; s < nsuper; ++s) {   // L y = P b
     const int k1 = super[s], nscol = super[s + 1] - k1;
     const int psi = pi[s], nsrow = pi[s + 1] - psi, nsrow2 = nsrow - nscol;
@@ -260,15 +285,31 @@ void CholmodSolver::supernodalSolveWithoutBlas(const double* b, double* x, int n
     own_e_.resize(esize, 1);
     Eigen::Map<Eigen::VectorXd> y(own_y_.data(), n), e(own_e_.data(), esize);
     gather(y.data(), 0);
-    supernodalSweeps(f, y, e);
+    supernodalSweeps(f, static_cast<const double*>(f.x), y, e);
     scatter(y.data(), 0);
     return;
   }
   own_y_.resize(n, ncols);
   own_e_.resize(esize, ncols);
   for (int c = 0; c < ncols; ++c) gather(own_y_.col(c).data(), c);
-  supernodalSweeps(f, own_y_, own_e_);
+  supernodalSweeps(f, static_cast<const double*>(f.x), own_y_, own_e_);
   for (int c = 0; c < ncols; ++c) scatter(own_y_.col(c).data(), c);
+}
+
+void CholmodSolver::solvePreconditioner(const double* b, double* x) {
+  if (!single_current_ || !blas_free_solves_) {
+    solve(b, x, 1);
+    return;
+  }
+  // supernodalSolveWithoutBlas's permutation and sweeps, in float
+  const cholmod_factor& f = *factor_;
+  const auto n = static_cast<Eigen::Index>(f.n);
+  const int* perm = static_cast<const int*>(f.Perm);
+  single_y_.resize(n);
+  single_e_.resize(static_cast<Eigen::Index>(f.maxesize));
+  for (Eigen::Index k = 0; k < n; ++k) single_y_[k] = static_cast<float>(b[perm ? perm[k] : k]);
+  supernodalSweeps(f, static_cast<const float*>(single_x_.data()), single_y_, single_e_);
+  for (Eigen::Index k = 0; k < n; ++k) x[perm ? perm[k] : k] = static_cast<double>(single_y_[k]);
 }
 
 void CholmodSolver::solve(const double* b, double* x, int ncols) {
@@ -314,6 +355,7 @@ void CholmodSolver::analyzeLike(const CholmodSolver& other) {
   if (simplicial_) cholmod_free_factor(&simplicial_, &common_);
   if (symbolic_) cholmod_free_factor(&symbolic_, &common_);
   factorized_ = false;
+  single_current_ = false;
   factor_ = cholmod_copy_factor(other.symbolic_ ? other.symbolic_ : other.factor_, &common_);
   if (!factor_) throw NumericalError("CHOLMOD: copying a factor failed (out of memory?)");
   if (other.symbolic_) {
@@ -326,6 +368,9 @@ void CholmodSolver::swapFactor(CholmodSolver& other) noexcept {
   std::swap(factor_, other.factor_);
   std::swap(simplicial_, other.simplicial_);
   std::swap(factorized_, other.factorized_);
+  // the float copies go with their factors (each side's setting stays its own)
+  single_x_.swap(other.single_x_);
+  std::swap(single_current_, other.single_current_);
 }
 
 std::size_t CholmodSolver::factorNonzeros() const {
@@ -371,6 +416,8 @@ void BackgroundFactoriser::start(const Sparse& a, const CholmodSolver& like) {
       solver_->setDualForms(true);
     else
       solver_->setBlasFreeSolves(true);
+    // the float copy of the preconditioner made here, after the worker's factorisation
+    solver_->setSinglePrecisionPreconditioner(like.singlePrecisionPreconditioner());
     copy_ = a;   // pattern and values; later jobs copy the values only
   } else {
     std::copy(a.valuePtr(), a.valuePtr() + a.nonZeros(), copy_.valuePtr());
@@ -487,7 +534,7 @@ ReuseSolveResult ReusedFactorSolver::solve(CholmodSolver& factor, Sparse& a,
         a, b, x, policy_.tolerance, bound, cg_,
         [&](const Eigen::VectorXd& r, Eigen::VectorXd& z) {
           if (!block_rotation) {
-            factor.solve(r.data(), z.data(), 1);
+            factor.solvePreconditioner(r.data(), z.data());
             return;
           }
           // z = T A_f^-1 T^T r
@@ -495,7 +542,7 @@ ReuseSolveResult ReusedFactorSolver::solve(CholmodSolver& factor, Sparse& a,
           warp_.resize(r.size());
           for (Eigen::Index k = 0; k < blocks; ++k)
             warp_.segment<3>(3 * k).noalias() = block_rotation[k].transpose() * r.segment<3>(3 * k);
-          factor.solve(warp_.data(), warp_.data(), 1);
+          factor.solvePreconditioner(warp_.data(), warp_.data());
           for (Eigen::Index k = 0; k < blocks; ++k)
             z.segment<3>(3 * k).noalias() = block_rotation[k] * warp_.segment<3>(3 * k);
         });

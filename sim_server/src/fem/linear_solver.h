@@ -12,6 +12,7 @@
 #include <memory>
 #include <mutex>
 #include <thread>
+#include <vector>
 
 #include "tactus/sim/state_archive.h"
 
@@ -64,6 +65,27 @@ class CholmodSolver {
   /// See the class comment; turning it on converts a supernodal numeric factor held now.
   void setBlasFreeSolves(bool on);
   bool blasFreeSolves() const { return blas_free_solves_; }
+  /// Single-precision preconditioner solves (with setBlasFreeSolves; the factor-reuse strategy's
+  /// PCG): factorize() also keeps a float copy of the supernodal factor's values (made by the
+  /// thread that factorises: the background worker's, so a step never pays the conversion;
+  /// swapFactor hands it over with the factor), and solvePreconditioner() runs the same sweeps
+  /// on it in float (Eigen's generic float kernels, which accumulate in float). The sweeps read
+  /// half the bytes: liver_23k's factor 12.9 MB instead of 25.8 (docs/measurements.md, "The
+  /// simulation step at organ scale"). The result differs from the double solve by about
+  /// 1e-7 relative (the factor's own rounding to float dominates; a double accumulation over the
+  /// float values would not change that); PCG's residual, products and convergence test stay in
+  /// double, so only the preconditioner is less exact, far less than the reused factor's lag
+  /// makes it anyway. solve() (direct solves, compliance) stays in double. Deterministic: the
+  /// copy is a rounding of the values, the same bits on every run. Turning it on converts a
+  /// supernodal numeric factor held now (with setBlasFreeSolves on).
+  void setSinglePrecisionPreconditioner(bool on);
+  bool singlePrecisionPreconditioner() const { return single_precision_; }
+  /// The factor's float copy is held (setSinglePrecisionPreconditioner, a supernodal factor
+  /// solved without BLAS): solvePreconditioner() uses it.
+  bool holdsSinglePrecisionCopy() const { return single_current_; }
+  /// x ~= A^-1 b for one right-hand side of length n (x may alias b): the float sweeps when the
+  /// float copy is held, solve() otherwise.
+  void solvePreconditioner(const double* b, double* x);
   /// Both forms: a supernodal numeric factor is kept and a simplicial copy of it made after each
   /// factorisation (cholmod_copy_factor, then cholmod_change_factor on the copy); solve() uses the
   /// supernodal one when it gets cholmodBlasMutex() at once (std::try_to_lock) and the simplicial
@@ -80,6 +102,8 @@ class CholmodSolver {
   cholmod_sparse view(Sparse& lower) const;
   /// setBlasFreeSolves: solve() on the supernodal factor by Eigen's dense kernels
   void supernodalSolveWithoutBlas(const double* b, double* x, int ncols);
+  /// singlePrecisionPreconditioner: the float copy of the current supernodal factor's values
+  void makeSinglePrecisionCopy();
   void makeSimplicialCopy();
   /// `factor` (supernodal, of this solver's common) converted to the simplicial LL' form.
   void simplicialInPlace(cholmod_factor* factor);
@@ -94,7 +118,11 @@ class CholmodSolver {
   cholmod_dense* y2_ = nullptr;
   cholmod_dense* e2_ = nullptr;
   Eigen::MatrixXd own_y_, own_e_;   // supernodalSolveWithoutBlas's workspaces
+  std::vector<float> single_x_;     // the float copy of factor_->x (single_current_)
+  Eigen::VectorXf single_y_, single_e_;   // solvePreconditioner's float workspaces
   bool factorized_ = false;
+  bool single_precision_ = false;
+  bool single_current_ = false;     // single_x_ holds factor_'s current values
   bool blas_free_solves_ = false;
   bool dual_forms_ = false;
 };
@@ -174,7 +202,9 @@ CgResult conjugateGradient(const CholmodSolver::Sparse& lower, const Eigen::Vect
 /// process. Its CHOLMOD state is its own; its factorisation holds cholmodBlasMutex() (several
 /// bodies' workers and the step's own factorisations never run BLAS at once), and its solver is
 /// set to solve without BLAS (CholmodSolver::setBlasFreeSolves), so the factor handed over is
-/// solved without BLAS. The caller's solver must be set so too: then nothing on the step's
+/// solved without BLAS; when the caller's solver keeps a float copy for its preconditioner
+/// solves (CholmodSolver::setSinglePrecisionPreconditioner), the worker makes it after its
+/// factorisation and hands it over with the factor. The caller's solver must be set so too: then nothing on the step's
 /// thread runs BLAS while the worker does, except a factorisation there, which waits for the
 /// worker's. With a caller's solver set to dual forms
 /// (CholmodSolver::setDualForms) the worker keeps the supernodal factor and hands over its
@@ -268,6 +298,8 @@ struct ReuseSolveResult {
 /// never waits (a job not finished yet is looked at again at the next step, the step going on
 /// with PCG on the factor it has), so refactorisation is off the step's critical path, at the
 /// price of results that depend on the worker's timing (each still meets the tolerance).
+/// PCG's preconditioner solves are the factor's solvePreconditioner() (single precision when
+/// the factor is set so); its direct solves after a refresh are solve() (double).
 class ReusedFactorSolver {
  public:
   using Sparse = CholmodSolver::Sparse;

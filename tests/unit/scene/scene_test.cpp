@@ -261,13 +261,16 @@ TEST(Scene, LinearSolverStrategies) {
   EXPECT_EQ(def.solver.refactor_every_steps, 0);
   EXPECT_EQ(def.solver.background_refactor_lag_steps, 0);
   EXPECT_FALSE(def.solver.background_refactor_when_ready);
+  EXPECT_FALSE(def.solver.single_precision_preconditioner);
   const SceneSpec s = parseScene(
       kFullHead +
           "solver: {linear: cholmod_reuse, refactor_iterations: 12, refactor_every_steps: 50,\n"
-          "         background_refactor_lag_steps: 2, background_refactor_when_ready: true}\n",
+          "         background_refactor_lag_steps: 2, background_refactor_when_ready: true,\n"
+          "         single_precision_preconditioner: true}\n",
       "s.yaml", kSceneFiles);
   EXPECT_EQ(s.solver.background_refactor_lag_steps, 2);
   EXPECT_TRUE(s.solver.background_refactor_when_ready);
+  EXPECT_TRUE(s.solver.single_precision_preconditioner);
   EXPECT_EQ(s.solver.linear, LinearSolverKind::kCholmodReuse);
   EXPECT_EQ(s.solver.refactor_iterations, 12);
   EXPECT_EQ(s.solver.refactor_every_steps, 50);

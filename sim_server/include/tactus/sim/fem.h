@@ -120,6 +120,13 @@ struct FemSolverOptions {
   /// waits for the worker; timing-dependent results) instead of exactly
   /// background_refactor_lag_steps steps after its start (reproducible; waits if not ready)
   bool background_refactor_when_ready = false;
+  /// kCholmodReuse in the background (background_refactor_lag_steps > 0, the supernodal factor
+  /// solved without BLAS): PCG's preconditioner solves run in single precision on a float copy
+  /// of the factor that the worker makes after its factorisation (half the bytes per sweep;
+  /// PCG itself stays in double and meets cg_tolerance as before). false, the default: the
+  /// double sweeps. Scene key solver.single_precision_preconditioner (liver_grasp_20k and
+  /// liver_grasp_23k set it; docs/design.md, "Free motion")
+  bool single_precision_preconditioner = false;
 };
 
 /// Per-stage wall times of the last step [s] and solver figures. freeMotion allocates nothing

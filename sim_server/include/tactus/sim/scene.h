@@ -195,6 +195,9 @@ struct SolverSpec {
   /// kCholmodReuse in the background: the new factor takes over as soon as the worker has
   /// finished, no step waiting for it (FemSolverOptions::background_refactor_when_ready)
   bool background_refactor_when_ready = false;
+  /// kCholmodReuse in the background: PCG's preconditioner solves in single precision
+  /// (FemSolverOptions::single_precision_preconditioner)
+  bool single_precision_preconditioner = false;
   double nsgs_tolerance = 1e-6;
   int nsgs_max_sweeps = 500;
   double nsgs_sor = 1.0;                        ///< over-relaxation factor in (0, 2)

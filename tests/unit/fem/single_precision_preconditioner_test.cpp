@@ -1,0 +1,295 @@
+// The single-precision preconditioner of the factor-reuse strategy (CholmodSolver::
+// setSinglePrecisionPreconditioner, FemSolverOptions::single_precision_preconditioner) on a real
+// mesh, liver_20k.msh as liver_grasp_20k places and fixes it: the float sweep pair is the double
+// one to about 1e-7 relative (and is really the float one: not bit-equal), the same bits on
+// every call, the background worker makes the float copy and hands it over with its factor, and
+// a body whose PCG is preconditioned in float matches the direct solve within the PCG tolerance
+// at every step with the iterations of the double preconditioner.
+#include <gtest/gtest.h>
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <string>
+#include <vector>
+
+#include "../../../sim_server/src/fem/linear_solver.h"
+#include "tactus/sim/fem.h"
+#include "tactus/sim/mesh.h"
+#include "tactus/sim/scene.h"
+
+namespace tactus::sim {
+namespace {
+
+// liver_grasp_20k's tissue: its mesh, placement, fixed box, material, damping and time step.
+struct SinglePrecisionLiver {
+  TetMesh mesh;
+  std::vector<int> fixed;
+  FemMaterial material;
+};
+
+const SinglePrecisionLiver& singlePrecisionLiver() {
+  static const SinglePrecisionLiver liver = [] {
+    SinglePrecisionLiver l;
+    l.mesh = loadTetMesh(std::string(TACTUS_SOURCE_DIR) + "/scenes/meshes/liver_20k.msh");
+    transformMesh(l.mesh, 0.1, Eigen::Vector3d::Zero(), Eigen::Vector3d(0.0260, 0.0566, -1.5242));
+    BoxSpec box;
+    box.min_m = Eigen::Vector3d(-0.2, -0.2, -0.2);
+    box.max_m = Eigen::Vector3d(-0.07, 0.2, 0.2);
+    l.fixed = nodesInBoxes(l.mesh, {box});
+    l.material.law = MaterialLaw::kCorotational;
+    l.material.young_pa = 15000.0;
+    l.material.poisson = 0.45;
+    l.material.density_kgpm3 = 1000.0;
+    l.material.damping = RayleighSpec{0.5, 0.005};
+    return l;
+  }();
+  return liver;
+}
+
+constexpr double kLiverTimeStep = 0.01;
+
+// The lower triangle of the liver's linear-elastic step matrix (1 + h alpha) M + (h beta + h^2) K
+// (lumped mass) over its free nodes: the pattern and the scale of what its FemBody solves.
+fem_detail::CholmodSolver::Sparse liverStepMatrixLower(double stiffness_scale) {
+  const SinglePrecisionLiver& l = singlePrecisionLiver();
+  const int nodes = l.mesh.nodeCount();
+  std::vector<int> dof(static_cast<std::size_t>(nodes), 0);
+  for (int i : l.fixed) dof[static_cast<std::size_t>(i)] = -1;
+  int n = 0;
+  for (int& d : dof)
+    if (d == 0) {
+      d = n;
+      n += 3;
+    }
+  const FemMaterial& m = l.material;
+  const double h = kLiverTimeStep, young = m.young_pa * stiffness_scale;
+  const double lambda = young * m.poisson / ((1.0 + m.poisson) * (1.0 - 2.0 * m.poisson));
+  const double mu = young / (2.0 * (1.0 + m.poisson));
+  const double k_scale = h * m.damping->stiffness_beta_s + h * h;
+  const double m_scale = 1.0 + h * m.damping->mass_alpha_per_s;
+  std::vector<Eigen::Triplet<double, int>> t;
+  for (const auto& tet : l.mesh.tets) {
+    Eigen::Matrix3d d;
+    for (int k = 0; k < 3; ++k) d.col(k) = l.mesh.nodes.col(tet[k + 1]) - l.mesh.nodes.col(tet[0]);
+    const double volume = d.determinant() / 6.0;
+    const Eigen::Matrix3d d_inv = d.inverse();
+    Eigen::Vector3d g[4];
+    for (int k = 0; k < 3; ++k) g[k + 1] = d_inv.row(k).transpose();
+    g[0] = -(g[1] + g[2] + g[3]);
+    for (int a = 0; a < 4; ++a)
+      for (int b = 0; b < 4; ++b) {
+        const int da = dof[static_cast<std::size_t>(tet[a])];
+        const int db = dof[static_cast<std::size_t>(tet[b])];
+        if (da < 0 || db < 0) continue;
+        Eigen::Matrix3d k = volume * (lambda * g[a] * g[b].transpose() +
+                                      mu * g[b] * g[a].transpose() +
+                                      mu * g[a].dot(g[b]) * Eigen::Matrix3d::Identity());
+        k *= k_scale;
+        if (a == b) k.diagonal().array() += m_scale * m.density_kgpm3 * volume / 4.0;
+        for (int i = 0; i < 3; ++i)
+          for (int j = 0; j < 3; ++j)
+            if (da + i >= db + j) t.emplace_back(da + i, db + j, k(i, j));
+      }
+  }
+  fem_detail::CholmodSolver::Sparse a(n, n);
+  a.setFromTriplets(t.begin(), t.end());
+  a.makeCompressed();
+  return a;
+}
+
+Eigen::VectorXd singlePrecisionRhs(Eigen::Index n) {
+  Eigen::VectorXd b(n);
+  for (Eigen::Index i = 0; i < n; ++i)
+    b[i] = std::sin(0.37 * static_cast<double>(i)) + 0.1 * static_cast<double>(i % 7);
+  return b;
+}
+
+double relativeDifference(const Eigen::VectorXd& x, const Eigen::VectorXd& y) {
+  return (x - y).norm() / y.norm();
+}
+
+std::string scientific(double v) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%.3g", v);
+  return text;
+}
+
+// The float sweeps against the double ones on the liver's supernodal factor: close (about 1e-7
+// relative; the factor's rounding to float dominates), not the same bits (they did run in
+// float), in place too, the same bits on every call and after a second factorisation of the
+// same values; without the setting (or without the BLAS-free solves, which the float copy
+// belongs to) solvePreconditioner is solve() bit for bit.
+TEST(SinglePrecisionPreconditioner, FloatSweepsMatchTheDoubleSolveOnTheLiver) {
+  fem_detail::CholmodSolver::Sparse a = liverStepMatrixLower(1.0);
+  const Eigen::Index n = a.rows();
+  const Eigen::VectorXd b = singlePrecisionRhs(n);
+  fem_detail::CholmodSolver solver;
+  solver.setBlasFreeSolves(true);
+  solver.analyze(a);
+  ASSERT_TRUE(solver.factorize(a));
+  ASSERT_TRUE(solver.supernodal()) << "the liver's factor must be supernodal";
+  EXPECT_FALSE(solver.holdsSinglePrecisionCopy());
+  Eigen::VectorXd x_double(n), x_off(n);
+  solver.solve(b.data(), x_double.data(), 1);
+  solver.solvePreconditioner(b.data(), x_off.data());
+  EXPECT_EQ(x_off, x_double);
+
+  solver.setSinglePrecisionPreconditioner(true);   // converts the factor held now
+  ASSERT_TRUE(solver.holdsSinglePrecisionCopy());
+  Eigen::VectorXd x_float(n);
+  solver.solvePreconditioner(b.data(), x_float.data());
+  const double difference = relativeDifference(x_float, x_double);
+  EXPECT_LT(difference, 1e-6);
+  EXPECT_GT(difference, 0.0) << "the float sweeps gave the double solve's bits";
+  Eigen::VectorXd x_again = b;
+  solver.solvePreconditioner(x_again.data(), x_again.data());   // in place
+  EXPECT_EQ(x_again, x_float);
+  ASSERT_TRUE(solver.factorize(a));   // the copy made again by the factorisation
+  ASSERT_TRUE(solver.holdsSinglePrecisionCopy());
+  solver.solvePreconditioner(b.data(), x_again.data());
+  EXPECT_EQ(x_again, x_float);
+  RecordProperty("float_against_double", scientific(difference));
+
+  solver.setBlasFreeSolves(false);
+  EXPECT_FALSE(solver.holdsSinglePrecisionCopy());
+  solver.setBlasFreeSolves(true);   // the copy made again from the factor held
+  ASSERT_TRUE(solver.holdsSinglePrecisionCopy());
+  solver.solvePreconditioner(b.data(), x_again.data());
+  EXPECT_EQ(x_again, x_float);
+  solver.setSinglePrecisionPreconditioner(false);
+  EXPECT_FALSE(solver.holdsSinglePrecisionCopy());
+  solver.solvePreconditioner(b.data(), x_off.data());
+  EXPECT_EQ(x_off, x_double);
+}
+
+// The worker factorises a stiffer matrix and hands its factor over with the float copy it made:
+// the caller's preconditioner solves then solve the new matrix (float against double 1e-6), and
+// PCG on the old matrix A0 preconditioned by the new factor in float converges to the direct
+// solution of A0 within its tolerance, in the iterations of the double preconditioner.
+TEST(SinglePrecisionPreconditioner, TheWorkerHandsOverItsFloatCopyAndPcgConverges) {
+  fem_detail::CholmodSolver::Sparse a0 = liverStepMatrixLower(1.0), a1 = liverStepMatrixLower(1.3);
+  const Eigen::Index n = a0.rows();
+  const Eigen::VectorXd b = singlePrecisionRhs(n);
+  fem_detail::CholmodSolver step, exact1, exact0;
+  step.setBlasFreeSolves(true);
+  step.setSinglePrecisionPreconditioner(true);
+  step.analyze(a0);
+  exact1.analyze(a1);
+  exact0.analyze(a0);
+  ASSERT_TRUE(step.factorize(a0));
+  ASSERT_TRUE(exact1.factorize(a1));
+  ASSERT_TRUE(exact0.factorize(a0));
+
+  fem_detail::BackgroundFactoriser worker;
+  worker.start(a1, step);
+  double waited_s = 0.0, factorisation_s = 0.0;
+  ASSERT_TRUE(worker.collect(step, waited_s, factorisation_s));
+  ASSERT_TRUE(step.holdsSinglePrecisionCopy()) << "the worker made no float copy";
+  Eigen::VectorXd z(n), z_double(n);
+  step.solvePreconditioner(b.data(), z.data());
+  exact1.solve(b.data(), z_double.data(), 1);
+  EXPECT_LT(relativeDifference(z, z_double), 1e-6);
+  EXPECT_GT(relativeDifference(z, z_double), 0.0);
+
+  // A0 x = b by PCG preconditioned by A1's factor: in float (step) and in double (exact1)
+  Eigen::VectorXd x_direct(n);
+  exact0.solve(b.data(), x_direct.data(), 1);
+  const double tol = 1e-10;
+  fem_detail::CgBuffers buffers;
+  Eigen::VectorXd x_float = Eigen::VectorXd::Zero(n), x_double = Eigen::VectorXd::Zero(n);
+  const fem_detail::CgResult in_float = fem_detail::conjugateGradient(
+      a0, b, x_float, tol, 100, buffers,
+      [&](const Eigen::VectorXd& r, Eigen::VectorXd& out) {
+        step.solvePreconditioner(r.data(), out.data());
+      });
+  const fem_detail::CgResult in_double = fem_detail::conjugateGradient(
+      a0, b, x_double, tol, 100, buffers,
+      [&](const Eigen::VectorXd& r, Eigen::VectorXd& out) {
+        exact1.solve(r.data(), out.data(), 1);
+      });
+  ASSERT_TRUE(in_float.converged) << in_float.iterations << " iterations, residual "
+                                  << in_float.residual;
+  ASSERT_TRUE(in_double.converged);
+  EXPECT_GE(in_float.iterations, 3);   // A1's factor is not A0's: PCG has work to do
+  EXPECT_LE(in_float.iterations, in_double.iterations + 1);
+  EXPECT_LT(relativeDifference(x_float, x_direct), 1e-8);
+  RecordProperty("pcg_iterations_float", in_float.iterations);
+  RecordProperty("pcg_iterations_double", in_double.iterations);
+}
+
+FemSolverOptions singlePrecisionOptions(LinearSolverKind kind, bool single) {
+  FemSolverOptions o;
+  o.linear = kind;
+  o.cg_tolerance = 1e-10;
+  o.background_refactor_lag_steps = kind == LinearSolverKind::kCholmodReuse ? 2 : 0;
+  o.single_precision_preconditioner = single;
+  return o;
+}
+
+// The liver settling under gravity with the background refresh (lag 2), its PCG preconditioned
+// in float and, beside it, in double: each step's dv matches the direct solve from the same
+// state within the PCG tolerance, the float preconditioner needs the double one's iterations
+// (at most one more at a step, two more in all), and a second float run (without the direct
+// solves beside it) gives the same bits.
+TEST(SinglePrecisionPreconditioner, TheSettlingLiverMatchesTheDirectSolve) {
+  const SinglePrecisionLiver& l = singlePrecisionLiver();
+  const Eigen::Vector3d gravity(0.0, 0.0, -9.81);
+  constexpr int kSteps = 20;
+  auto run = [&](bool single, bool beside_exact, std::vector<int>* iterations,
+                 std::vector<Eigen::VectorXd>* q, double* worst) {
+    FemBody body(l.mesh, l.material, l.fixed, &gravity,
+                 singlePrecisionOptions(LinearSolverKind::kCholmodReuse, single));
+    FemBody exact(l.mesh, l.material, l.fixed, &gravity,
+                  singlePrecisionOptions(LinearSolverKind::kCholmod, false));
+    int taken = 0;
+    for (int s = 0; s < kSteps; ++s) {
+      const Eigen::VectorXd v0 = body.velocities();
+      if (beside_exact) {
+        exact.positions() = body.positions();
+        exact.velocities() = v0;
+        ASSERT_TRUE(exact.freeMotion(kLiverTimeStep).ok) << "step " << s;
+      }
+      const FemStepStats st = body.freeMotion(kLiverTimeStep);
+      ASSERT_TRUE(st.ok) << "step " << s;
+      if (s > 0) {
+        EXPECT_FALSE(st.factor_refreshed) << "step " << s;
+      }
+      if (!st.factor_refreshed) {
+        EXPECT_LE(st.cg_residual, 1e-10) << "step " << s;
+      }
+      if (st.background_factor_taken) ++taken;
+      if (beside_exact)
+        *worst = std::max(*worst, relativeDifference(body.velocities() - v0, exact.velocities() - v0));
+      iterations->push_back(st.cg_iterations);
+      if (q) q->push_back(body.positions());
+    }
+    EXPECT_GE(taken, 2) << "the settling liver refreshes its factor in the background";
+  };
+  std::vector<int> it_float, it_double, it_again;
+  std::vector<Eigen::VectorXd> q_float, q_again;
+  double worst_float = 0.0, worst_double = 0.0, worst_again = 0.0;
+  run(true, true, &it_float, &q_float, &worst_float);
+  run(false, true, &it_double, nullptr, &worst_double);
+  run(true, false, &it_again, &q_again, &worst_again);
+  EXPECT_LT(worst_float, 1e-6);
+  EXPECT_LT(worst_double, 1e-6);
+  int sum_float = 0, sum_double = 0;
+  for (int s = 0; s < kSteps; ++s) {
+    EXPECT_LE(it_float[static_cast<std::size_t>(s)], it_double[static_cast<std::size_t>(s)] + 1)
+        << "step " << s;
+    sum_float += it_float[static_cast<std::size_t>(s)];
+    sum_double += it_double[static_cast<std::size_t>(s)];
+  }
+  EXPECT_LE(sum_float, sum_double + 2);
+  EXPECT_EQ(it_again, it_float);
+  ASSERT_EQ(q_again.size(), q_float.size());
+  for (std::size_t s = 0; s < q_float.size(); ++s) ASSERT_EQ(q_again[s], q_float[s]) << "step " << s;
+  RecordProperty("pcg_iterations_float", sum_float);
+  RecordProperty("pcg_iterations_double", sum_double);
+  RecordProperty("worst_relative_dv_error_float", scientific(worst_float));
+}
+
+}  // namespace
+}  // namespace tactus::sim
