@@ -60,7 +60,8 @@ class CholmodSolver {
   /// The symbolic analysis of `other` (analyzed) taken over by copying it: no second ordering,
   /// and both then factorise matrices of the same pattern alike.
   void analyzeLike(const CholmodSolver& other);
-  /// Exchanges the factors (and whether each holds a numeric one) with `other`.
+  /// Exchanges the factors (and whether each holds a numeric one, and their float copies) with
+  /// `other`.
   void swapFactor(CholmodSolver& other) noexcept;
   /// See the class comment; turning it on converts a supernodal numeric factor held now.
   void setBlasFreeSolves(bool on);
