@@ -24,6 +24,49 @@ using c0_detail::RestBlock;
 
 namespace {
 
+// A column-major matrix on storage that only grows: resizing it within the largest size it had
+// neither allocates nor writes memory the process has not touched yet. addW's products follow
+// the contact rows, whose count changes at almost every step: as Eigen::MatrixXd (a new
+// allocation at each change of size) they took fresh pages from the system whenever the
+// problem outgrew the largest so far, up to 1900 minor page faults in one step of
+// liver_grasp_23k's grasp (docs/design.md, "The contact buffers").
+class GrowOnlyMatrix {
+public:
+  using Map = Eigen::Map<Eigen::MatrixXd>;
+  GrowOnlyMatrix() = default;
+  GrowOnlyMatrix(const GrowOnlyMatrix &) = delete;
+  GrowOnlyMatrix &operator=(const GrowOnlyMatrix &) = delete;
+  // The matrix resized (its values unspecified), as a map valid until the next resize.
+  Map &resize(Eigen::Index rows, Eigen::Index cols) {
+    const auto need = static_cast<std::size_t>(rows * cols);
+    if (need > buf_.size())
+      buf_.resize(std::max(need, buf_.size() + buf_.size() / 2));
+    new (&map_) Map(buf_.data(), rows, cols);
+    return map_;
+  }
+  // Storage for `count` values from now on (written once: its pages are the process's).
+  void reserve(std::size_t count) {
+    if (count > buf_.size()) {
+      const Eigen::Index rows = map_.rows(), cols = map_.cols();
+      buf_.resize(count);
+      new (&map_) Map(buf_.data(), rows, cols);
+    }
+  }
+  Map &map() { return map_; }
+  const Map &map() const { return map_; }
+  std::size_t capacity() const { return buf_.size(); }
+  void swap(GrowOnlyMatrix &other) noexcept {
+    buf_.swap(other.buf_);   // the data pointers move with the buffers
+    const Eigen::Index rows = map_.rows(), cols = map_.cols();
+    new (&map_) Map(buf_.data(), other.map_.rows(), other.map_.cols());
+    new (&other.map_) Map(other.buf_.data(), rows, cols);
+  }
+
+private:
+  std::vector<double> buf_;
+  Map map_{nullptr, 0, 0};
+};
+
 // Row-to-node expansion of H: (local node, 3-vector p) pairs per row.
 struct RowTerms {
   int count = 0;
@@ -74,43 +117,44 @@ public:
     const int u = collect(rows);
     const int du = 3 * u;
     // G = C_UU P, column by column from 3x3 blocks
-    g_.resize(du, m);
+    GrowOnlyMatrix::Map &gm = g_.resize(du, m);
     if (active_ == ComplianceKind::kUncoupled) {
-      g_.setZero();
+      gm.setZero();
       for (int l = 0; l < m; ++l)
         for (int t = 0; t < terms_[l].count; ++t) {
           const int b = terms_[l].local[t];
-          g_.col(l).segment<3>(3 * b) +=
+          gm.col(l).segment<3>(3 * b) +=
               diag_[blk_.local[touched_[b]]] * terms_[l].p[t];
         }
     } else {
       gatherCuu(u);
       for (int l = 0; l < m;) {
         const int g = sameNodeRun(l, m);
-        double *out[3] = {g_.col(l).data(), nullptr, nullptr};
+        double *out[3] = {gm.col(l).data(), nullptr, nullptr};
         for (int r = 1; r < g; ++r)
-          out[r] = g_.col(l + r).data();
-        combineRun(cuu_, l, g, 0, du, out);
+          out[r] = gm.col(l + r).data();
+        combineRun(cuu_.map(), l, g, 0, du, out);
         l += g;
       }
     }
     // W = G^T P (symmetric): lower triangle only, through G^T so every column
     // is one fused pass over contiguous memory, then added to both triangles of
     // w
-    gt_ = g_.transpose();
-    wd_.resize(m, m);
+    GrowOnlyMatrix::Map &gtm = gt_.resize(m, du);
+    gtm = gm.transpose();
+    GrowOnlyMatrix::Map &wdm = wd_.resize(m, m);
     // (a run of rows shares the start row l; entries above the diagonal are
     // overwritten below)
     for (int l = 0; l < m;) {
       const int g = sameNodeRun(l, m);
-      double *out[3] = {wd_.col(l).data() + l, nullptr, nullptr};
+      double *out[3] = {wdm.col(l).data() + l, nullptr, nullptr};
       for (int r = 1; r < g; ++r)
-        out[r] = wd_.col(l + r).data() + l;
-      combineRun(gt_, l, g, l, m - l, out);
+        out[r] = wdm.col(l + r).data() + l;
+      combineRun(gtm, l, g, l, m - l, out);
       l += g;
     }
-    wd_.triangularView<Eigen::StrictlyUpper>() = wd_.transpose();
-    w += wd_;
+    wdm.triangularView<Eigen::StrictlyUpper>() = wdm.transpose();
+    w += wdm;
     release();
   }
 
@@ -164,12 +208,28 @@ public:
            sizeof(double) * diag_.size() +
            sizeof(Eigen::Matrix3d) * rot_.size() +
            sizeof(double) *
-               static_cast<std::size_t>(cuu_.size() + prev_cuu_.size() +
-                                        g_.size() + gt_.size() + wd_.size() +
+               static_cast<std::size_t>(cuu_.capacity() + prev_cuu_.capacity() +
+                                        g_.capacity() + gt_.capacity() + wd_.capacity() +
                                         r_.size());
   }
 
   ComplianceBuildInfo buildInfo() const override { return info_; }
+
+  // addW's G (3|U| x m), G^T, H C H^T (m x m) and the two C_UU (3|U| square), sized for 3|U| =
+  // m (liver_grasp_23k holds 873 rows on 191 nodes, 3|U| = 573; a problem with more nodes per
+  // row grows the storage as it needs)
+  void reserve(int rows) override {
+    if (rows <= 0)
+      return;
+    const auto m = static_cast<std::size_t>(rows);
+    const std::size_t du =
+        std::min(m, 3 * static_cast<std::size_t>(body_->nodeCount()));
+    g_.reserve(du * m);
+    gt_.reserve(du * m);
+    wd_.reserve(m * m);
+    cuu_.reserve(du * du);
+    prev_cuu_.reserve(du * du);
+  }
 
   // The state of the model (state_archive.h): the rotations and coherences of the last update()
   // and the model it chose. update() recomputes them at every step before they are read; they
@@ -219,6 +279,11 @@ private:
       if (!path.empty())
         c0_detail::writeCache(path, hash, body, blk_);
     }
+    // the corrections solve with the rest factorisation: made now, not at the first contact
+    // (computeRestBlock has made it; a C0 read from the cache has not)
+    if ((kind_ == ComplianceKind::kWarped || kind_ == ComplianceKind::kRest) &&
+        !opt_.exact_correction)
+      body.prepareRestCompliance(opt_.h_s);
     if (kind_ == ComplianceKind::kUncoupled) {
       // isotropic per node: mean of the diagonal of the node's 3x3 block; drop
       // the dense block
@@ -244,7 +309,7 @@ private:
   // r's terms t and components j of p_t[j] * src(first + ., 3 a_t + j). One
   // fused pass reads each of the (up to 9) source columns once for the whole
   // run; vectorisable over the output.
-  void combineRun(const Eigen::MatrixXd &src, int l, int g, int first, int len,
+  void combineRun(const GrowOnlyMatrix::Map &src, int l, int g, int first, int len,
                   double *const *out) const {
     const double *col[9];
     double coef[3][9];
@@ -377,7 +442,7 @@ private:
     const int du = 3 * u;
     if (active_ == ComplianceKind::kExact) {
       forgetPreviousCuu();
-      cuu_.resize(du, du);
+      GrowOnlyMatrix::Map &cuu = cuu_.resize(du, du);
       const int n = body_->nodeCount();
       e_.setZero(3 * n, du);
       for (int a = 0; a < u; ++a)
@@ -385,7 +450,7 @@ private:
           e_(3 * touched_[a] + c, 3 * a + c) = 1.0;
       body_->solveComplianceBatch(e_, x_);
       for (int b = 0; b < u; ++b)
-        cuu_.middleRows<3>(3 * b) = x_.middleRows<3>(3 * touched_[b]);
+        cuu.middleRows<3>(3 * b) = x_.middleRows<3>(3 * touched_[b]);
       return;
     }
     // C0's blocks of the nodes the previous call touched too come from that call's C_UU (kept
@@ -393,8 +458,9 @@ private:
     // lines in three columns of a matrix of gigabytes): the touched nodes change little from
     // one contact pass or step to the next. The same values either way.
     // (swapped before any resize: the previous values are read below)
-    std::swap(cuu_, prev_cuu_);
-    cuu_.resize(du, du);
+    cuu_.swap(prev_cuu_);
+    GrowOnlyMatrix::Map &cuu = cuu_.resize(du, du);
+    const GrowOnlyMatrix::Map &prev_cuu = prev_cuu_.map();
     prev_index_.resize(static_cast<std::size_t>(u));
     for (int a = 0; a < u; ++a)
       prev_index_[a] = prev_local_.empty() ? -1 : prev_local_[touched_[a]];
@@ -404,10 +470,10 @@ private:
       for (int a = 0; a < u; ++a) {
         const int pa = prev_index_[a];
         if (pa >= 0 && pb >= 0)
-          cuu_.block<3, 3>(3 * a, 3 * b) =
-              prev_cuu_.block<3, 3>(3 * pa, 3 * pb);
+          cuu.block<3, 3>(3 * a, 3 * b) =
+              prev_cuu.block<3, 3>(3 * pa, 3 * pb);
         else
-          cuu_.block<3, 3>(3 * a, 3 * b) =
+          cuu.block<3, 3>(3 * a, 3 * b) =
               blk_.block(blk_.local[touched_[a]], sb);
       }
     }
@@ -446,10 +512,11 @@ private:
   std::vector<int> touched_;
   std::vector<RowTerms> terms_;
   std::vector<Eigen::Matrix3d> coherence_rot_;  // update(): the rotations coherence_ reads
-  Eigen::MatrixXd cuu_, g_, gt_, wd_, e_, x_;
+  GrowOnlyMatrix cuu_, g_, gt_, wd_;   // C_UU, G, G^T and H C H^T of addW
+  Eigen::MatrixXd e_, x_;              // the exact model's unit loads and their solves
   // the previous gather of C0's blocks (gatherCuu): its C_UU, its nodes and their index in it
   // (node -> index, -1 otherwise; empty before the first gather), and the current nodes' index
-  Eigen::MatrixXd prev_cuu_;
+  GrowOnlyMatrix prev_cuu_;
   std::vector<int> prev_touched_, prev_local_, prev_index_;
   Eigen::VectorXd r_;
 };

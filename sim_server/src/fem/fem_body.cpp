@@ -48,19 +48,12 @@ void FemBody::Impl::init(const TetMesh& m, const FemMaterial& mat,
                                           opt.background_refactor_when_ready});
   if (opt.linear == LinearSolverKind::kCholmodReuse && opt.background_refactor_lag_steps > 0) {
     // the worker runs BLAS (CHOLMOD's supernodal factorisation) while the steps go on: the
-    // step's own solves make no BLAS call (CholmodSolver::setBlasFreeSolves, linear_solver.h)
+    // step's own solves make no BLAS call (CholmodSolver::setBlasFreeSolves, linear_solver.h),
+    // so none waits for the worker, whichever step takes its factor
     background = std::make_unique<fem_detail::BackgroundFactoriser>();
     reuse.setBackground(background.get());
-    if (opt.background_refactor_when_ready) {
-      // no solve waits for the worker's BLAS: each takes the supernodal factor when the lock is
-      // free and its simplicial copy when the worker holds it (timing-dependent rounding, as the
-      // takeover already is)
-      chol.setDualForms(true);
-      chol_rest.setDualForms(true);
-    } else {
-      chol.setBlasFreeSolves(true);
-      chol_rest.setBlasFreeSolves(true);
-    }
+    chol.setBlasFreeSolves(true);
+    chol_rest.setBlasFreeSolves(true);
     // PCG's preconditioner solves in float on a copy the worker makes (linear_solver.h); the
     // compliance's and the direct solves stay in double
     chol.setSinglePrecisionPreconditioner(opt.single_precision_preconditioner);
@@ -486,6 +479,8 @@ void FemBody::solveRestCompliance(double h, const Eigen::VectorXd& r, Eigen::Vec
   x.resize(3 * m.n);
   m.expand(xr.data(), h, x.data());
 }
+
+void FemBody::prepareRestCompliance(double h) { impl_->ensureRestFactor(h); }
 
 void FemBody::solveRestComplianceBatch(double h, const Eigen::MatrixXd& r, Eigen::MatrixXd& x) {
   Impl& m = *impl_;

@@ -51,7 +51,6 @@ class StopSignalsBlocked {
 };
 
 std::atomic<long> g_blas_contended{0};
-std::atomic<long> g_dual_simplicial_solves{0};
 std::atomic<std::int64_t> g_blas_waited_ns{0};
 
 // Holds cholmodBlasMutex() for one CHOLMOD call; counts the calls that found it taken and their
@@ -88,14 +87,8 @@ CholmodSolver::CholmodSolver() {
   common_.error_handler = nullptr;
 }
 
-long dualFormSimplicialSolves() { return g_dual_simplicial_solves.load(std::memory_order_relaxed); }
-
 CholmodSolver::~CholmodSolver() {
   if (factor_) cholmod_free_factor(&factor_, &common_);
-  if (simplicial_) cholmod_free_factor(&simplicial_, &common_);
-  if (x2_) cholmod_free_dense(&x2_, &common_);
-  if (y2_) cholmod_free_dense(&y2_, &common_);
-  if (e2_) cholmod_free_dense(&e2_, &common_);
   if (symbolic_) cholmod_free_factor(&symbolic_, &common_);
   if (x_) cholmod_free_dense(&x_, &common_);
   if (y_) cholmod_free_dense(&y_, &common_);
@@ -125,7 +118,6 @@ cholmod_sparse CholmodSolver::view(Sparse& lower) const {
 void CholmodSolver::analyze(Sparse& lower) {
   if (!lower.isCompressed()) lower.makeCompressed();
   if (factor_) cholmod_free_factor(&factor_, &common_);
-  if (simplicial_) cholmod_free_factor(&simplicial_, &common_);
   if (symbolic_) cholmod_free_factor(&symbolic_, &common_);
   single_current_ = false;
   cholmod_sparse a = view(lower);
@@ -168,40 +160,14 @@ bool CholmodSolver::factorize(Sparse& lower) {
   factorized_ = ok && common_.status == CHOLMOD_OK && factor_->minor == factor_->n;
   single_current_ = false;
   if (factorized_ && single_precision_ && blas_free_solves_) makeSinglePrecisionCopy();
-  if (simplicial_) cholmod_free_factor(&simplicial_, &common_);   // of the previous values
-  if (factorized_ && dual_forms_ && !blas_free_solves_) makeSimplicialCopy();
   return factorized_;
-}
-
-void CholmodSolver::makeSimplicialCopy() {
-  if (simplicial_) cholmod_free_factor(&simplicial_, &common_);
-  if (!factor_->is_super) return;
-  simplicial_ = cholmod_copy_factor(factor_, &common_);
-  if (!simplicial_) throw NumericalError("CHOLMOD: copying a factor failed (out of memory?)");
-  simplicialInPlace(simplicial_);
-}
-
-void CholmodSolver::setDualForms(bool on) {
-  dual_forms_ = on;
-  if (on && factorized_ && !blas_free_solves_ && simplicial_ == nullptr) makeSimplicialCopy();
-  if (!on && simplicial_) cholmod_free_factor(&simplicial_, &common_);
-}
-
-void CholmodSolver::simplicialInPlace(cholmod_factor* factor) {
-  // LL' kept (the values are moved, no square roots), packed, monotonic
-  const int ok = cholmod_change_factor(CHOLMOD_REAL, 1, 0, 1, 1, factor, &common_);
-  if (!ok || common_.status < CHOLMOD_OK)
-    throw NumericalError("CHOLMOD: converting a factor to the simplicial form failed (status " +
-                         std::to_string(common_.status) + ")");
 }
 
 void CholmodSolver::setBlasFreeSolves(bool on) {
   blas_free_solves_ = on;
-  if (on && simplicial_) cholmod_free_factor(&simplicial_, &common_);
   if (!on) single_current_ = false;
   if (on && single_precision_ && factorized_ && !single_current_) makeSinglePrecisionCopy();
 }
-
 void CholmodSolver::setSinglePrecisionPreconditioner(bool on) {
   single_precision_ = on;
   if (!on) {
@@ -327,20 +293,7 @@ void CholmodSolver::solve(const double* b, double* x, int ncols) {
     supernodalSolveWithoutBlas(b, x, ncols);
     return;
   }
-  if (factor_->is_super && simplicial_ != nullptr) {
-    // dual forms: the supernodal solve when the lock is free, else the simplicial copy's
-    std::unique_lock<std::mutex> lock(cholmodBlasMutex(), std::try_to_lock);
-    if (lock.owns_lock()) {
-      cholmod_solve2(CHOLMOD_A, factor_, &bd, nullptr, &x_, nullptr, &y_, &e_, &common_);
-    } else {
-      lock = {};
-      g_dual_simplicial_solves.fetch_add(1, std::memory_order_relaxed);
-      cholmod_solve2(CHOLMOD_A, simplicial_, &bd, nullptr, &x2_, nullptr, &y2_, &e2_, &common_);
-      if (!x2_) throw NumericalError("CHOLMOD solve failed (out of memory?)");
-      std::memcpy(x, x2_->x, sizeof(double) * n * bd.ncol);
-      return;
-    }
-  } else if (factor_->is_super) {
+  if (factor_->is_super) {
     const CholmodBlasCall blas;
     cholmod_solve2(CHOLMOD_A, factor_, &bd, nullptr, &x_, nullptr, &y_, &e_, &common_);
   } else {
@@ -352,7 +305,6 @@ void CholmodSolver::solve(const double* b, double* x, int ncols) {
 
 void CholmodSolver::analyzeLike(const CholmodSolver& other) {
   if (factor_) cholmod_free_factor(&factor_, &common_);
-  if (simplicial_) cholmod_free_factor(&simplicial_, &common_);
   if (symbolic_) cholmod_free_factor(&symbolic_, &common_);
   factorized_ = false;
   single_current_ = false;
@@ -366,7 +318,6 @@ void CholmodSolver::analyzeLike(const CholmodSolver& other) {
 
 void CholmodSolver::swapFactor(CholmodSolver& other) noexcept {
   std::swap(factor_, other.factor_);
-  std::swap(simplicial_, other.simplicial_);
   std::swap(factorized_, other.factorized_);
   // the float copies go with their factors (each side's setting stays its own)
   single_x_.swap(other.single_x_);
@@ -410,12 +361,8 @@ void BackgroundFactoriser::start(const Sparse& a, const CholmodSolver& like) {
   if (!solver_) {
     solver_ = std::make_unique<CholmodSolver>();
     solver_->analyzeLike(like);
-    // the factor handed over is solved without BLAS, or (dual forms) comes with a simplicial
-    // copy for the solves that find the lock taken
-    if (like.dualForms() && !like.blasFreeSolves())
-      solver_->setDualForms(true);
-    else
-      solver_->setBlasFreeSolves(true);
+    // the factor handed over is solved without BLAS
+    solver_->setBlasFreeSolves(true);
     // the float copy of the preconditioner made here, after the worker's factorisation
     solver_->setSinglePrecisionPreconditioner(like.singlePrecisionPreconditioner());
     copy_ = a;   // pattern and values; later jobs copy the values only
@@ -582,8 +529,7 @@ namespace tactus::sim {
 
 BlasLockFigures blasLockFigures() {
   return {fem_detail::g_blas_contended.load(std::memory_order_relaxed),
-          1e-9 * static_cast<double>(fem_detail::g_blas_waited_ns.load(std::memory_order_relaxed)),
-          fem_detail::dualFormSimplicialSolves()};
+          1e-9 * static_cast<double>(fem_detail::g_blas_waited_ns.load(std::memory_order_relaxed))};
 }
 
 std::unique_lock<std::mutex> lockCholmodBlas() {

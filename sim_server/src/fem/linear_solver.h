@@ -37,7 +37,9 @@ std::mutex& cholmodBlasMutex();
 /// triangular solves and matrix-vector products by Eigen's kernels): no BLAS and no lock, the
 /// same bits whatever another thread does, and one right-hand side as fast as CHOLMOD's BLAS
 /// solve (liver_grasp_23k: docs/measurements.md, "The background refresh as the default"). The
-/// solvers a step's thread uses while a background factorisation runs are set so. (A
+/// solvers a step's thread uses while a background factorisation runs are set so, whether the
+/// worker's factor is taken a fixed number of steps later or when ready
+/// (FactorReusePolicy::background_when_ready): no solve of the step waits for the worker. (A
 /// simplicial factor's solves make no BLAS call either way.)
 class CholmodSolver {
  public:
@@ -87,15 +89,6 @@ class CholmodSolver {
   /// x ~= A^-1 b for one right-hand side of length n (x may alias b): the float sweeps when the
   /// float copy is held, solve() otherwise.
   void solvePreconditioner(const double* b, double* x);
-  /// Both forms: a supernodal numeric factor is kept and a simplicial copy of it made after each
-  /// factorisation (cholmod_copy_factor, then cholmod_change_factor on the copy); solve() uses the
-  /// supernodal one when it gets cholmodBlasMutex() at once (std::try_to_lock) and the simplicial
-  /// copy, without BLAS, when another thread holds it: a solve never waits for the lock, and is
-  /// the faster supernodal one whenever no worker is in BLAS. The two forms round differently,
-  /// so which one solved depends on timing. Turning it on copies a supernodal factor held now.
-  /// Exclusive with setBlasFreeSolves (which wins).
-  void setDualForms(bool on);
-  bool dualForms() const { return dual_forms_; }
   /// The numeric factor is supernodal (its solves use BLAS and take the lock).
   bool supernodal() const { return factor_ != nullptr && factor_->is_super; }
 
@@ -105,19 +98,12 @@ class CholmodSolver {
   void supernodalSolveWithoutBlas(const double* b, double* x, int ncols);
   /// singlePrecisionPreconditioner: the float copy of the current supernodal factor's values
   void makeSinglePrecisionCopy();
-  void makeSimplicialCopy();
-  /// `factor` (supernodal, of this solver's common) converted to the simplicial LL' form.
-  void simplicialInPlace(cholmod_factor* factor);
   cholmod_common common_;
   cholmod_factor* factor_ = nullptr;
-  cholmod_factor* simplicial_ = nullptr;   // dual forms: the simplicial copy of factor_
   cholmod_factor* symbolic_ = nullptr;   // the supernodal analysis (null when simplicial)
   cholmod_dense* x_ = nullptr;
   cholmod_dense* y_ = nullptr;
   cholmod_dense* e_ = nullptr;
-  cholmod_dense* x2_ = nullptr;   // the simplicial copy's solve workspaces
-  cholmod_dense* y2_ = nullptr;
-  cholmod_dense* e2_ = nullptr;
   Eigen::MatrixXd own_y_, own_e_;   // supernodalSolveWithoutBlas's workspaces
   std::vector<float> single_x_;     // the float copy of factor_->x (single_current_)
   Eigen::VectorXf single_y_, single_e_;   // solvePreconditioner's float workspaces
@@ -125,12 +111,7 @@ class CholmodSolver {
   bool single_precision_ = false;
   bool single_current_ = false;     // single_x_ holds factor_'s current values
   bool blas_free_solves_ = false;
-  bool dual_forms_ = false;
 };
-
-/// Solves of dual-form factors (CholmodSolver::setDualForms) that found the BLAS lock taken and
-/// used the simplicial copy instead of waiting.
-long dualFormSimplicialSolves();
 
 /// Work vectors of conjugateGradient, kept between calls (no allocation once sized).
 struct CgBuffers {
@@ -207,11 +188,8 @@ CgResult conjugateGradient(const CholmodSolver::Sparse& lower, const Eigen::Vect
 /// solves (CholmodSolver::setSinglePrecisionPreconditioner), the worker makes it after its
 /// factorisation and hands it over with the factor. The caller's solver must be set so too: then nothing on the step's
 /// thread runs BLAS while the worker does, except a factorisation there, which waits for the
-/// worker's. With a caller's solver set to dual forms
-/// (CholmodSolver::setDualForms) the worker keeps the supernodal factor and hands over its
-/// simplicial copy with it (made outside the lock), and the caller's solves take whichever the
-/// lock allows without waiting. The worker runs at the process's priority: a lower one would
-/// make such a factorisation wait longer whenever the machine is busy.
+/// worker's. The worker runs at the process's priority: a lower one would make such a
+/// factorisation wait longer whenever the machine is busy.
 class BackgroundFactoriser {
  public:
   using Sparse = CholmodSolver::Sparse;

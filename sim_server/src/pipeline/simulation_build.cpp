@@ -114,6 +114,11 @@ Simulation::Simulation(std::shared_ptr<const SimulationModel> model)
     : impl_(std::make_unique<Impl>(std::move(model))) {
   impl_->state = buildState(impl_->model);
   impl_->scratch = buildScratch(impl_->model);
+  // the compliance models' scratch for the largest problem, written now and not page by page
+  // while a grasp's contacts grow (TissueCompliance::reserve)
+  for (TissueState& ts : impl_->state.tissues) {
+    if (ts.compliance) ts.compliance->reserve(impl_->model.max_rows);
+  }
 }
 
 Simulation::~Simulation() = default;

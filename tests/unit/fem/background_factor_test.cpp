@@ -171,10 +171,9 @@ TEST(BackgroundFactorTest, TwoWorkersAndTheCallersFactorisationsNeverCorruptAFac
 // solve and takes no factor, and each due step is counted as not ready. Once the lock is released
 // and the worker has finished, the next step takes its factor. A step that waited for the worker
 // (or factorised on its own thread, which needs the lock too) would hang until the holder gives up
-// after kHoldLimit, which the test then reports: it counts, it does not time. The same with dual
-// forms (CholmodSolver::setDualForms: the solves take the supernodal factor when the lock is
-// free), whose solves use the simplicial copy while the lock is held.
-void stepWhileTheWorkerCannotFinish(bool dual_forms) {
+// after kHoldLimit, which the test then reports: it counts, it does not time. (A FemBody set so,
+// FemSolverOptions::background_refactor_when_ready: linear_solver_test.cpp.)
+TEST(BackgroundFactorTest, AStepNeverWaitsForTheWorkerWhenTheFactorIsTakenWhenReady) {
   constexpr int kSteps = 12;
   constexpr double kTolerance = 1e-10;
   constexpr auto kHoldLimit = std::chrono::seconds(120);
@@ -196,10 +195,7 @@ void stepWhileTheWorkerCannotFinish(bool dual_forms) {
   };
 
   CholmodSolver factor;
-  if (dual_forms)
-    factor.setDualForms(true);
-  else
-    factor.setBlasFreeSolves(true);
+  factor.setBlasFreeSolves(true);
   BackgroundFactoriser worker;
   FactorReusePolicy policy;
   policy.tolerance = kTolerance;
@@ -238,7 +234,6 @@ void stepWhileTheWorkerCannotFinish(bool dual_forms) {
   }
   int started = 0, taken = 0;
   double worst = 0.0;
-  const long simplicial_before = dualFormSimplicialSolves();
   for (int k = 1; k < kSteps; ++k) {
     if (reuse.adoptDue(factor, waited_s, factorisation_s)) ++taken;
     r = reuse.solve(factor, a[k], b, x);
@@ -259,10 +254,6 @@ void stepWhileTheWorkerCannotFinish(bool dual_forms) {
   EXPECT_EQ(taken, 0);
   EXPECT_GT(reuse.notReadySteps(), 0);
   EXPECT_LT(worst, 1e-8);
-  // dual forms: every solve while the lock was held used the simplicial copy
-  if (dual_forms) {
-    EXPECT_GT(dualFormSimplicialSolves(), simplicial_before);
-  }
 
   // released: once the worker has finished, the next step takes its factor
   const auto until = std::chrono::steady_clock::now() + kHoldLimit;
@@ -272,25 +263,12 @@ void stepWhileTheWorkerCannotFinish(bool dual_forms) {
   const long not_ready = reuse.notReadySteps();
   EXPECT_TRUE(reuse.adoptDue(factor, waited_s, factorisation_s));
   EXPECT_EQ(reuse.notReadySteps(), not_ready);
-  // handed over supernodal: solved without BLAS, or (dual forms) with its simplicial copy
+  // handed over supernodal, solved without BLAS
   EXPECT_TRUE(factor.supernodal());
   r = reuse.solve(factor, a[kSteps - 1], b, x);
   EXPECT_TRUE(r.ok && !r.refreshed);
   EXPECT_LT(relativeError(x, kSteps - 1), 1e-8);
-  ::testing::Test::RecordProperty(
-      std::string("worst_relative_error_while_held") + (dual_forms ? "_dual" : ""),
-      std::to_string(worst));
-}
-
-TEST(BackgroundFactorTest, AStepNeverWaitsForTheWorkerWhenTheFactorIsTakenWhenReady) {
-  {
-    SCOPED_TRACE("solves without BLAS");
-    stepWhileTheWorkerCannotFinish(false);
-  }
-  {
-    SCOPED_TRACE("dual forms");
-    stepWhileTheWorkerCannotFinish(true);
-  }
+  RecordProperty("worst_relative_error_while_held", std::to_string(worst));
 }
 
 }  // namespace

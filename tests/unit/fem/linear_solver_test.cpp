@@ -8,8 +8,12 @@
 
 #include <Eigen/Geometry>
 #include <algorithm>
+#include <chrono>
 #include <cmath>
+#include <condition_variable>
+#include <mutex>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "tactus/sim/fem.h"
@@ -252,6 +256,98 @@ TEST(CholmodReuse, BackgroundRefreshTakenWhenReadyMatchesTheDirectSolve) {
   RecordProperty("steps", steps);
   RecordProperty("steps_not_ready", std::to_string(reuse.counters().background_not_ready));
   RecordProperty("synchronous_refreshes", synchronous);
+}
+
+// A body whose factor is taken when ready solves its steps without BLAS (the supernodal factor's
+// sweeps, CholmodSolver::setBlasFreeSolves), so no step waits for a worker in BLAS. On a block
+// large enough for CHOLMOD's supernodal (BLAS) factor, checked by the first step's factorisation
+// waiting for the BLAS lock another thread holds, the lock is then held while the body tumbles:
+// its worker cannot factorise, every step goes on with PCG on its first factor, and each dv
+// matches the direct solve of the same state (made once the lock is released). A step that
+// took the lock (a BLAS solve, or a factorisation of its own) would wait until the holder gives
+// up after kHoldLimit, which the test reports: it counts, it does not time.
+TEST(CholmodReuse, TakenWhenReadyTheStepsSolveWithoutBlas) {
+  const double tol = 1e-10;
+  constexpr int kSteps = 10;
+  constexpr auto kHoldLimit = std::chrono::seconds(120);
+  const TetMesh block = makeBoxTetMesh(12, 6, 6, Eigen::Vector3d(0.12, 0.06, 0.06));
+  FemSolverOptions o = options(LinearSolverKind::kCholmodReuse, tol, 1);
+  o.background_refactor_when_ready = true;
+  FemBody reuse(block, softMaterial(), {}, nullptr, o);
+  tumble(reuse, 4.0);
+  std::mutex m;
+  std::condition_variable cv;
+  bool held = false, release = false, gave_up = false;
+  // the holder takes the BLAS lock and keeps it until released (or kHoldLimit)
+  auto hold = [&](std::chrono::milliseconds at_most) {
+    auto blas = lockCholmodBlas();
+    std::unique_lock<std::mutex> lock(m);
+    held = true;
+    cv.notify_all();
+    gave_up = !cv.wait_for(lock, at_most, [&] { return release; });
+  };
+  auto waitHeld = [&] {
+    std::unique_lock<std::mutex> lock(m);
+    cv.wait(lock, [&] { return held; });
+  };
+  auto releaseHolder = [&](std::thread& holder) {
+    {
+      std::lock_guard<std::mutex> lock(m);
+      release = true;
+    }
+    cv.notify_all();
+    holder.join();
+    held = release = false;
+  };
+  // the first step factorises on its own thread: it waits for the holder's 50 ms when the
+  // factor is supernodal
+  {
+    const long contended = blasLockFigures().contended_calls;
+    std::thread holder(hold, std::chrono::milliseconds(50));
+    waitHeld();
+    ASSERT_TRUE(reuse.freeMotion(kSolverTimeStep).ok);
+    holder.join();
+    held = false;
+    ASSERT_GT(blasLockFigures().contended_calls, contended)
+        << "the block must be large enough for CHOLMOD's supernodal (BLAS) factor";
+  }
+  std::vector<Eigen::VectorXd> q0, v0, dv;
+  int started = 0, taken = 0, refreshed = 0;
+  {
+    std::thread holder(hold, std::chrono::milliseconds(kHoldLimit));
+    waitHeld();
+    for (int s = 0; s < kSteps; ++s) {
+      q0.push_back(reuse.positions());
+      v0.push_back(reuse.velocities());
+      const FemStepStats sr = reuse.freeMotion(kSolverTimeStep);
+      EXPECT_TRUE(sr.ok) << "step " << s;
+      if (sr.factor_refreshed) ++refreshed;
+      if (sr.background_factor_taken) ++taken;
+      if (sr.background_factorisation_started) ++started;
+      if (!sr.factor_refreshed) {
+        EXPECT_LE(sr.cg_residual, tol) << "step " << s;
+      }
+      dv.push_back(reuse.velocities() - v0.back());
+    }
+    releaseHolder(holder);
+    EXPECT_FALSE(gave_up) << "a step waited for the BLAS lock";
+  }
+  EXPECT_EQ(refreshed, 0);
+  EXPECT_EQ(taken, 0);   // the worker could not factorise while the lock was held
+  EXPECT_GE(started, 1) << "the tumbling must start a background factorisation";
+  EXPECT_GT(reuse.counters().background_not_ready, 0);
+  EXPECT_EQ(reuse.counters().background_waits, 0);
+  FemBody exact(block, softMaterial(), {}, nullptr, options(LinearSolverKind::kCholmod));
+  double worst = 0.0;
+  for (int s = 0; s < kSteps; ++s) {
+    exact.positions() = q0[static_cast<std::size_t>(s)];
+    exact.velocities() = v0[static_cast<std::size_t>(s)];
+    ASSERT_TRUE(exact.freeMotion(kSolverTimeStep).ok);
+    const Eigen::VectorXd dv_e = exact.velocities() - v0[static_cast<std::size_t>(s)];
+    worst = std::max(worst, (dv[static_cast<std::size_t>(s)] - dv_e).norm() / dv_e.norm());
+  }
+  EXPECT_LT(worst, 1e-6);
+  RecordProperty("worst_relative_dv_error", std::to_string(worst));
 }
 
 // solveCompliance after a step that reused an old factor factorises the current A: the same

@@ -131,6 +131,12 @@ class TissueCompliance {
                           Eigen::VectorXd& dq) = 0;
   /// Bytes held by the model (C0 block etc.), for the log.
   virtual std::size_t memoryBytes() const = 0;
+  /// Sizes (and writes once) addW's scratch for problems of up to `rows` rows, so that the
+  /// steps' calls neither allocate nor touch memory new to the process while the contacts grow
+  /// (a first touch of a page cost ~18 us on the VM measured in docs/measurements.md, "The
+  /// simulation step at organ scale"). The Simulation calls it with the largest problem's rows.
+  /// Nothing by default.
+  virtual void reserve(int rows) { (void)rows; }
   /// How the model was built; skipped_row_nodes is cumulative over addW/correction calls
   /// (warped/rest/uncoupled only know the surface nodes: a row node inside the volume contributes
   /// zero compliance and is counted here).

@@ -102,9 +102,8 @@ enum class PcgPreconditioner {
 ///    over at the first step, background_refactor_lag_steps or more after its start, at which the
 ///    worker has finished (Counters::background_not_ready counts the steps that went on with the
 ///    old factor instead); each step still meets cg_tolerance, but which factor preconditions
-///    which step then depends on the worker's timing. The body's factors then keep both forms:
-///    a solve uses the supernodal one (BLAS) when no worker is in BLAS and its simplicial copy
-///    when one is, never waiting (BlasLockFigures::simplicial_instead_of_waiting).
+///    which step then depends on the worker's timing (the solves are the BLAS-free sweeps as
+///    above: none waits for the worker's BLAS either).
 struct FemSolverOptions {
   LinearSolverKind linear = LinearSolverKind::kCholmod;
   double cg_tolerance = 1e-8;                   ///< relative residual ||A dv - b|| / ||b||
@@ -212,6 +211,12 @@ class FemBody {
   void solveRestCompliance(double h, const Eigen::VectorXd& r, Eigen::VectorXd& x);
   /// Same for the columns of r (3n x k) at once.
   void solveRestComplianceBatch(double h, const Eigen::MatrixXd& r, Eigen::MatrixXd& x);
+  /// Factorises the rest-shape matrix for h now (nothing when it is already), so that the first
+  /// solveRestCompliance does not: the warped and rest compliance models call it when they are
+  /// built, whose C0 loaded from a cache would otherwise leave the factorisation (its analysis
+  /// and numeric factorisation, about 0.4 s of CPU on liver_grasp_23k) to the first step in
+  /// contact.
+  void prepareRestCompliance(double h);
   /// Time step of the last freeMotion (0 before the first).
   double lastStepH() const;
 
@@ -370,17 +375,14 @@ NumericThreads queryNumericThreads();
 /// buffer per process, so two threads must not run BLAS at once. Nothing else is serialised:
 /// the library defines no BLAS routine of its own. With the background refresh on
 /// (FemSolverOptions::background_refactor_lag_steps > 0) a worker thread runs BLAS, under this
-/// lock, between and during steps, and the body's step-thread solves use simplicial factors (no
-/// BLAS). A program that calls BLAS itself on other threads meanwhile (numpy included) must take
+/// lock, between and during steps, and the body's step-thread solves make no BLAS call (the
+/// supernodal factor's sweeps by Eigen's kernels). A program that calls BLAS itself on other threads meanwhile (numpy included) must take
 /// lockCholmodBlas() around those calls, or use a BLAS that is safe to call from several threads
 /// (an OpenBLAS built with threads or with USE_LOCKING), or keep the background refresh off.
 /// Calls that found the lock taken, and their total wait [s].
 struct BlasLockFigures {
   long contended_calls = 0;
   double waited_s = 0.0;
-  /// solves that found the lock taken and used a factor's simplicial copy instead of waiting
-  /// (FemSolverOptions::background_refactor_when_ready)
-  long simplicial_instead_of_waiting = 0;
 };
 BlasLockFigures blasLockFigures();
 
