@@ -159,23 +159,26 @@ bool CholmodSolver::factorize(Sparse& lower) {
   }
   factorized_ = ok && common_.status == CHOLMOD_OK && factor_->minor == factor_->n;
   single_current_ = false;
-  if (factorized_ && single_precision_ && blas_free_solves_) makeSinglePrecisionCopy();
+  syncSinglePrecisionCopy();
   return factorized_;
 }
 
 void CholmodSolver::setBlasFreeSolves(bool on) {
   blas_free_solves_ = on;
-  if (!on) single_current_ = false;
-  if (on && single_precision_ && factorized_ && !single_current_) makeSinglePrecisionCopy();
+  syncSinglePrecisionCopy();
 }
+
 void CholmodSolver::setSinglePrecisionPreconditioner(bool on) {
   single_precision_ = on;
-  if (!on) {
+  if (!on) single_x_ = {};
+  syncSinglePrecisionCopy();
+}
+
+void CholmodSolver::syncSinglePrecisionCopy() {
+  if (!(single_precision_ && blas_free_solves_ && factorized_))
     single_current_ = false;
-    single_x_ = {};
-  } else if (blas_free_solves_ && factorized_ && !single_current_) {
+  else if (!single_current_)
     makeSinglePrecisionCopy();
-  }
 }
 
 void CholmodSolver::makeSinglePrecisionCopy() {
@@ -231,35 +234,39 @@ void supernodalSweeps(const cholmod_factor& f, const Scalar* lx, Y& y, E& e) {
   }
 }
 
+// x = P^T L^-T L^-1 P b for the columns of `y` (n x ncols, or a vector): b gathered into y in
+// the factor's order (converted to Scalar), supernodalSweeps, y scattered back into x.
+template <class Scalar, class Y, class E>
+void permutedSweeps(const cholmod_factor& f, const Scalar* lx, Y& y, E& e, const double* b,
+                    double* x) {
+  const auto n = static_cast<Eigen::Index>(f.n);
+  const int* perm = static_cast<const int*>(f.Perm);
+  for (Eigen::Index c = 0; c < y.cols(); ++c)
+    for (Eigen::Index k = 0; k < n; ++k)
+      y(k, c) = static_cast<Scalar>(b[c * n + (perm ? perm[k] : k)]);
+  supernodalSweeps(f, lx, y, e);
+  for (Eigen::Index c = 0; c < y.cols(); ++c)
+    for (Eigen::Index k = 0; k < n; ++k)
+      x[c * n + (perm ? perm[k] : k)] = static_cast<double>(y(k, c));
+}
+
 }  // namespace
 
 void CholmodSolver::supernodalSolveWithoutBlas(const double* b, double* x, int ncols) {
-  // x = P^T L^-T L^-1 P b on CHOLMOD's supernodal LL' factor: cholmod_super_lsolve's and
-  // cholmod_super_ltsolve's sweeps, their dtrsv/dgemv (dtrsm/dgemm) by Eigen's kernels
+  // cholmod_super_lsolve's and cholmod_super_ltsolve's sweeps, their dtrsv/dgemv (dtrsm/dgemm)
+  // by Eigen's kernels
   const cholmod_factor& f = *factor_;
   const auto n = static_cast<Eigen::Index>(f.n);
-  const int* perm = static_cast<const int*>(f.Perm);
   const auto esize = static_cast<Eigen::Index>(f.maxesize);
-  auto gather = [&](double* y, int c) {
-    for (Eigen::Index k = 0; k < n; ++k) y[k] = b[c * n + (perm ? perm[k] : k)];
-  };
-  auto scatter = [&](const double* y, int c) {
-    for (Eigen::Index k = 0; k < n; ++k) x[c * n + (perm ? perm[k] : k)] = y[k];
-  };
-  if (ncols == 1) {
-    own_y_.resize(n, 1);
-    own_e_.resize(esize, 1);
-    Eigen::Map<Eigen::VectorXd> y(own_y_.data(), n), e(own_e_.data(), esize);
-    gather(y.data(), 0);
-    supernodalSweeps(f, static_cast<const double*>(f.x), y, e);
-    scatter(y.data(), 0);
-    return;
-  }
+  const auto* lx = static_cast<const double*>(f.x);
   own_y_.resize(n, ncols);
   own_e_.resize(esize, ncols);
-  for (int c = 0; c < ncols; ++c) gather(own_y_.col(c).data(), c);
-  supernodalSweeps(f, static_cast<const double*>(f.x), own_y_, own_e_);
-  for (int c = 0; c < ncols; ++c) scatter(own_y_.col(c).data(), c);
+  if (ncols == 1) {   // Eigen's matrix-vector kernels for one column
+    Eigen::Map<Eigen::VectorXd> y(own_y_.data(), n), e(own_e_.data(), esize);
+    permutedSweeps(f, lx, y, e, b, x);
+    return;
+  }
+  permutedSweeps(f, lx, own_y_, own_e_, b, x);
 }
 
 void CholmodSolver::solvePreconditioner(const double* b, double* x) {
@@ -269,13 +276,9 @@ void CholmodSolver::solvePreconditioner(const double* b, double* x) {
   }
   // supernodalSolveWithoutBlas's permutation and sweeps, in float
   const cholmod_factor& f = *factor_;
-  const auto n = static_cast<Eigen::Index>(f.n);
-  const int* perm = static_cast<const int*>(f.Perm);
-  single_y_.resize(n);
+  single_y_.resize(static_cast<Eigen::Index>(f.n));
   single_e_.resize(static_cast<Eigen::Index>(f.maxesize));
-  for (Eigen::Index k = 0; k < n; ++k) single_y_[k] = static_cast<float>(b[perm ? perm[k] : k]);
-  supernodalSweeps(f, static_cast<const float*>(single_x_.data()), single_y_, single_e_);
-  for (Eigen::Index k = 0; k < n; ++k) x[perm ? perm[k] : k] = static_cast<double>(single_y_[k]);
+  permutedSweeps(f, static_cast<const float*>(single_x_.data()), single_y_, single_e_, b, x);
 }
 
 void CholmodSolver::solve(const double* b, double* x, int ncols) {
