@@ -205,7 +205,8 @@ bool readCache(const std::filesystem::path &path, std::uint64_t hash,
     // the padding: written as zeros, checked as part of the checksum's bytes
     std::vector<unsigned char> padding(at.c0_at - at.padding_at);
     sum.add(next(padding.data(), padding.size()), padding.size());
-    auto *payload = static_cast<unsigned char *>(blk.data());
+    // the read fallback fills resize's memory; a mapped C0 is read where it lies
+    auto *payload = static_cast<unsigned char *>(blk.storage.writableData());
     const std::uint64_t payload_bytes = d * d * blk.scalarBytes();
     bool finite = true;
     for (std::uint64_t done = 0; done < payload_bytes;) {

@@ -106,6 +106,8 @@ void computeRestBlock(FemBody &body, const ComplianceOptions &opt,
   const int s = static_cast<int>(blk.surface.size());
   const int d = 3 * s;
   blk.resize(d);
+  Eigen::Map<Eigen::MatrixXd> c0_out = blk.writableC0();
+  Eigen::Map<Eigen::MatrixXf> c0f_out = blk.writableC0f();
   const int batch = std::max(1, opt.solve_batch);
   Eigen::MatrixXd rhs, sol;
   progress(opt.show_progress, 0, d);
@@ -121,19 +123,19 @@ void computeRestBlock(FemBody &body, const ComplianceOptions &opt,
     for (int j = 0; j < k; ++j)
       for (int a = 0; a < s; ++a) {
         if (blk.single)
-          blk.c0f.block<3, 1>(3 * a, c0 + j) =
+          c0f_out.block<3, 1>(3 * a, c0 + j) =
               sol.block<3, 1>(3 * blk.surface[a], j).cast<float>();
         else
-          blk.c0.block<3, 1>(3 * a, c0 + j) =
+          c0_out.block<3, 1>(3 * a, c0 + j) =
               sol.block<3, 1>(3 * blk.surface[a], j);
       }
     progress(opt.show_progress, c0 + k, d);
   }
   // remove the solver's round-off asymmetry
   if (blk.single)
-    symmetrise(blk.c0f);
+    symmetrise(c0f_out);
   else
-    symmetrise(blk.c0);
+    symmetrise(c0_out);
 }
 
 } // namespace tactus::sim::c0_detail

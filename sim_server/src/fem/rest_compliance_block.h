@@ -49,6 +49,7 @@ public:
     base_ = p;
     data_ = p;
     mapped_ = mapped;
+    writable_ = true;
   }
   // Takes over a mapping (mmap) of `mapped` bytes at `base`, unmapped by reset(); the data
   // start `offset` bytes into it.
@@ -57,6 +58,7 @@ public:
     base_ = base;
     data_ = static_cast<char *>(base) + offset;
     mapped_ = mapped;
+    writable_ = false;
   }
   void reset() {
     if (base_ != nullptr)
@@ -64,13 +66,17 @@ public:
     base_ = nullptr;
     data_ = nullptr;
     mapped_ = 0;
+    writable_ = false;
   }
-  void *data() const { return data_; }
+  const void *data() const { return data_; }
+  // allocate's memory; nullptr for an adopted (read-only) mapping or no memory
+  void *writableData() const { return writable_ ? data_ : nullptr; }
 
 private:
   void *base_ = nullptr;
   void *data_ = nullptr;
   std::size_t mapped_ = 0;
+  bool writable_ = false;
 };
 
 // Bytes the dense C0 block of `surface_nodes` nodes takes ((3s)^2 scalars).
@@ -90,8 +96,10 @@ struct RestBlock {
   std::vector<int> local;   // node -> surface index, -1 inside the volume
   bool single = false;      // stored in float (c0f) instead of double (c0)
   LargeBuffer storage;      // memory of c0 / c0f
-  Eigen::Map<Eigen::MatrixXd> c0{nullptr, 0, 0}; // 3s x 3s
-  Eigen::Map<Eigen::MatrixXf> c0f{nullptr, 0, 0};
+  // C0 for reading (3s x 3s), in one of the two precisions; written only by computeRestBlock,
+  // through writableC0 / writableC0f
+  Eigen::Map<const Eigen::MatrixXd> c0{nullptr, 0, 0};
+  Eigen::Map<const Eigen::MatrixXf> c0f{nullptr, 0, 0};
   std::size_t scalarBytes() const {
     return single ? sizeof(float) : sizeof(double);
   }
@@ -110,13 +118,24 @@ struct RestBlock {
   // The maps on the storage's d x d values (re-seating an Eigen::Map is done by placement new).
   void seat(Eigen::Index d) {
     if (single)
-      new (&c0f) Eigen::Map<Eigen::MatrixXf>(
-          static_cast<float *>(storage.data()), d, d);
+      new (&c0f) Eigen::Map<const Eigen::MatrixXf>(
+          static_cast<const float *>(storage.data()), d, d);
     else
-      new (&c0) Eigen::Map<Eigen::MatrixXd>(
-          static_cast<double *>(storage.data()), d, d);
+      new (&c0) Eigen::Map<const Eigen::MatrixXd>(
+          static_cast<const double *>(storage.data()), d, d);
   }
-  void *data() { return storage.data(); }
+  // Writable views of resize's memory for the precomputation; empty (0 x 0) on a C0 adopted
+  // from a cache file, whose pages are read-only.
+  Eigen::Map<Eigen::MatrixXd> writableC0() {
+    auto *p = static_cast<double *>(storage.writableData());
+    const Eigen::Index d = p != nullptr && !single ? c0.rows() : 0;
+    return {p, d, d};
+  }
+  Eigen::Map<Eigen::MatrixXf> writableC0f() {
+    auto *p = static_cast<float *>(storage.writableData());
+    const Eigen::Index d = p != nullptr && single ? c0f.rows() : 0;
+    return {p, d, d};
+  }
   const void *data() const { return storage.data(); }
   Eigen::Matrix3d block(int a, int b) const {
     if (single)
@@ -128,8 +147,8 @@ struct RestBlock {
            static_cast<std::size_t>(single ? c0f.size() : c0.size());
   }
   void release() {
-    new (&c0) Eigen::Map<Eigen::MatrixXd>(nullptr, 0, 0);
-    new (&c0f) Eigen::Map<Eigen::MatrixXf>(nullptr, 0, 0);
+    new (&c0) Eigen::Map<const Eigen::MatrixXd>(nullptr, 0, 0);
+    new (&c0f) Eigen::Map<const Eigen::MatrixXf>(nullptr, 0, 0);
     storage.reset();
   }
 };
