@@ -488,7 +488,7 @@ void FemBody::solveRestComplianceBatch(double h, const Eigen::MatrixXd& r, Eigen
   const int k = static_cast<int>(r.cols());
   Eigen::MatrixXd rr(m.n_free, k);
   for (int c = 0; c < k; ++c) m.reduce(r.col(c), rr.col(c).data());
-  m.chol_rest.solve(rr.data(), rr.data(), k);
+  m.chol_rest.solveWithBlas(rr.data(), rr.data(), k);
   x.resize(3 * m.n, k);
   for (int c = 0; c < k; ++c) m.expand(rr.col(c).data(), h, x.col(c).data());
 }

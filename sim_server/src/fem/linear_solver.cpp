@@ -282,6 +282,14 @@ void CholmodSolver::solvePreconditioner(const double* b, double* x) {
 }
 
 void CholmodSolver::solve(const double* b, double* x, int ncols) {
+  if (factor_->is_super && blas_free_solves_) {
+    supernodalSolveWithoutBlas(b, x, ncols);
+    return;
+  }
+  solveWithBlas(b, x, ncols);
+}
+
+void CholmodSolver::solveWithBlas(const double* b, double* x, int ncols) {
   const auto n = factor_->n;
   cholmod_dense bd{};
   bd.nrow = n;
@@ -292,10 +300,6 @@ void CholmodSolver::solve(const double* b, double* x, int ncols) {
   bd.z = nullptr;
   bd.xtype = CHOLMOD_REAL;
   bd.dtype = CHOLMOD_DOUBLE;
-  if (factor_->is_super && blas_free_solves_) {
-    supernodalSolveWithoutBlas(b, x, ncols);
-    return;
-  }
   if (factor_->is_super) {
     const CholmodBlasCall blas;
     cholmod_solve2(CHOLMOD_A, factor_, &bd, nullptr, &x_, nullptr, &y_, &e_, &common_);

@@ -57,6 +57,13 @@ class CholmodSolver {
   bool factorized() const { return factorized_; }
   /// x = A^-1 b for `ncols` column-major right-hand sides of length n (x may alias b).
   void solve(const double* b, double* x, int ncols);
+  /// solve() for many right-hand sides at once (the rest compliance C0's precomputation): on a
+  /// supernodal factor CHOLMOD's own solve, whose dense blocks BLAS multiplies with the CPU's
+  /// widest vectors (OpenBLAS picks its kernels when it starts), also with setBlasFreeSolves on;
+  /// it holds cholmodBlasMutex() for the call, so it waits for a background factorisation
+  /// running in another thread. The bits follow the CPU's BLAS kernels, as those of a solver
+  /// without setBlasFreeSolves do.
+  void solveWithBlas(const double* b, double* x, int ncols);
   /// Nonzeros of the factor (for the log/benchmarks).
   std::size_t factorNonzeros() const;
   /// The symbolic analysis of `other` (analyzed) taken over by copying it: no second ordering,
