@@ -107,6 +107,12 @@ TEST(BackgroundFactorTest, BlasFreeSolvesOfTheSupernodalFactorMatchCholmods) {
         << "column " << c;
     EXPECT_LT(relativeResidual(a1, x_many.col(c), rhs.col(c)), 1e-13) << "column " << c;
   }
+  // the rest compliance's precomputation solves many columns through CHOLMOD's own (BLAS) solve,
+  // also on a solver set to solve without BLAS: the reference's bits, not the sweeps' rounding
+  Eigen::MatrixXd x_blas(n, 3);
+  step.solveWithBlas(rhs.data(), x_blas.data(), 3);
+  EXPECT_TRUE(step.blasFreeSolves());
+  EXPECT_TRUE(x_blas == x_cholmod);
 
   // the caller's own factorisation and its solves: the first factor's solution again
   ASSERT_TRUE(step.factorize(a0));
