@@ -482,6 +482,11 @@ void FemBody::solveRestCompliance(double h, const Eigen::VectorXd& r, Eigen::Vec
 
 void FemBody::prepareRestCompliance(double h) { impl_->ensureRestFactor(h); }
 
+void FemBody::prepareFreeMotion(double h) {
+  if (!(h > 0.0)) throw Error("FemBody::prepareFreeMotion: time step must be > 0");
+  impl_->prepareFreeMotion(h);
+}
+
 void FemBody::solveRestComplianceBatch(double h, const Eigen::MatrixXd& r, Eigen::MatrixXd& x) {
   Impl& m = *impl_;
   m.ensureRestFactor(h);

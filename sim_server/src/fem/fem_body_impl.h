@@ -151,6 +151,9 @@ struct FemState {
   // kCholmodReuse: the values of the A the factor of record was computed from (copied when the
   // factor is refreshed; a restored state refactorises them, fem_state.cpp)
   Eigen::VectorXd factor_values;
+  // prepareFreeMotion: chol's generation when it factorised the A of factor_values before the
+  // first step (0: none prepared); the next freeMotion uses it if its A is that one
+  std::uint64_t prepared_generation = 0;
 };
 
 struct FemScratch {
@@ -286,6 +289,7 @@ struct FemBody::Impl : FemModel, FemState, FemScratch {
   // its rotations.
   void ensureStepNodeSums();
   void ensureRestFactor(double h);
+  void prepareFreeMotion(double h);   // FemBody::prepareFreeMotion
   void ensureCurrentFactor();
   // dv = A^-1 rhs by a fresh CHOLMOD factorisation of `a` (timed into stats); false when A is not
   // positive definite.

@@ -3,6 +3,7 @@
 // loop that builds the system is in fem_assembly.cpp.
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <string>
 
 #include <spdlog/spdlog.h>
@@ -74,6 +75,19 @@ bool FemBody::Impl::solveStep(double h, FemStepStats& stats) {
       double background_factor_s = 0.0;
       const bool taken = reuse.adoptDue(chol, stats.factor_wait_s, background_factor_s);
       counters.background_not_ready = reuse.notReadySteps();
+      counters.background_wait_s += stats.factor_wait_s;
+      if (prepared_generation != 0) {
+        // prepareFreeMotion's factor: used when nothing refactorised chol since and this
+        // step's A is the one it factorised, to the bit (then the same factor as factorising
+        // it here would give)
+        const bool holds =
+            prepared_generation == chol.generation() && reuse.ageSteps() < 0 &&
+            chol.factorized() && factor_values.size() == a.nonZeros() &&
+            std::memcmp(factor_values.data(), a.valuePtr(),
+                        sizeof(double) * static_cast<std::size_t>(a.nonZeros())) == 0;
+        prepared_generation = 0;
+        if (holds) reuse.notePreparedFactor();
+      }
       if (stats.factor_wait_s > 1e-4) {
         ++counters.background_waits;
         counters.background_wait_max_s = std::max(counters.background_wait_max_s, stats.factor_wait_s);
@@ -119,7 +133,8 @@ bool FemBody::Impl::solveStep(double h, FemStepStats& stats) {
       stats.cg_iterations = r.cg_iterations;
       stats.cg_residual = r.residual;
       stats.factor_refreshed = r.refreshed;
-      if (r.refreshed) ++counters.factorisations;
+      stats.factor_prepared = r.prepared;
+      if (r.refreshed && !r.prepared) ++counters.factorisations;
       chol_current = r.refreshed;
       return r.ok;
     }
@@ -136,6 +151,38 @@ bool FemBody::Impl::solveStep(double h, FemStepStats& stats) {
     }
   }
   return false;
+}
+
+void FemBody::Impl::prepareFreeMotion(double h) {
+  if (options.linear != LinearSolverKind::kCholmodReuse || reuse.ageSteps() >= 0) return;
+  const bool damped = material.damping.has_value();
+  const double alpha = damped ? material.damping->mass_alpha_per_s : 0.0;
+  const double beta = damped ? material.damping->stiffness_beta_s : 0.0;
+  // freeMotion's A at the current state, into a copy: the state (A, the kept rotations: a
+  // query's evaluation works on a copy of them) and the counters stay as they were
+  Sparse next = a;
+  Eigen::VectorXd force;
+  const Counters kept = counters;
+  int inverted = 0;
+  evaluate(q, &v, h, beta, &force, &next, h + beta, 1.0 / h + alpha, false, &inverted, false);
+  counters = kept;
+  if (!chol.analyzed()) chol.analyze(next);
+  prepared_generation = 0;
+  if (!chol.factorize(next)) return;   // the first step factorises and reports it
+  factor_values = Eigen::Map<const Eigen::VectorXd>(next.valuePtr(), next.nonZeros());
+  prepared_generation = chol.generation();
+  ++counters.prepared_factorisations;
+  if (background != nullptr && !background->busy()) {
+    // the worker made ready now too, not by the first steps that start and take a job: its
+    // thread, its copy of the analysis and of A, and its factor's storage and float copy
+    // written once (by a job on this A, dropped), and the step's copies of a job's A and
+    // rotations sized (the first job's start and wait took 2000 page faults and a 0.1-0.2 s
+    // wait on liver_grasp_23k)
+    background->start(next, chol);
+    background->discard();
+    background_factor_values = factor_values;
+    background_node_rot.assign(static_cast<std::size_t>(n_free / 3), Eigen::Matrix3d::Identity());
+  }
 }
 
 bool FemBody::Impl::pcg(double tol, int max_iter, FemStepStats& stats) {

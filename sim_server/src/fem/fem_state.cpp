@@ -7,7 +7,7 @@ namespace tactus::sim {
 
 // A member added to FemState must be added below (or to the list of members rebuilt from
 // others): this stops the build until it is.
-static_assert(kAggregateFields<FemState> == 20,
+static_assert(kAggregateFields<FemState> == 21,
               "FemState gained or lost a member: walk it in FemBody::Impl::transferState "
               "(fem_state.cpp) and update this count");
 
@@ -83,8 +83,10 @@ void FemBody::Impl::transferState(StateArchive& ar) {
   }
   // Not state: the background worker (`background`, a thread; its job restarted above), the
   // model (FemModel, with the rest factor built from it on demand), the step's
-  // buffers (FemScratch, written before they are read, but node_rot above) and the statistics
-  // (counters, inversion_warned).
+  // buffers (FemScratch, written before they are read, but node_rot above), the statistics
+  // (counters, inversion_warned) and prepared_generation (prepareFreeMotion's factor: a load
+  // that rebuilds chol above changes its generation, and the first step checks its A against
+  // the prepared one to the bit).
 }
 
 void FemBody::transferState(StateArchive& ar) { impl_->transferState(ar); }

@@ -120,6 +120,7 @@ void CholmodSolver::analyze(Sparse& lower) {
   if (factor_) cholmod_free_factor(&factor_, &common_);
   if (symbolic_) cholmod_free_factor(&symbolic_, &common_);
   single_current_ = false;
+  ++generation_;
   cholmod_sparse a = view(lower);
   {
     const StopSignalsBlocked stop_signals_pending;
@@ -142,6 +143,7 @@ void CholmodSolver::analyze(Sparse& lower) {
 }
 
 bool CholmodSolver::factorize(Sparse& lower) {
+  ++generation_;
   if (!factor_->is_super && symbolic_ != nullptr) {
     // a simplicial conversion of an earlier factor: start again from the supernodal analysis
     cholmod_free_factor(&factor_, &common_);
@@ -315,6 +317,7 @@ void CholmodSolver::analyzeLike(const CholmodSolver& other) {
   if (symbolic_) cholmod_free_factor(&symbolic_, &common_);
   factorized_ = false;
   single_current_ = false;
+  ++generation_;
   factor_ = cholmod_copy_factor(other.symbolic_ ? other.symbolic_ : other.factor_, &common_);
   if (!factor_) throw NumericalError("CHOLMOD: copying a factor failed (out of memory?)");
   if (other.symbolic_) {
@@ -329,6 +332,8 @@ void CholmodSolver::swapFactor(CholmodSolver& other) noexcept {
   // the float copies go with their factors (each side's setting stays its own)
   single_x_.swap(other.single_x_);
   std::swap(single_current_, other.single_current_);
+  ++generation_;
+  ++other.generation_;
 }
 
 std::size_t CholmodSolver::factorNonzeros() const {
@@ -466,6 +471,8 @@ ReuseSolveResult ReusedFactorSolver::solve(CholmodSolver& factor, Sparse& a,
                                            const Eigen::VectorXd& b, Eigen::VectorXd& x,
                                            const Eigen::Matrix3d* block_rotation) {
   ReuseSolveResult out;
+  const bool prepared = prepared_ && factor.factorized();
+  prepared_ = false;
   if (age_steps_ >= 0) ++age_steps_;
   const bool missing = age_steps_ < 0 || !factor.factorized();
   const bool due =
@@ -510,8 +517,13 @@ ReuseSolveResult ReusedFactorSolver::solve(CholmodSolver& factor, Sparse& a,
   if (refresh) {
     job_stale_ = true;   // this factor is newer than a running job's
     const std::int64_t t1 = shared::monotonicNs();
-    if (!factor.analyzed()) factor.analyze(a);
-    const bool factored = factor.factorize(a);
+    // a prepared factor holds this A already (notePreparedFactor): only the direct solve
+    out.prepared = prepared && missing;
+    bool factored = true;
+    if (!out.prepared) {
+      if (!factor.analyzed()) factor.analyze(a);
+      factored = factor.factorize(a);
+    }
     out.factorisation_s = shared::secondsSinceNs(t1);
     if (!factored) {
       age_steps_ = -1;

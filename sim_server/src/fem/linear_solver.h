@@ -9,6 +9,7 @@
 #include <Eigen/SparseCore>
 #include <condition_variable>
 #include <cstddef>
+#include <cstdint>
 #include <memory>
 #include <mutex>
 #include <thread>
@@ -98,6 +99,10 @@ class CholmodSolver {
   void solvePreconditioner(const double* b, double* x);
   /// The numeric factor is supernodal (its solves use BLAS and take the lock).
   bool supernodal() const { return factor_ != nullptr && factor_->is_super; }
+  /// Changes whenever the factor held may change (analyze, analyzeLike, factorize, swapFactor):
+  /// a caller that kept the value knows the factor is still the one it computed when it is the
+  /// same.
+  std::uint64_t generation() const { return generation_; }
 
  private:
   cholmod_sparse view(Sparse& lower) const;
@@ -120,6 +125,7 @@ class CholmodSolver {
   bool single_precision_ = false;
   bool single_current_ = false;     // single_x_ holds factor_'s current values
   bool blas_free_solves_ = false;
+  std::uint64_t generation_ = 0;
 };
 
 /// Work vectors of conjugateGradient, kept between calls (no allocation once sized).
@@ -260,6 +266,9 @@ struct ReuseSolveResult {
   double solve_s = 0.0;
   /// background mode: this solve started factorising its A on the worker thread
   bool background_started = false;
+  /// the refresh used the factor prepared before the step (notePreparedFactor): a direct solve,
+  /// no factorisation in this solve
+  bool prepared = false;
 };
 
 /// A dv = b with the CHOLMOD factorisation of a recent system matrix A_f as the preconditioner of
@@ -316,6 +325,12 @@ class ReusedFactorSolver {
     last_iterations_ = 0;
     job_stale_ = true;
   }
+  /// For the next solve() only: the factor holds its A already (factorised before the step,
+  /// e.g. at set-up from the same state, and checked by the caller to be that A's to the bit).
+  /// When that solve refreshes (no factor of record yet) it solves directly with it instead of
+  /// factorising: the same factor and the same bits as the factorisation would give, without
+  /// the step paying for it.
+  void notePreparedFactor() { prepared_ = true; }
   /// The factor no longer holds a step's A (e.g. a static solve factorised K): refresh next time.
   void forget() {
     age_steps_ = -1;
@@ -363,6 +378,7 @@ class ReusedFactorSolver {
   int job_steps_ = 0;        // steps since the worker's job started (while it is busy)
   bool job_stale_ = false;   // a newer factor than the job's was made since it started
   bool restart_job_ = false; // a loaded state had a job in flight (jobToRestart)
+  bool prepared_ = false;    // notePreparedFactor (consumed by the next solve)
 };
 
 }  // namespace tactus::sim::fem_detail

@@ -119,6 +119,9 @@ Simulation::Simulation(std::shared_ptr<const SimulationModel> model)
   for (TissueState& ts : impl_->state.tissues) {
     if (ts.compliance) ts.compliance->reserve(impl_->model.max_rows);
   }
+  // the first step's factorisation made now (solver.linear cholmod_reuse): that step solves
+  // with it when its system matrix is the one factorised here (FemBody::prepareFreeMotion)
+  for (TissueState& ts : impl_->state.tissues) ts.body->prepareFreeMotion(impl_->model.h_s);
 }
 
 Simulation::~Simulation() = default;

@@ -30,7 +30,8 @@ void freeMotion(const SimulationModel& model, SimulationState& state, StepScratc
     if (!st.ok) report.finite = false;
     report.inverted_elements += st.inverted_elements;
     report.fem_cg_iterations += st.cg_iterations;
-    if (st.factor_refreshed || model.spec.solver.linear == LinearSolverKind::kCholmod)
+    if ((st.factor_refreshed && !st.factor_prepared) ||
+        model.spec.solver.linear == LinearSolverKind::kCholmod)
       ++report.fem_factorisations;
   }
   for (std::size_t i = 0; i < state.instruments.size(); ++i) {

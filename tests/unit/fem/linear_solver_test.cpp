@@ -156,6 +156,61 @@ TEST(CholmodReuse, RefreshesTheFactorOnlyWhenTheMatrixDrifts) {
   EXPECT_EQ(scheduled.counters().factorisations, before4 + 5);
 }
 
+// The first step's factorisation made before it (FemBody::prepareFreeMotion, which a Simulation
+// calls at set-up): that step solves directly with the prepared factor and factorises nothing
+// on its own thread, and every step gives the same bits as a body that factorised in its first
+// step (synchronous and background refreshes); a factor prepared for another state or another
+// time step is not used (the step factorises its own A, the same bits as without preparing).
+TEST(CholmodReuse, PreparedFirstFactorGivesTheSameStepsWithoutFactorising) {
+  const double tol = 1e-8;
+  for (const int lag : {0, 2}) {
+    FemBody plain(beamMesh(), softMaterial(), {}, nullptr,
+                  options(LinearSolverKind::kCholmodReuse, tol, lag));
+    FemBody prepared(beamMesh(), softMaterial(), {}, nullptr,
+                     options(LinearSolverKind::kCholmodReuse, tol, lag));
+    tumble(plain, 4.0);
+    tumble(prepared, 4.0);
+    prepared.prepareFreeMotion(kSolverTimeStep);
+    EXPECT_EQ(prepared.counters().prepared_factorisations, 1);
+    EXPECT_EQ(prepared.counters().factorisations, 0);
+    EXPECT_EQ(prepared.counters().rotation_extractions, 0);   // the preparation is no step
+    for (int s = 0; s < 60; ++s) {
+      const FemStepStats a = plain.freeMotion(kSolverTimeStep);
+      const FemStepStats b = prepared.freeMotion(kSolverTimeStep);
+      ASSERT_TRUE(a.ok && b.ok) << "lag " << lag << " step " << s;
+      EXPECT_FALSE(a.factor_prepared);
+      EXPECT_EQ(b.factor_prepared, s == 0) << "lag " << lag << " step " << s;
+      EXPECT_EQ(a.factor_refreshed, b.factor_refreshed) << "lag " << lag << " step " << s;
+      EXPECT_EQ(a.cg_iterations, b.cg_iterations) << "lag " << lag << " step " << s;
+      ASSERT_EQ(plain.positions(), prepared.positions()) << "lag " << lag << " step " << s;
+      ASSERT_EQ(plain.velocities(), prepared.velocities()) << "lag " << lag << " step " << s;
+    }
+    EXPECT_GE(plain.counters().factorisations, 1);
+    EXPECT_EQ(prepared.counters().factorisations + 1, plain.counters().factorisations)
+        << "lag " << lag;
+    EXPECT_EQ(prepared.counters().rotation_extractions, plain.counters().rotation_extractions);
+  }
+  // prepared, then the state changed (or another h): the step factorises its own A
+  for (const bool other_h : {false, true}) {
+    FemBody reference(beamMesh(), softMaterial(), {}, nullptr,
+                      options(LinearSolverKind::kCholmodReuse, tol, 0));
+    FemBody stale(beamMesh(), softMaterial(), {}, nullptr,
+                  options(LinearSolverKind::kCholmodReuse, tol, 0));
+    if (other_h) tumble(stale, 4.0);
+    stale.prepareFreeMotion(other_h ? 2.0 * kSolverTimeStep : kSolverTimeStep);
+    if (!other_h) tumble(stale, 4.0);
+    tumble(reference, 4.0);
+    const FemStepStats st = stale.freeMotion(kSolverTimeStep);
+    ASSERT_TRUE(st.ok);
+    EXPECT_TRUE(st.factor_refreshed);
+    EXPECT_FALSE(st.factor_prepared);
+    EXPECT_EQ(stale.counters().factorisations, 1);
+    ASSERT_TRUE(reference.freeMotion(kSolverTimeStep).ok);
+    EXPECT_EQ(reference.positions(), stale.positions()) << "other h " << other_h;
+    EXPECT_EQ(reference.velocities(), stale.velocities()) << "other h " << other_h;
+  }
+}
+
 // Background refreshes: the worker factorises while the steps go on with PCG on the old factor;
 // each step's dv still matches the direct solve, no step after the first factorises on its own
 // thread, each factor is taken exactly `lag` steps after the step that started it, and two runs

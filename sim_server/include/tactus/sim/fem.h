@@ -149,6 +149,9 @@ struct FemStepStats {
   bool background_factorisation_started = false;
   bool background_factor_taken = false;
   double factor_wait_s = 0.0;
+  /// kCholmodReuse: the refresh (factor_refreshed) solved directly with the factor
+  /// prepareFreeMotion made from this step's A: no factorisation on the step's thread
+  bool factor_prepared = false;
   /// Tetrahedra inverted at the start of the step (det F <= 0 at the positions the step starts
   /// from). The corotational force pushes an inverted element back (see polarRotation); a count
   /// that stays up at equilibrium means the mesh or material cannot carry the load.
@@ -217,6 +220,16 @@ class FemBody {
   /// and numeric factorisation, about 0.4 s of CPU on liver_grasp_23k) to the first step in
   /// contact.
   void prepareRestCompliance(double h);
+  /// kCholmodReuse, before the first step (no factor of record yet): assembles the system
+  /// matrix the next freeMotion(h) will assemble from the current state and factorises it now
+  /// (with the symbolic analysis), so that the first step does not: that step checks that its
+  /// A is the prepared one to the bit and then solves directly with the prepared factor (the
+  /// same factor and the same results as factorising there); any other A (the state changed in
+  /// between, another h) is factorised by the step as before. Nothing to do for the other
+  /// solvers or once a factor of record exists. On liver_grasp_23k the first step's
+  /// factorisation was 0.5 s of the step (docs/measurements.md, "The simulation step at organ
+  /// scale").
+  void prepareFreeMotion(double h);
   /// Time step of the last freeMotion (0 before the first).
   double lastStepH() const;
 
@@ -307,6 +320,10 @@ class FemBody {
     /// steps that waited more than 0.1 ms for the worker (factor_wait_s), and the longest wait
     long background_waits = 0;
     double background_wait_max_s = 0.0;
+    double background_wait_s = 0.0;             ///< all the steps' waits for the worker
+    /// made before the first step (prepareFreeMotion) and used by it instead of a factorisation
+    /// on the step's thread (not in `factorisations`)
+    long prepared_factorisations = 0;
     /// background_refactor_when_ready: steps at which a background factor was due and not
     /// ready (they went on with the factor they had instead of waiting)
     long background_not_ready = 0;
