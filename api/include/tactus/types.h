@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "tactus/shared/grow_only_matrix.h"
 #include "tactus/shared/nsgs.h"
 #include "tactus/shared/pose.h"
 
@@ -111,7 +112,11 @@ struct ContactProblem {
   std::vector<int> row_offset;                 ///< contacts + 1
   std::vector<std::uint64_t> contact_id;       ///< stable across steps (warm starts)
   std::vector<double> mu;                      ///< per contact
-  Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> W;
+  /// Row-major, rows x rows; an Eigen::Map of storage that only grows (grow_only_matrix.h): a
+  /// simulation reserves it for its largest problem at set-up, so that a step whose problem
+  /// changes size neither allocates nor touches fresh memory. Read and written as an Eigen
+  /// matrix; assigning an expression resizes it.
+  shared::GrowOnlyMatrix<Eigen::RowMajor> W;
   Eigen::VectorXd delta_free;                  ///< gaps and tangential motions without force
   Eigen::VectorXd f;                           ///< forces in the local frames (n, t1, t2) [N]
   Eigen::Matrix<double, Eigen::Dynamic, 6, Eigen::RowMajor> J;   ///< d delta_free / d x_h

@@ -16,6 +16,7 @@
 #include "tactus/shared/clock.h"
 #include "tactus/shared/error.h"
 #include "tactus/shared/file_io.h"
+#include "tactus/shared/grow_only_matrix.h"
 #include "tactus/sim/state_archive.h"
 
 namespace tactus::sim {
@@ -24,48 +25,9 @@ using c0_detail::RestBlock;
 
 namespace {
 
-// A column-major matrix on storage that only grows: resizing it within the largest size it had
-// neither allocates nor writes memory the process has not touched yet. addW's products follow
-// the contact rows, whose count changes at almost every step: as Eigen::MatrixXd (a new
-// allocation at each change of size) they took fresh pages from the system whenever the
-// problem outgrew the largest so far, up to 1900 minor page faults in one step of
-// liver_grasp_23k's grasp (docs/design.md, "The contact buffers").
-class GrowOnlyMatrix {
-public:
-  using Map = Eigen::Map<Eigen::MatrixXd>;
-  GrowOnlyMatrix() = default;
-  GrowOnlyMatrix(const GrowOnlyMatrix &) = delete;
-  GrowOnlyMatrix &operator=(const GrowOnlyMatrix &) = delete;
-  // The matrix resized (its values unspecified), as a map valid until the next resize.
-  Map &resize(Eigen::Index rows, Eigen::Index cols) {
-    const auto need = static_cast<std::size_t>(rows * cols);
-    if (need > buf_.size())
-      buf_.resize(std::max(need, buf_.size() + buf_.size() / 2));
-    new (&map_) Map(buf_.data(), rows, cols);
-    return map_;
-  }
-  // Storage for `count` values from now on (written once: its pages are the process's).
-  void reserve(std::size_t count) {
-    if (count > buf_.size()) {
-      const Eigen::Index rows = map_.rows(), cols = map_.cols();
-      buf_.resize(count);
-      new (&map_) Map(buf_.data(), rows, cols);
-    }
-  }
-  Map &map() { return map_; }
-  const Map &map() const { return map_; }
-  std::size_t capacity() const { return buf_.size(); }
-  void swap(GrowOnlyMatrix &other) noexcept {
-    buf_.swap(other.buf_);   // the data pointers move with the buffers
-    const Eigen::Index rows = map_.rows(), cols = map_.cols();
-    new (&map_) Map(buf_.data(), other.map_.rows(), other.map_.cols());
-    new (&other.map_) Map(other.buf_.data(), rows, cols);
-  }
-
-private:
-  std::vector<double> buf_;
-  Map map_{nullptr, 0, 0};
-};
+// addW's products on storage that only grows (grow_only_matrix.h): they follow the contact
+// rows, whose count changes at almost every step.
+using GrowOnlyMatrix = shared::GrowOnlyMatrix<Eigen::ColMajor>;
 
 // Row-to-node expansion of H: (local node, 3-vector p) pairs per row.
 struct RowTerms {

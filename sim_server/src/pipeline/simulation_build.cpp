@@ -104,6 +104,12 @@ StepScratch buildScratch(const SimulationModel& model) {
                                   tissueContactCapacity(model.spec));
   }
   scratch.problem.row_offset.assign(1, 0);
+  // W for the largest problem, written now: a step whose problem outgrows the largest so far
+  // takes no fresh page (grow_only_matrix.h)
+  if (model.has_contacts) {
+    scratch.problem.W.reserve(static_cast<std::size_t>(model.max_rows) *
+                              static_cast<std::size_t>(model.max_rows));
+  }
   return scratch;
 }
 

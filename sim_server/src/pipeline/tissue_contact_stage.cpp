@@ -144,7 +144,7 @@ int appendTissueContactRows(const SimulationState& state, StepScratch& scratch, 
 }
 
 void addCoupledTissueW(TissueState& ts, TissueScratch& tx,
-                       Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>& W) {
+                       shared::GrowOnlyMatrix<Eigen::RowMajor>& W) {
   const int own = tx.rows.rows();
   tx.coupled_rows.assign(tx.rows.tissue.begin(), tx.rows.tissue.end());
   tx.coupled_rows.insert(tx.coupled_rows.end(), tx.pair_parts.begin(), tx.pair_parts.end());

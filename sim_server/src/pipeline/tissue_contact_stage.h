@@ -36,7 +36,7 @@ int appendTissueContactRows(const SimulationState& state, StepScratch& scratch, 
 /// W += H_t C_t H_t^T over tissue t's own rows and its parts of the pair rows, when it has such
 /// parts (else the caller adds its own block directly).
 void addCoupledTissueW(TissueState& ts, TissueScratch& tx,
-                       Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>& W);
+                       shared::GrowOnlyMatrix<Eigen::RowMajor>& W);
 
 /// dq = C_t H_t^T f over tissue t's own rows and pair parts (tissues with parts).
 void coupledTissueCorrection(TissueState& ts, TissueScratch& tx, const Eigen::VectorXd& f);
