@@ -8,6 +8,7 @@
 // simulation as it was.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstring>
 #include <string>
 #include <vector>
@@ -119,6 +120,29 @@ TEST(SimulationStateTest, FirstStepUsesTheFactorMadeAtSetUpWithTheSameBits) {
   EXPECT_EQ(sim.tissue(0).counters().factorisations, before + 1);
   EXPECT_EQ(print(sim, again).hash, first_print.hash) << "the first step";
   expectSameRun(prepared, runPrinting(sim, 30), "the first step factorising");
+}
+
+// The contact problem's W lives in storage reserved at set-up for the largest problem
+// (shared::GrowOnlyMatrix): through a grasp whose rows change from step to step it never moves.
+TEST(SimulationStateTest, TheContactProblemKeepsWsStorageWhileItsRowsChange) {
+  Simulation sim(scene("liver_grasp.yaml"));
+  const ContactProblemData& p = sim.lastProblem();
+  const double* storage = p.W.data();
+  ASSERT_NE(storage, nullptr);
+  const std::size_t capacity = p.W.capacity();
+  int sizes = 0, last_rows = -1, max_rows = 0;
+  for (int k = 0; k < 400; ++k) {
+    sim.setDeviceTarget(sim.scriptedTarget(sim.time()));
+    const StepReport r = sim.step();
+    if (r.rows != last_rows) ++sizes;
+    last_rows = r.rows;
+    max_rows = std::max(max_rows, r.rows);
+    ASSERT_EQ(p.W.rows(), p.rows) << "step " << k;
+    ASSERT_EQ(p.W.data(), storage) << "step " << k << ", " << p.rows << " rows";
+    ASSERT_EQ(p.W.capacity(), capacity);
+  }
+  EXPECT_GT(sizes, 20);   // the problem changed size at many steps
+  EXPECT_GE(capacity, static_cast<std::size_t>(max_rows) * static_cast<std::size_t>(max_rows));
 }
 
 TEST(SimulationStateTest, LiverGraspContinuesBitForBitOver200ContactSteps) {
