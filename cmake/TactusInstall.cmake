@@ -19,7 +19,8 @@ install(DIRECTORY ${PROJECT_SOURCE_DIR}/api/include/tactus
 install(FILES ${PROJECT_BINARY_DIR}/api/include/tactus/version.h
         DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}/tactus COMPONENT library)
 # the project headers the public ones include
-foreach(h nsgs.h pose.h error.h messages.h triple_buffer.h delassus_blocks.h warm_start.h)
+foreach(h nsgs.h pose.h error.h messages.h triple_buffer.h delassus_blocks.h warm_start.h
+          grow_only_matrix.h)
   install(FILES ${PROJECT_SOURCE_DIR}/shared/include/tactus/shared/${h}
           DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}/tactus/shared COMPONENT library)
 endforeach()
