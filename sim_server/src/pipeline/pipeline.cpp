@@ -22,7 +22,8 @@ namespace {
 
 // strain limiting (strain_limit.h) after each pass's correction, before the next detection
 // looks at the corrected state: the contacts' nodes keep their corrected positions where the
-// tet has another node to move
+// tet has another node to move, and what the sweeps cannot lift goes back to the step's start
+// (q_begin: every tet at its bound when the last step ended)
 void limitStrain(const SimulationModel& m, SimulationState& s, StepScratch& x, StepReport& report) {
   report.strain_limited_elements = 0;
   report.strain_limit_unresolved = 0;
@@ -32,7 +33,7 @@ void limitStrain(const SimulationModel& m, SimulationState& s, StepScratch& x, S
     TissueScratch& tx = x.tissues[t];
     const StrainLimitResult limited = limitVolumes(*s.tissues[t].body, tm.rest_volume6,
                                                    tm.min_volume_ratio, m.h_s, tx.rows.tissue,
-                                                   tx.strain_limit);
+                                                   tx.strain_limit, &tx.q_begin);
     report.strain_limited_elements += limited.limited;
     report.strain_limit_unresolved += limited.unresolved;
   }
