@@ -363,8 +363,8 @@ void PrintTo(const FailingGridCase& c, std::ostream* os) {
 }
 
 std::vector<FailingGridCase> failingGridApproaches() {
-  // measured with strain limiting (2026-11-29) unless marked "before strain limiting" (2026-11-28:
-  // liver_grasp_23k's grid was stopped after 17 approaches)
+  // liver_grasp_20k measured with strain limiting (2026-11-29); liver_grasp_23k with the limiter's
+  // fallback to the step's start (2026-11-29: every other approach of its grid meets all three)
   const double light = test_support::kGridGripsNmprad[0], firm = test_support::kGridGripsNmprad[1];
   return {
       {"liver_grasp_20k.yaml", gridApproach(-5, -5, -20, light), "slips (rise 4 %)"},
@@ -374,19 +374,8 @@ std::vector<FailingGridCase> failingGridApproaches() {
        "slips (rise -11 %), a tet inverted for one step (-0.24)"},
       {"liver_grasp_20k.yaml", gridApproach(-5, 5, 20, firm), "slips (rise 29 %)"},
       {"liver_grasp_20k.yaml", gridApproach(0, 0, -20, light), "slips (rise 66 %)"},
-      {"liver_grasp_23k.yaml", gridApproach(-5, -5, -20, light),
-       "slips (rise 38 %), a tet inverted for 4 steps (-4.6)"},
-      {"liver_grasp_23k.yaml", gridApproach(5, -5, -20, light), "slips (rise 84 %)"},
-      {"liver_grasp_23k.yaml", gridApproach(-5, 5, -20, light),
-       "a tet in the jaws inverted for one step (-0.62 at 2.40 s; met all three before the "
-       "limiter's step bound)"},
-      {"liver_grasp_23k.yaml", gridApproach(-5, 0, 0, light), "a tet in the jaws inverted for 3 steps (-61)"},
-      {"liver_grasp_23k.yaml", gridApproach(5, -5, -20, firm),
-       "before strain limiting: tets in the jaws inverted (-20)"},
-      {"liver_grasp_23k.yaml", gridApproach(-5, 5, 20, firm),
-       "before strain limiting: tets inverted in the jaws (-2.2)"},
-      {"liver_grasp_23k.yaml", gridApproach(5, -5, 20, firm),
-       "before strain limiting: a tet in the jaws inverted (-0.15)"},
+      {"liver_grasp_23k.yaml", gridApproach(5, -5, -20, light), "slips (rise 87 %)"},
+      {"liver_grasp_23k.yaml", gridApproach(5, -5, -20, firm), "slips (rise 89 %)"},
   };
 }
 
