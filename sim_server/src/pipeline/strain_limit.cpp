@@ -38,6 +38,27 @@ void collectBelow(const FemBody& body, const std::vector<double>& rest6, double 
   }
 }
 
+// The tets around `nodes` not yet measured at `stamp` (scratch.checked), measured at q: each
+// below min_ratio goes into scratch.below and to on_below. Uses scratch.node_tet*.
+template <class OnBelow>
+void measureAround(const std::vector<int>& nodes, int stamp, const Eigen::VectorXd& q,
+                   const std::vector<std::array<int, 4>>& tets, const std::vector<double>& rest6,
+                   double min_ratio, StrainLimitScratch& scratch, OnBelow&& on_below) {
+  for (int node : nodes) {
+    const auto k = static_cast<std::size_t>(node);
+    for (int i = scratch.node_tet_offset[k]; i < scratch.node_tet_offset[k + 1]; ++i) {
+      const int e = scratch.node_tet[static_cast<std::size_t>(i)];
+      const auto te = static_cast<std::size_t>(e);
+      if (scratch.checked[te] == stamp) continue;
+      scratch.checked[te] = stamp;
+      if (volume6At(q, tets[te]) < min_ratio * rest6[te]) {
+        scratch.below.push_back(e);
+        on_below(e);
+      }
+    }
+  }
+}
+
 // The tets the sweeps left below the bound: their nodes go back to q_valid (the step's start,
 // where every tet kept its bound), then the nodes of every tet that this leaves below (a tet
 // with some nodes back and some not), ring after ring, until no tet around a node moved back is
@@ -78,17 +99,7 @@ void rollBack(FemBody& body, const std::vector<double>& rest6, double min_ratio,
     out.rolled_back += static_cast<int>(ring.size());
     ++stamp;
     scratch.below.clear();
-    for (int k : ring) {
-      for (int i = scratch.node_tet_offset[static_cast<std::size_t>(k)]; i < scratch.node_tet_offset[static_cast<std::size_t>(k) + 1]; ++i) {
-        const int e = scratch.node_tet[static_cast<std::size_t>(i)];
-        if (scratch.checked[static_cast<std::size_t>(e)] == stamp) continue;
-        scratch.checked[static_cast<std::size_t>(e)] = stamp;
-        if (volume6At(q, tets[static_cast<std::size_t>(e)]) < min_ratio * rest6[static_cast<std::size_t>(e)]) {
-          scratch.below.push_back(e);
-          queueTet(e);
-        }
-      }
-    }
+    measureAround(ring, stamp, q, tets, rest6, min_ratio, scratch, queueTet);
   }
 }
 
@@ -213,14 +224,8 @@ StrainLimitResult limitVolumes(FemBody& body, const std::vector<double>& rest6, 
       }
     }
     // only the tets around a node that moved can have changed
-    for (int node : scratch.moved_nodes) {
-      for (int i = scratch.node_tet_offset[static_cast<std::size_t>(node)]; i < scratch.node_tet_offset[static_cast<std::size_t>(node) + 1]; ++i) {
-        const int e = scratch.node_tet[static_cast<std::size_t>(i)];
-        if (scratch.checked[static_cast<std::size_t>(e)] == out.sweeps) continue;
-        scratch.checked[static_cast<std::size_t>(e)] = out.sweeps;
-        if (volume6At(q, tets[static_cast<std::size_t>(e)]) < min_ratio * rest6[static_cast<std::size_t>(e)]) scratch.below.push_back(e);
-      }
-    }
+    measureAround(scratch.moved_nodes, out.sweeps, q, tets, rest6, min_ratio, scratch,
+                  [](int) {});
     scratch.moved_nodes.clear();
     if (scratch.below.empty()) break;
     for (int e : scratch.below) {
