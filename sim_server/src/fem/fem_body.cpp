@@ -367,6 +367,7 @@ FemStepStats FemBody::freeMotion(double h, const Eigen::VectorXd* external_force
   FemStepStats stats;
   if (!(h > 0.0)) throw Error("FemBody::freeMotion: time step must be > 0");
   const std::int64_t t0 = shared::monotonicNs();
+  m.keepRestFactorResident();
   const bool damped = m.material.damping.has_value();
   const double alpha = damped ? m.material.damping->mass_alpha_per_s : 0.0;
   const double beta = damped ? m.material.damping->stiffness_beta_s : 0.0;
@@ -476,6 +477,7 @@ void FemBody::solveRestCompliance(double h, const Eigen::VectorXd& r, Eigen::Vec
   Eigen::VectorXd rr(m.n_free), xr(m.n_free);
   m.reduce(r, rr.data());
   m.chol_rest.solve(rr.data(), xr.data(), 1);
+  m.rest_solved = true;
   x.resize(3 * m.n);
   m.expand(xr.data(), h, x.data());
 }
@@ -494,6 +496,7 @@ void FemBody::solveRestComplianceBatch(double h, const Eigen::MatrixXd& r, Eigen
   Eigen::MatrixXd rr(m.n_free, k);
   for (int c = 0; c < k; ++c) m.reduce(r.col(c), rr.col(c).data());
   m.chol_rest.solveWithBlas(rr.data(), rr.data(), k);
+  m.rest_solved = true;
   x.resize(3 * m.n, k);
   for (int c = 0; c < k; ++c) m.expand(rr.col(c).data(), h, x.col(c).data());
 }

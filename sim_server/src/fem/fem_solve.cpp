@@ -29,6 +29,15 @@ void FemBody::Impl::ensureRestFactor(double h) {
   rest_h = h;
 }
 
+void FemBody::Impl::keepRestFactorResident() {
+  if (!rest_solved && chol_rest.factorized()) {
+    // the sum is stored so that the reads are made
+    volatile double sink = chol_rest.touchPages();
+    (void)sink;
+  }
+  rest_solved = false;
+}
+
 void FemBody::Impl::ensureCurrentFactor() {
   if (chol_current) return;
   if (compliance_scale == 0.0)
@@ -154,6 +163,10 @@ bool FemBody::Impl::solveStep(double h, FemStepStats& stats) {
 }
 
 void FemBody::Impl::prepareFreeMotion(double h) {
+  // the rest factor read once more now, after the rest of the set-up (the compliance models'
+  // reading of their blocks)
+  rest_solved = false;
+  keepRestFactorResident();
   if (options.linear != LinearSolverKind::kCholmodReuse || reuse.ageSteps() >= 0) return;
   const bool damped = material.damping.has_value();
   const double alpha = damped ? material.damping->mass_alpha_per_s : 0.0;

@@ -336,6 +336,20 @@ void CholmodSolver::swapFactor(CholmodSolver& other) noexcept {
   ++other.generation_;
 }
 
+double CholmodSolver::touchPages() const {
+  if (!factor_ || !factorized_ || factor_->x == nullptr) return 0.0;
+  // one value a page: a page is 4096 bytes or more, so every page of the arrays is read
+  const std::size_t count = factor_->is_super ? factor_->xsize : factor_->nzmax;
+  const auto* x = static_cast<const double*>(factor_->x);
+  double sum = 0.0;
+  for (std::size_t i = 0; i < count; i += 4096 / sizeof(double)) sum += x[i];
+  if (count > 0) sum += x[count - 1];
+  if (single_current_) {
+    for (std::size_t i = 0; i < single_x_.size(); i += 4096 / sizeof(float)) sum += single_x_[i];
+  }
+  return sum;
+}
+
 std::size_t CholmodSolver::factorNonzeros() const {
   if (!factor_) return 0;
   if (factor_->is_super) {

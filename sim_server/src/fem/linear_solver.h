@@ -103,6 +103,15 @@ class CholmodSolver {
   /// a caller that kept the value knows the factor is still the one it computed when it is the
   /// same.
   std::uint64_t generation() const { return generation_; }
+  /// Reads one value per 4 KiB page of the numeric factor (and of its float copy) and returns
+  /// their sum (nothing when there is none). A factor kept for a later solve (the rest factor of
+  /// the contact correction, unused until the first contact) has its pages touched so, at a few
+  /// hundredths of a millisecond a call when they are resident: on the VM this project measures
+  /// on, a page not read for some time costs about 10 us at its next read (the first contact
+  /// step's rest solve took 50-60 ms instead of 4-5 in half the runs of liver_grasp_23k;
+  /// docs/measurements.md, "The simulation step at organ scale"), and a call once a step keeps
+  /// that cost off the step that needs the factor. Leaves the factor and every result alone.
+  double touchPages() const;
 
  private:
   cholmod_sparse view(Sparse& lower) const;
