@@ -103,6 +103,7 @@ struct BenchOptions {
   std::string split_contact_groups;    ///< "true"/"false": overrides solver.split_contact_groups
   std::string local_model;             ///< non-empty: overrides haptics.local_model
   int background_lag = -1;             ///< >= 0: overrides solver.background_refactor_lag_steps
+  int background_free_lag = -1;        ///< >= 0: overrides ..._refactor_free_lag_steps
   std::string when_ready;              ///< "true"/"false": overrides ..._refactor_when_ready
   std::string single_precondition;     ///< "true"/"false": overrides ..._precision_preconditioner
 };
@@ -125,6 +126,8 @@ int run(const BenchOptions& o) {
     spec.solver.split_contact_groups = o.split_contact_groups == "true";
   }
   if (o.background_lag >= 0) spec.solver.background_refactor_lag_steps = o.background_lag;
+  if (o.background_free_lag >= 0)
+    spec.solver.background_refactor_free_lag_steps = o.background_free_lag;
   if (!o.when_ready.empty()) spec.solver.background_refactor_when_ready = o.when_ready == "true";
   if (!o.single_precondition.empty())
     spec.solver.single_precision_preconditioner = o.single_precondition == "true";
@@ -531,6 +534,10 @@ int main(int argc, char** argv) {
   app.addOption("--background-refactor-lag-steps", o.background_lag,
                  "Override the scene's solver.background_refactor_lag_steps (> 0: refactorise "
                  "on a worker thread)")
+      ->check(cli::range(0, 1000));
+  app.addOption("--background-refactor-free-lag-steps", o.background_free_lag,
+                 "Override the scene's solver.background_refactor_free_lag_steps (the lag over "
+                 "steps without contact; 0: the lag)")
       ->check(cli::range(0, 1000));
   app.addOption("--background-refactor-when-ready", o.when_ready,
                  "Override the scene's solver.background_refactor_when_ready (true: no step "

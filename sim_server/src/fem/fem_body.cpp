@@ -42,10 +42,13 @@ void FemBody::Impl::init(const TetMesh& m, const FemMaterial& mat,
   options = opt;
   if (opt.background_refactor_lag_steps < 0)
     throw Error("FemBody: background_refactor_lag_steps must be >= 0");
+  if (opt.background_refactor_free_lag_steps < 0)
+    throw Error("FemBody: background_refactor_free_lag_steps must be >= 0");
   reuse = fem_detail::ReusedFactorSolver({opt.cg_tolerance, opt.refactor_iterations,
                                           opt.refactor_every_steps,
                                           opt.background_refactor_lag_steps,
-                                          opt.background_refactor_when_ready});
+                                          opt.background_refactor_when_ready,
+                                          opt.background_refactor_free_lag_steps});
   if (opt.linear == LinearSolverKind::kCholmodReuse && opt.background_refactor_lag_steps > 0) {
     // the worker runs BLAS (CHOLMOD's supernodal factorisation) while the steps go on: the
     // step's own solves make no BLAS call (CholmodSolver::setBlasFreeSolves, linear_solver.h),
@@ -368,6 +371,8 @@ FemStepStats FemBody::freeMotion(double h, const Eigen::VectorXd* external_force
   if (!(h > 0.0)) throw Error("FemBody::freeMotion: time step must be > 0");
   const std::int64_t t0 = shared::monotonicNs();
   m.keepRestFactorResident();
+  m.after_contact = m.compliance_solved;
+  m.compliance_solved = false;
   const bool damped = m.material.damping.has_value();
   const double alpha = damped ? m.material.damping->mass_alpha_per_s : 0.0;
   const double beta = damped ? m.material.damping->stiffness_beta_s : 0.0;
@@ -456,6 +461,7 @@ void FemBody::solveCompliance(const Eigen::VectorXd& r, Eigen::VectorXd& x) cons
   Eigen::VectorXd rr(m.n_free), xr(m.n_free);
   m.reduce(r, rr.data());
   m.chol.solve(rr.data(), xr.data(), 1);
+  m.compliance_solved = true;
   x.resize(3 * m.n);
   m.expand(xr.data(), m.compliance_scale, x.data());
 }
@@ -467,6 +473,7 @@ void FemBody::solveComplianceBatch(const Eigen::MatrixXd& r, Eigen::MatrixXd& x)
   Eigen::MatrixXd rr(m.n_free, k);
   for (int c = 0; c < k; ++c) m.reduce(r.col(c), rr.col(c).data());
   m.chol.solve(rr.data(), rr.data(), k);
+  m.compliance_solved = true;
   x.resize(3 * m.n, k);
   for (int c = 0; c < k; ++c) m.expand(rr.col(c).data(), m.compliance_scale, x.col(c).data());
 }
@@ -478,6 +485,7 @@ void FemBody::solveRestCompliance(double h, const Eigen::VectorXd& r, Eigen::Vec
   m.reduce(r, rr.data());
   m.chol_rest.solve(rr.data(), xr.data(), 1);
   m.rest_solved = true;
+  m.compliance_solved = true;
   x.resize(3 * m.n);
   m.expand(xr.data(), h, x.data());
 }

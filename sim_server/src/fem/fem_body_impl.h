@@ -154,6 +154,10 @@ struct FemState {
   // prepareFreeMotion: chol's generation when it factorised the A of factor_values before the
   // first step (0: none prepared); the next freeMotion uses it if its A is that one
   std::uint64_t prepared_generation = 0;
+  // a contact correction solved with the body's compliance since the last freeMotion
+  // (solveCompliance, solveComplianceBatch, solveRestCompliance): the background refresh's lag
+  // counts the step it ends as one in contact (FemSolverOptions::background_refactor_free_lag_steps)
+  bool compliance_solved = false;
 };
 
 struct FemScratch {
@@ -182,6 +186,8 @@ struct FemScratch {
   // the rest factor solved since the last freeMotion (a contact correction); when it was not,
   // the next freeMotion reads its pages (keepRestFactorResident)
   bool rest_solved = false;
+  // freeMotion: the step before it was in contact (compliance_solved, taken and cleared)
+  bool after_contact = false;
 };
 
 struct FemBody::Impl : FemModel, FemState, FemScratch {

@@ -28,6 +28,7 @@ FemSolverOptions femSolverOptions(const SolverSpec& solver) {
   o.refactor_iterations = solver.refactor_iterations;
   o.refactor_every_steps = solver.refactor_every_steps;
   o.background_refactor_lag_steps = solver.background_refactor_lag_steps;
+  o.background_refactor_free_lag_steps = solver.background_refactor_free_lag_steps;
   o.background_refactor_when_ready = solver.background_refactor_when_ready;
   o.single_precision_preconditioner = solver.single_precision_preconditioner;
   return o;

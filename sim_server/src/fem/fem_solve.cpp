@@ -82,7 +82,8 @@ bool FemBody::Impl::solveStep(double h, FemStepStats& stats) {
     case LinearSolverKind::kCholmodReuse: {
       dv = 2.0 * dv_prev - dv_prev2;  // warm start
       double background_factor_s = 0.0;
-      const bool taken = reuse.adoptDue(chol, stats.factor_wait_s, background_factor_s);
+      const bool taken =
+          reuse.adoptDue(chol, stats.factor_wait_s, background_factor_s, after_contact);
       counters.background_not_ready = reuse.notReadySteps();
       counters.background_wait_s += stats.factor_wait_s;
       if (prepared_generation != 0) {

@@ -7,7 +7,7 @@ namespace tactus::sim {
 
 // A member added to FemState must be added below (or to the list of members rebuilt from
 // others): this stops the build until it is.
-static_assert(kAggregateFields<FemState> == 21,
+static_assert(kAggregateFields<FemState> == 22,
               "FemState gained or lost a member: walk it in FemBody::Impl::transferState "
               "(fem_state.cpp) and update this count");
 
@@ -52,6 +52,9 @@ void FemBody::Impl::transferState(StateArchive& ar) {
   ar.resizable("background_node_rot", background_node_rot, static_cast<std::size_t>(n_free / 3));
   ar.resizable("background_factor_values", background_factor_values,
                static_cast<std::size_t>(a.nonZeros()));
+  // whether the last step's contact correction solved with the body: the next step's adoptDue
+  // weighs the running job's age by it
+  ar("compliance_solved", compliance_solved);
   if (!ar.loading()) return;
   // rebuilt from the rotations on demand: FemBody::elementRotations' per-tet copy and the node sums
   rotation_by_tet_stale = true;

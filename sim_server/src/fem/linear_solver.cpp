@@ -454,12 +454,18 @@ void BackgroundFactoriser::run() {
 // ---- factor reuse ----
 
 bool ReusedFactorSolver::adoptDue(CholmodSolver& factor, double& waited_s,
-                                  double& factorisation_s) {
+                                  double& factorisation_s, bool after_contact) {
   waited_s = 0.0;
   factorisation_s = 0.0;
   if (background_ == nullptr || !background_->busy()) return false;
   ++job_steps_;
-  if (job_steps_ < policy_.background_lag_steps) return false;
+  const int lag = policy_.background_lag_steps;
+  const int free_lag = policy_.background_free_lag_steps > 0 ? policy_.background_free_lag_steps
+                                                               : policy_.background_lag_steps;
+  // a step after contact counts 1 / lag of the way, one without 1 / free_lag (in units of
+  // 1 / (lag x free_lag)); with free_lag == lag every step counts alike
+  job_units_ += after_contact ? free_lag : lag;
+  if (job_units_ < lag * free_lag) return false;
   if (policy_.background_when_ready && !background_->finished()) {
     // not ready: this step goes on with the factor it has; the next one looks again
     ++not_ready_steps_;
@@ -498,6 +504,7 @@ ReuseSolveResult ReusedFactorSolver::solve(CholmodSolver& factor, Sparse& a,
     if (background_->busy()) return;
     background_->start(a, factor);
     job_steps_ = 0;
+    job_units_ = 0;
     job_stale_ = false;
     out.background_started = true;
   };

@@ -263,6 +263,9 @@ struct FactorReusePolicy {
   /// (the steps at which the factor changes then depend on the worker's speed); false: exactly
   /// background_lag_steps steps after, waiting for the worker if it has not finished
   bool background_when_ready = false;
+  /// background mode, lagged: the lag over steps without contact (see
+  /// ReusedFactorSolver::adoptDue); 0: background_lag_steps
+  int background_free_lag_steps = 0;
 };
 
 /// Figures of one ReusedFactorSolver::solve.
@@ -318,7 +321,14 @@ class ReusedFactorSolver {
   /// started the job. A job made stale by a newer factor is dropped at that step instead.
   /// With background_when_ready: the same when the job has finished, nothing (no wait) when it
   /// has not (counted by notReadySteps()).
-  bool adoptDue(CholmodSolver& factor, double& waited_s, double& factorisation_s);
+  /// `after_contact`: the previous step's contact correction solved with the body. With
+  /// background_free_lag_steps > 0 the steps since the job's start are weighed: each counts
+  /// background_free_lag_steps units after a step in contact, background_lag_steps units after
+  /// one without, and the job is due when they reach background_lag_steps x
+  /// background_free_lag_steps (the lag's steps in contact, or the free lag's without; a mix in
+  /// between). Without, every step counts one and the job is due after background_lag_steps.
+  bool adoptDue(CholmodSolver& factor, double& waited_s, double& factorisation_s,
+                bool after_contact = false);
   /// background_when_ready: steps at which a job was due and had not finished (each went on with
   /// the factor it had instead of waiting).
   long notReadySteps() const { return not_ready_steps_; }
@@ -360,6 +370,7 @@ class ReusedFactorSolver {
     bool job = background_ != nullptr && background_->busy();
     ar("background_job", job);
     ar("background_job_steps", job_steps_);
+    ar("background_job_units", job_units_);
     ar("background_job_stale", job_stale_);
     if (!ar.loading()) return;
     if (background_ != nullptr && background_->busy()) background_->discard();
@@ -385,6 +396,7 @@ class ReusedFactorSolver {
   long not_ready_steps_ = 0;
   BackgroundFactoriser* background_ = nullptr;
   int job_steps_ = 0;        // steps since the worker's job started (while it is busy)
+  int job_units_ = 0;        // and their weights (adoptDue)
   bool job_stale_ = false;   // a newer factor than the job's was made since it started
   bool restart_job_ = false; // a loaded state had a job in flight (jobToRestart)
   bool prepared_ = false;    // notePreparedFactor (consumed by the next solve)

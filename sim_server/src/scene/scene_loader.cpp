@@ -48,6 +48,7 @@ void SceneParser::readSolver(const YAML::Node& n, SolverSpec* s, int instruments
   const std::string p = "solver";
   checkKeys(n, p, {"linear", "cg_tolerance", "cg_max_iterations", "refactor_iterations",
                    "refactor_every_steps", "background_refactor_lag_steps",
+                   "background_refactor_free_lag_steps",
                    "background_refactor_when_ready", "single_precision_preconditioner",
                    "nsgs_tolerance",
                    "nsgs_max_sweeps", "nsgs_sor", "nsgs_anderson_depth", "split_contact_groups", "max_contacts", "contact_iterations",
@@ -62,6 +63,8 @@ void SceneParser::readSolver(const YAML::Node& n, SolverSpec* s, int instruments
   integer(n, p, "refactor_iterations", &s->refactor_iterations, 1, 10'000, 1'000);
   integer(n, p, "refactor_every_steps", &s->refactor_every_steps, 0, 100'000'000, 1'000'000);
   integer(n, p, "background_refactor_lag_steps", &s->background_refactor_lag_steps, 0, 1000, 100);
+  integer(n, p, "background_refactor_free_lag_steps", &s->background_refactor_free_lag_steps, 0,
+          1000, 100);
   boolean(n, p, "background_refactor_when_ready", &s->background_refactor_when_ready);
   boolean(n, p, "single_precision_preconditioner", &s->single_precision_preconditioner);
   number(n, p, "nsgs_tolerance", &s->nsgs_tolerance, kPositive, Range{-kInf, 1.0, false, true},

@@ -277,5 +277,52 @@ TEST(BackgroundFactorTest, AStepNeverWaitsForTheWorkerWhenTheFactorIsTakenWhenRe
   RecordProperty("worst_relative_error_while_held", std::to_string(worst));
 }
 
+// The lagged takeover with a longer lag out of contact (FactorReusePolicy::
+// background_free_lag_steps): the steps since a job's start are weighed by whether the step
+// before each was in contact, and the job is taken at the step at which they add up to the lag:
+// lag 2 in contact, 4 out of it, 3 for a step out of contact then two in it; without the free
+// lag every step counts alike. Counts, not times: the worker's speed decides nothing (collect
+// waits for it).
+TEST(BackgroundFactorTest, TheLaggedTakeoverWeighsStepsOutOfContactByTheFreeLag) {
+  constexpr int kSteps = 8;
+  std::vector<LowerMatrix> a(kSteps);
+  for (int k = 0; k < kSteps; ++k) a[k] = gridLaplacianLower(8, 0.5 + 0.03 * k);
+  const Eigen::VectorXd b = rampRhs(a[0].rows());
+  // the adoptDue call (1: the step after the job's start) at which the job is taken
+  auto takenAt = [&](int free_lag, const std::vector<bool>& after_contact) {
+    CholmodSolver factor;
+    factor.setBlasFreeSolves(true);
+    BackgroundFactoriser worker;
+    FactorReusePolicy policy;
+    policy.tolerance = 1e-10;
+    policy.refactor_every_steps = 1;   // every step due: the second step starts a job
+    policy.background_lag_steps = 2;
+    policy.background_free_lag_steps = free_lag;
+    ReusedFactorSolver reuse(policy);
+    reuse.setBackground(&worker);
+    Eigen::VectorXd x = Eigen::VectorXd::Zero(b.size());
+    double waited_s = 0.0, factorisation_s = 0.0;
+    EXPECT_TRUE(reuse.solve(factor, a[0], b, x).refreshed);   // no factor yet: on this thread
+    EXPECT_FALSE(reuse.adoptDue(factor, waited_s, factorisation_s, after_contact[0]));
+    EXPECT_TRUE(reuse.solve(factor, a[1], b, x).background_started);
+    for (int k = 1; k < kSteps - 1; ++k) {
+      const bool contact = after_contact[static_cast<std::size_t>(k)];
+      if (reuse.adoptDue(factor, waited_s, factorisation_s, contact)) return k;
+      const ReuseSolveResult r = reuse.solve(factor, a[k + 1], b, x);
+      EXPECT_TRUE(r.ok && !r.refreshed) << "step " << k + 1;
+    }
+    return -1;
+  };
+  const std::vector<bool> free(kSteps, false), contact(kSteps, true);
+  std::vector<bool> free_then_contact(kSteps, true);
+  free_then_contact[1] = false;
+  EXPECT_EQ(takenAt(4, contact), 2);
+  EXPECT_EQ(takenAt(4, free), 4);
+  EXPECT_EQ(takenAt(4, free_then_contact), 3);
+  EXPECT_EQ(takenAt(0, free), 2);
+  EXPECT_EQ(takenAt(0, contact), 2);
+  EXPECT_EQ(takenAt(2, free), 2);
+}
+
 }  // namespace
 }  // namespace tactus::sim::fem_detail

@@ -237,9 +237,14 @@ TEST(SimulationStateTest, ObstaclesAndTissueContactContinueBitForBit) {
 // not when ready): a state saved while the worker factorises holds the values it factorises, and
 // the restore starts that job again, so the factor takes over at the same step and the run
 // continues bit for bit (without the job's restart the restored run kept its old factor longer).
-TEST(SimulationStateTest, ABackgroundFactorisationInFlightContinuesBitForBit) {
+// With a longer lag out of contact (solver.background_refactor_free_lag_steps) the job's weighed
+// age and whether the last step was in contact are state too: saved in contact, a restore that
+// counted its first step as one out of contact would take the factor a step later.
+void expectBackgroundJobContinuesBitForBit(int free_lag_steps) {
+  SCOPED_TRACE("background_refactor_free_lag_steps " + std::to_string(free_lag_steps));
   SceneSpec spec = scene("liver_grasp.yaml");
   spec.solver.background_refactor_lag_steps = 2;
+  spec.solver.background_refactor_free_lag_steps = free_lag_steps;
   spec.solver.background_refactor_when_ready = false;
   Simulation sim(spec);
   // into the grasp, to a step that leaves a job in flight
@@ -265,6 +270,14 @@ TEST(SimulationStateTest, ABackgroundFactorisationInFlightContinuesBitForBit) {
 
   sim.restoreState(saved);
   expectSameRun(original, runPrinting(sim, 60), "the simulation rewound");
+}
+
+TEST(SimulationStateTest, ABackgroundFactorisationInFlightContinuesBitForBit) {
+  expectBackgroundJobContinuesBitForBit(0);
+}
+
+TEST(SimulationStateTest, ABackgroundFactorisationInFlightWithAFreeLagContinuesBitForBit) {
+  expectBackgroundJobContinuesBitForBit(4);
 }
 
 // The other linear solves carry their own warm starts (PCG: the last dv) or none (CHOLMOD).

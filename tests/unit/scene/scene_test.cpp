@@ -260,15 +260,18 @@ TEST(Scene, LinearSolverStrategies) {
   EXPECT_EQ(def.solver.refactor_iterations, 8);
   EXPECT_EQ(def.solver.refactor_every_steps, 0);
   EXPECT_EQ(def.solver.background_refactor_lag_steps, 0);
+  EXPECT_EQ(def.solver.background_refactor_free_lag_steps, 0);
   EXPECT_FALSE(def.solver.background_refactor_when_ready);
   EXPECT_FALSE(def.solver.single_precision_preconditioner);
   const SceneSpec s = parseScene(
       kFullHead +
           "solver: {linear: cholmod_reuse, refactor_iterations: 12, refactor_every_steps: 50,\n"
           "         background_refactor_lag_steps: 2, background_refactor_when_ready: true,\n"
+          "         background_refactor_free_lag_steps: 4,\n"
           "         single_precision_preconditioner: true}\n",
       "s.yaml", kSceneFiles);
   EXPECT_EQ(s.solver.background_refactor_lag_steps, 2);
+  EXPECT_EQ(s.solver.background_refactor_free_lag_steps, 4);
   EXPECT_TRUE(s.solver.background_refactor_when_ready);
   EXPECT_TRUE(s.solver.single_precision_preconditioner);
   EXPECT_EQ(s.solver.linear, LinearSolverKind::kCholmodReuse);
@@ -284,6 +287,8 @@ TEST(Scene, LinearSolverStrategies) {
             "s.yaml:4:31: solver.refactor_iterations: must be in [1, 10000] (got 20000)");
   EXPECT_EQ(sceneError(kFullHead + "solver: {background_refactor_lag_steps: -1}\n"),
             "s.yaml:4:41: solver.background_refactor_lag_steps: must be >= 0 (got -1)");
+  EXPECT_EQ(sceneError(kFullHead + "solver: {background_refactor_free_lag_steps: -1}\n"),
+            "s.yaml:4:46: solver.background_refactor_free_lag_steps: must be >= 0 (got -1)");
 }
 
 TEST(Scene, EulerAnglesApplyXThenYThenZ) {

@@ -115,6 +115,16 @@ struct FemSolverOptions {
   /// its factor (0, the default: refresh synchronously, on the step's thread; liver_grasp_20k
   /// and liver_grasp_23k set 2)
   int background_refactor_lag_steps = 0;
+  /// kCholmodReuse in the background, the lagged takeover: the lag over steps without contact.
+  /// The steps since a job's start are added up, a step in which a contact correction solved
+  /// with the body's compliance (solveCompliance, solveComplianceBatch, solveRestCompliance)
+  /// counting 1 / background_refactor_lag_steps and one without 1 / this, and the new factor
+  /// takes over at the step at which they reach 1: a step out of contact costs about half of one
+  /// in contact on the grasp scenes, the factorisation the same, so fewer steps would wait for
+  /// it out of contact (liver_grasp_23k sets 4 with the lag 2). Which steps count how much
+  /// follows from the contacts, never from the worker's speed: reproducible bit for bit.
+  /// 0 (the default): background_refactor_lag_steps, every step counting alike.
+  int background_refactor_free_lag_steps = 0;
   /// kCholmodReuse in the background: the new factor takes over as soon as it is ready (no step
   /// waits for the worker; timing-dependent results) instead of exactly
   /// background_refactor_lag_steps steps after its start (reproducible; waits if not ready)

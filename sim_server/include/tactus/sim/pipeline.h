@@ -153,7 +153,9 @@ class Simulation {
 /// Format of Simulation::saveState's bytes: "TACTSTAT", this version (u32), the model name's
 /// length (u32), the model identity (u64), the step index (i64), the time (f64), the model name,
 /// then the state's fields (state_archive.h). A state of another version is refused.
-inline constexpr std::uint32_t kStateFormatVersion = 1;
+/// Version 2 added a FemBody's flag of a contact solve in its last step and a running background
+/// job's weighed age (FemSolverOptions::background_refactor_free_lag_steps).
+inline constexpr std::uint32_t kStateFormatVersion = 2;
 
 /// The header of a saved state.
 struct StateHeader {

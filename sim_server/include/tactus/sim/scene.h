@@ -192,6 +192,10 @@ struct SolverSpec {
   /// kCholmodReuse: > 0 refreshes the factor on a worker thread, the new factor taking over this
   /// many steps later (FemSolverOptions::background_refactor_lag_steps); 0: on the step's thread
   int background_refactor_lag_steps = 0;
+  /// kCholmodReuse in the background: the lag over steps without contact (a step whose
+  /// contact correction did not solve with the body counts background_refactor_lag_steps / this
+  /// of a step; FemSolverOptions::background_refactor_free_lag_steps); 0: the same lag
+  int background_refactor_free_lag_steps = 0;
   /// kCholmodReuse in the background: the new factor takes over as soon as the worker has
   /// finished, no step waiting for it (FemSolverOptions::background_refactor_when_ready)
   bool background_refactor_when_ready = false;
