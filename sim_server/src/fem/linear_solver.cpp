@@ -463,8 +463,9 @@ bool ReusedFactorSolver::adoptDue(CholmodSolver& factor, double& waited_s,
   const int free_lag = policy_.background_free_lag_steps > 0 ? policy_.background_free_lag_steps
                                                                : policy_.background_lag_steps;
   // a step after contact counts 1 / lag of the way, one without 1 / free_lag (in units of
-  // 1 / (lag x free_lag)); with free_lag == lag every step counts alike
-  job_units_ += after_contact ? free_lag : lag;
+  // 1 / (lag x free_lag)); with free_lag == lag every step counts alike. Held at the due
+  // count once reached (a job not ready in the when-ready mode is looked at again each step).
+  job_units_ = std::min(job_units_ + (after_contact ? free_lag : lag), lag * free_lag);
   if (job_units_ < lag * free_lag) return false;
   if (policy_.background_when_ready && !background_->finished()) {
     // not ready: this step goes on with the factor it has; the next one looks again
