@@ -123,7 +123,8 @@ struct FemSolverOptions {
   /// in contact on the grasp scenes, the factorisation the same, so fewer steps would wait for
   /// it out of contact (liver_grasp_23k sets 4 with the lag 2). Which steps count how much
   /// follows from the contacts, never from the worker's speed: reproducible bit for bit.
-  /// 0 (the default): background_refactor_lag_steps, every step counting alike.
+  /// 0 (the default): background_refactor_lag_steps, every step counting alike. With
+  /// background_refactor_when_ready the same count is the least age at which a job is taken.
   int background_refactor_free_lag_steps = 0;
   /// kCholmodReuse in the background: the new factor takes over as soon as it is ready (no step
   /// waits for the worker; timing-dependent results) instead of exactly
