@@ -75,48 +75,24 @@ public:
     const int m = static_cast<int>(rows.size());
     if (m == 0)
       return;
-    chooseModel(rows);
-    const int u = collect(rows);
-    const int du = 3 * u;
-    // G = C_UU P, column by column from 3x3 blocks
-    GrowOnlyMatrix::Map &gm = g_.resize(du, m);
-    if (active_ == ComplianceKind::kUncoupled) {
-      gm.setZero();
-      for (int l = 0; l < m; ++l)
-        for (int t = 0; t < terms_[l].count; ++t) {
-          const int b = terms_[l].local[t];
-          gm.col(l).segment<3>(3 * b) +=
-              diag_[blk_.local[touched_[b]]] * terms_[l].p[t];
-        }
-    } else {
-      gatherCuu(u);
-      for (int l = 0; l < m;) {
-        const int g = sameNodeRun(l, m);
-        double *out[3] = {gm.col(l).data(), nullptr, nullptr};
-        for (int r = 1; r < g; ++r)
-          out[r] = gm.col(l + r).data();
-        combineRun(cuu_.map(), l, g, 0, du, out);
-        l += g;
-      }
-    }
-    // W = G^T P (symmetric): lower triangle only, through G^T so every column
-    // is one fused pass over contiguous memory, then added to both triangles of
-    // w
-    GrowOnlyMatrix::Map &gtm = gt_.resize(m, du);
-    gtm = gm.transpose();
+    buildGt(rows);
+    // W = G^T P (symmetric): lower triangle only, then added to both triangles of w
     GrowOnlyMatrix::Map &wdm = wd_.resize(m, m);
-    // (a run of rows shares the start row l; entries above the diagonal are
-    // overwritten below)
-    for (int l = 0; l < m;) {
-      const int g = sameNodeRun(l, m);
-      double *out[3] = {wdm.col(l).data() + l, nullptr, nullptr};
-      for (int r = 1; r < g; ++r)
-        out[r] = wdm.col(l + r).data() + l;
-      combineRun(gtm, l, g, l, m - l, out);
-      l += g;
-    }
+    writeLower(m, wdm.data(), wdm.outerStride());
     wdm.triangularView<Eigen::StrictlyUpper>() = wdm.transpose();
     w += wdm;
+    release();
+  }
+
+  void setWLower(std::span<const TissueRow> rows,
+                 Eigen::Ref<Eigen::MatrixXd> w) override {
+    const int m = static_cast<int>(rows.size());
+    if (m == 0)
+      return;
+    buildGt(rows);
+    // straight into w's columns: no m x m scratch, no mirror, no second pass (addW's values:
+    // combine's sums start at +0.0 and so are never -0.0, and 0.0 + x is x for every other x)
+    writeLower(m, w.data(), w.outerStride());
     release();
   }
 
@@ -191,6 +167,8 @@ public:
     wd_.reserve(m * m);
     cuu_.reserve(du * du);
     prev_cuu_.reserve(du * du);
+    // correction's r = H^T f over the body, written now rather than at the first contact
+    r_.setZero(3 * body_->nodeCount());
   }
 
   // The state of the model (state_archive.h): the rotations and coherences of the last update()
@@ -254,6 +232,55 @@ private:
       for (int a = 0; a < s; ++a)
         diag_[a] = blk_.block(a, a).trace() / 3.0;
       blk_.release();
+    }
+  }
+
+  // addW's first part: chooses the model, collects the rows' nodes, and leaves G = C_UU P
+  // (3|U| x m) in g_ and G^T (m x 3|U|) in gt_.
+  void buildGt(std::span<const TissueRow> rows) {
+    const int m = static_cast<int>(rows.size());
+    chooseModel(rows);
+    const int u = collect(rows);
+    const int du = 3 * u;
+    // G = C_UU P, column by column from 3x3 blocks
+    GrowOnlyMatrix::Map &gm = g_.resize(du, m);
+    if (active_ == ComplianceKind::kUncoupled) {
+      gm.setZero();
+      for (int l = 0; l < m; ++l)
+        for (int t = 0; t < terms_[l].count; ++t) {
+          const int b = terms_[l].local[t];
+          gm.col(l).segment<3>(3 * b) +=
+              diag_[blk_.local[touched_[b]]] * terms_[l].p[t];
+        }
+    } else {
+      gatherCuu(u);
+      for (int l = 0; l < m;) {
+        const int g = sameNodeRun(l, m);
+        double *out[3] = {gm.col(l).data(), nullptr, nullptr};
+        for (int r = 1; r < g; ++r)
+          out[r] = gm.col(l + r).data();
+        combineRun(cuu_.map(), l, g, 0, du, out);
+        l += g;
+      }
+    }
+    // through G^T so every column of W below is one fused pass over contiguous memory
+    GrowOnlyMatrix::Map &gtm = gt_.resize(m, du);
+    gtm = gm.transpose();
+  }
+
+  // The lower triangle (diagonal included) of W = G^T P into the column-major m x m matrix at
+  // `w` with column stride `ld`, from buildGt's G^T. A run of rows shares its start row l, so
+  // the run's later columns also get entries just above the diagonal (at most two a column):
+  // the strict upper triangle is left unspecified.
+  void writeLower(int m, double *w, Eigen::Index ld) const {
+    const GrowOnlyMatrix::Map &gtm = gt_.map();
+    for (int l = 0; l < m;) {
+      const int g = sameNodeRun(l, m);
+      double *out[3] = {w + l * ld + l, nullptr, nullptr};
+      for (int r = 1; r < g; ++r)
+        out[r] = w + (l + r) * ld + l;
+      combineRun(gtm, l, g, l, m - l, out);
+      l += g;
     }
   }
 

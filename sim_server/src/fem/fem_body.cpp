@@ -481,7 +481,10 @@ void FemBody::solveComplianceBatch(const Eigen::MatrixXd& r, Eigen::MatrixXd& x)
 void FemBody::solveRestCompliance(double h, const Eigen::VectorXd& r, Eigen::VectorXd& x) {
   Impl& m = *impl_;
   m.ensureRestFactor(h);
-  Eigen::VectorXd rr(m.n_free), xr(m.n_free);
+  // (the buffers, written when the rest factor was made: no fresh page at the first contact)
+  Eigen::VectorXd &rr = m.rest_rhs, &xr = m.rest_x;
+  rr.resize(m.n_free);
+  xr.resize(m.n_free);
   m.reduce(r, rr.data());
   m.chol_rest.solve(rr.data(), xr.data(), 1);
   m.rest_solved = true;

@@ -188,6 +188,8 @@ struct FemScratch {
   bool rest_solved = false;
   // freeMotion: the step before it was in contact (compliance_solved, taken and cleared)
   bool after_contact = false;
+  // solveRestCompliance's reduced right-hand side and solution
+  Eigen::VectorXd rest_rhs, rest_x;
 };
 
 struct FemBody::Impl : FemModel, FemState, FemScratch {
@@ -299,6 +301,9 @@ struct FemBody::Impl : FemModel, FemState, FemScratch {
   void ensureStepNodeSums();
   void ensureRestFactor(double h);
   void prepareFreeMotion(double h);   // FemBody::prepareFreeMotion
+  // the step's buffers (node rotation sums and rotations, the smoothing's per-tet sums) given
+  // the storage the steps size them to, written now (prepareFreeMotion)
+  void prepareStepBuffers();
   void ensureCurrentFactor();
   // dv = A^-1 rhs by a fresh CHOLMOD factorisation of `a` (timed into stats); false when A is not
   // positive definite.

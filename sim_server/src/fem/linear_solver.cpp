@@ -271,6 +271,18 @@ void CholmodSolver::supernodalSolveWithoutBlas(const double* b, double* x, int n
   permutedSweeps(f, lx, own_y_, own_e_, b, x);
 }
 
+void CholmodSolver::prepareSolveWorkspaces() {
+  if (factor_ == nullptr || !factor_->is_super) return;
+  const auto n = static_cast<Eigen::Index>(factor_->n);
+  const auto esize = static_cast<Eigen::Index>(factor_->maxesize);
+  own_y_.setZero(n, 1);
+  own_e_.setZero(esize, 1);
+  if (single_current_) {
+    single_y_.setZero(n);
+    single_e_.setZero(esize);
+  }
+}
+
 void CholmodSolver::solvePreconditioner(const double* b, double* x) {
   if (!single_current_ || !blas_free_solves_) {
     solve(b, x, 1);

@@ -112,6 +112,11 @@ class CholmodSolver {
   /// docs/measurements.md, "The simulation step at organ scale"), and a call once a step keeps
   /// that cost off the step that needs the factor. Leaves the factor and every result alone.
   double touchPages() const;
+  /// Sizes and writes the workspaces of the solves without BLAS (double, and float when the
+  /// single-precision copy is current) for one right-hand side, so that the first solve takes
+  /// no fresh page. The factor and every result are left alone. Nothing without a supernodal
+  /// factor.
+  void prepareSolveWorkspaces();
 
  private:
   cholmod_sparse view(Sparse& lower) const;
@@ -354,6 +359,11 @@ class ReusedFactorSolver {
   void forget() {
     age_steps_ = -1;
     job_stale_ = true;
+  }
+  /// Sizes and writes the PCG's work vectors and the warp's for `n` unknowns (set-up: the first
+  /// PCG then takes no fresh page). Every value is written by solve() before it is read.
+  void prepareBuffers(Eigen::Index n) {
+    for (Eigen::VectorXd* v : {&cg_.r, &cg_.z, &cg_.p, &cg_.ap, &warp_}) v->setZero(n);
   }
   /// Steps since the factor was computed (-1: none yet).
   int ageSteps() const { return age_steps_; }

@@ -7,6 +7,7 @@
 #include "step_stages.h"
 #include "tissue_contact_stage.h"
 #include "tactus/shared/clock.h"
+#include "tactus/shared/grow_only_matrix.h"
 
 namespace tactus::sim {
 namespace {
@@ -94,8 +95,9 @@ int countDistinctNodes(const SimulationState& state, StepScratch& scratch) {
 // + H_i C6_i H_i^T (+ c_g g g^T) over instrument i's rows, J's rows of instrument i (= H_i G_i)
 // and its contact compliance on their diagonal. The rows of one instrument are found through
 // scratch.row_instrument (-1 for an obstacle's rows, which belong to no instrument).
+// With upper_only the pairs (i, j > i) go to W's upper triangle alone (the caller mirrors it).
 void addToolCompliance(const SimulationModel& model, const SimulationState& state,
-                       StepScratch& scratch, int instrument, int rows) {
+                       StepScratch& scratch, int instrument, int rows, bool upper_only) {
   const double h = model.h_s;
   ContactProblemData& p = scratch.problem;
   const bool only = state.instruments.size() == 1;
@@ -129,7 +131,7 @@ void addToolCompliance(const SimulationModel& model, const SimulationState& stat
       if (!owns(j)) continue;
       const double w = bi.dot(scratch.b_tool.row(j)) + gi * p.grip[j];
       wi[j] += w;
-      if (j != i) p.W(j, i) += w;
+      if (j != i && !upper_only) p.W(j, i) += w;
     }
   }
   // contact compliance (collision.h): W + c I, penetration c f_n per contact
@@ -154,7 +156,20 @@ void assembleProblem(const SimulationModel& model, SimulationState& state, StepS
   p.normal.resize(contacts);
   p.tangent1.resize(contacts);
   p.tangent2.resize(contacts);
-  p.W.setZero(rows, rows);
+  // Without rows between tissues every tissue's block is its own, and W is assembled in its
+  // upper triangle (row-major: each row's part right of the diagonal, contiguous), the tissue
+  // blocks set in place (TissueCompliance::setWLower), the instruments' terms added there, then
+  // mirrored once: the bits of the sum of both halves (the tissue blocks are symmetric to the
+  // bit, and each term went to both halves alike), for a single write of W's storage instead of
+  // a zeroing, a scratch block, its mirror, its sum into W and the instruments' column writes.
+  const PairRowsScratch& pairs = scratch.pair_rows;
+  bool upper_only = pairs.rows() == 0;
+  for (const TissueScratch& tx : scratch.tissues) upper_only = upper_only && tx.pair_parts.empty();
+  if (upper_only) {
+    p.W.resize(rows, rows);
+  } else {
+    p.W.setZero(rows, rows);
+  }
   p.delta_free.resize(rows);
   p.J.resize(rows, 6);
   scratch.h_tool.resize(rows, 6);
@@ -175,7 +190,14 @@ void assembleProblem(const SimulationModel& model, SimulationState& state, StepS
       // the tissue's block in place: W is symmetric, so the transposed view of the row-major
       // block (column-major for the model) is the same matrix
       auto block = p.W.block(tx.row_begin, tx.row_begin, m, m).transpose();
-      ts.compliance->addW(tx.rows.tissue, block);
+      if (upper_only) {
+        // its lower triangle is the block's upper one in W; right of the block, in its rows,
+        // the other tissues' columns (no coupling)
+        ts.compliance->setWLower(tx.rows.tissue, block);
+        p.W.block(tx.row_begin, tx.row_begin + m, m, rows - tx.row_begin - m).setZero();
+      } else {
+        ts.compliance->addW(tx.rows.tissue, block);
+      }
       ++counters.w_builds;
     }
     scratch.h_tool.middleRows(tx.row_begin, m) = tx.rows.tool;
@@ -183,7 +205,6 @@ void assembleProblem(const SimulationModel& model, SimulationState& state, StepS
     for (int r = 0; r < m; ++r) p.delta_free[tx.row_begin + r] = tx.rows.delta_free[r];
   }
   // the rows between tissues, last: no tool part, their pair's contact compliance on the diagonal
-  const PairRowsScratch& pairs = scratch.pair_rows;
   if (pairs.rows() > 0) {
     const int r0 = pairs.row_begin;
     const int nc = static_cast<int>(pairs.row_offset.size()) - 1;
@@ -216,6 +237,7 @@ void assembleProblem(const SimulationModel& model, SimulationState& state, StepS
   if (rows == 0) return;
   if (state.instruments.empty()) {
     p.J.setZero();
+    if (upper_only) shared::mirrorUpperToLower(p.W.map());
     return;
   }
   // + H_tool C6 H_tool^T = B B^T with B = H_tool L (C6 = L L^T), each pair (i, j) computed
@@ -227,8 +249,9 @@ void assembleProblem(const SimulationModel& model, SimulationState& state, StepS
   // tissues) stay 0
   if (state.instruments.size() > 1) p.J.setZero();
   for (std::size_t i = 0; i < state.instruments.size(); ++i) {
-    addToolCompliance(model, state, scratch, static_cast<int>(i), rows);
+    addToolCompliance(model, state, scratch, static_cast<int>(i), rows, upper_only);
   }
+  if (upper_only) shared::mirrorUpperToLower(p.W.map());
 }
 
 }  // namespace

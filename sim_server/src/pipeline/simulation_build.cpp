@@ -3,6 +3,7 @@
 #include <spdlog/spdlog.h>
 
 #include "simulation_impl.h"
+#include "strain_limit.h"
 #include "tissue_contact_stage.h"
 
 namespace tactus::sim {
@@ -128,6 +129,18 @@ Simulation::Simulation(std::shared_ptr<const SimulationModel> model)
   // the first step's factorisation made now (solver.linear cholmod_reuse): that step solves
   // with it when its system matrix is the one factorised here (FemBody::prepareFreeMotion)
   for (TissueState& ts : impl_->state.tissues) ts.body->prepareFreeMotion(impl_->model.h_s);
+  // the step's per-tissue vectors at their size and the volume limiter's maps, written now: the
+  // first step and the first contact step took their pages otherwise (a first touch costs
+  // about 18 us on the VM measured; docs/design.md, "The step's buffers written at set-up").
+  // Every value is written by the step before it is read.
+  for (std::size_t t = 0; t < impl_->state.tissues.size(); ++t) {
+    const FemBody& body = *impl_->state.tissues[t].body;
+    TissueScratch& tx = impl_->scratch.tissues[t];
+    for (Eigen::VectorXd* v : {&tx.q_begin, &tx.q_free, &tx.v_free, &tx.dq, &tx.dq_previous}) {
+      v->setZero(body.dofCount());
+    }
+    if (impl_->model.tissues[t].min_volume_ratio > 0.0) prepareStrainLimit(body, tx.strain_limit);
+  }
 }
 
 Simulation::~Simulation() = default;

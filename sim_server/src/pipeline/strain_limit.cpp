@@ -4,6 +4,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "tactus/shared/grow_only_matrix.h"
+
 namespace tactus::sim {
 
 namespace {
@@ -56,6 +58,25 @@ void measureAround(const std::vector<int>& nodes, int stamp, const Eigen::Vector
         on_below(e);
       }
     }
+  }
+}
+
+// node -> its tets (CSR), once per body
+void buildNodeTets(const FemBody& body, StrainLimitScratch& scratch) {
+  const int n = body.nodeCount();
+  if (scratch.node_tet_offset.size() == static_cast<std::size_t>(n) + 1) return;
+  const auto& tets = body.mesh().tets;
+  scratch.node_tet_offset.assign(static_cast<std::size_t>(n) + 1, 0);
+  for (const auto& t : tets) {
+    for (int k : t) ++scratch.node_tet_offset[static_cast<std::size_t>(k) + 1];
+  }
+  for (std::size_t i = 1; i < scratch.node_tet_offset.size(); ++i) {
+    scratch.node_tet_offset[i] += scratch.node_tet_offset[i - 1];
+  }
+  scratch.node_tet.assign(static_cast<std::size_t>(scratch.node_tet_offset.back()), 0);
+  std::vector<int> fill(scratch.node_tet_offset.begin(), scratch.node_tet_offset.end() - 1);
+  for (std::size_t e = 0; e < tets.size(); ++e) {
+    for (int k : tets[e]) scratch.node_tet[static_cast<std::size_t>(fill[static_cast<std::size_t>(k)]++)] = static_cast<int>(e);
   }
 }
 
@@ -145,21 +166,7 @@ StrainLimitResult limitVolumes(FemBody& body, const std::vector<double>& rest6, 
   Eigen::VectorXd& v = body.velocities();
   const Eigen::VectorXd& mass = body.lumpedMass();
   const auto& tets = body.mesh().tets;
-  // node -> its tets (CSR), once per body
-  if (scratch.node_tet_offset.size() != static_cast<std::size_t>(n) + 1) {
-    scratch.node_tet_offset.assign(static_cast<std::size_t>(n) + 1, 0);
-    for (const auto& t : tets) {
-      for (int k : t) ++scratch.node_tet_offset[static_cast<std::size_t>(k) + 1];
-    }
-    for (std::size_t i = 1; i < scratch.node_tet_offset.size(); ++i) {
-      scratch.node_tet_offset[i] += scratch.node_tet_offset[i - 1];
-    }
-    scratch.node_tet.assign(static_cast<std::size_t>(scratch.node_tet_offset.back()), 0);
-    std::vector<int> fill(scratch.node_tet_offset.begin(), scratch.node_tet_offset.end() - 1);
-    for (std::size_t e = 0; e < tets.size(); ++e) {
-      for (int k : tets[e]) scratch.node_tet[static_cast<std::size_t>(fill[static_cast<std::size_t>(k)]++)] = static_cast<int>(e);
-    }
-  }
+  buildNodeTets(body, scratch);
   scratch.moved.assign(static_cast<std::size_t>(n), 0);
   scratch.checked.assign(tets.size(), 0);
   const double target = min_ratio + kStrainLimitSlack;
@@ -239,6 +246,18 @@ StrainLimitResult limitVolumes(FemBody& body, const std::vector<double>& rest6, 
   if (!scratch.below.empty() && q_valid != nullptr) rollBack(body, rest6, min_ratio, h, *q_valid, scratch, out);
   out.unresolved = static_cast<int>(scratch.below.size());
   return out;
+}
+
+void prepareStrainLimit(const FemBody& body, StrainLimitScratch& scratch) {
+  using shared::reserveWritten;
+  buildNodeTets(body, scratch);
+  const auto nodes = static_cast<std::size_t>(body.nodeCount());
+  const auto tets = body.mesh().tets.size();
+  reserveWritten(scratch.pinned, nodes, char{0});
+  reserveWritten(scratch.rolled, nodes, char{0});
+  reserveWritten(scratch.moved, nodes, 0);
+  reserveWritten(scratch.listed, tets, char{0});
+  reserveWritten(scratch.checked, tets, 0);
 }
 
 }  // namespace tactus::sim

@@ -36,6 +36,11 @@ struct StrainLimitScratch {
   std::vector<char> rolled;        ///< per node: moved back to the valid state
 };
 
+/// Builds the scratch's node -> tets map of `body` and writes the storage of its per-node and
+/// per-tet buffers now, so that the first step that limits a tet takes no fresh page (the
+/// Simulation calls it at set-up). What limitVolumes computes is unchanged.
+void prepareStrainLimit(const FemBody& body, StrainLimitScratch& scratch);
+
 struct StrainLimitResult {
   int limited = 0;       ///< tets found below the bound (first sweep)
   int unresolved = 0;    ///< tets still below the bound after the last sweep

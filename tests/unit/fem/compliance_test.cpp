@@ -280,6 +280,40 @@ TEST_F(LiverCompliance, WarpedWDoesNotDependOnTheCallsBefore) {
   }
 }
 
+// setWLower (buildW's assembly in place) gives the lower triangle of addW's W into a zero
+// matrix bit for bit, for every model, in a column-major block of a larger matrix (W's rows of
+// one tissue among others) and over calls whose rows change (the warped model's kept C_UU), and
+// writes nothing outside the block.
+TEST_F(LiverCompliance, SetWLowerIsAddWsLowerTriangleBitForBit) {
+  auto body = deformedBody();
+  const auto a = randomRows(*body, 30, 21);
+  auto b = randomRows(*body, 12, 22);
+  b.insert(b.end(), a.begin(), a.begin() + 36);
+  const std::array<const std::vector<TissueRow>*, 3> calls = {&a, &b, &a};
+  for (ComplianceKind kind : {ComplianceKind::kExact, ComplianceKind::kWarped,
+                              ComplianceKind::kRest, ComplianceKind::kUncoupled}) {
+    auto model = makeCompliance(kind, *body, quietOptions(h_));
+    auto reference = makeCompliance(kind, *body, quietOptions(h_));
+    model->update(*body);
+    reference->update(*body);
+    for (const std::vector<TissueRow>* rows : calls) {
+      const auto m = static_cast<Eigen::Index>(rows->size());
+      const Eigen::MatrixXd w_ref = buildW(*reference, *rows);
+      Eigen::MatrixXd big = Eigen::MatrixXd::Constant(m + 7, m + 9, -3.5);
+      model->setWLower(*rows, big.block(4, 5, m, m));
+      const Eigen::MatrixXd got = big.block(4, 5, m, m);
+      for (Eigen::Index j = 0; j < m; ++j)
+        for (Eigen::Index i = j; i < m; ++i)
+          ASSERT_EQ(got(i, j), w_ref(i, j)) << "kind " << static_cast<int>(kind) << " at ("
+                                            << i << ", " << j << ")";
+      // outside the block: untouched
+      Eigen::MatrixXd outside = big;
+      outside.block(4, 5, m, m).setConstant(-3.5);
+      EXPECT_TRUE((outside.array() == -3.5).all()) << "kind " << static_cast<int>(kind);
+    }
+  }
+}
+
 TEST_F(LiverCompliance, CorrectionIsConsistentWithW) {
   auto body = deformedBody();
   const auto rows = randomRows(*body, 30, 3);

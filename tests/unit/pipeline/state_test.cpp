@@ -145,6 +145,44 @@ TEST(SimulationStateTest, TheContactProblemKeepsWsStorageWhileItsRowsChange) {
   EXPECT_GE(capacity, static_cast<std::size_t>(max_rows) * static_cast<std::size_t>(max_rows));
 }
 
+// W is assembled in its upper triangle and mirrored (buildW) when no rows join two tissues, and
+// summed into both halves otherwise: either way it is symmetric to the bit, with a positive
+// diagonal, at every contact step of one grasper (liver_grasp), two graspers on one tissue
+// (liver_bimanual), two tissues with an obstacle and without rows between them
+// (liver_on_stomach without its tissue contact: every tissue's block its own, the blocks
+// between them zero) and with them (liver_on_stomach).
+TEST(SimulationStateTest, TheContactProblemsWIsSymmetricToTheBit) {
+  struct Case {
+    std::string scene;
+    bool tissue_contact;
+    int steps;
+  };
+  for (const Case& c : {Case{"liver_grasp.yaml", true, 260}, Case{"liver_bimanual.yaml", true, 300},
+                        Case{"liver_on_stomach.yaml", false, 30},
+                        Case{"liver_on_stomach.yaml", true, 30}}) {
+    SCOPED_TRACE(c.scene + (c.tissue_contact ? "" : " without tissue contact"));
+    SceneSpec spec = scene(c.scene);
+    if (!c.tissue_contact) spec.tissue_contacts.clear();
+    Simulation sim(spec);
+    int checked = 0;
+    for (int k = 0; k < c.steps; ++k) {
+      for (int i = 0; i < sim.instrumentCount(); ++i) {
+        sim.setDeviceTarget(i, sim.scriptedTarget(i, sim.time()));
+      }
+      const StepReport r = sim.step();
+      if (r.rows == 0) continue;
+      const ContactProblemData& p = sim.lastProblem();
+      ASSERT_EQ(p.W.rows(), r.rows);
+      for (int i = 0; i < r.rows; ++i) {
+        ASSERT_GT(p.W(i, i), 0.0) << "step " << k << ", row " << i;
+        for (int j = 0; j < i; ++j) ASSERT_EQ(p.W(i, j), p.W(j, i)) << "step " << k;
+      }
+      ++checked;
+    }
+    EXPECT_GT(checked, 10);
+  }
+}
+
 TEST(SimulationStateTest, LiverGraspContinuesBitForBitOver200ContactSteps) {
   const SceneSpec spec = scene("liver_grasp.yaml");
   ASSERT_EQ(spec.solver.linear, LinearSolverKind::kCholmodReuse);

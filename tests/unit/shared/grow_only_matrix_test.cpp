@@ -90,6 +90,41 @@ TEST(GrowOnlyMatrix, CopiesAreDeepAndMovesExchangeTheStorage) {
   EXPECT_TRUE(big == c);
 }
 
+// The strict upper triangle copied onto the strict lower one, for sizes around the tile's (32)
+// and a row-major map as buildW's W; the diagonal and the upper triangle unchanged.
+TEST(GrowOnlyMatrix, MirrorUpperToLowerCopiesTheUpperTriangle) {
+  for (int n : {0, 1, 2, 31, 32, 33, 70, 97}) {
+    const Eigen::MatrixXd values = Eigen::MatrixXd::Random(n, n);
+    GrowOnlyMatrix<Eigen::RowMajor> m;
+    m = values;
+    mirrorUpperToLower(m.map());
+    for (int i = 0; i < n; ++i)
+      for (int j = 0; j < n; ++j)
+        ASSERT_EQ(m(i, j), i <= j ? values(i, j) : values(j, i))
+            << n << ": (" << i << ", " << j << ")";
+    Eigen::MatrixXd col = values;
+    mirrorUpperToLower(col);
+    EXPECT_TRUE(col == Eigen::MatrixXd(m.map())) << n;
+  }
+}
+
+// reserveWritten gives the storage and keeps the size and values: a resize or assign within it
+// keeps the data where it is.
+TEST(GrowOnlyMatrix, ReserveWrittenKeepsTheSizeAndTheValues) {
+  std::vector<Eigen::Matrix3d> v(3, Eigen::Matrix3d::Identity());
+  reserveWritten(v, 1000, Eigen::Matrix3d(Eigen::Matrix3d::Zero()));
+  EXPECT_EQ(v.size(), 3u);
+  EXPECT_GE(v.capacity(), 1000u);
+  for (const Eigen::Matrix3d& x : v) EXPECT_TRUE(x == Eigen::Matrix3d::Identity());
+  const Eigen::Matrix3d* storage = v.data();
+  v.assign(1000, Eigen::Matrix3d::Constant(2.0));
+  EXPECT_EQ(v.data(), storage);
+  std::vector<int> empty;
+  reserveWritten(empty, 50, 0);
+  EXPECT_TRUE(empty.empty());
+  EXPECT_GE(empty.capacity(), 50u);
+}
+
 TEST(GrowOnlyMatrix, ReserveKeepsTheSizeAndTheValues) {
   GrowOnlyMatrix<Eigen::ColMajor> m;
   const Eigen::MatrixXd values = Eigen::MatrixXd::Random(3, 4);

@@ -103,4 +103,37 @@ class GrowOnlyMatrix
   std::vector<double> buf_;
 };
 
+/// Storage for `count` values in `v` from now on, written once with `fill` (its pages are the
+/// process's; a default-constructed Eigen matrix would write nothing), its size and values
+/// kept: a later resize or assign within `count` neither allocates nor touches memory new to
+/// the process. For the step's std::vector buffers, whose first sizing
+/// at the first step (or the first contact) took hundreds of first-touch page faults on
+/// liver_grasp_23k (docs/design.md, "The step's buffers written at set-up").
+template <class T, class A>
+void reserveWritten(std::vector<T, A>& v, std::size_t count, const T& fill) {
+  if (v.capacity() >= count) return;
+  const std::size_t size = v.size();
+  v.resize(count, fill);
+  v.resize(size);
+}
+
+/// m(i, j) = m(j, i) for every i > j of the square matrix m: its strict upper triangle copied
+/// onto the strict lower one, tile by tile so that the strided side of the copy stays in the
+/// cache (one pass over the triangle, where a copy row by row misses the cache at every value
+/// of the strided side once m outgrows it). The diagonal and the upper triangle are unchanged.
+template <class Derived>
+void mirrorUpperToLower(Eigen::MatrixBase<Derived>& m) {
+  constexpr Eigen::Index kTile = 32;
+  const Eigen::Index n = m.rows();
+  for (Eigen::Index i0 = 0; i0 < n; i0 += kTile) {
+    const Eigen::Index i1 = std::min(n, i0 + kTile);
+    for (Eigen::Index j0 = 0; j0 <= i0; j0 += kTile) {
+      for (Eigen::Index i = i0; i < i1; ++i) {
+        const Eigen::Index j1 = std::min(i, j0 + kTile);
+        for (Eigen::Index j = j0; j < j1; ++j) m.coeffRef(i, j) = m.coeff(j, i);
+      }
+    }
+  }
+}
+
 }  // namespace tactus::shared

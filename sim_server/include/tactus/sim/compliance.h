@@ -126,6 +126,14 @@ class TissueCompliance {
   /// W += H C H^T for the given rows (W is rows.size() square, row-major or column-major alike:
   /// the result is symmetric).
   virtual void addW(std::span<const TissueRow> rows, Eigen::Ref<Eigen::MatrixXd> W) = 0;
+  /// The lower triangle (diagonal included) of W, column-major rows.size() square, set to that
+  /// of H C H^T: the values addW adds into a zero W, bit for bit, written once and in place
+  /// (buildW's assembly: no m x m scratch, no mirror; the caller mirrors the triangle it
+  /// completes). The strict upper triangle is left unspecified. By default through addW.
+  virtual void setWLower(std::span<const TissueRow> rows, Eigen::Ref<Eigen::MatrixXd> W) {
+    W.setZero();
+    addW(rows, W);
+  }
   /// dq = C H^T f (3n; fixed DOFs zero). `f` has rows.size() entries.
   virtual void correction(FemBody& body, std::span<const TissueRow> rows, const double* f,
                           Eigen::VectorXd& dq) = 0;
