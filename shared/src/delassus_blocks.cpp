@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstddef>
 
+#include "tactus/shared/grow_only_matrix.h"
 #include "tactus/shared/nsgs.h"
 
 namespace tactus::shared {
@@ -57,6 +58,26 @@ void DelassusBlocks::reserve(int max_rows, int max_contacts, double max_fill) {
   max_rows_ = max_rows;
   max_contacts_ = max_contacts;
   clear();
+}
+
+void DelassusBlocks::reserveStorage(int max_rows, int max_contacts, double max_fill) {
+  max_rows = std::max(max_rows, 0);
+  max_contacts = std::max(max_contacts, 0);
+  max_fill = std::clamp(std::isfinite(max_fill) ? max_fill : 1.0, 0.0, 1.0);
+  const std::int64_t nb = blockLimit(max_contacts, max_fill);
+  const std::int64_t nv =
+      static_cast<std::int64_t>(std::floor(max_fill * static_cast<double>(max_rows) *
+                                           static_cast<double>(max_rows))) +
+      9 * static_cast<std::int64_t>(max_contacts);
+  const auto n1 = static_cast<std::size_t>(max_contacts) + 1;
+  for (auto* v : {&row_offset_, &row_start_, &column_start_}) reserveWritten(*v, n1, 0);
+  reserveWritten(diagonal_block_, static_cast<std::size_t>(max_contacts), 0);
+  reserveWritten(row_bits_, static_cast<std::size_t>(max_rows), std::uint64_t{0});
+  for (auto* v : {&block_column_, &column_block_, &column_row_}) {
+    reserveWritten(*v, static_cast<std::size_t>(nb), 0);
+  }
+  reserveWritten(value_start_, static_cast<std::size_t>(nb), std::int64_t{0});
+  reserveWritten(values_, static_cast<std::size_t>(nv), 0.0);
 }
 
 void DelassusBlocks::clear() noexcept {

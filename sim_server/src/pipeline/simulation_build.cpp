@@ -98,11 +98,12 @@ StepScratch buildScratch(const SimulationModel& model) {
         instrumentSpec(model.spec, static_cast<int>(i)).max_opening_rad;
   }
   if (model.has_contacts) {
-    scratch.workspace.reserve(model.max_rows,
-                              problemContactCapacity(model.spec) +
-                                  model.spec.obstacle_contact.max_contacts *
-                                      static_cast<int>(model.tissues.size()) +
-                                  tissueContactCapacity(model.spec));
+    const int max_contacts = problemContactCapacity(model.spec) +
+                             model.spec.obstacle_contact.max_contacts *
+                                 static_cast<int>(model.tissues.size()) +
+                             tissueContactCapacity(model.spec);
+    scratch.workspace.reserve(model.max_rows, max_contacts);
+    scratch.groups.reserveStorage(model.max_rows, max_contacts);
   }
   scratch.problem.row_offset.assign(1, 0);
   // W for the largest problem, written now: a step whose problem outgrows the largest so far

@@ -263,6 +263,47 @@ TEST(NsgsBlocks, ChooseStorageFollowsTheBlockFill) {
   EXPECT_FALSE(small.holds());
 }
 
+// Storage written ahead for larger problems (reserveStorage, the Simulation's set-up) changes
+// no choice of chooseStorage and no block it holds, and a reserve() within it allocates
+// nothing: mixed 1-/3-row problems (where the value capacity can decide), block-sparse and
+// dense ones, the FCLIB set.
+TEST(NsgsBlocks, StorageReservedAheadChangesNoChoice) {
+  std::vector<std::pair<std::string, DenseProblem>> cases;
+  cases.emplace_back("mixed rows", mixedRows(7));
+  cases.emplace_back("one tissue", tissues(1, 40, 4));
+  cases.emplace_back("four tissues", tissues(4, 15, 3));
+  cases.emplace_back("pile 60 x 6", spherePile(60, 2, 0.8, 6));
+  std::vector<std::pair<std::string, ContactProblemView>> views;
+  for (const auto& [name, p] : cases) views.emplace_back(name, p.view());
+  const auto fclib = fclibSet();
+  for (const auto& [name, p] : fclib) views.emplace_back(name, p.view());
+  for (const auto& [name, v] : views) {
+    DelassusBlocks plain(v.rows, v.contacts);
+    DelassusBlocks ahead;
+    ahead.reserveStorage(4 * v.rows, 4 * v.contacts);
+    test::AllocScope scope;
+    ahead.reserve(v.rows, v.contacts);
+    EXPECT_EQ(scope.allocations(), 0) << name;
+    const bool on_blocks = chooseStorage(v, plain).blocks != nullptr;
+    ASSERT_EQ(chooseStorage(v, ahead).blocks != nullptr, on_blocks) << name;
+    if (!on_blocks) continue;
+    ASSERT_EQ(ahead.blocks(), plain.blocks()) << name;
+    for (int b = 0; b < plain.blocks(); ++b) {
+      ASSERT_EQ(ahead.blockColumn()[b], plain.blockColumn()[b]) << name;
+      ASSERT_EQ(ahead.valueStart()[b], plain.valueStart()[b]) << name;
+    }
+    const int nc = v.contacts;
+    const int last = plain.rowStart()[nc] - 1;
+    const int lr = plain.rowOffset()[nc] - plain.rowOffset()[nc - 1];
+    const int lj = plain.blockColumn()[last];
+    const int lc = v.row_offset[lj + 1] - v.row_offset[lj];
+    const std::int64_t values = plain.valueStart()[last] + lr * lc;
+    for (std::int64_t k = 0; k < values; ++k) {
+      ASSERT_EQ(ahead.values()[k], plain.values()[k]) << name;
+    }
+  }
+}
+
 TEST(NsgsBlocks, SameSolutionAndSweepsOnTheFclibSet) {
   int compared = 0;
   for (const auto& [name, p] : fclibSet()) {

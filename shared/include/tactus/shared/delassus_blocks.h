@@ -51,6 +51,11 @@ class DelassusBlocks {
   /// Capacity for problems up to max_rows / max_contacts whose fill is at most max_fill
   /// (allocates; not real-time).
   void reserve(int max_rows, int max_contacts, double max_fill = kBlockSparseMaxFill);
+  /// Storage for reserve(max_rows, max_contacts, max_fill), written now (its pages the
+  /// process's), the capacity reserve() gave left as it is: a later reserve() within these
+  /// bounds neither allocates nor touches fresh pages, and assign() decides as it would have
+  /// (the capacity it checks is reserve()'s).
+  void reserveStorage(int max_rows, int max_contacts, double max_fill = kBlockSparseMaxFill);
 
   /// Copies the non-zero blocks of dense.W (one pass over W; a NaN counts as non-zero). Returns
   /// false, and then holds no problem, when the view is inconsistent (see solveNsgs' kEmpty),
