@@ -4,6 +4,7 @@
 #include <bit>
 #include <cmath>
 #include <cstddef>
+#include <cstdint>
 
 #include "tactus/shared/grow_only_matrix.h"
 #include "tactus/shared/nsgs.h"
@@ -28,6 +29,27 @@ std::int64_t blockLimit(int nc, double max_fill) noexcept {
   return std::max<std::int64_t>(nc, static_cast<std::int64_t>(std::min(limit, 4e18)));
 }
 
+// The storage reserve() and reserveStorage() size: bounds clamped, blocks and values.
+struct StorageSize {
+  int rows = 0;
+  int contacts = 0;
+  std::size_t blocks = 0;
+  std::size_t values = 0;   // fill x m^2 for uniform contacts, plus the diagonal blocks
+};
+
+StorageSize storageSize(int max_rows, int max_contacts, double max_fill) noexcept {
+  StorageSize size;
+  size.rows = std::max(max_rows, 0);
+  size.contacts = std::max(max_contacts, 0);
+  max_fill = std::clamp(std::isfinite(max_fill) ? max_fill : 1.0, 0.0, 1.0);
+  size.blocks = static_cast<std::size_t>(blockLimit(size.contacts, max_fill));
+  size.values = static_cast<std::size_t>(
+      static_cast<std::int64_t>(std::floor(max_fill * static_cast<double>(size.rows) *
+                                           static_cast<double>(size.rows))) +
+      9 * static_cast<std::int64_t>(size.contacts));
+  return size;
+}
+
 }  // namespace
 
 DelassusBlocks::DelassusBlocks(int max_rows, int max_contacts, double max_fill) {
@@ -35,49 +57,32 @@ DelassusBlocks::DelassusBlocks(int max_rows, int max_contacts, double max_fill) 
 }
 
 void DelassusBlocks::reserve(int max_rows, int max_contacts, double max_fill) {
-  max_rows = std::max(max_rows, 0);
-  max_contacts = std::max(max_contacts, 0);
-  max_fill = std::clamp(std::isfinite(max_fill) ? max_fill : 1.0, 0.0, 1.0);
-  const std::int64_t nb = blockLimit(max_contacts, max_fill);
-  // values: fill x m^2 for uniform contacts, plus the diagonal blocks
-  const std::int64_t nv =
-      static_cast<std::int64_t>(std::floor(max_fill * static_cast<double>(max_rows) *
-                                           static_cast<double>(max_rows))) +
-      9 * static_cast<std::int64_t>(max_contacts);
-  const auto n1 = static_cast<std::size_t>(max_contacts) + 1;
+  const StorageSize size = storageSize(max_rows, max_contacts, max_fill);
+  const auto n1 = static_cast<std::size_t>(size.contacts) + 1;
   row_offset_.assign(n1, 0);
   row_start_.assign(n1, 0);
   column_start_.assign(n1, 0);
-  diagonal_block_.assign(static_cast<std::size_t>(max_contacts), 0);
-  row_bits_.assign(static_cast<std::size_t>(max_rows), 0);
-  block_column_.assign(static_cast<std::size_t>(nb), 0);
-  value_start_.assign(static_cast<std::size_t>(nb), 0);
-  column_block_.assign(static_cast<std::size_t>(nb), 0);
-  column_row_.assign(static_cast<std::size_t>(nb), 0);
-  values_.assign(static_cast<std::size_t>(nv), 0.0);
-  max_rows_ = max_rows;
-  max_contacts_ = max_contacts;
+  diagonal_block_.assign(static_cast<std::size_t>(size.contacts), 0);
+  row_bits_.assign(static_cast<std::size_t>(size.rows), 0);
+  block_column_.assign(size.blocks, 0);
+  value_start_.assign(size.blocks, 0);
+  column_block_.assign(size.blocks, 0);
+  column_row_.assign(size.blocks, 0);
+  values_.assign(size.values, 0.0);
+  max_rows_ = size.rows;
+  max_contacts_ = size.contacts;
   clear();
 }
 
 void DelassusBlocks::reserveStorage(int max_rows, int max_contacts, double max_fill) {
-  max_rows = std::max(max_rows, 0);
-  max_contacts = std::max(max_contacts, 0);
-  max_fill = std::clamp(std::isfinite(max_fill) ? max_fill : 1.0, 0.0, 1.0);
-  const std::int64_t nb = blockLimit(max_contacts, max_fill);
-  const std::int64_t nv =
-      static_cast<std::int64_t>(std::floor(max_fill * static_cast<double>(max_rows) *
-                                           static_cast<double>(max_rows))) +
-      9 * static_cast<std::int64_t>(max_contacts);
-  const auto n1 = static_cast<std::size_t>(max_contacts) + 1;
+  const StorageSize size = storageSize(max_rows, max_contacts, max_fill);
+  const auto n1 = static_cast<std::size_t>(size.contacts) + 1;
   for (auto* v : {&row_offset_, &row_start_, &column_start_}) reserveWritten(*v, n1, 0);
-  reserveWritten(diagonal_block_, static_cast<std::size_t>(max_contacts), 0);
-  reserveWritten(row_bits_, static_cast<std::size_t>(max_rows), std::uint64_t{0});
-  for (auto* v : {&block_column_, &column_block_, &column_row_}) {
-    reserveWritten(*v, static_cast<std::size_t>(nb), 0);
-  }
-  reserveWritten(value_start_, static_cast<std::size_t>(nb), std::int64_t{0});
-  reserveWritten(values_, static_cast<std::size_t>(nv), 0.0);
+  reserveWritten(diagonal_block_, static_cast<std::size_t>(size.contacts), 0);
+  reserveWritten(row_bits_, static_cast<std::size_t>(size.rows), std::uint64_t{0});
+  for (auto* v : {&block_column_, &column_block_, &column_row_}) reserveWritten(*v, size.blocks, 0);
+  reserveWritten(value_start_, size.blocks, std::int64_t{0});
+  reserveWritten(values_, size.values, 0.0);
 }
 
 void DelassusBlocks::clear() noexcept {
