@@ -232,7 +232,7 @@ TEST(PadGrasp23kTest, NominalApproachLiftsTheLobeAndConverges) {
 // compliance 0.45 GB in .cache/compliance-20k; about 20 s), grasped at liver_grasp_23k's point,
 // meets the nominal list: the lobe rises with the tool (101.7 % measured), no tet in the jaws
 // falls below 0.3 of its rest volume (0.500), every contact step converges with median sweeps
-// <= 50 (36), the forces stay within the liver2 bound and no tissue point has two contacts from
+// <= 50 (26), the forces stay within the liver2 bound and no tissue point has two contacts from
 // one jaw. Its pads touch about 125 distinct tissue nodes (1.7 mm surface elements): the 150-node
 // count is liver_grasp_23k's (above).
 TEST(PadGrasp20kTest, NominalApproachHoldsTheLobe) {
