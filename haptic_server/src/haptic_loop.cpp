@@ -35,20 +35,11 @@ static_assert(
     shared::kStatsFallbackSlipTurns == static_cast<int>(FallbackReason::kSlipTurns) &&
     shared::kStatsFallbackReasonCount == static_cast<int>(FallbackReason::kSlipTurns) + 1);
 
+using detail::ageNs;
 using detail::finite;
 using detail::sanitizeLimit;
 
 namespace {
-
-// now - t_ns, saturated instead of overflowing (time stamps from shared memory or a device)
-std::int64_t ageNs(std::int64_t now, std::int64_t t_ns) noexcept {
-  std::int64_t age = 0;
-  if (__builtin_sub_overflow(now, t_ns, &age)) {
-    return t_ns < 0 ? std::numeric_limits<std::int64_t>::max()
-                    : std::numeric_limits<std::int64_t>::min();
-  }
-  return age;
-}
 
 std::string show(double v) {
   std::ostringstream os;
@@ -362,7 +353,7 @@ void HapticLoop::publishSample(DeviceChannel& ch, int i, std::int64_t now,
 }
 
 // The newest prepared snapshot, its age, and the local model.
-void HapticLoop::takeSnapshot(std::int64_t now, std::int64_t deadline_ns,
+void HapticLoop::takeSnapshot(std::int64_t now, std::int64_t t_read_ns, std::int64_t deadline_ns,
                               TickOutput& out) noexcept {
   bool stale = true;
   bool switched = false;
@@ -390,10 +381,12 @@ void HapticLoop::takeSnapshot(std::int64_t now, std::int64_t deadline_ns,
     if (hdr.seq == 0) {
       out.flags |= shared::kStatsNoSnapshot;
     } else {
-      const std::int64_t age = ageNs(now, hdr.t_ns);
+      // aged at the moment it was taken (a tick preempted since its device read may be handed
+      // one published meanwhile)
+      const std::int64_t age = detail::snapshotAgeNs(now, t_read_ns, shared::monotonicNs(), hdr.t_ns);
       const bool shutting = (hdr.flags & shared::kSnapshotShuttingDown) != 0;
       // stamped in the future (both sides share CLOCK_MONOTONIC): corrupt, never fresh
-      const bool future = age < -kFutureSnapshotSlackNs;
+      const bool future = detail::fromTheFuture(age);
       stale = watchdog_ns_ == 0 || age > watchdog_ns_ || future || shutting ||
               (hdr.flags & shared::kSnapshotValid) == 0;
       if (future && hdr.seq != snapshot_seq_) {
@@ -652,10 +645,11 @@ TickOutput HapticLoop::tick(std::int64_t scheduled_ns, std::int64_t woken_ns) no
           ? std::max(out.deadline_ns - std::min(kOutputReserveNs, settings_.solve_budget_ns / 4),
                      out.started_ns + 1)
           : 0;
-  // one solve: each instrument's wrench in out.device[i]; the snapshot's age is taken at this
-  // moment (a device read may have stalled since the tick woke), so a snapshot published
-  // meanwhile is not taken for one from the future
-  takeSnapshot(now + (t_read - out.started_ns), solve_deadline, out);
+  // one solve: each instrument's wrench in out.device[i]; the snapshot's age is taken on the
+  // tick's clock moved on by the real time since the tick started (a device read may have
+  // stalled since the tick woke, the tick may be preempted before it takes the snapshot), so a
+  // snapshot published meanwhile is not taken for one from the future
+  takeSnapshot(now + (t_read - out.started_ns), t_read, solve_deadline, out);
   const std::int64_t t_model = shared::monotonicNs();
   out.model_ns = t_model - t_read;
   std::array<double, 3> force0{};

@@ -9,6 +9,7 @@
 #include <memory>
 
 #include "tactus/haptic/haptic_loop.h"
+#include "tactus/shared/clock.h"
 
 namespace tactus::haptic {
 
@@ -33,8 +34,11 @@ struct HapticLoopTestAccess {
   static void publishSample(HapticLoop& l, std::int64_t now, device::IoStatus io) {
     l.publishSample(l.channels_[0], 0, now, io);
   }
-  static void takeSnapshot(HapticLoop& l, std::int64_t now, TickOutput& out) {
-    l.takeSnapshot(now, 0, out);
+  /// `now`: the tick's clock at its device read; `t_read_ns`: the real clock then (by default
+  /// the call's moment: the snapshot taken right after the read).
+  static void takeSnapshot(HapticLoop& l, std::int64_t now, TickOutput& out,
+                           std::int64_t t_read_ns = shared::monotonicNs()) {
+    l.takeSnapshot(now, t_read_ns, 0, out);
   }
   /// Prepares the newest snapshot (as the preparer thread would) and adopts it; its sequence.
   static std::uint64_t prepareNewest(HapticLoop& l, AttachedSegment& link) {

@@ -139,6 +139,39 @@ TEST_F(HapticPhasesTest, TakeSnapshotFlagsAMissingOrOldSnapshotAndSolvesAFreshOn
   EXPECT_EQ(loop_->counters().snapshots_taken.load(), 2u);
 }
 
+// A tick preempted between its device read and taking the snapshot may be handed one that the
+// simulation published meanwhile, stamped after the read: it is aged when taken, so it is fresh,
+// never "from the future" (aged at the read, it was 19 ms ahead and faded a correct force).
+// One stamped after the moment it was taken still is from the future.
+TEST_F(HapticPhasesTest, ASnapshotPublishedWhileTheTickWasPreemptedIsFresh) {
+  settings_.watchdog_ms = 1000.0;   // the test's own stalls never make it stale
+  loop_.emplace(device_, settings_);
+  loop_->offerLink(link_.get());
+  readValidPose();
+  constexpr std::int64_t kPreemptedNs = 20'000'000;
+  // the read 20 ms ago on the real clock, at t_ on the tick's; the snapshot published 19 ms later
+  const std::int64_t t_read = shared::monotonicNs() - kPreemptedNs;
+  publish(-0.002, 1e-3, 0.0, t_ + kPreemptedNs - 1'000'000);
+  TickOutput out;
+  P::takeSnapshot(*loop_, t_, out, t_read);
+  EXPECT_FALSE(out.stale);
+  EXPECT_EQ(out.flags & shared::kStatsSnapshotStale, 0u);
+  EXPECT_EQ(out.contacts, 1);
+  EXPECT_NEAR(out.force_n[2], 2.0, 1e-9);
+  shared::RtEvent e;
+  while (loop_->events().tryPop(&e)) EXPECT_NE(e.code, kEventSnapshotFromTheFuture);
+
+  // stamped a minute after it was taken: from the future, not solved, one event
+  publish(-0.002, 1e-3, 0.0, shared::monotonicNs() - t_read + t_ + 60'000'000'000);
+  out = {};
+  P::takeSnapshot(*loop_, t_, out, t_read);
+  EXPECT_TRUE(out.stale);
+  EXPECT_EQ(out.contacts, 0);
+  int future_events = 0;
+  while (loop_->events().tryPop(&e)) future_events += e.code == kEventSnapshotFromTheFuture;
+  EXPECT_EQ(future_events, 1);
+}
+
 TEST_F(HapticPhasesTest, LocalModelMovesDeltaFreeWithTheDevice) {
   publish(-0.002, 1e-3, 0.0, t_);
   ASSERT_EQ(P::prepareNewest(*loop_, *link_), 1u);
