@@ -78,21 +78,21 @@ public:
     buildGt(rows);
     // W = G^T P (symmetric): lower triangle only, then added to both triangles of w
     GrowOnlyMatrix::Map &wdm = wd_.resize(m, m);
-    writeLower(m, wdm.data(), wdm.outerStride());
+    writeLower(m, wdm.data(), wdm.outerStride(), WColumnsDone{});
     wdm.triangularView<Eigen::StrictlyUpper>() = wdm.transpose();
     w += wdm;
     release();
   }
 
-  void setWLower(std::span<const TissueRow> rows,
-                 Eigen::Ref<Eigen::MatrixXd> w) override {
+  void setWLower(std::span<const TissueRow> rows, Eigen::Ref<Eigen::MatrixXd> w,
+                 WColumnsDone done) override {
     const int m = static_cast<int>(rows.size());
     if (m == 0)
       return;
     buildGt(rows);
     // straight into w's columns: no m x m scratch, no mirror, no second pass (addW's values:
     // combine's sums start at +0.0 and so are never -0.0, and 0.0 + x is x for every other x)
-    writeLower(m, w.data(), w.outerStride());
+    writeLower(m, w.data(), w.outerStride(), done);
     release();
   }
 
@@ -235,16 +235,43 @@ private:
     }
   }
 
-  // addW's first part: chooses the model, collects the rows' nodes, and leaves G = C_UU P
-  // (3|U| x m) in g_ and G^T (m x 3|U|) in gt_.
+  // addW's first part: chooses the model, collects the rows' nodes, and leaves G^T (m x 3|U|,
+  // G = C_UU P) in gt_.
   void buildGt(std::span<const TissueRow> rows) {
     const int m = static_cast<int>(rows.size());
     chooseModel(rows);
     const int u = collect(rows);
     const int du = 3 * u;
-    // G = C_UU P, column by column from 3x3 blocks
+    if (active_ != ComplianceKind::kUncoupled) {
+      gatherCuu(u);
+      // G's columns a few runs at a time into a tile that stays in L1 (du x at most kGTile),
+      // transposed from there into G^T: the values of G = C_UU P column by column, without G
+      // itself going through memory
+      GrowOnlyMatrix::Map &gtm = gt_.resize(m, du);
+      GrowOnlyMatrix::Map &tile = g_.resize(du, kGTile);
+      for (int l = 0; l < m;) {
+        const int first = l;
+        int cols = 0;
+        while (l < m && cols + 3 <= kGTile) {
+          const int g = sameNodeRun(l, m);
+          double *out[3] = {tile.col(cols).data(), nullptr, nullptr};
+          for (int r = 1; r < g; ++r)
+            out[r] = tile.col(cols + r).data();
+          combineRun(cuu_.map(), l, g, 0, du, out);
+          cols += g;
+          l += g;
+        }
+        for (int i = 0; i < du; ++i) {
+          double *dst = gtm.data() + static_cast<Eigen::Index>(i) * m + first;
+          for (int c = 0; c < cols; ++c)
+            dst[c] = tile(i, c);
+        }
+      }
+      return;
+    }
+    // uncoupled: G = C_UU P, column by column from the diagonal blocks
     GrowOnlyMatrix::Map &gm = g_.resize(du, m);
-    if (active_ == ComplianceKind::kUncoupled) {
+    {
       gm.setZero();
       for (int l = 0; l < m; ++l)
         for (int t = 0; t < terms_[l].count; ++t) {
@@ -252,16 +279,6 @@ private:
           gm.col(l).segment<3>(3 * b) +=
               diag_[blk_.local[touched_[b]]] * terms_[l].p[t];
         }
-    } else {
-      gatherCuu(u);
-      for (int l = 0; l < m;) {
-        const int g = sameNodeRun(l, m);
-        double *out[3] = {gm.col(l).data(), nullptr, nullptr};
-        for (int r = 1; r < g; ++r)
-          out[r] = gm.col(l + r).data();
-        combineRun(cuu_.map(), l, g, 0, du, out);
-        l += g;
-      }
     }
     // through G^T so every column of W below is one fused pass over contiguous memory
     GrowOnlyMatrix::Map &gtm = gt_.resize(m, du);
@@ -271,8 +288,8 @@ private:
   // The lower triangle (diagonal included) of W = G^T P into the column-major m x m matrix at
   // `w` with column stride `ld`, from buildGt's G^T. A run of rows shares its start row l, so
   // the run's later columns also get entries just above the diagonal (at most two a column):
-  // the strict upper triangle is left unspecified.
-  void writeLower(int m, double *w, Eigen::Index ld) const {
+  // the strict upper triangle is left unspecified. `done` is called after each run's columns.
+  void writeLower(int m, double *w, Eigen::Index ld, WColumnsDone done) const {
     const GrowOnlyMatrix::Map &gtm = gt_.map();
     for (int l = 0; l < m;) {
       const int g = sameNodeRun(l, m);
@@ -280,6 +297,8 @@ private:
       for (int r = 1; r < g; ++r)
         out[r] = w + (l + r) * ld + l;
       combineRun(gtm, l, g, l, m - l, out);
+      if (done.call != nullptr)
+        done.call(done.context, l, g);
       l += g;
     }
   }
@@ -501,7 +520,10 @@ private:
   std::vector<int> touched_;
   std::vector<RowTerms> terms_;
   std::vector<Eigen::Matrix3d> coherence_rot_;  // update(): the rotations coherence_ reads
-  GrowOnlyMatrix cuu_, g_, gt_, wd_;   // C_UU, G, G^T and H C H^T of addW
+  // C_UU, G (the uncoupled model's; the others' tile of G's columns), G^T and H C H^T of addW
+  GrowOnlyMatrix cuu_, g_, gt_, wd_;
+  // G's columns per tile (buildGt): 3|U| x 8 doubles, in L1 for the 23k's 573
+  static constexpr int kGTile = 8;
   Eigen::MatrixXd e_, x_;              // the exact model's unit loads and their solves
   // the previous gather of C0's blocks (gatherCuu): its C_UU, its nodes and their index in it
   // (node -> index, -1 otherwise; empty before the first gather), and the current nodes' index

@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <string>
@@ -196,9 +197,12 @@ namespace {
 
 // One sweep pair of CholmodSolver::supernodalSolveWithoutBlas over the permuted right-hand sides
 // `y` (n x ncols, or a vector: Eigen's matrix-vector kernels for one column), `e` its scratch,
-// with the factor's values `lx` (f.x, or its float copy: then y and e are float too).
+// with the factor's values `lx` (f.x, or its float copy: then y and e are float too). With
+// skip_zero the forward sweep passes over the supernodes whose part of y is all zero when it
+// reaches them (CholmodSolver::setSkipZeroSupernodes); returns how many it skipped.
 template <class Scalar, class Y, class E>
-void supernodalSweeps(const cholmod_factor& f, const Scalar* lx, Y& y, E& e) {
+long supernodalSweeps(const cholmod_factor& f, const Scalar* lx, Y& y, E& e, bool skip_zero) {
+  long skipped = 0;
   const int* super = static_cast<const int*>(f.super);
   const int* pi = static_cast<const int*>(f.pi);
   const int* px = static_cast<const int*>(f.px);
@@ -212,6 +216,11 @@ void supernodalSweeps(const cholmod_factor& f, const Scalar* lx, Y& y, E& e) {
     const int psi = pi[s], nsrow = pi[s + 1] - psi, nsrow2 = nsrow - nscol;
     const Block l(lx + px[s], nsrow, nscol, Eigen::OuterStride<>(nsrow));
     auto y1 = y.middleRows(k1, nscol);
+    // a part of y still zero has nothing to solve or pass on (see skipZeroSupernodes)
+    if (skip_zero && (y1.array() == Scalar(0)).all()) {
+      ++skipped;
+      continue;
+    }
     l.topRows(nscol).template triangularView<Eigen::Lower>().solveInPlace(y1);
     if (nsrow2 == 0) continue;
     auto e2 = e.topRows(nsrow2);
@@ -234,22 +243,28 @@ void supernodalSweeps(const cholmod_factor& f, const Scalar* lx, Y& y, E& e) {
     }
     l.topRows(nscol).template triangularView<Eigen::Lower>().transpose().solveInPlace(y1);
   }
+  return skipped;
 }
 
 // x = P^T L^-T L^-1 P b for the columns of `y` (n x ncols, or a vector): b gathered into y in
 // the factor's order (converted to Scalar), supernodalSweeps, y scattered back into x.
 template <class Scalar, class Y, class E>
-void permutedSweeps(const cholmod_factor& f, const Scalar* lx, Y& y, E& e, const double* b,
-                    double* x) {
+long permutedSweeps(const cholmod_factor& f, const Scalar* lx, Y& y, E& e, const double* b,
+                    double* x, bool skip_zero) {
   const auto n = static_cast<Eigen::Index>(f.n);
   const int* perm = static_cast<const int*>(f.Perm);
+  bool negative_zero = false;   // (skipping keeps the full sweep's bits only without one)
   for (Eigen::Index c = 0; c < y.cols(); ++c)
-    for (Eigen::Index k = 0; k < n; ++k)
-      y(k, c) = static_cast<Scalar>(b[c * n + (perm ? perm[k] : k)]);
-  supernodalSweeps(f, lx, y, e);
+    for (Eigen::Index k = 0; k < n; ++k) {
+      const auto v = static_cast<Scalar>(b[c * n + (perm ? perm[k] : k)]);
+      negative_zero = negative_zero || (v == Scalar(0) && std::signbit(v));
+      y(k, c) = v;
+    }
+  const long skipped = supernodalSweeps(f, lx, y, e, skip_zero && !negative_zero);
   for (Eigen::Index c = 0; c < y.cols(); ++c)
     for (Eigen::Index k = 0; k < n; ++k)
       x[c * n + (perm ? perm[k] : k)] = static_cast<double>(y(k, c));
+  return skipped;
 }
 
 }  // namespace
@@ -265,10 +280,10 @@ void CholmodSolver::supernodalSolveWithoutBlas(const double* b, double* x, int n
   own_e_.resize(esize, ncols);
   if (ncols == 1) {   // Eigen's matrix-vector kernels for one column
     Eigen::Map<Eigen::VectorXd> y(own_y_.data(), n), e(own_e_.data(), esize);
-    permutedSweeps(f, lx, y, e, b, x);
+    skipped_supernodes_ = permutedSweeps(f, lx, y, e, b, x, skip_zero_supernodes_);
     return;
   }
-  permutedSweeps(f, lx, own_y_, own_e_, b, x);
+  skipped_supernodes_ = permutedSweeps(f, lx, own_y_, own_e_, b, x, skip_zero_supernodes_);
 }
 
 void CholmodSolver::prepareSolveWorkspaces() {
@@ -292,7 +307,8 @@ void CholmodSolver::solvePreconditioner(const double* b, double* x) {
   const cholmod_factor& f = *factor_;
   single_y_.resize(static_cast<Eigen::Index>(f.n));
   single_e_.resize(static_cast<Eigen::Index>(f.maxesize));
-  permutedSweeps(f, static_cast<const float*>(single_x_.data()), single_y_, single_e_, b, x);
+  skipped_supernodes_ = permutedSweeps(f, static_cast<const float*>(single_x_.data()), single_y_,
+                                       single_e_, b, x, skip_zero_supernodes_);
 }
 
 void CholmodSolver::solve(const double* b, double* x, int ncols) {

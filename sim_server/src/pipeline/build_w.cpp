@@ -6,6 +6,7 @@
 #include "obstacle_stage.h"
 #include "step_stages.h"
 #include "tissue_contact_stage.h"
+#include "tool_terms.h"
 #include "tactus/shared/clock.h"
 #include "tactus/shared/grow_only_matrix.h"
 
@@ -92,46 +93,57 @@ int countDistinctNodes(const SimulationState& state, StepScratch& scratch) {
   return static_cast<int>(std::unique(keys.begin(), keys.end()) - keys.begin());
 }
 
-// + H_i C6_i H_i^T (+ c_g g g^T) over instrument i's rows, J's rows of instrument i (= H_i G_i)
-// and its contact compliance on their diagonal. The rows of one instrument are found through
+// B = H_i L_i (C6_i = L_i L_i^T) and J's rows (= H_i G_i) over instrument i's rows; returns
+// its grip compliance c_g (0 for kinematic jaws). The rows of one instrument are found through
 // scratch.row_instrument (-1 for an obstacle's rows, which belong to no instrument).
-// With upper_only the pairs (i, j > i) go to W's upper triangle alone (the caller mirrors it).
-void addToolCompliance(const SimulationModel& model, const SimulationState& state,
-                       StepScratch& scratch, int instrument, int rows, bool upper_only) {
+double prepareToolRows(const SimulationModel& model, const SimulationState& state,
+                       StepScratch& scratch, int instrument, int rows) {
   const double h = model.h_s;
   ContactProblemData& p = scratch.problem;
-  const bool only = state.instruments.size() == 1;
-  // (an obstacle's rows, instrument -1, belong to none)
-  const auto owns = [&](int r) {
-    return scratch.row_instrument[static_cast<std::size_t>(r)] == instrument;
-  };
   const Instrument& tool = state.instruments[static_cast<std::size_t>(instrument)];
   const shared::Matrix6d c6 = tool.compliance6(h);
   const shared::Matrix6d l6 = c6.llt().matrixL();
   const shared::Matrix6d g6 =
       scratch.tool_free[static_cast<std::size_t>(instrument)].freeMotionSensitivity(h);
-  if (only) {
+  if (state.instruments.size() == 1) {
     scratch.b_tool.noalias() = scratch.h_tool * l6;
     p.J.noalias() = scratch.h_tool * g6;
   } else {
     scratch.b_tool.resize(rows, 6);
     for (int r = 0; r < rows; ++r) {
-      if (!owns(r)) continue;
+      if (scratch.row_instrument[static_cast<std::size_t>(r)] != instrument) continue;
       scratch.b_tool.row(r).noalias() = scratch.h_tool.row(r) * l6;
       p.J.row(r).noalias() = scratch.h_tool.row(r) * g6;
     }
   }
-  const double c_grip = tool.gripCompliance(h);
-  for (int i = 0; i < rows; ++i) {
-    if (!owns(i)) continue;
-    const auto bi = scratch.b_tool.row(i);
-    double* wi = p.W.row(i).data();
-    const double gi = c_grip * p.grip[i];
-    for (int j = i; j < rows; ++j) {
-      if (!owns(j)) continue;
-      const double w = bi.dot(scratch.b_tool.row(j)) + gi * p.grip[j];
-      wi[j] += w;
-      if (j != i && !upper_only) p.W(j, i) += w;
+  return tool.gripCompliance(h);
+}
+
+// + H_i C6_i H_i^T (+ c_g g g^T) over instrument i's rows, J's rows of instrument i (= H_i G_i)
+// and its contact compliance on their diagonal. With upper_only the pairs (i, j > i) go to W's
+// upper triangle alone (the caller mirrors it). With terms_added the caller has added B, J and
+// the terms already (ToolTerms, one row of W at a time): only the contact compliance is left.
+void addToolCompliance(const SimulationModel& model, const SimulationState& state,
+                       StepScratch& scratch, int instrument, int rows, bool upper_only,
+                       bool terms_added) {
+  ContactProblemData& p = scratch.problem;
+  // (an obstacle's rows, instrument -1, belong to none)
+  const auto owns = [&](int r) {
+    return scratch.row_instrument[static_cast<std::size_t>(r)] == instrument;
+  };
+  if (!terms_added) {
+    const double c_grip = prepareToolRows(model, state, scratch, instrument, rows);
+    for (int i = 0; i < rows; ++i) {
+      if (!owns(i)) continue;
+      const double* bi = scratch.b_tool.row(i).data();
+      double* wi = p.W.row(i).data();
+      const double gi = c_grip * p.grip[i];
+      for (int j = i; j < rows; ++j) {
+        if (!owns(j)) continue;
+        const double w = toolDot(bi, scratch.b_tool.row(j).data()) + gi * p.grip[j];
+        wi[j] += w;
+        if (j != i && !upper_only) p.W(j, i) += w;
+      }
     }
   }
   // contact compliance (collision.h): W + c I, penetration c f_n per contact
@@ -139,6 +151,18 @@ void addToolCompliance(const SimulationModel& model, const SimulationState& stat
   for (int r = 0; r < rows; ++r) {
     if (owns(r)) p.W(r, r) += c;
   }
+}
+
+// setWLower's WColumnsDone in the fused assembly: the instrument's terms on the rows of W just
+// written (the block's columns are W's rows: the block is W's transposed view)
+struct ToolRowsContext {
+  const ToolTerms* terms;
+  double* w;
+  Eigen::Index ld;
+};
+void addToolTermsToRows(void* context, int first, int count) {
+  const auto& ctx = *static_cast<const ToolRowsContext*>(context);
+  for (int i = first; i < first + count; ++i) ctx.terms->addRow(i, ctx.w + i * ctx.ld);
 }
 
 // W = sum_tissue H C H^T + H_tool C6 H_tool^T (+ c_g g g^T, + c I), delta_free, J and the
@@ -174,37 +198,18 @@ void assembleProblem(const SimulationModel& model, SimulationState& state, StepS
   p.J.resize(rows, 6);
   scratch.h_tool.resize(rows, 6);
   p.grip.resize(rows);
-  for (std::size_t t = 0; t < state.tissues.size(); ++t) {
-    TissueState& ts = state.tissues[t];
-    const TissueScratch& tx = scratch.tissues[t];
+  // the rows' tool part, grip column and free gaps, and the per-contact data, before W
+  for (const TissueScratch& tx : scratch.tissues) {
     const int m = tx.rows.rows();
     const int nc = static_cast<int>(tx.rows.row_offset.size()) - 1;
     for (int c = 1; c <= nc; ++c) p.row_offset.push_back(tx.row_begin + tx.rows.row_offset[c]);
-    if (!tx.pair_parts.empty()) {
-      // with its parts of the rows between tissues (tissue_contact_stage.h)
-      addCoupledTissueW(ts, scratch.tissues[t], p.W);
-      ++counters.w_builds;
-    }
     if (m == 0) continue;
-    if (tx.pair_parts.empty()) {
-      // the tissue's block in place: W is symmetric, so the transposed view of the row-major
-      // block (column-major for the model) is the same matrix
-      auto block = p.W.block(tx.row_begin, tx.row_begin, m, m).transpose();
-      if (upper_only) {
-        // its lower triangle is the block's upper one in W; right of the block, in its rows,
-        // the other tissues' columns (no coupling)
-        ts.compliance->setWLower(tx.rows.tissue, block);
-        p.W.block(tx.row_begin, tx.row_begin + m, m, rows - tx.row_begin - m).setZero();
-      } else {
-        ts.compliance->addW(tx.rows.tissue, block);
-      }
-      ++counters.w_builds;
-    }
     scratch.h_tool.middleRows(tx.row_begin, m) = tx.rows.tool;
     for (int r = 0; r < m; ++r) p.grip[tx.row_begin + r] = tx.grip[static_cast<std::size_t>(r)];
     for (int r = 0; r < m; ++r) p.delta_free[tx.row_begin + r] = tx.rows.delta_free[r];
   }
-  // the rows between tissues, last: no tool part, their pair's contact compliance on the diagonal
+  // the rows between tissues, last: no tool part, their pair's contact compliance on the
+  // diagonal (added once W's tissue blocks are in, below)
   if (pairs.rows() > 0) {
     const int r0 = pairs.row_begin;
     const int nc = static_cast<int>(pairs.row_offset.size()) - 1;
@@ -213,7 +218,6 @@ void assembleProblem(const SimulationModel& model, SimulationState& state, StepS
     for (int r = 0; r < pairs.rows(); ++r) {
       p.grip[r0 + r] = 0.0;
       p.delta_free[r0 + r] = pairs.delta_free[static_cast<std::size_t>(r)];
-      p.W(r0 + r, r0 + r) += pairs.compliance_mpn[static_cast<std::size_t>(r)];
     }
   }
   const std::vector<Contact>& all = scratch.all_contacts;
@@ -234,6 +238,54 @@ void assembleProblem(const SimulationModel& model, SimulationState& state, StepS
     p.tangent1[c] = all[c].t1;
     p.tangent2[c] = all[c].t2;
   }
+  // One tissue's block is all of W and one instrument owns every row (the grasps): the
+  // instrument's terms go into each row of W as the tissue's block completes it, while the row
+  // is in cache, instead of in a second pass over W's upper triangle (the same sums in the same
+  // order: the same bits)
+  bool fused = upper_only && rows > 0 && state.instruments.size() == 1;
+  for (const TissueScratch& tx : scratch.tissues) {
+    const int m = tx.rows.rows();
+    fused = fused && (m == 0 || (tx.row_begin == 0 && m == rows));
+  }
+  for (int r = 0; r < rows && fused; ++r) fused = scratch.row_instrument[static_cast<std::size_t>(r)] == 0;
+  ToolRowsContext tool_rows{&scratch.tool_terms, p.W.data(), p.W.outerStride()};
+  WColumnsDone done;
+  if (fused) {
+    const double c_grip = prepareToolRows(model, state, scratch, 0, rows);
+    scratch.tool_terms.prepare(scratch.b_tool, p.grip.data(), c_grip);
+    done = WColumnsDone{&addToolTermsToRows, &tool_rows};
+  }
+  for (std::size_t t = 0; t < state.tissues.size(); ++t) {
+    TissueState& ts = state.tissues[t];
+    const TissueScratch& tx = scratch.tissues[t];
+    const int m = tx.rows.rows();
+    if (!tx.pair_parts.empty()) {
+      // with its parts of the rows between tissues (tissue_contact_stage.h)
+      addCoupledTissueW(ts, scratch.tissues[t], p.W);
+      ++counters.w_builds;
+    }
+    if (m == 0) continue;
+    if (tx.pair_parts.empty()) {
+      // the tissue's block in place: W is symmetric, so the transposed view of the row-major
+      // block (column-major for the model) is the same matrix
+      auto block = p.W.block(tx.row_begin, tx.row_begin, m, m).transpose();
+      if (upper_only) {
+        // its lower triangle is the block's upper one in W; right of the block, in its rows,
+        // the other tissues' columns (no coupling)
+        ts.compliance->setWLower(tx.rows.tissue, block, done);
+        p.W.block(tx.row_begin, tx.row_begin + m, m, rows - tx.row_begin - m).setZero();
+      } else {
+        ts.compliance->addW(tx.rows.tissue, block);
+      }
+      ++counters.w_builds;
+    }
+  }
+  if (pairs.rows() > 0) {
+    const int r0 = pairs.row_begin;
+    for (int r = 0; r < pairs.rows(); ++r) {
+      p.W(r0 + r, r0 + r) += pairs.compliance_mpn[static_cast<std::size_t>(r)];
+    }
+  }
   if (rows == 0) return;
   if (state.instruments.empty()) {
     p.J.setZero();
@@ -249,12 +301,43 @@ void assembleProblem(const SimulationModel& model, SimulationState& state, StepS
   // tissues) stay 0
   if (state.instruments.size() > 1) p.J.setZero();
   for (std::size_t i = 0; i < state.instruments.size(); ++i) {
-    addToolCompliance(model, state, scratch, static_cast<int>(i), rows, upper_only);
+    addToolCompliance(model, state, scratch, static_cast<int>(i), rows, upper_only, fused);
   }
   if (upper_only) shared::mirrorUpperToLower(p.W.map());
 }
 
 }  // namespace
+
+void ToolTerms::prepare(const ToolRows& b, const double* grip, double c_grip) {
+  b_ = &b;
+  grip_ = grip;
+  c_grip_ = c_grip;
+  rows_ = b.rows();
+  columns_.resize(static_cast<std::size_t>(6 * rows_));
+  for (Eigen::Index k = 0; k < 6; ++k) {
+    double* col = columns_.data() + k * rows_;
+    for (Eigen::Index r = 0; r < rows_; ++r) col[r] = b(r, k);
+  }
+}
+
+void ToolTerms::addRow(Eigen::Index i, double* wi) const {
+  const Eigen::Index m = rows_;
+  const double* c0 = columns_.data();
+  const double* c1 = c0 + m;
+  const double* c2 = c1 + m;
+  const double* c3 = c2 + m;
+  const double* c4 = c3 + m;
+  const double* c5 = c4 + m;
+  const double* bi = b_->row(i).data();
+  const double a0 = bi[0], a1 = bi[1], a2 = bi[2], a3 = bi[3], a4 = bi[4], a5 = bi[5];
+  const double gi = c_grip_ * grip_[i];
+  const double* g = grip_;
+  // toolDot(B_i, B_j) + gi g_j term by term (a_k c_k[j] is c_k[j] a_k: the same product)
+  for (Eigen::Index j = i; j < m; ++j) {
+    wi[j] += (a0 * c0[j] + (a2 * c2[j] + a4 * c4[j])) + (a1 * c1[j] + (a3 * c3[j] + a5 * c5[j])) +
+             gi * g[j];
+  }
+}
 
 void buildW(const SimulationModel& model, SimulationState& state, StepScratch& scratch,
             StepReport& report, PipelineCounters& counters, FoundAt found_at) {

@@ -11,6 +11,7 @@
 
 #include "contact_groups.h"
 #include "strain_limit.h"
+#include "tool_terms.h"
 #include "tactus/shared/nsgs.h"
 #include "tactus/shared/pose.h"
 #include "tactus/sim/collision.h"
@@ -52,8 +53,6 @@ struct PairRowsScratch {
   int rows() const { return static_cast<int>(delta_free.size()); }
 };
 
-using ToolRows = Eigen::Matrix<double, Eigen::Dynamic, 6, Eigen::RowMajor>;
-
 struct StepScratch {
   std::vector<TissueScratch> tissues;    ///< as SimulationModel::tissues
   /// The assembled contact problem of the last pass (W, delta_free, f, J, ...); after the step,
@@ -66,6 +65,7 @@ struct StepScratch {
   std::vector<const Eigen::VectorXd*> tissue_positions;   ///< per tissue (detectTissueContacts)
   ToolRows h_tool;                       ///< H_tool, rows x 6 (each row: its own instrument's)
   ToolRows b_tool;                       ///< H_tool L, C6 = L L^T (the row's instrument's L)
+  ToolTerms tool_terms;                  ///< b_tool by columns, W's rows one by one (one instrument)
   std::vector<int> row_instrument;       ///< per row: the instrument of its contact
   std::vector<std::int64_t> node_keys;   ///< countDistinctNodes
   /// The compliance update of this step's free state has not run yet: updateCompliance runs when

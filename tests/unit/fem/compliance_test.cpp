@@ -314,6 +314,54 @@ TEST_F(LiverCompliance, SetWLowerIsAddWsLowerTriangleBitForBit) {
   }
 }
 
+// setWLower's WColumnsDone (buildW adds the instrument's terms to W's rows as they are
+// completed): called for every column once, in order, each group of columns already holding
+// its final values from the diagonal down when it is called, for every model; what is added
+// there by the callee stays (nothing writes those entries afterwards).
+TEST_F(LiverCompliance, SetWLowerReportsEachColumnOnceWhenItIsFinal) {
+  auto body = deformedBody();
+  const auto rows = randomRows(*body, 30, 23);
+  const auto m = static_cast<Eigen::Index>(rows.size());
+  struct Seen {
+    Eigen::Ref<Eigen::MatrixXd>* w = nullptr;
+    Eigen::MatrixXd at_call;   // each column's entries from its diagonal down when reported
+    std::vector<int> order;
+  };
+  for (ComplianceKind kind : {ComplianceKind::kExact, ComplianceKind::kWarped,
+                              ComplianceKind::kRest, ComplianceKind::kUncoupled}) {
+    auto model = makeCompliance(kind, *body, quietOptions(h_));
+    model->update(*body);
+    Eigen::MatrixXd big = Eigen::MatrixXd::Constant(m + 7, m + 9, -3.5);
+    Eigen::Ref<Eigen::MatrixXd> w = big.block(4, 5, m, m);
+    Seen seen;
+    seen.w = &w;
+    seen.at_call = Eigen::MatrixXd::Zero(m, m);
+    const WColumnsDone done{
+        [](void* context, int first, int count) {
+          auto& s = *static_cast<Seen*>(context);
+          for (int c = first; c < first + count; ++c) {
+            s.order.push_back(c);
+            for (Eigen::Index i = c; i < s.w->rows(); ++i) {
+              s.at_call(i, c) = (*s.w)(i, c);
+              (*s.w)(i, c) += 1.0;   // a term added there, as buildW adds the instrument's
+            }
+          }
+        },
+        &seen};
+    model->setWLower(rows, w, done);
+    ASSERT_EQ(static_cast<Eigen::Index>(seen.order.size()), m) << "kind " << static_cast<int>(kind);
+    for (Eigen::Index c = 0; c < m; ++c) ASSERT_EQ(seen.order[static_cast<std::size_t>(c)], c);
+    const Eigen::MatrixXd w_ref = buildW(*model, rows);
+    for (Eigen::Index j = 0; j < m; ++j)
+      for (Eigen::Index i = j; i < m; ++i) {
+        ASSERT_EQ(seen.at_call(i, j), w_ref(i, j))
+            << "kind " << static_cast<int>(kind) << " at (" << i << ", " << j << ")";
+        ASSERT_EQ(w(i, j), w_ref(i, j) + 1.0)
+            << "kind " << static_cast<int>(kind) << " at (" << i << ", " << j << ")";
+      }
+  }
+}
+
 TEST_F(LiverCompliance, CorrectionIsConsistentWithW) {
   auto body = deformedBody();
   const auto rows = randomRows(*body, 30, 3);

@@ -109,6 +109,14 @@ struct ComplianceBuildInfo {
   long exact_fallbacks = 0;
 };
 
+/// What TissueCompliance::setWLower calls after each group of columns it completes: `call(context,
+/// first, count)` once columns first .. first + count - 1 hold their final values from their
+/// diagonal down. Empty (call null): nothing is called.
+struct WColumnsDone {
+  void (*call)(void* context, int first, int count) = nullptr;
+  void* context = nullptr;
+};
+
 /// A tissue's compliance model. Model, state and scratch (docs/design.md, "Model, state,
 /// scratch"): the model is what makeCompliance builds (the kind, the options, C0 on the surface
 /// or its diagonal) and does not change afterwards; the state is what update() refreshes once a
@@ -129,10 +137,15 @@ class TissueCompliance {
   /// The lower triangle (diagonal included) of W, column-major rows.size() square, set to that
   /// of H C H^T: the values addW adds into a zero W, bit for bit, written once and in place
   /// (buildW's assembly: no m x m scratch, no mirror; the caller mirrors the triangle it
-  /// completes). The strict upper triangle is left unspecified. By default through addW.
-  virtual void setWLower(std::span<const TissueRow> rows, Eigen::Ref<Eigen::MatrixXd> W) {
+  /// completes). The strict upper triangle is left unspecified. `done` is called as groups of
+  /// columns are completed, each column once, in order, while they are still in cache (buildW
+  /// adds the instrument's terms there rather than in a second pass over W). By default through
+  /// addW, then `done` for all columns at once.
+  virtual void setWLower(std::span<const TissueRow> rows, Eigen::Ref<Eigen::MatrixXd> W,
+                         WColumnsDone done = {}) {
     W.setZero();
     addW(rows, W);
+    if (done.call != nullptr) done.call(done.context, 0, static_cast<int>(rows.size()));
   }
   /// dq = C H^T f (3n; fixed DOFs zero). `f` has rows.size() entries.
   virtual void correction(FemBody& body, std::span<const TissueRow> rows, const double* f,
