@@ -247,7 +247,9 @@ void assembleProblem(const SimulationModel& model, SimulationState& state, StepS
     const int m = tx.rows.rows();
     fused = fused && (m == 0 || (tx.row_begin == 0 && m == rows));
   }
-  for (int r = 0; r < rows && fused; ++r) fused = scratch.row_instrument[static_cast<std::size_t>(r)] == 0;
+  for (int r = 0; r < rows && fused; ++r) {
+    fused = scratch.row_instrument[static_cast<std::size_t>(r)] == 0;
+  }
   ToolRowsContext tool_rows{&scratch.tool_terms, p.W.data(), p.W.outerStride()};
   WColumnsDone done;
   if (fused) {

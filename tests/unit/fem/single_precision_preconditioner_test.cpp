@@ -315,8 +315,8 @@ TEST(SinglePrecisionPreconditioner, SkippingZeroSupernodesKeepsTheFullSweepsBits
   Eigen::VectorXd with_negative_zero = sparse;
   with_negative_zero[n / 3 + 700] = -0.0;
   const auto sameBits = [](const Eigen::VectorXd& x, const Eigen::VectorXd& y) {
-    return x.size() == y.size() &&
-           std::memcmp(x.data(), y.data(), sizeof(double) * static_cast<std::size_t>(x.size())) == 0;
+    const auto bytes = sizeof(double) * static_cast<std::size_t>(x.size());
+    return x.size() == y.size() && std::memcmp(x.data(), y.data(), bytes) == 0;
   };
   struct Solved {
     Eigen::VectorXd x;
