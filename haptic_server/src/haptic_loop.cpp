@@ -383,7 +383,9 @@ void HapticLoop::takeSnapshot(std::int64_t now, std::int64_t t_read_ns, std::int
     } else {
       // aged at the moment it was taken (a tick preempted since its device read may be handed
       // one published meanwhile)
-      const std::int64_t age = detail::snapshotAgeNs(now, t_read_ns, shared::monotonicNs(), hdr.t_ns);
+      const std::int64_t age =
+          t_read_ns >= 0 ? detail::snapshotAgeNs(now, t_read_ns, shared::monotonicNs(), hdr.t_ns)
+                         : ageNs(now, hdr.t_ns);
       const bool shutting = (hdr.flags & shared::kSnapshotShuttingDown) != 0;
       // stamped in the future (both sides share CLOCK_MONOTONIC): corrupt, never fresh
       const bool future = detail::fromTheFuture(age);
@@ -645,11 +647,14 @@ TickOutput HapticLoop::tick(std::int64_t scheduled_ns, std::int64_t woken_ns) no
           ? std::max(out.deadline_ns - std::min(kOutputReserveNs, settings_.solve_budget_ns / 4),
                      out.started_ns + 1)
           : 0;
-  // one solve: each instrument's wrench in out.device[i]; the snapshot's age is taken on the
-  // tick's clock moved on by the real time since the tick started (a device read may have
-  // stalled since the tick woke, the tick may be preempted before it takes the snapshot), so a
-  // snapshot published meanwhile is not taken for one from the future
-  takeSnapshot(now + (t_read - out.started_ns), t_read, solve_deadline, out);
+  // one solve: each instrument's wrench in out.device[i]. On the real clock (a solve budget) the
+  // snapshot's age is taken on the tick's clock moved on by the real time since the tick started
+  // (a device read may have stalled since the tick woke, the tick may be preempted before it
+  // takes the snapshot), so a snapshot published meanwhile is not taken for one from the
+  // future. Without a clock (solve_budget_ns = 0: simulated time) on the caller's clock alone.
+  const bool real_clock = settings_.solve_budget_ns > 0;
+  takeSnapshot(real_clock ? now + (t_read - out.started_ns) : now, real_clock ? t_read : -1,
+               solve_deadline, out);
   const std::int64_t t_model = shared::monotonicNs();
   out.model_ns = t_model - t_read;
   std::array<double, 3> force0{};

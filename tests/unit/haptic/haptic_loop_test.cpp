@@ -305,6 +305,46 @@ TEST_F(HapticLoopTest, ASnapshotStampedInTheFutureIsStale) {
   EXPECT_FALSE(tickFor(1).stale);
 }
 
+// A device whose reads take `read_delay` of real time.
+class SlowReadingDevice : public ScriptedDevice {
+ public:
+  device::IoStatus read(device::DeviceState* out) noexcept override {
+    std::this_thread::sleep_for(read_delay);
+    return ScriptedDevice::read(out);
+  }
+  std::chrono::milliseconds read_delay{0};
+};
+
+// Without a clock (solve_budget_ns = 0: simulated time, in tests and offline tools) a snapshot
+// is aged on the caller's clock alone, however long the tick takes in real time: after a 30 ms
+// device read, a snapshot 40 ms old on that clock is fresh under the 50 ms watchdog. On the real
+// clock (a solve budget) the read's 30 ms count: 70 ms, stale.
+TEST_F(HapticLoopTest, WithoutAClockTheSnapshotIsAgedOnTheCallersClockAlone) {
+  loop_->offerLink(nullptr);   // the fixture's loop lets go of the segment
+  tickFor(1);
+  SlowReadingDevice slow;
+  slow.state.pos_m = {0.0, 0.0, 0.0};
+  for (const bool clocked : {false, true}) {
+    SCOPED_TRACE(clocked ? "real clock" : "no clock");
+    HapticSettings s = settings_;
+    s.solve_budget_ns = clocked ? 400'000 : 0;
+    s.max_sweeps = std::min(s.max_sweeps, HapticSettingsLimits::kMaxSweepsWithoutBudget);
+    HapticLoop loop(slow, s);
+    loop.offerLink(link_.get());
+    slow.read_delay = std::chrono::milliseconds(0);
+    t_ += 1'000'000;
+    (void)loop.tick(t_, t_);   // takes the link
+    t_ += 1'000'000;
+    publish(-0.002, 1e-3, 0.0, t_ - 40'000'000);
+    slow.read_delay = std::chrono::milliseconds(30);
+    EXPECT_EQ(loop.tick(t_, t_).stale, clocked);
+    loop.offerLink(nullptr);
+    slow.read_delay = std::chrono::milliseconds(0);
+    t_ += 1'000'000;
+    (void)loop.tick(t_, t_);
+  }
+}
+
 // A zero (or far from unit) quaternion from a device is not an orientation: the sample is
 // refused like a non-finite one (the pose held, the force faded), never taken as identity.
 TEST_F(HapticLoopTest, AZeroQuaternionFromTheDeviceIsAFaultNotIdentity) {
