@@ -48,12 +48,33 @@ void freeMotion(const SimulationModel& model, SimulationState& state, StepScratc
   report.times.free_motion_s += shared::secondsSinceNs(t0);
 }
 
-double gapBeyondCompliance(const SimulationState& state, const Contact& contact,
-                           double compliance_mpn) {
-  if (!(compliance_mpn > 0.0)) return contact.gap_m;
+double lastNormalForce(const SimulationState& state, std::span<const Contact> solved,
+                       const Contact& contact) {
   const auto it = state.warm_start_f.find(contact.id);
-  return it == state.warm_start_f.end() ? contact.gap_m
-                                        : contact.gap_m + compliance_mpn * it->second[0];
+  if (it != state.warm_start_f.end()) return it->second[0];
+  if (contact.kind != ContactKind::kSphereTriangle) return 0.0;
+  // the same sphere's contact across an edge of its triangle (two shared nodes)
+  double f = std::numeric_limits<double>::infinity();
+  for (const Contact& k : solved) {
+    if (k.kind != ContactKind::kSphereTriangle || k.feature != contact.feature ||
+        k.instrument != contact.instrument) {
+      continue;
+    }
+    int shared = 0;
+    for (const int a : k.nodes) {
+      for (const int b : contact.nodes) shared += a >= 0 && a == b ? 1 : 0;
+    }
+    if (shared < 2) continue;
+    const auto jt = state.warm_start_f.find(k.id);
+    f = std::min(f, jt == state.warm_start_f.end() ? 0.0 : jt->second[0]);
+  }
+  return std::isfinite(f) ? f : 0.0;
+}
+
+double gapBeyondCompliance(const SimulationState& state, const Contact& contact,
+                           double compliance_mpn, std::span<const Contact> solved) {
+  if (!(compliance_mpn > 0.0) || !(contact.gap_m < 0.0)) return contact.gap_m;
+  return contact.gap_m + compliance_mpn * lastNormalForce(state, solved, contact);
 }
 
 namespace {
@@ -78,6 +99,17 @@ void detectTissue(SimulationState& state, TissueState& ts) {
   ts.found = &ts.merged;
 }
 
+// The tissue's contacts with the instruments in the last assembled problem (buildW: at
+// scratch.all_contacts[contact_begin], one per row block of its rows).
+std::span<const Contact> solvedInstrumentContacts(const StepScratch& scratch, std::size_t t) {
+  const TissueScratch& tx = scratch.tissues[t];
+  if (tx.rows.row_offset.empty()) return {};
+  const auto begin = static_cast<std::size_t>(tx.contact_begin);
+  const std::size_t count = tx.rows.row_offset.size() - 1;
+  if (begin + count > scratch.all_contacts.size()) return {};
+  return std::span<const Contact>(scratch.all_contacts).subspan(begin, count);
+}
+
 }  // namespace
 
 double queryContacts(const SimulationModel& model, SimulationState& state, StepScratch& scratch) {
@@ -89,16 +121,19 @@ double queryContacts(const SimulationModel& model, SimulationState& state, StepS
   scratch.min_excess_gap = min_gap;
   // between tissues (lowers min_excess_gap itself: their contact compliance)
   min_gap = std::min(min_gap, detectTissueContacts(state, scratch));
-  for (TissueState& ts : state.tissues) {
+  for (std::size_t t = 0; t < state.tissues.size(); ++t) {
+    TissueState& ts = state.tissues[t];
     if (state.instruments.empty()) {
       ts.found = &kNone;
       continue;
     }
     detectTissue(state, ts);
+    const std::span<const Contact> solved = solvedInstrumentContacts(scratch, t);
     for (const Contact& k : *ts.found) {
       min_gap = std::min(min_gap, k.gap_m);
       const double c = instrumentSpec(model.spec, k.instrument).contact_compliance_mpn;
-      scratch.min_excess_gap = std::min(scratch.min_excess_gap, gapBeyondCompliance(state, k, c));
+      scratch.min_excess_gap =
+          std::min(scratch.min_excess_gap, gapBeyondCompliance(state, k, c, solved));
     }
   }
   return min_gap;

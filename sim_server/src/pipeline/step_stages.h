@@ -10,6 +10,8 @@
 // Each reads the model, changes the state, reuses the scratch and records into the report (times,
 // figures) and the run's counters.
 
+#include <span>
+
 #include "simulation_model.h"
 #include "simulation_state.h"
 #include "step_scratch.h"
@@ -27,10 +29,20 @@ void freeMotion(const SimulationModel& model, SimulationState& state, StepScratc
 double detectCollisions(const SimulationModel& model, SimulationState& state, StepScratch& scratch,
                         StepReport& report, PipelineCounters& counters);
 
-/// The contact's gap + c f_n, f_n its normal force (by id) in the last solve: its penetration
-/// beyond what the contact compliance c allows (the gap itself when c = 0 or the contact is new).
+/// The normal force the last solve put on `contact`: the force of its id; for a sphere's face
+/// contact (kSphereTriangle, a pad sample's) whose id the solve did not have, the force of the
+/// same feature's contact in `solved` on a triangle sharing an edge with its own (the smaller if
+/// several): the sphere's closest point crossed that edge after the solve, so the contact that
+/// carries the force is found on the neighbour triangle, under another id. 0 when neither.
+/// `solved`: the contacts of the last solve on the contact's tissue with the instruments.
+double lastNormalForce(const SimulationState& state, std::span<const Contact> solved,
+                       const Contact& contact);
+
+/// The contact's gap + c f_n, f_n its normal force in the last solve (lastNormalForce): its
+/// penetration beyond what the contact compliance c allows (the gap itself when c = 0 or the
+/// contact is new).
 double gapBeyondCompliance(const SimulationState& state, const Contact& contact,
-                           double compliance_mpn);
+                           double compliance_mpn, std::span<const Contact> solved = {});
 
 /// detectCollisions without its timing and counter (Simulation::geometricMinGap).
 double queryContacts(const SimulationModel& model, SimulationState& state, StepScratch& scratch);
