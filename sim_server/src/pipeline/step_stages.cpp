@@ -49,11 +49,12 @@ void freeMotion(const SimulationModel& model, SimulationState& state, StepScratc
 }
 
 double lastNormalForce(const SimulationState& state, std::span<const Contact> solved,
-                       const Contact& contact) {
+                       const Contact& contact, const Eigen::VectorXd& q, double radius_m) {
   const auto it = state.warm_start_f.find(contact.id);
   if (it != state.warm_start_f.end()) return it->second[0];
   if (contact.kind != ContactKind::kSphereTriangle) return 0.0;
-  // the same sphere's contact across an edge of its triangle (two shared nodes)
+  // the same sphere's contact across an edge of its triangle (two shared nodes), its tissue
+  // point (at q) within half the sphere's radius of this one's
   double f = std::numeric_limits<double>::infinity();
   for (const Contact& k : solved) {
     if (k.kind != ContactKind::kSphereTriangle || k.feature != contact.feature ||
@@ -65,6 +66,7 @@ double lastNormalForce(const SimulationState& state, std::span<const Contact> so
       for (const int b : contact.nodes) shared += a >= 0 && a == b ? 1 : 0;
     }
     if (shared < 2) continue;
+    if (!((tissuePointAt(k, q) - contact.tissue_point_m).norm() <= 0.5 * radius_m)) continue;
     const auto jt = state.warm_start_f.find(k.id);
     f = std::min(f, jt == state.warm_start_f.end() ? 0.0 : jt->second[0]);
   }
@@ -72,9 +74,21 @@ double lastNormalForce(const SimulationState& state, std::span<const Contact> so
 }
 
 double gapBeyondCompliance(const SimulationState& state, const Contact& contact,
-                           double compliance_mpn, std::span<const Contact> solved) {
-  if (!(compliance_mpn > 0.0) || !(contact.gap_m < 0.0)) return contact.gap_m;
-  return contact.gap_m + compliance_mpn * lastNormalForce(state, solved, contact);
+                           double compliance_mpn) {
+  if (!(compliance_mpn > 0.0)) return contact.gap_m;
+  const auto it = state.warm_start_f.find(contact.id);
+  return it == state.warm_start_f.end() ? contact.gap_m
+                                        : contact.gap_m + compliance_mpn * it->second[0];
+}
+
+double gapBeyondCompliance(const SimulationState& state, const Contact& contact,
+                           double compliance_mpn, std::span<const Contact> solved,
+                           const Eigen::VectorXd& q, double radius_m) {
+  // a contact outside the tissue penetrates nothing: no look for a renamed one's force
+  if (!(compliance_mpn > 0.0) || !(contact.gap_m < 0.0)) {
+    return gapBeyondCompliance(state, contact, compliance_mpn);
+  }
+  return contact.gap_m + compliance_mpn * lastNormalForce(state, solved, contact, q, radius_m);
 }
 
 namespace {
@@ -128,12 +142,20 @@ double queryContacts(const SimulationModel& model, SimulationState& state, StepS
       continue;
     }
     detectTissue(state, ts);
-    const std::span<const Contact> solved = solvedInstrumentContacts(scratch, t);
+    // the renamed contacts' forces with the first pass's contacts found at the step's start only
+    // (docs/design.md, "Additions beyond the paper": contact passes)
+    const std::span<const Contact> solved =
+        model.spec.solver.contact_detection == ContactDetection::kStepStart
+            ? solvedInstrumentContacts(scratch, t)
+            : std::span<const Contact>{};
     for (const Contact& k : *ts.found) {
       min_gap = std::min(min_gap, k.gap_m);
       const double c = instrumentSpec(model.spec, k.instrument).contact_compliance_mpn;
+      const Instrument& tool = state.instruments[static_cast<std::size_t>(k.instrument)];
+      const double radius = tool.features()[static_cast<std::size_t>(k.feature)].radius_m;
       scratch.min_excess_gap =
-          std::min(scratch.min_excess_gap, gapBeyondCompliance(state, k, c, solved));
+          std::min(scratch.min_excess_gap,
+                   gapBeyondCompliance(state, k, c, solved, ts.body->positions(), radius));
     }
   }
   return min_gap;

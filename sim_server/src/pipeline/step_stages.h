@@ -31,18 +31,25 @@ double detectCollisions(const SimulationModel& model, SimulationState& state, St
 
 /// The normal force the last solve put on `contact`: the force of its id; for a sphere's face
 /// contact (kSphereTriangle, a pad sample's) whose id the solve did not have, the force of the
-/// same feature's contact in `solved` on a triangle sharing an edge with its own (the smaller if
-/// several): the sphere's closest point crossed that edge after the solve, so the contact that
-/// carries the force is found on the neighbour triangle, under another id. 0 when neither.
-/// `solved`: the contacts of the last solve on the contact's tissue with the instruments.
+/// same feature's contact in `solved` on a triangle sharing an edge with its own whose tissue
+/// point, at the positions `q`, lies within half the sphere's radius `radius_m` of this one's
+/// (the smaller if several): the sphere's closest point crossed that edge after the solve, so the
+/// contact that carries the force is found on the neighbour triangle, under another id. Farther,
+/// the contact has moved over the tissue and is new. 0 when none. `solved`: the contacts of the
+/// last solve on the contact's tissue with the instruments.
 double lastNormalForce(const SimulationState& state, std::span<const Contact> solved,
-                       const Contact& contact);
+                       const Contact& contact, const Eigen::VectorXd& q, double radius_m);
 
-/// The contact's gap + c f_n, f_n its normal force in the last solve (lastNormalForce): its
-/// penetration beyond what the contact compliance c allows (the gap itself when c = 0 or the
-/// contact is new).
+/// The contact's gap + c f_n, f_n its normal force in the last solve by its id: its penetration
+/// beyond what the contact compliance c allows (the gap itself when c = 0 or the contact is new).
 double gapBeyondCompliance(const SimulationState& state, const Contact& contact,
-                           double compliance_mpn, std::span<const Contact> solved = {});
+                           double compliance_mpn);
+
+/// As above with f_n from lastNormalForce (a sphere's contact renamed across an edge keeps it).
+/// detectCollisions passes the solved contacts with step-start detection only, else none.
+double gapBeyondCompliance(const SimulationState& state, const Contact& contact,
+                           double compliance_mpn, std::span<const Contact> solved,
+                           const Eigen::VectorXd& q, double radius_m);
 
 /// detectCollisions without its timing and counter (Simulation::geometricMinGap).
 double queryContacts(const SimulationModel& model, SimulationState& state, StepScratch& scratch);
