@@ -151,8 +151,11 @@ double queryContacts(const SimulationModel& model, SimulationState& state, StepS
     for (const Contact& k : *ts.found) {
       min_gap = std::min(min_gap, k.gap_m);
       const double c = instrumentSpec(model.spec, k.instrument).contact_compliance_mpn;
-      const Instrument& tool = state.instruments[static_cast<std::size_t>(k.instrument)];
-      const double radius = tool.features()[static_cast<std::size_t>(k.feature)].radius_m;
+      const std::span<const ToolFeature> features =
+          state.instruments[static_cast<std::size_t>(k.instrument)].features();
+      const double radius = k.feature >= 0 && k.feature < static_cast<int>(features.size())
+                                ? features[static_cast<std::size_t>(k.feature)].radius_m
+                                : 0.0;
       scratch.min_excess_gap =
           std::min(scratch.min_excess_gap,
                    gapBeyondCompliance(state, k, c, solved, ts.body->positions(), radius));
