@@ -366,15 +366,16 @@ void PrintTo(const FailingGridCase& c, std::ostream* os) {
 }
 
 std::vector<FailingGridCase> failingGridApproaches() {
-  // liver_grasp_20k at liver_grasp_23k's grasp point with face contacts (2026-11-29); liver_grasp_23k
-  // with the limiter's fallback to the step's start (2026-11-29). Every other approach of both
-  // grids meets all three: on both meshes the same two slip
+  // both scenes as shipped (docs/measurements.md, "The grasp anywhere", 2026-11-30). Every other
+  // approach of both grids meets all three: on both meshes the same two slip, and on
+  // liver_grasp_23k a third at the criterion
   const double light = test_support::kGridGripsNmprad[0], firm = test_support::kGridGripsNmprad[1];
   return {
       {"liver_grasp_20k.yaml", gridApproach(5, -5, -20, light), "slips (rise 71 %)"},
       {"liver_grasp_20k.yaml", gridApproach(5, -5, -20, firm), "slips (rise 87 %)"},
       {"liver_grasp_23k.yaml", gridApproach(5, -5, -20, light), "slips (rise 87 %)"},
       {"liver_grasp_23k.yaml", gridApproach(5, -5, -20, firm), "slips (rise 89 %)"},
+      {"liver_grasp_23k.yaml", gridApproach(-5, -5, -20, light), "slips (rise 89 %)"},
   };
 }
 
