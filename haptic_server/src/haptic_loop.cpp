@@ -353,7 +353,7 @@ void HapticLoop::publishSample(DeviceChannel& ch, int i, std::int64_t now,
 }
 
 // The newest prepared snapshot, its age, and the local model.
-void HapticLoop::takeSnapshot(std::int64_t now, std::int64_t t_read_ns, std::int64_t deadline_ns,
+void HapticLoop::takeSnapshot(std::int64_t now, std::int64_t t_now_ns, std::int64_t deadline_ns,
                               TickOutput& out) noexcept {
   bool stale = true;
   bool switched = false;
@@ -381,11 +381,11 @@ void HapticLoop::takeSnapshot(std::int64_t now, std::int64_t t_read_ns, std::int
     if (hdr.seq == 0) {
       out.flags |= shared::kStatsNoSnapshot;
     } else {
-      // aged at the moment it was taken (a tick preempted since its device read may be handed
-      // one published meanwhile)
+      // aged at the moment it was taken (a tick preempted since it started may be handed one
+      // published meanwhile)
       const std::int64_t age =
-          t_read_ns >= 0 ? detail::snapshotAgeNs(now, t_read_ns, shared::monotonicNs(), hdr.t_ns)
-                         : ageNs(now, hdr.t_ns);
+          t_now_ns >= 0 ? detail::snapshotAgeNs(now, t_now_ns, shared::monotonicNs(), hdr.t_ns)
+                        : ageNs(now, hdr.t_ns);
       const bool shutting = (hdr.flags & shared::kSnapshotShuttingDown) != 0;
       // stamped in the future (both sides share CLOCK_MONOTONIC): corrupt, never fresh
       const bool future = detail::fromTheFuture(age);
@@ -652,9 +652,7 @@ TickOutput HapticLoop::tick(std::int64_t scheduled_ns, std::int64_t woken_ns) no
   // (a device read may have stalled since the tick woke, the tick may be preempted before it
   // takes the snapshot), so a snapshot published meanwhile is not taken for one from the
   // future. Without a clock (solve_budget_ns = 0: simulated time) on the caller's clock alone.
-  const bool real_clock = settings_.solve_budget_ns > 0;
-  takeSnapshot(real_clock ? now + (t_read - out.started_ns) : now, real_clock ? t_read : -1,
-               solve_deadline, out);
+  takeSnapshot(now, settings_.solve_budget_ns > 0 ? out.started_ns : -1, solve_deadline, out);
   const std::int64_t t_model = shared::monotonicNs();
   out.model_ns = t_model - t_read;
   std::array<double, 3> force0{};

@@ -40,23 +40,23 @@ inline std::int64_t ageNs(std::int64_t now, std::int64_t t_ns) noexcept {
   return age;
 }
 
-/// The age [ns] of a snapshot stamped `stamp_ns`, at the moment the tick took it.
-/// `now_at_read_ns` is the tick's clock when the devices had been read, `t_read_ns` and
-/// `t_taken_ns` the real clock (CLOCK_MONOTONIC) then and once the snapshot was taken. The real
-/// time between the two counts: a tick preempted after its device read may be handed a snapshot
+/// The age [ns] of a snapshot stamped `stamp_ns`, at the moment the tick took it: `now_ns` is
+/// the tick's clock at some moment of the tick (its start), `t_now_ns` and `t_taken_ns` the real
+/// clock (CLOCK_MONOTONIC) then and once the snapshot was taken. The real time between the two
+/// counts: a device read may stall, and a tick preempted after it may be handed a snapshot
 /// published meanwhile, which is fresh, not from the future. A backward step of the real clock
 /// counts as none; the sums saturate instead of overflowing (stamps come from shared memory).
-inline std::int64_t snapshotAgeNs(std::int64_t now_at_read_ns, std::int64_t t_read_ns,
+inline std::int64_t snapshotAgeNs(std::int64_t now_ns, std::int64_t t_now_ns,
                                   std::int64_t t_taken_ns, std::int64_t stamp_ns) noexcept {
   constexpr std::int64_t kMax = std::numeric_limits<std::int64_t>::max();
-  std::int64_t since_read = 0;
-  if (__builtin_sub_overflow(t_taken_ns, t_read_ns, &since_read)) {
-    since_read = t_taken_ns > t_read_ns ? kMax : 0;
+  std::int64_t since = 0;
+  if (__builtin_sub_overflow(t_taken_ns, t_now_ns, &since)) {
+    since = t_taken_ns > t_now_ns ? kMax : 0;
   }
-  since_read = std::max<std::int64_t>(since_read, 0);
-  std::int64_t now = 0;
-  if (__builtin_add_overflow(now_at_read_ns, since_read, &now)) now = kMax;
-  return ageNs(now, stamp_ns);
+  since = std::max<std::int64_t>(since, 0);
+  std::int64_t now_at_take = 0;
+  if (__builtin_add_overflow(now_ns, since, &now_at_take)) now_at_take = kMax;
+  return ageNs(now_at_take, stamp_ns);
 }
 
 /// A snapshot of this age was stamped in the future: corrupt, never fresh.

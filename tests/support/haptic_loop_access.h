@@ -34,11 +34,11 @@ struct HapticLoopTestAccess {
   static void publishSample(HapticLoop& l, std::int64_t now, device::IoStatus io) {
     l.publishSample(l.channels_[0], 0, now, io);
   }
-  /// `now`: the tick's clock at its device read; `t_read_ns`: the real clock then (by default
-  /// the call's moment: the snapshot taken right after the read).
+  /// `now`: the tick's clock; `t_now_ns`: the real clock at that moment (by default the call's:
+  /// the snapshot taken at once).
   static void takeSnapshot(HapticLoop& l, std::int64_t now, TickOutput& out,
-                           std::int64_t t_read_ns = shared::monotonicNs()) {
-    l.takeSnapshot(now, t_read_ns, 0, out);
+                           std::int64_t t_now_ns = shared::monotonicNs()) {
+    l.takeSnapshot(now, t_now_ns, 0, out);
   }
   /// Prepares the newest snapshot (as the preparer thread would) and adopts it; its sequence.
   static std::uint64_t prepareNewest(HapticLoop& l, AttachedSegment& link) {

@@ -387,9 +387,9 @@ class HapticLoop {
                               TickOutput& out) noexcept;
   void publishSample(DeviceChannel& ch, int i, std::int64_t now, device::IoStatus io) noexcept;
   /// The newest prepared snapshot, its age, and the local model under `deadline_ns`. `now`: the
-  /// tick's clock at the device read, `t_read_ns` the real clock then (the snapshot is aged at
-  /// `now` plus the real time since, once taken), or negative without a clock (aged at `now`).
-  void takeSnapshot(std::int64_t now, std::int64_t t_read_ns, std::int64_t deadline_ns,
+  /// tick's clock, `t_now_ns` the real clock at that moment (the snapshot is aged at `now` plus
+  /// the real time since, once taken), or negative without a clock (aged at `now`).
+  void takeSnapshot(std::int64_t now, std::int64_t t_now_ns, std::int64_t deadline_ns,
                     TickOutput& out) noexcept;
   /// After takeSnapshot: blends a new snapshot's wrench in (HapticSettings::snapshot_blend_ms).
   void blendSnapshot(bool switched, bool solved, TickOutput& out) noexcept;
