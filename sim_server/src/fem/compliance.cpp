@@ -270,16 +270,12 @@ private:
       return;
     }
     // uncoupled: G = C_UU P, column by column from the diagonal blocks
-    GrowOnlyMatrix::Map &gm = g_.resize(du, m);
-    {
-      gm.setZero();
-      for (int l = 0; l < m; ++l)
-        for (int t = 0; t < terms_[l].count; ++t) {
-          const int b = terms_[l].local[t];
-          gm.col(l).segment<3>(3 * b) +=
-              diag_[blk_.local[touched_[b]]] * terms_[l].p[t];
-        }
-    }
+    GrowOnlyMatrix::Map &gm = g_.setZero(du, m);
+    for (int l = 0; l < m; ++l)
+      for (int t = 0; t < terms_[l].count; ++t) {
+        const int b = terms_[l].local[t];
+        gm.col(l).segment<3>(3 * b) += diag_[blk_.local[touched_[b]]] * terms_[l].p[t];
+      }
     // through G^T so every column of W below is one fused pass over contiguous memory
     GrowOnlyMatrix::Map &gtm = gt_.resize(m, du);
     gtm = gm.transpose();
