@@ -36,15 +36,23 @@ std::vector<Contact> sampleContactsAt(Collision& collision, double x, double y) 
   return collision.detect(features, shared::Pose{});
 }
 
-TEST(ContactPasses, ASampleContactRenamedAcrossAnEdgeKeepsItsForcesGive) {
-  const test::TestSurface grid = test::flatGrid(2, 2, 1e-3);
-  CollisionOptions options;
-  options.alarm_distance_m = 3e-3;
-  Collision collision(grid.surface, grid.q, options);
+// A flat 2 x 2 grid of 1 mm cells at z = 0 and its collision (3 mm alarm distance).
+class ContactPasses : public ::testing::Test {
+ protected:
+  static CollisionOptions gridOptions() {
+    CollisionOptions options;
+    options.alarm_distance_m = 3e-3;
+    return options;
+  }
+  const test::TestSurface grid_ = test::flatGrid(2, 2, 1e-3);
+  Collision collision_{grid_.surface, grid_.q, gridOptions()};
+};
+
+TEST_F(ContactPasses, ASampleContactRenamedAcrossAnEdgeKeepsItsForcesGive) {
   // over the first cell's lower triangle, then 0.14 mm on across its diagonal over the upper one
-  const std::vector<Contact> solved = sampleContactsAt(collision, 0.55e-3, 0.45e-3);
+  const std::vector<Contact> solved = sampleContactsAt(collision_, 0.55e-3, 0.45e-3);
   ASSERT_EQ(solved.size(), 1u);
-  const std::vector<Contact> now = sampleContactsAt(collision, 0.45e-3, 0.55e-3);
+  const std::vector<Contact> now = sampleContactsAt(collision_, 0.45e-3, 0.55e-3);
   ASSERT_EQ(now.size(), 1u);
   const Contact& renamed = now[0];
   EXPECT_NE(renamed.id, solved[0].id) << "the contact keeps its id: no rename to test";
@@ -53,35 +61,31 @@ TEST(ContactPasses, ASampleContactRenamedAcrossAnEdgeKeepsItsForcesGive) {
   // the last solve held the sample's contact with 0.05 N: c f = 0.15 mm of give
   SimulationState state;
   state.warm_start_f[solved[0].id] = {0.05, 0.0, 0.0};
-  EXPECT_DOUBLE_EQ(lastNormalForce(state, solved, renamed, grid.q, kPassRadius), 0.05);
+  EXPECT_DOUBLE_EQ(lastNormalForce(state, solved, renamed, grid_.q, kPassRadius), 0.05);
   const double beyond =
-      gapBeyondCompliance(state, renamed, kPassCompliance, solved, grid.q, kPassRadius);
+      gapBeyondCompliance(state, renamed, kPassCompliance, solved, grid_.q, kPassRadius);
   EXPECT_NEAR(beyond, 0.0, 1e-9);
   EXPECT_GT(beyond, -kPassTolerance) << "the renamed contact's give taken for penetration";
   // by id alone it is new and penetrates by its whole gap
   EXPECT_LT(gapBeyondCompliance(state, renamed, kPassCompliance), -kPassTolerance);
 }
 
-TEST(ContactPasses, ASampleContactThatMovedOverTheTissueIsNew) {
+TEST_F(ContactPasses, ASampleContactThatMovedOverTheTissueIsNew) {
   // the sphere's closest point 0.57 mm from the solved contact's, more than half its radius
   // (0.5 mm): the contact has moved over the tissue, its row's nodes are no longer the right ones
-  const test::TestSurface grid = test::flatGrid(2, 2, 1e-3);
-  CollisionOptions options;
-  options.alarm_distance_m = 3e-3;
-  Collision collision(grid.surface, grid.q, options);
-  const std::vector<Contact> solved = sampleContactsAt(collision, 0.8e-3, 0.2e-3);
+  const std::vector<Contact> solved = sampleContactsAt(collision_, 0.8e-3, 0.2e-3);
   ASSERT_EQ(solved.size(), 1u);
-  const std::vector<Contact> now = sampleContactsAt(collision, 0.4e-3, 0.6e-3);
+  const std::vector<Contact> now = sampleContactsAt(collision_, 0.4e-3, 0.6e-3);
   ASSERT_EQ(now.size(), 1u);
   ASSERT_NE(now[0].id, solved[0].id);
   SimulationState state;
   state.warm_start_f[solved[0].id] = {0.05, 0.0, 0.0};
-  EXPECT_EQ(lastNormalForce(state, solved, now[0], grid.q, kPassRadius), 0.0);
-  EXPECT_LT(gapBeyondCompliance(state, now[0], kPassCompliance, solved, grid.q, kPassRadius),
+  EXPECT_EQ(lastNormalForce(state, solved, now[0], grid_.q, kPassRadius), 0.0);
+  EXPECT_LT(gapBeyondCompliance(state, now[0], kPassCompliance, solved, grid_.q, kPassRadius),
             -kPassTolerance);
 }
 
-TEST(ContactPasses, OnlyTheSameSpheresContactAcrossAnEdgeLendsItsForce) {
+TEST_F(ContactPasses, OnlyTheSameSpheresContactAcrossAnEdgeLendsItsForce) {
   // hand-built: the solved contact on triangle (0, 1, 2) with 0.05 N, candidates on other
   // triangles and features, each 0.15 mm deep
   Contact held;
