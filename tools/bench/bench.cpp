@@ -184,7 +184,7 @@ int run(const BenchOptions& o) {
   std::vector<Series> busy = stages;   // the steps with at least o.min_contacts contacts
   std::vector<double> busy_contacts;
   std::vector<double> contacts, rows, sim_sweeps, tick_us, tick_cpu_us, tick_sweeps_v, tick_err, passes,
-      geometric_pen_mm, excess_pen_mm, distinct_nodes, total_fn, fem_cg, groups;
+      geometric_pen_mm, excess_pen_mm, distinct_nodes, total_fn, fem_cg, fem_local, groups;
   long fem_factorisations = 0;
   long tick_converged = 0;
   long sim_converged = 0;
@@ -199,7 +199,7 @@ int run(const BenchOptions& o) {
     if (trace == nullptr) throw Error("cannot write " + o.trace);
     std::fprintf(trace, "step,t_s,contacts,rows,sim_sweeps,step_ms,tick_solve_us,tick_sweeps,groups,solve_ms,"
                         "free_ms,detect_ms,compliance_ms,build_w_ms,constrained_ms,cpu_ms,passes,"
-                        "factorisations,cg_iterations,publish_ms,minor_faults,factor_wait_ms\n");
+                        "factorisations,cg_iterations,publish_ms,minor_faults,factor_wait_ms,pcg_local_nodes\n");
   }
   const std::int64_t t0 = shared::monotonicNs();
   // each step of the headless runner: publish, the figures, the haptic tick on the snapshot
@@ -224,12 +224,12 @@ int run(const BenchOptions& o) {
     const double waited = waitedS();
     const double step_wait_s = waited - wait_mark;
     wait_mark = waited;
-    std::fprintf(trace, "%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%d,%d,%d,%.4f,%ld,%.4f\n",
+    std::fprintf(trace, "%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%d,%d,%d,%.4f,%ld,%.4f,%d\n",
                  1e3 * r.times.free_motion_s, 1e3 * r.times.detect_collisions_s,
                  1e3 * r.times.update_compliance_s, 1e3 * r.times.build_w_s,
                  1e3 * r.times.constrained_motion_s, 1e3 * step_cpu_s, r.contact_passes,
                  static_cast<int>(r.fem_factorisations), static_cast<int>(r.fem_cg_iterations),
-                 1e3 * stages[6].v.back(), step_faults, 1e3 * step_wait_s);
+                 1e3 * stages[6].v.back(), step_faults, 1e3 * step_wait_s, r.fem_pcg_local_nodes);
   };
   const auto afterStepInner = [&](long k, const sim::StepReport& r) {
     const std::int64_t tp = shared::monotonicNs();
@@ -239,6 +239,7 @@ int run(const BenchOptions& o) {
     step_faults = threadMinorFaults() - faults_mark;
     stages[0].v.push_back(r.times.free_motion_s);
     fem_cg.push_back(r.fem_cg_iterations);
+    fem_local.push_back(r.fem_pcg_local_nodes);
     fem_factorisations += r.fem_factorisations;
     stages[1].v.push_back(r.times.detect_collisions_s);
     stages[2].v.push_back(r.times.update_compliance_s);
@@ -378,10 +379,12 @@ int run(const BenchOptions& o) {
   std::printf("free motion linear solve: %ld CHOLMOD factorisations on the step's thread, %ld "
               "at set-up and %ld in the background in %ld steps (%ld steps waited for the "
               "background one, %.2f ms in all, at most %.2f ms; %ld went on without it, not "
-              "ready); PCG iterations per step median %.0f, p90 %.0f, max %.0f\n",
+              "ready); PCG iterations per step median %.0f, p90 %.0f, max %.0f; nodes in its "
+              "local correction median %.0f, p90 %.0f, max %.0f\n",
               fem_factorisations, prepared_factorisations, background_factorisations, steps,
               background_waits, 1e3 * background_wait_s, 1e3 * background_wait_max_s,
-              background_not_ready, pct(fem_cg, 0.5), pct(fem_cg, 0.9), pct(fem_cg, 1.0));
+              background_not_ready, pct(fem_cg, 0.5), pct(fem_cg, 0.9), pct(fem_cg, 1.0),
+              pct(fem_local, 0.5), pct(fem_local, 0.9), pct(fem_local, 1.0));
   std::printf("CPU of the run's other threads (the background factorisations): %.2f s, %.2f ms "
               "per step\n", other_threads_cpu_s,
               1e3 * other_threads_cpu_s / static_cast<double>(std::max(1L, steps)));

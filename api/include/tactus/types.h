@@ -84,6 +84,9 @@ struct StepReport {
   /// system matrix and PCG iterations
   int fem_factorisations = 0;
   int fem_cg_iterations = 0;
+  /// The nodes of the free motions' PCG local corrections (FemSolverOptions::
+  /// pcg_local_correction_threshold), over all tissues
+  int fem_pcg_local_nodes = 0;
   StageTimes times;
 };
 

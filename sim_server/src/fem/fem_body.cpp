@@ -44,11 +44,18 @@ void FemBody::Impl::init(const TetMesh& m, const FemMaterial& mat,
     throw Error("FemBody: background_refactor_lag_steps must be >= 0");
   if (opt.background_refactor_free_lag_steps < 0)
     throw Error("FemBody: background_refactor_free_lag_steps must be >= 0");
+  if (!(opt.pcg_local_correction_threshold >= 0.0) ||
+      !std::isfinite(opt.pcg_local_correction_threshold) ||
+      opt.pcg_local_correction_max_nodes < 0 || opt.pcg_local_correction_max_nodes > 1000)
+    throw Error("FemBody: pcg_local_correction_threshold must be finite and >= 0, "
+                "pcg_local_correction_max_nodes in [0, 1000]");
   reuse = fem_detail::ReusedFactorSolver({opt.cg_tolerance, opt.refactor_iterations,
                                           opt.refactor_every_steps,
                                           opt.background_refactor_lag_steps,
                                           opt.background_refactor_when_ready,
-                                          opt.background_refactor_free_lag_steps});
+                                          opt.background_refactor_free_lag_steps,
+                                          opt.pcg_local_correction_threshold,
+                                          opt.pcg_local_correction_max_nodes});
   if (opt.linear == LinearSolverKind::kCholmodReuse && opt.background_refactor_lag_steps > 0) {
     // the worker runs BLAS (CHOLMOD's supernodal factorisation) while the steps go on: the
     // step's own solves make no BLAS call (CholmodSolver::setBlasFreeSolves, linear_solver.h),

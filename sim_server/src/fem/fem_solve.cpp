@@ -128,8 +128,12 @@ bool FemBody::Impl::solveStep(double h, FemStepStats& stats) {
             relative_rot[dof_base[i] / 3] = node_rot[i] * factor_node_rot[dof_base[i] / 3].transpose();
       }
       const double warp_s = shared::secondsSinceNs(t_warp);
+      // A_f's values (the local correction compares them with A's): those of the factor of
+      // record, kept by noteFactorSource
+      const bool source_known = factor_values.size() == a.nonZeros();
       const fem_detail::ReuseSolveResult r =
-          reuse.solve(chol, a, rhs, dv, corotational ? relative_rot.data() : nullptr);
+          reuse.solve(chol, a, rhs, dv, corotational ? relative_rot.data() : nullptr,
+                      corotational && source_known ? factor_values.data() : nullptr);
       if (r.refreshed) {
         keepFactorRotations();
         noteFactorSource();
@@ -146,6 +150,7 @@ bool FemBody::Impl::solveStep(double h, FemStepStats& stats) {
       stats.factorisation_s = r.factorisation_s + stats.factor_wait_s;
       stats.solve_s = warp_s + r.solve_s;
       stats.cg_iterations = r.cg_iterations;
+      stats.pcg_local_nodes = r.local_nodes;
       stats.cg_residual = r.residual;
       stats.factor_refreshed = r.refreshed;
       stats.factor_prepared = r.prepared;

@@ -516,9 +516,153 @@ bool ReusedFactorSolver::adoptDue(CholmodSolver& factor, double& waited_s,
   return true;
 }
 
+// ---- the local correction ----
+
+void ReusedFactorSolver::indexBlocks(const Sparse& a) {
+  if (indexed_nonzeros_ == a.nonZeros()) return;
+  const int nodes = static_cast<int>(a.cols() / 3);
+  blocks_.clear();
+  diagonal_block_.assign(static_cast<std::size_t>(nodes), -1);
+  // the blocks of each column node, in the order their rows first appear
+  std::vector<int> last_of_row(static_cast<std::size_t>(nodes), -1);
+  for (int col_node = 0; col_node < nodes; ++col_node) {
+    const auto first = static_cast<int>(blocks_.size());
+    for (int c = 3 * col_node; c < 3 * col_node + 3; ++c) {
+      for (auto p = a.outerIndexPtr()[c]; p < a.outerIndexPtr()[c + 1]; ++p) {
+        const int row = a.innerIndexPtr()[p];
+        const int row_node = row / 3;
+        int& k = last_of_row[static_cast<std::size_t>(row_node)];
+        if (k < first) {
+          k = static_cast<int>(blocks_.size());
+          NodeBlock nb;
+          nb.row = row_node;
+          nb.col = col_node;
+          nb.pos.fill(-1);
+          blocks_.push_back(nb);
+        }
+        blocks_[static_cast<std::size_t>(k)].pos[static_cast<std::size_t>(3 * (row % 3) + c % 3)] =
+            static_cast<int>(p);
+      }
+    }
+  }
+  // per node, the blocks of its block row (stored as (row, col) or as (col, row))
+  node_block_begin_.assign(static_cast<std::size_t>(nodes) + 1, 0);
+  for (std::size_t k = 0; k < blocks_.size(); ++k) {
+    const NodeBlock& nb = blocks_[k];
+    ++node_block_begin_[static_cast<std::size_t>(nb.row) + 1];
+    if (nb.row != nb.col) ++node_block_begin_[static_cast<std::size_t>(nb.col) + 1];
+    else diagonal_block_[static_cast<std::size_t>(nb.row)] = static_cast<int>(k);
+  }
+  for (int i = 0; i < nodes; ++i) node_block_begin_[i + 1] += node_block_begin_[i];
+  node_block_index_.assign(static_cast<std::size_t>(node_block_begin_.back()), 0);
+  std::vector<int> fill(node_block_begin_.begin(), node_block_begin_.end() - 1);
+  for (std::size_t k = 0; k < blocks_.size(); ++k) {
+    const NodeBlock& nb = blocks_[k];
+    node_block_index_[static_cast<std::size_t>(fill[nb.row]++)] = static_cast<int>(k);
+    if (nb.row != nb.col) node_block_index_[static_cast<std::size_t>(fill[nb.col]++)] = static_cast<int>(k);
+  }
+  local_index_.assign(static_cast<std::size_t>(nodes), -1);
+  indexed_nonzeros_ = a.nonZeros();
+}
+
+Eigen::Matrix3d ReusedFactorSolver::blockValues(const NodeBlock& b, const double* values) const {
+  Eigen::Matrix3d m;
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) {
+      int p = b.pos[static_cast<std::size_t>(3 * r + c)];
+      if (p < 0 && b.row == b.col) p = b.pos[static_cast<std::size_t>(3 * c + r)];   // symmetric
+      m(r, c) = p < 0 ? 0.0 : values[p];
+    }
+  return m;
+}
+
+int ReusedFactorSolver::selectLocalNodes(const Sparse& a, const double* factor_a_values,
+                                         const Eigen::Matrix3d* block_rotation) {
+  for (const int i : local_nodes_) local_index_[static_cast<std::size_t>(i)] = -1;
+  local_nodes_.clear();
+  const double threshold = policy_.local_correction_threshold;
+  if (threshold <= 0.0 || factor_a_values == nullptr || block_rotation == nullptr ||
+      a.cols() % 3 != 0)
+    return 0;
+  indexBlocks(a);
+  candidates_.clear();
+  const int nodes = static_cast<int>(a.cols() / 3);
+  const double threshold2 = threshold * threshold;
+  for (int i = 0; i < nodes; ++i) {
+    const int k = diagonal_block_[static_cast<std::size_t>(i)];
+    if (k < 0) continue;
+    const NodeBlock& nb = blocks_[static_cast<std::size_t>(k)];
+    const Eigen::Matrix3d now = blockValues(nb, a.valuePtr());
+    const Eigen::Matrix3d warped =
+        block_rotation[i] * blockValues(nb, factor_a_values) * block_rotation[i].transpose();
+    const double misfit2 = (now - warped).squaredNorm();
+    const double scale2 = now.squaredNorm();
+    if (misfit2 > threshold2 * scale2) candidates_.push_back({misfit2 / scale2, i});
+  }
+  const auto cap = static_cast<std::size_t>(std::max(policy_.local_correction_max_nodes, 0));
+  if (candidates_.size() > cap) {
+    // the furthest off (ties to the lower node: the same nodes on every run)
+    std::nth_element(candidates_.begin(), candidates_.begin() + static_cast<std::ptrdiff_t>(cap),
+                     candidates_.end(), [](const auto& l, const auto& r) {
+                       return l.first > r.first || (l.first == r.first && l.second < r.second);
+                     });
+    candidates_.resize(cap);
+  }
+  for (const auto& c : candidates_) local_nodes_.push_back(c.second);
+  std::sort(local_nodes_.begin(), local_nodes_.end());
+  const auto m = static_cast<Eigen::Index>(3 * local_nodes_.size());
+  if (m == 0) return 0;
+  for (std::size_t j = 0; j < local_nodes_.size(); ++j)
+    local_index_[static_cast<std::size_t>(local_nodes_[j])] = static_cast<int>(j);
+  // A_LL (dense, lower part filled; LLT reads the lower triangle)
+  local_a_.setZero(m, m);
+  for (const int i : local_nodes_) {
+    const auto li = 3 * local_index_[static_cast<std::size_t>(i)];
+    for (int q = node_block_begin_[i]; q < node_block_begin_[i + 1]; ++q) {
+      const NodeBlock& nb = blocks_[static_cast<std::size_t>(node_block_index_[q])];
+      if (nb.row != i) continue;   // each block once: from its row node
+      const int lj = local_index_[static_cast<std::size_t>(nb.col)];
+      if (lj < 0) continue;
+      local_a_.block<3, 3>(li, 3 * lj) = blockValues(nb, a.valuePtr());
+    }
+  }
+  const Eigen::LLT<Eigen::Ref<Eigen::MatrixXd>> llt(local_a_);   // in place
+  if (llt.info() != Eigen::Success) {
+    for (const int i : local_nodes_) local_index_[static_cast<std::size_t>(i)] = -1;
+    local_nodes_.clear();
+    return 0;
+  }
+  local_u_.resize(m);
+  return static_cast<int>(local_nodes_.size());
+}
+
+void ReusedFactorSolver::localResidual(const Sparse& a, const Eigen::VectorXd& r,
+                                       const Eigen::VectorXd& y) {
+  for (std::size_t j = 0; j < local_nodes_.size(); ++j) {
+    const int i = local_nodes_[j];
+    Eigen::Vector3d u = r.segment<3>(3 * i);
+    for (int q = node_block_begin_[i]; q < node_block_begin_[i + 1]; ++q) {
+      const NodeBlock& nb = blocks_[static_cast<std::size_t>(node_block_index_[q])];
+      const Eigen::Matrix3d m = blockValues(nb, a.valuePtr());
+      if (nb.row == i) u.noalias() -= m * y.segment<3>(3 * nb.col);
+      else u.noalias() -= m.transpose() * y.segment<3>(3 * nb.row);
+    }
+    local_u_.segment<3>(3 * static_cast<Eigen::Index>(j)) = u;
+  }
+}
+
+void ReusedFactorSolver::addLocalSolution(Eigen::VectorXd& x) {
+  const auto lower = local_a_.triangularView<Eigen::Lower>();
+  lower.solveInPlace(local_u_);
+  lower.adjoint().solveInPlace(local_u_);
+  for (std::size_t j = 0; j < local_nodes_.size(); ++j)
+    x.segment<3>(3 * local_nodes_[j]) += local_u_.segment<3>(3 * static_cast<Eigen::Index>(j));
+}
+
 ReuseSolveResult ReusedFactorSolver::solve(CholmodSolver& factor, Sparse& a,
                                            const Eigen::VectorXd& b, Eigen::VectorXd& x,
-                                           const Eigen::Matrix3d* block_rotation) {
+                                           const Eigen::Matrix3d* block_rotation,
+                                           const double* factor_a_values) {
   ReuseSolveResult out;
   const bool prepared = prepared_ && factor.factorized();
   prepared_ = false;
@@ -541,6 +685,12 @@ ReuseSolveResult ReusedFactorSolver::solve(CholmodSolver& factor, Sparse& a,
   if (!refresh) {
     const std::int64_t t0 = shared::monotonicNs();
     const int bound = background ? 3 * policy_.refactor_iterations : policy_.refactor_iterations;
+    out.local_nodes = selectLocalNodes(a, factor_a_values, block_rotation);
+    if (out.local_nodes > 0) {
+      // the start with Z^T (b - A x0) = 0
+      localResidual(a, b, x);
+      addLocalSolution(x);
+    }
     const CgResult cg = conjugateGradient(
         a, b, x, policy_.tolerance, bound, cg_,
         [&](const Eigen::VectorXd& r, Eigen::VectorXd& z) {
@@ -556,6 +706,11 @@ ReuseSolveResult ReusedFactorSolver::solve(CholmodSolver& factor, Sparse& a,
           factor.solvePreconditioner(warp_.data(), warp_.data());
           for (Eigen::Index k = 0; k < blocks; ++k)
             z.segment<3>(3 * k).noalias() = block_rotation[k] * warp_.segment<3>(3 * k);
+          if (out.local_nodes > 0) {
+            // z += Z A_LL^-1 Z^T (r - A z)
+            localResidual(a, r, z);
+            addLocalSolution(z);
+          }
         });
     out.solve_s = shared::secondsSinceNs(t0);
     out.cg_iterations = cg.iterations;

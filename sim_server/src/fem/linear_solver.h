@@ -5,10 +5,12 @@
 
 #include <cholmod.h>
 
+#include <Eigen/Cholesky>
 #include <Eigen/Core>
 #include <Eigen/SparseCore>
 #include <condition_variable>
 #include <cstddef>
+#include <array>
 #include <cstdint>
 #include <memory>
 #include <mutex>
@@ -288,6 +290,13 @@ struct FactorReusePolicy {
   /// background mode, lagged: the lag over steps without contact (see
   /// ReusedFactorSolver::adoptDue); 0: background_lag_steps
   int background_free_lag_steps = 0;
+  /// > 0: PCG corrects the preconditioner exactly at the nodes where it is furthest from the
+  /// current A (see ReusedFactorSolver::solve): a node whose diagonal block of A differs from
+  /// the warped factor's, T A_f T^T, by more than this fraction (Frobenius norms) joins the
+  /// local block; 0: no local correction
+  double local_correction_threshold = 0.0;
+  /// at most this many nodes in the local block (those furthest off when more qualify)
+  int local_correction_max_nodes = 96;
 };
 
 /// Figures of one ReusedFactorSolver::solve.
@@ -303,6 +312,8 @@ struct ReuseSolveResult {
   /// the refresh used the factor prepared before the step (notePreparedFactor): a direct solve,
   /// no factorisation in this solve
   bool prepared = false;
+  /// nodes in the PCG's local correction (0: none)
+  int local_nodes = 0;
 };
 
 /// A dv = b with the CHOLMOD factorisation of a recent system matrix A_f as the preconditioner of
@@ -331,6 +342,18 @@ struct ReuseSolveResult {
 /// price of results that depend on the worker's timing (each still meets the tolerance).
 /// PCG's preconditioner solves are the factor's solvePreconditioner() (single precision when
 /// the factor is set so); its direct solves after a refresh are solve() (double).
+///
+/// Local correction (local_correction_threshold > 0, with A_f's values given to solve()): the
+/// warp follows rotations that one rotation per node represents; where the elements around a
+/// node deform unlike it (the tets crushed between a grasper's jaws, a released lobe's fold) the
+/// warped factor is wrong at a handful of nodes, and PCG spent most of its iterations there
+/// (liver_grasp_23k: 11-22 iterations with a factor one step old). Before PCG the nodes whose
+/// diagonal block of A is furthest from T A_f T^T form a local block A_LL, factorised densely
+/// (Z: the unit vectors of its unknowns). The start is corrected so that Z^T r0 = 0
+/// (x0 += Z A_LL^-1 Z^T r0), and each preconditioner solve y = T A_f^-1 T^T r is followed by
+/// z = y + Z A_LL^-1 Z^T (r - A y): the deflated PCG in its "adapted" form (A-DEF2), which keeps
+/// Z^T r = 0 at every iteration, so that plain PCG's recurrences apply. Which nodes form the
+/// block follows from A, A_f and the rotations alone: reproducible bit for bit.
 class ReusedFactorSolver {
  public:
   using Sparse = CholmodSolver::Sparse;
@@ -358,8 +381,12 @@ class ReusedFactorSolver {
   /// `block_rotation` (null: none) warps the preconditioner to T A_f^-1 T^T with T block
   /// diagonal, one 3x3 rotation per 3 consecutive unknowns (size / 3 of them): the rotation of
   /// each node since the factor's step, so that the factor follows the tissue's rotations.
+  /// `factor_a_values` (null: none): the values of A_f, the matrix the factor was computed
+  /// from, in A's pattern; with block_rotation and local_correction_threshold > 0 they enable
+  /// the local correction.
   ReuseSolveResult solve(CholmodSolver& factor, Sparse& a, const Eigen::VectorXd& b,
-                         Eigen::VectorXd& x, const Eigen::Matrix3d* block_rotation = nullptr);
+                         Eigen::VectorXd& x, const Eigen::Matrix3d* block_rotation = nullptr,
+                         const double* factor_a_values = nullptr);
   /// The factor was computed from the current A outside solve() (it is 0 steps old).
   void noteFactorised() {
     age_steps_ = 0;
@@ -427,6 +454,31 @@ class ReusedFactorSolver {
   bool job_stale_ = false;   // a newer factor than the job's was made since it started
   bool restart_job_ = false; // a loaded state had a job in flight (jobToRestart)
   bool prepared_ = false;    // notePreparedFactor (consumed by the next solve)
+
+  // ---- the local correction (scratch, rebuilt each solve from A, A_f and the rotations) ----
+  // The 3x3 block of A at (row node, column node), row >= col: the positions of its nine
+  // values in A's value array (-1: not stored, the diagonal block's upper part).
+  struct NodeBlock {
+    int row = 0, col = 0;
+    std::array<int, 9> pos{};
+  };
+  void indexBlocks(const Sparse& a);
+  Eigen::Matrix3d blockValues(const NodeBlock& b, const double* values) const;
+  int selectLocalNodes(const Sparse& a, const double* factor_a_values,
+                       const Eigen::Matrix3d* block_rotation);
+  // local_u_ = (r - A y) at the local nodes' unknowns
+  void localResidual(const Sparse& a, const Eigen::VectorXd& r, const Eigen::VectorXd& y);
+  // x += Z A_LL^-1 local_u_
+  void addLocalSolution(Eigen::VectorXd& x);
+  std::vector<NodeBlock> blocks_;
+  std::vector<int> diagonal_block_;                      // per node: its diagonal block
+  std::vector<int> node_block_begin_, node_block_index_; // per node: the blocks in its row
+  Eigen::Index indexed_nonzeros_ = -1;
+  std::vector<std::pair<double, int>> candidates_;       // (misfit, node)
+  std::vector<int> local_nodes_;                         // ascending
+  std::vector<int> local_index_;                         // per node: its place in local_nodes_, -1
+  Eigen::MatrixXd local_a_;   // A_LL, then its Cholesky factor in the lower triangle
+  Eigen::VectorXd local_u_;
 };
 
 }  // namespace tactus::sim::fem_detail

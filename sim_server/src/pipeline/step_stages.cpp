@@ -30,6 +30,7 @@ void freeMotion(const SimulationModel& model, SimulationState& state, StepScratc
     if (!st.ok) report.finite = false;
     report.inverted_elements += st.inverted_elements;
     report.fem_cg_iterations += st.cg_iterations;
+    report.fem_pcg_local_nodes += st.pcg_local_nodes;
     if ((st.factor_refreshed && !st.factor_prepared) ||
         model.spec.solver.linear == LinearSolverKind::kCholmod)
       ++report.fem_factorisations;

@@ -50,6 +50,7 @@ void SceneParser::readSolver(const YAML::Node& n, SolverSpec* s, int instruments
                    "refactor_every_steps", "background_refactor_lag_steps",
                    "background_refactor_free_lag_steps",
                    "background_refactor_when_ready", "single_precision_preconditioner",
+                   "pcg_local_correction_threshold",
                    "nsgs_tolerance",
                    "nsgs_max_sweeps", "nsgs_sor", "nsgs_anderson_depth", "split_contact_groups", "max_contacts", "contact_iterations",
                    "penetration_tolerance", "contact_detection"});
@@ -67,6 +68,8 @@ void SceneParser::readSolver(const YAML::Node& n, SolverSpec* s, int instruments
           1000, 100);
   boolean(n, p, "background_refactor_when_ready", &s->background_refactor_when_ready);
   boolean(n, p, "single_precision_preconditioner", &s->single_precision_preconditioner);
+  number(n, p, "pcg_local_correction_threshold", &s->pcg_local_correction_threshold,
+         Range{0.0, 1.0});
   number(n, p, "nsgs_tolerance", &s->nsgs_tolerance, kPositive, Range{-kInf, 1.0, false, true},
          kPositiveUpTo(1e-2));
   integer(n, p, "nsgs_max_sweeps", &s->nsgs_max_sweeps, 1, 10'000'000, 100'000);

@@ -393,6 +393,8 @@ TEST(Scene, EachKindOfErrorHasItsExactMessage) {
             "s.yaml:6:7: instrument.trajectory[0].t: is required");
   EXPECT_EQ(sceneError(kFullHead + "solver: {nsgs_sor: 2}\n"),
             "s.yaml:4:20: solver.nsgs_sor: must be in (0, 2) (got 2)");
+  EXPECT_EQ(sceneError(kFullHead + "solver: {pcg_local_correction_threshold: 1.5}\n"),
+            "s.yaml:4:42: solver.pcg_local_correction_threshold: must be in [0, 1] (got 1.5)");
   EXPECT_EQ(sceneError(kFullHead + "solver: {nsgs_anderson_depth: 9}\n"),
             "s.yaml:4:31: solver.nsgs_anderson_depth: must be in [0, 8] (got 9)");
   EXPECT_EQ(sceneError(kFullHead + "haptics: {nsgs_anderson_depth: -1}\n"),

@@ -137,6 +137,16 @@ struct FemSolverOptions {
   /// double sweeps. Scene key solver.single_precision_preconditioner (liver_grasp_20k and
   /// liver_grasp_23k set it; docs/design.md, "Free motion")
   bool single_precision_preconditioner = false;
+  /// kCholmodReuse, corotational: > 0 corrects the warped factor exactly at the nodes where it
+  /// is furthest from the current A: those whose diagonal 3x3 block of A differs from the warped
+  /// factor's by more than this fraction (Frobenius norms; at most
+  /// pcg_local_correction_max_nodes of them, the furthest off), solved together with a dense
+  /// Cholesky factor inside each preconditioner application (a deflated PCG; the tets crushed
+  /// between a grasper's jaws deform unlike their nodes' rotations, and PCG spent most of its
+  /// iterations there). 0, the default: none. Scene key solver.pcg_local_correction_threshold
+  /// (liver_grasp_20k and liver_grasp_23k set 0.03; docs/design.md, "Free motion")
+  double pcg_local_correction_threshold = 0.0;
+  int pcg_local_correction_max_nodes = 96;
 };
 
 /// Per-stage wall times of the last step [s] and solver figures. freeMotion allocates nothing
@@ -148,6 +158,8 @@ struct FemStepStats {
   double factorisation_s = 0.0;
   double solve_s = 0.0;
   int cg_iterations = 0;                        ///< 0 for kCholmod
+  /// kCholmodReuse: nodes in the PCG's local correction (pcg_local_correction_threshold)
+  int pcg_local_nodes = 0;
   /// false: the factorisation failed or dv was not finite (state kept), or CG stopped above its
   /// tolerance (its last finite iterate is applied; cg_residual says how far it got).
   bool ok = true;

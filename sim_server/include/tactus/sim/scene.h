@@ -196,6 +196,8 @@ struct SolverSpec {
   /// contact correction did not solve with the body counts background_refactor_lag_steps / this
   /// of a step; FemSolverOptions::background_refactor_free_lag_steps); 0: the same lag
   int background_refactor_free_lag_steps = 0;
+  /// kCholmodReuse: the PCG's local correction (FemSolverOptions::pcg_local_correction_threshold)
+  double pcg_local_correction_threshold = 0.0;
   /// kCholmodReuse in the background: the new factor takes over as soon as the worker has
   /// finished, no step waiting for it (FemSolverOptions::background_refactor_when_ready)
   bool background_refactor_when_ready = false;
