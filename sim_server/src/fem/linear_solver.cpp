@@ -615,7 +615,13 @@ int ReusedFactorSolver::selectLocalNodes(const Sparse& a, const double* factor_a
   for (std::size_t j = 0; j < local_nodes_.size(); ++j)
     local_index_[static_cast<std::size_t>(local_nodes_[j])] = static_cast<int>(j);
   // A_LL (dense, lower part filled; LLT reads the lower triangle)
-  local_a_.setZero(m, m);
+  const auto capacity = static_cast<Eigen::Index>(3 * cap);
+  if (local_a_.rows() != capacity) {
+    local_a_.setZero(capacity, capacity);
+    local_u_.setZero(capacity);
+  }
+  auto block = local_a_.topLeftCorner(m, m);
+  block.setZero();
   for (const int i : local_nodes_) {
     const auto li = 3 * local_index_[static_cast<std::size_t>(i)];
     for (int q = node_block_begin_[i]; q < node_block_begin_[i + 1]; ++q) {
@@ -623,16 +629,16 @@ int ReusedFactorSolver::selectLocalNodes(const Sparse& a, const double* factor_a
       if (nb.row != i) continue;   // each block once: from its row node
       const int lj = local_index_[static_cast<std::size_t>(nb.col)];
       if (lj < 0) continue;
-      local_a_.block<3, 3>(li, 3 * lj) = blockValues(nb, a.valuePtr());
+      block.block<3, 3>(li, 3 * lj) = blockValues(nb, a.valuePtr());
     }
   }
-  const Eigen::LLT<Eigen::Ref<Eigen::MatrixXd>> llt(local_a_);   // in place
+  Eigen::Ref<Eigen::MatrixXd> factor_in_place(block);
+  const Eigen::LLT<Eigen::Ref<Eigen::MatrixXd>> llt(factor_in_place);
   if (llt.info() != Eigen::Success) {
     for (const int i : local_nodes_) local_index_[static_cast<std::size_t>(i)] = -1;
     local_nodes_.clear();
     return 0;
   }
-  local_u_.resize(m);
   return static_cast<int>(local_nodes_.size());
 }
 
@@ -652,11 +658,13 @@ void ReusedFactorSolver::localResidual(const Sparse& a, const Eigen::VectorXd& r
 }
 
 void ReusedFactorSolver::addLocalSolution(Eigen::VectorXd& x) {
-  const auto lower = local_a_.triangularView<Eigen::Lower>();
-  lower.solveInPlace(local_u_);
-  lower.adjoint().solveInPlace(local_u_);
+  const auto m = static_cast<Eigen::Index>(3 * local_nodes_.size());
+  const auto lower = local_a_.topLeftCorner(m, m).triangularView<Eigen::Lower>();
+  auto u = local_u_.head(m);
+  lower.solveInPlace(u);
+  lower.adjoint().solveInPlace(u);
   for (std::size_t j = 0; j < local_nodes_.size(); ++j)
-    x.segment<3>(3 * local_nodes_[j]) += local_u_.segment<3>(3 * static_cast<Eigen::Index>(j));
+    x.segment<3>(3 * local_nodes_[j]) += u.segment<3>(3 * static_cast<Eigen::Index>(j));
 }
 
 ReuseSolveResult ReusedFactorSolver::solve(CholmodSolver& factor, Sparse& a,

@@ -477,7 +477,10 @@ class ReusedFactorSolver {
   std::vector<std::pair<double, int>> candidates_;       // (misfit, node)
   std::vector<int> local_nodes_;                         // ascending
   std::vector<int> local_index_;                         // per node: its place in local_nodes_, -1
-  Eigen::MatrixXd local_a_;   // A_LL, then its Cholesky factor in the lower triangle
+  // A_LL, then its Cholesky factor in the lower triangle: the top left 3 x local nodes square
+  // of a matrix sized once for the most nodes (and local_u_ its head), so that a block of
+  // another size than the last takes no allocation
+  Eigen::MatrixXd local_a_;
   Eigen::VectorXd local_u_;
 };
 
