@@ -144,7 +144,7 @@ struct FemSolverOptions {
   /// Cholesky factor inside each preconditioner application (a deflated PCG; the tets crushed
   /// between a grasper's jaws deform unlike their nodes' rotations, and PCG spent most of its
   /// iterations there). 0, the default: none. Scene key solver.pcg_local_correction_threshold
-  /// (liver_grasp_20k and liver_grasp_23k set 0.03; docs/design.md, "Free motion")
+  /// (liver_grasp_20k sets 0.03, liver_grasp_23k 0.05; docs/design.md, "Free motion")
   double pcg_local_correction_threshold = 0.0;
   int pcg_local_correction_max_nodes = 96;
 };
