@@ -243,6 +243,7 @@ PYBIND11_MODULE(tactus, m) {
       .def_readonly("strain_limit_unresolved", &tactus::StepReport::strain_limit_unresolved)
       .def_readonly("fem_factorisations", &tactus::StepReport::fem_factorisations)
       .def_readonly("fem_cg_iterations", &tactus::StepReport::fem_cg_iterations)
+      .def_readonly("fem_pcg_local_nodes", &tactus::StepReport::fem_pcg_local_nodes)
       .def_readonly("times", &tactus::StepReport::times);
 
   py::class_<tactus::InstrumentState>(m, "InstrumentState", "An instrument's god object")
