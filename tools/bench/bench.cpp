@@ -105,7 +105,7 @@ struct BenchOptions {
   int background_lag = -1;             ///< >= 0: overrides solver.background_refactor_lag_steps
   int background_free_lag = -1;        ///< >= 0: overrides ..._refactor_free_lag_steps
   std::string when_ready;              ///< "true"/"false": overrides ..._refactor_when_ready
-  std::string single_precondition;     ///< "true"/"false": overrides ..._precision_preconditioner
+  std::string precondition_precision;  ///< "double"/"float"/"half": overrides it
 };
 
 int run(const BenchOptions& o) {
@@ -129,8 +129,12 @@ int run(const BenchOptions& o) {
   if (o.background_free_lag >= 0)
     spec.solver.background_refactor_free_lag_steps = o.background_free_lag;
   if (!o.when_ready.empty()) spec.solver.background_refactor_when_ready = o.when_ready == "true";
-  if (!o.single_precondition.empty())
-    spec.solver.single_precision_preconditioner = o.single_precondition == "true";
+  if (o.precondition_precision == "double")
+    spec.solver.preconditioner_precision = sim::PreconditionerPrecision::kDouble;
+  if (o.precondition_precision == "float")
+    spec.solver.preconditioner_precision = sim::PreconditionerPrecision::kFloat;
+  if (o.precondition_precision == "half")
+    spec.solver.preconditioner_precision = sim::PreconditionerPrecision::kHalf;
   if (o.linear == "cholmod") spec.solver.linear = sim::LinearSolverKind::kCholmod;
   if (o.linear == "pcg") spec.solver.linear = sim::LinearSolverKind::kPcg;
   if (o.linear == "cholmod_reuse") spec.solver.linear = sim::LinearSolverKind::kCholmodReuse;
@@ -546,10 +550,10 @@ int main(int argc, char** argv) {
                  "Override the scene's solver.background_refactor_when_ready (true: no step "
                  "waits for the worker)")
       ->check(cli::isMember({"true", "false"}));
-  app.addOption("--single-precision-preconditioner", o.single_precondition,
-                 "Override the scene's solver.single_precision_preconditioner (true: PCG's "
-                 "preconditioner solves in float)")
-      ->check(cli::isMember({"true", "false"}));
+  app.addOption("--preconditioner-precision", o.precondition_precision,
+                 "Override the scene's solver.preconditioner_precision (PCG's preconditioner "
+                 "solves in double, float or half)")
+      ->check(cli::isMember({"double", "float", "half"}));
   app.addOption("--linear", o.linear, "Override the scene's solver.linear")
       ->check(cli::isMember({"cholmod", "pcg", "cholmod_reuse"}));
   app.addOption("--log-level", o.log_level, "spdlog level of the simulation library")

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <mutex>
 #include <string>
 
 #include <spdlog/spdlog.h>
@@ -64,9 +65,28 @@ void FemBody::Impl::init(const TetMesh& m, const FemMaterial& mat,
     reuse.setBackground(background.get());
     chol.setBlasFreeSolves(true);
     chol_rest.setBlasFreeSolves(true);
-    // PCG's preconditioner solves in float on a copy the worker makes (linear_solver.h); the
-    // compliance's and the direct solves stay in double
-    chol.setSinglePrecisionPreconditioner(opt.single_precision_preconditioner);
+    // PCG's preconditioner solves in float or half on a copy the worker makes
+    // (linear_solver.h); the compliance's and the direct solves stay in double
+    switch (opt.preconditioner_precision) {
+      case PreconditionerPrecision::kDouble:
+        break;
+      case PreconditionerPrecision::kFloat:
+        chol.setSinglePrecisionPreconditioner(true);
+        break;
+      case PreconditionerPrecision::kHalf:
+        if (fem_detail::halfSweepsPayOff()) {
+          chol.setHalfPrecisionPreconditioner(true);
+          break;
+        }
+        chol.setSinglePrecisionPreconditioner(true);
+        static std::once_flag logged;
+        std::call_once(logged, [] {
+          spdlog::info("solver.preconditioner_precision half: this CPU has neither F16C nor "
+                       "AVX-512F, whose conversions make the half sweeps faster than the float "
+                       "ones; PCG's preconditioner uses the float copy instead");
+        });
+        break;
+    }
   }
   corotational = mat.law != MaterialLaw::kLinear;
   rotation_stiffness =

@@ -30,7 +30,7 @@ FemSolverOptions femSolverOptions(const SolverSpec& solver) {
   o.background_refactor_lag_steps = solver.background_refactor_lag_steps;
   o.background_refactor_free_lag_steps = solver.background_refactor_free_lag_steps;
   o.background_refactor_when_ready = solver.background_refactor_when_ready;
-  o.single_precision_preconditioner = solver.single_precision_preconditioner;
+  o.preconditioner_precision = solver.preconditioner_precision;
   o.pcg_local_correction_threshold = solver.pcg_local_correction_threshold;
   return o;
 }

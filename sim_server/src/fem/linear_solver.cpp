@@ -121,6 +121,7 @@ void CholmodSolver::analyze(Sparse& lower) {
   if (factor_) cholmod_free_factor(&factor_, &common_);
   if (symbolic_) cholmod_free_factor(&symbolic_, &common_);
   single_current_ = false;
+  half_current_ = false;
   ++generation_;
   cholmod_sparse a = view(lower);
   {
@@ -162,6 +163,7 @@ bool CholmodSolver::factorize(Sparse& lower) {
   }
   factorized_ = ok && common_.status == CHOLMOD_OK && factor_->minor == factor_->n;
   single_current_ = false;
+  half_current_ = false;
   syncSinglePrecisionCopy();
   return factorized_;
 }
@@ -173,12 +175,27 @@ void CholmodSolver::setBlasFreeSolves(bool on) {
 
 void CholmodSolver::setSinglePrecisionPreconditioner(bool on) {
   single_precision_ = on;
+  if (on) half_precision_ = false;
   if (!on) single_x_ = {};
   syncSinglePrecisionCopy();
 }
 
+void CholmodSolver::setHalfPrecisionPreconditioner(bool on) {
+  half_precision_ = on;
+  if (on) single_precision_ = false;
+  syncSinglePrecisionCopy();
+}
+
 void CholmodSolver::syncSinglePrecisionCopy() {
-  if (!(single_precision_ && blas_free_solves_ && factorized_))
+  const bool copies = blas_free_solves_ && factorized_;
+  if (!(half_precision_ && copies)) {
+    half_current_ = false;
+  } else if (!half_current_) {
+    half_current_ = factor_->is_super && half_.assign(*factor_);
+  }
+  // the float copy: asked for, or in place of a half copy that could not be made
+  const bool want_single = single_precision_ || (half_precision_ && !half_current_);
+  if (!(want_single && copies))
     single_current_ = false;
   else if (!single_current_)
     makeSinglePrecisionCopy();
@@ -296,9 +313,15 @@ void CholmodSolver::prepareSolveWorkspaces() {
     single_y_.setZero(n);
     single_e_.setZero(esize);
   }
+  if (half_current_) half_.prepare(*factor_);
 }
 
 void CholmodSolver::solvePreconditioner(const double* b, double* x) {
+  if (half_current_ && blas_free_solves_) {
+    half_.solve(*factor_, b, x);
+    skipped_supernodes_ = 0;
+    return;
+  }
   if (!single_current_ || !blas_free_solves_) {
     solve(b, x, 1);
     return;
@@ -345,6 +368,7 @@ void CholmodSolver::analyzeLike(const CholmodSolver& other) {
   if (symbolic_) cholmod_free_factor(&symbolic_, &common_);
   factorized_ = false;
   single_current_ = false;
+  half_current_ = false;
   ++generation_;
   factor_ = cholmod_copy_factor(other.symbolic_ ? other.symbolic_ : other.factor_, &common_);
   if (!factor_) throw NumericalError("CHOLMOD: copying a factor failed (out of memory?)");
@@ -360,6 +384,8 @@ void CholmodSolver::swapFactor(CholmodSolver& other) noexcept {
   // the float copies go with their factors (each side's setting stays its own)
   single_x_.swap(other.single_x_);
   std::swap(single_current_, other.single_current_);
+  half_.swap(other.half_);
+  std::swap(half_current_, other.half_current_);
   ++generation_;
   ++other.generation_;
 }
@@ -375,6 +401,7 @@ double CholmodSolver::touchPages() const {
   if (single_current_) {
     for (std::size_t i = 0; i < single_x_.size(); i += 4096 / sizeof(float)) sum += single_x_[i];
   }
+  if (half_current_) sum += static_cast<double>(half_.touchPages());
   return sum;
 }
 
@@ -419,6 +446,7 @@ void BackgroundFactoriser::start(const Sparse& a, const CholmodSolver& like) {
     solver_->setBlasFreeSolves(true);
     // the float copy of the preconditioner made here, after the worker's factorisation
     solver_->setSinglePrecisionPreconditioner(like.singlePrecisionPreconditioner());
+    solver_->setHalfPrecisionPreconditioner(like.halfPrecisionPreconditioner());
     copy_ = a;   // pattern and values; later jobs copy the values only
   } else {
     std::copy(a.valuePtr(), a.valuePtr() + a.nonZeros(), copy_.valuePtr());

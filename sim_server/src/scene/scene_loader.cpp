@@ -49,7 +49,8 @@ void SceneParser::readSolver(const YAML::Node& n, SolverSpec* s, int instruments
   checkKeys(n, p, {"linear", "cg_tolerance", "cg_max_iterations", "refactor_iterations",
                    "refactor_every_steps", "background_refactor_lag_steps",
                    "background_refactor_free_lag_steps",
-                   "background_refactor_when_ready", "single_precision_preconditioner",
+                   "background_refactor_when_ready", "preconditioner_precision",
+                   "single_precision_preconditioner",
                    "pcg_local_correction_threshold",
                    "nsgs_tolerance",
                    "nsgs_max_sweeps", "nsgs_sor", "nsgs_anderson_depth", "split_contact_groups", "max_contacts", "contact_iterations",
@@ -67,7 +68,14 @@ void SceneParser::readSolver(const YAML::Node& n, SolverSpec* s, int instruments
   integer(n, p, "background_refactor_free_lag_steps", &s->background_refactor_free_lag_steps, 0,
           1000, 100);
   boolean(n, p, "background_refactor_when_ready", &s->background_refactor_when_ready);
-  boolean(n, p, "single_precision_preconditioner", &s->single_precision_preconditioner);
+  choice(n, p, "preconditioner_precision", &s->preconditioner_precision,
+         {{"double", PreconditionerPrecision::kDouble},
+          {"float", PreconditionerPrecision::kFloat},
+          {"half", PreconditionerPrecision::kHalf}});
+  if (n["single_precision_preconditioner"].IsDefined())
+    error(n["single_precision_preconditioner"], join(p, "single_precision_preconditioner"),
+          "replaced by solver.preconditioner_precision (double, float or half): write "
+          "`preconditioner_precision: float` for `true`, or leave both out for `false`");
   number(n, p, "pcg_local_correction_threshold", &s->pcg_local_correction_threshold,
          Range{0.0, 1.0});
   number(n, p, "nsgs_tolerance", &s->nsgs_tolerance, kPositive, Range{-kInf, 1.0, false, true},

@@ -262,18 +262,30 @@ TEST(Scene, LinearSolverStrategies) {
   EXPECT_EQ(def.solver.background_refactor_lag_steps, 0);
   EXPECT_EQ(def.solver.background_refactor_free_lag_steps, 0);
   EXPECT_FALSE(def.solver.background_refactor_when_ready);
-  EXPECT_FALSE(def.solver.single_precision_preconditioner);
+  EXPECT_EQ(def.solver.preconditioner_precision, PreconditionerPrecision::kDouble);
   const SceneSpec s = parseScene(
       kFullHead +
           "solver: {linear: cholmod_reuse, refactor_iterations: 12, refactor_every_steps: 50,\n"
           "         background_refactor_lag_steps: 2, background_refactor_when_ready: true,\n"
           "         background_refactor_free_lag_steps: 4,\n"
-          "         single_precision_preconditioner: true}\n",
+          "         preconditioner_precision: half}\n",
       "s.yaml", kSceneFiles);
   EXPECT_EQ(s.solver.background_refactor_lag_steps, 2);
   EXPECT_EQ(s.solver.background_refactor_free_lag_steps, 4);
   EXPECT_TRUE(s.solver.background_refactor_when_ready);
-  EXPECT_TRUE(s.solver.single_precision_preconditioner);
+  EXPECT_EQ(s.solver.preconditioner_precision, PreconditionerPrecision::kHalf);
+  EXPECT_EQ(parseScene(kFullHead + "solver: {preconditioner_precision: float}\n", "s.yaml",
+                       kSceneFiles)
+                .solver.preconditioner_precision,
+            PreconditionerPrecision::kFloat);
+  EXPECT_EQ(sceneError(kFullHead + "solver: {preconditioner_precision: single}\n"),
+            "s.yaml:4:36: solver.preconditioner_precision: must be one of double, float, half "
+            "(got 'single')");
+  // the key it replaced: a clear error, not a silent double
+  EXPECT_EQ(sceneError(kFullHead + "solver: {single_precision_preconditioner: true}\n"),
+            "s.yaml:4:43: solver.single_precision_preconditioner: replaced by "
+            "solver.preconditioner_precision (double, float or half): write "
+            "`preconditioner_precision: float` for `true`, or leave both out for `false`");
   EXPECT_EQ(s.solver.linear, LinearSolverKind::kCholmodReuse);
   EXPECT_EQ(s.solver.refactor_iterations, 12);
   EXPECT_EQ(s.solver.refactor_every_steps, 50);

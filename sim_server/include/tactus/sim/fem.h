@@ -131,12 +131,13 @@ struct FemSolverOptions {
   /// background_refactor_lag_steps steps after its start (reproducible; waits if not ready)
   bool background_refactor_when_ready = false;
   /// kCholmodReuse in the background (background_refactor_lag_steps > 0, the supernodal factor
-  /// solved without BLAS): PCG's preconditioner solves run in single precision on a float copy
-  /// of the factor that the worker makes after its factorisation (half the bytes per sweep;
-  /// PCG itself stays in double and meets cg_tolerance as before). false, the default: the
-  /// double sweeps. Scene key solver.single_precision_preconditioner (liver_grasp_20k and
-  /// liver_grasp_23k set it; docs/design.md, "Free motion")
-  bool single_precision_preconditioner = false;
+  /// solved without BLAS): the precision of PCG's preconditioner solves. kFloat and kHalf sweep
+  /// a reduced copy of the factor that the worker makes after its factorisation, so a step
+  /// never pays the conversion; the sweeps read the whole factor and are bound by memory, so
+  /// fewer bytes are a faster solve. PCG itself stays in double and meets cg_tolerance as
+  /// before. Scene key solver.preconditioner_precision (liver_grasp_20k and liver_grasp_23k:
+  /// half; docs/design.md, "Free motion")
+  PreconditionerPrecision preconditioner_precision = PreconditionerPrecision::kDouble;
   /// kCholmodReuse, corotational: > 0 corrects the warped factor exactly at the nodes where it
   /// is furthest from the current A: those whose diagonal 3x3 block of A differs from the warped
   /// factor's by more than this fraction (Frobenius norms; at most

@@ -51,6 +51,19 @@ enum class LinearSolverKind {
   kCholmodReuse,   ///< PCG preconditioned by the CHOLMOD factor of a recent A, refreshed when
                    ///< PCG needs more than refactor_iterations (or on a schedule)
 };
+/// The precision of the factor-reuse PCG's preconditioner solves (FemSolverOptions::
+/// preconditioner_precision). PCG's residual, products and convergence test stay in double
+/// whichever it is, so every step still meets cg_tolerance; only the preconditioner, already
+/// inexact by the factor's age, is less exact.
+enum class PreconditionerPrecision {
+  kDouble,  ///< the factor's own values
+  kFloat,   ///< a float copy of the factor (half the bytes per sweep of the double)
+  /// the factor as L D^-1 in IEEE half precision and D^-2 in float, packed (5.4 MB on
+  /// liver_23k against the float copy's 12.9; fem_detail::HalfFactor): 11 significant bits,
+  /// the sweeps accumulate in float. Needs F16C or AVX-512F to be faster than kFloat: on a CPU
+  /// with neither the float copy is used instead (FemBody logs it once)
+  kHalf,
+};
 enum class InstrumentKind { kProbe, kGrasper };
 /// Where the first contact pass of a step detects its contacts (SolverSpec::contact_detection).
 enum class ContactDetection {
@@ -201,9 +214,9 @@ struct SolverSpec {
   /// kCholmodReuse in the background: the new factor takes over as soon as the worker has
   /// finished, no step waiting for it (FemSolverOptions::background_refactor_when_ready)
   bool background_refactor_when_ready = false;
-  /// kCholmodReuse in the background: PCG's preconditioner solves in single precision
-  /// (FemSolverOptions::single_precision_preconditioner)
-  bool single_precision_preconditioner = false;
+  /// kCholmodReuse in the background: the precision of PCG's preconditioner solves
+  /// (FemSolverOptions::preconditioner_precision)
+  PreconditionerPrecision preconditioner_precision = PreconditionerPrecision::kDouble;
   double nsgs_tolerance = 1e-6;
   int nsgs_max_sweeps = 500;
   double nsgs_sor = 1.0;                        ///< over-relaxation factor in (0, 2)
