@@ -162,6 +162,7 @@ void FemBody::Impl::init(const TetMesh& m, const FemMaterial& mat,
   if (mat.element == ElementKind::kEdgeSmoothedTet) buildEdgeDomains();
   buildPattern();
   buildRotationGroups();
+  buildSmoothingRows();
   f_int.resize(3 * n);
   rhs_full.resize(3 * n);
   rhs.resize(n_free);
@@ -189,6 +190,28 @@ void FemBody::Impl::init(const TetMesh& m, const FemMaterial& mat,
     hsh = fnv1a(tag, sizeof(tag) - 1, hsh);
   }
   hash = hsh;
+}
+
+void FemBody::Impl::buildSmoothingRows() {
+  // (i, j) once per tet holding both, sorted: the runs are the counts
+  std::vector<std::pair<int, int>> pairs;
+  pairs.reserve(16 * mesh.tets.size());
+  for (const auto& t : mesh.tets)
+    for (int a : t)
+      for (int b : t) pairs.emplace_back(a, b);
+  std::sort(pairs.begin(), pairs.end());
+  smooth_ptr.assign(static_cast<std::size_t>(n) + 1, 0);
+  smooth_node.clear();
+  smooth_count.clear();
+  for (std::size_t k = 0; k < pairs.size();) {
+    std::size_t end = k;
+    while (end < pairs.size() && pairs[end] == pairs[k]) ++end;
+    smooth_node.push_back(pairs[k].second);
+    smooth_count.push_back(static_cast<double>(end - k));
+    ++smooth_ptr[static_cast<std::size_t>(pairs[k].first) + 1];
+    k = end;
+  }
+  for (int i = 0; i < n; ++i) smooth_ptr[i + 1] += smooth_ptr[i];
 }
 
 void FemBody::Impl::buildRotationGroups() {
@@ -293,36 +316,29 @@ void FemBody::Impl::sumRotationGroups(std::vector<Eigen::Matrix3d>& acc, std::ve
 void FemBody::Impl::finishNodeRotations(std::vector<Eigen::Matrix3d>& acc, std::vector<double>& w,
                                         std::vector<Eigen::Matrix3d>& out, int smoothing_passes) {
   // smoothing: each pass gives every node the sum over its elements of their nodes' sums (one
-  // element layer wider on each side); rotations and weights alike, rescaled to the largest
-  // weight so that repeated passes cannot overflow (the polar factor ignores the scale)
+  // element layer wider on each side), as sum_j c_ij acc_j over the node's row of
+  // buildSmoothingRows (half the memory traffic of a pass through the tets and back);
+  // rotations and weights alike, rescaled to the largest weight so that repeated passes cannot
+  // overflow (the polar factor ignores the scale)
   if (smoothing_passes > 0) {
-    tet_acc.resize(static_cast<std::size_t>(mesh.tetCount()));
-    tet_w.resize(static_cast<std::size_t>(mesh.tetCount()));
+    smooth_acc.resize(static_cast<std::size_t>(n));
+    smooth_w.resize(static_cast<std::size_t>(n));
     for (int pass = 0; pass < smoothing_passes; ++pass) {
-      for (int e = 0; e < mesh.tetCount(); ++e) {
-        tet_acc[e].setZero();
-        tet_w[e] = 0.0;
-        for (int k = 0; k < 4; ++k) {
-          tet_acc[e] += acc[mesh.tets[e][k]];
-          tet_w[e] += w[mesh.tets[e][k]];
-        }
-      }
       for (int i = 0; i < n; ++i) {
-        acc[i].setZero();
-        w[i] = 0.0;
-      }
-      for (int e = 0; e < mesh.tetCount(); ++e) {
-        for (int k = 0; k < 4; ++k) {
-          acc[mesh.tets[e][k]] += tet_acc[e];
-          w[mesh.tets[e][k]] += tet_w[e];
+        Eigen::Matrix3d sum = Eigen::Matrix3d::Zero();
+        double sum_w = 0.0;
+        for (int p = smooth_ptr[i]; p < smooth_ptr[i + 1]; ++p) {
+          sum += smooth_count[p] * acc[smooth_node[p]];
+          sum_w += smooth_count[p] * w[smooth_node[p]];
         }
+        smooth_acc[i] = sum;
+        smooth_w[i] = sum_w;
       }
-      const double largest = *std::max_element(w.begin(), w.end());
-      if (largest > 0.0) {
-        for (int i = 0; i < n; ++i) {
-          acc[i] /= largest;
-          w[i] /= largest;
-        }
+      const double largest = *std::max_element(smooth_w.begin(), smooth_w.end());
+      const double divisor = largest > 0.0 ? largest : 1.0;
+      for (int i = 0; i < n; ++i) {
+        acc[i] = smooth_acc[i] / divisor;
+        w[i] = smooth_w[i] / divisor;
       }
     }
   }

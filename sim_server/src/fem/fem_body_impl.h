@@ -174,8 +174,13 @@ struct FemScratch {
   std::vector<Eigen::Matrix3d> relative_rot;
   std::vector<Eigen::Matrix3d> group_acc;           // sumNodeRotations' per-group sums
   std::vector<double> group_w;
-  std::vector<Eigen::Matrix3d> tet_acc;             // finishNodeRotations' smoothing: per-tet
-  std::vector<double> tet_w;                        // sums and their weights
+  // finishNodeRotations' smoothing: one pass is acc'_i = sum_j c_ij acc_j with c_ij the number
+  // of tets holding both nodes i and j (c_ii: the tets at i), node i's row in smooth_ptr /
+  // smooth_node / smooth_count (buildSmoothingRows); the pass's output in smooth_acc, smooth_w
+  std::vector<int> smooth_ptr, smooth_node;
+  std::vector<double> smooth_count;
+  std::vector<Eigen::Matrix3d> smooth_acc;
+  std::vector<double> smooth_w;
   std::vector<double> node_w;                       // node weights of the preconditioner's sums
   // the node sums of the last kept element rotations (ensureStepNodeSums) and a working copy
   std::vector<Eigen::Matrix3d> step_acc, work_acc;
@@ -279,6 +284,7 @@ struct FemBody::Impl : FemModel, FemState, FemScratch {
         out[3 * i + c] = dof_base[i] >= 0 ? scale * red[dof_base[i] + c] : 0.0;
   }
   void buildRotationGroups();
+  void buildSmoothingRows();
   // Node rotations from element rotations: volume-weighted sum over the adjacent elements,
   // summed over the node's rotation group, widened by `smoothing_passes` passes over the
   // elements (FemBody::nodeRotations), polar factor. Nodes with no weight get identity.

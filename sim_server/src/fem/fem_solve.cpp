@@ -177,7 +177,6 @@ void FemBody::Impl::prepareStepBuffers() {
   using shared::reserveWritten;
   const auto nodes = static_cast<std::size_t>(n);
   const auto blocks = static_cast<std::size_t>(n_free / 3);
-  const auto tets = static_cast<std::size_t>(mesh.tetCount());
   const Eigen::Matrix3d zero = Eigen::Matrix3d::Zero();
   for (auto* v : {&step_acc, &work_acc, &node_rot}) reserveWritten(*v, nodes, zero);
   for (auto* v : {&step_w, &work_w}) reserveWritten(*v, nodes, 0.0);
@@ -185,14 +184,14 @@ void FemBody::Impl::prepareStepBuffers() {
   for (auto* v : {&relative_rot, &factor_node_rot}) reserveWritten(*v, blocks, zero);
   reserveWritten(group_acc, static_cast<std::size_t>(rot_group_count), zero);
   reserveWritten(group_w, static_cast<std::size_t>(rot_group_count), 0.0);
-  reserveWritten(tet_acc, tets, zero);
-  reserveWritten(tet_w, tets, 0.0);
+  reserveWritten(smooth_acc, nodes, zero);
+  reserveWritten(smooth_w, nodes, 0.0);
 }
 
 void FemBody::Impl::prepareFreeMotion(double h) {
   // the step's buffers and (below) the factor's solve workspaces written now: the first step
   // took about 750 first-touch page faults on liver_grasp_23k sizing them, and the first
-  // contact step 565 more for the warped compliance's smoothing (tet_acc, tet_w)
+  // contact step 565 more for the warped compliance's smoothing (smooth_acc, smooth_w)
   prepareStepBuffers();
   // the rest factor read once more now, after the rest of the set-up (the compliance models'
   // reading of their blocks)
