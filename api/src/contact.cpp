@@ -215,14 +215,23 @@ bool writeSnapshotSlot(const ContactProblem& p, std::uint64_t seq, std::int64_t 
     slot.f()[i] = has_f ? p.f[i] : 0.0;
     for (int k = 0; k < 6; ++k) slot.J()[6 * i + k] = jacobian ? p.J(i, k) : 0.0;
   }
-  // the haptic side's symmetric sweep needs W == W^T exactly: say so only when it holds
+  // the haptic side's symmetric sweep needs W == W^T exactly: say so only when it holds.
+  // Compared in 32 x 32 tiles, each tile of the upper triangle against its mirror in the lower,
+  // both in cache (row by row against column by column took about 1 ms for 900 rows)
+  constexpr int kTile = 32;
   bool symmetric = true;
-  for (int i = 0; i < rows && symmetric; ++i) {
-    for (int j = i + 1; j < rows; ++j) {
-      if (!(W[static_cast<std::ptrdiff_t>(i) * ld + j] ==
-            W[static_cast<std::ptrdiff_t>(j) * ld + i])) {
-        symmetric = false;
-        break;
+  for (int i0 = 0; i0 < rows && symmetric; i0 += kTile) {
+    const int i1 = std::min(rows, i0 + kTile);
+    for (int j0 = i0; j0 < rows && symmetric; j0 += kTile) {
+      const int j1 = std::min(rows, j0 + kTile);
+      for (int i = i0; i < i1 && symmetric; ++i) {
+        for (int j = std::max(j0, i + 1); j < j1; ++j) {
+          if (!(W[static_cast<std::ptrdiff_t>(i) * ld + j] ==
+                W[static_cast<std::ptrdiff_t>(j) * ld + i])) {
+            symmetric = false;
+            break;
+          }
+        }
       }
     }
   }

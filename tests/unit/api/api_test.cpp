@@ -4,8 +4,11 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdint>
 #include <fstream>
 #include <sstream>
+#include <utility>
+#include <vector>
 
 #include "../../support/test_dir.h"
 #include "tactus/sim/mesh.h"
@@ -141,6 +144,41 @@ TEST(ApiTest, AStateOfAnotherModelOrNotAStateIsRefused) {
   EXPECT_THROW(State::load(junk), StateError);
   EXPECT_THROW(State::load(scene.dir.path), FileError);   // a folder
   EXPECT_THROW(block.setState(State()), StateError);
+}
+
+// A problem written into a snapshot slot says its W is exactly symmetric (kSnapshotSymmetricW:
+// the haptic side's sweep may then read one triangle) when it is, and only then: one entry off
+// its mirror anywhere, in a tile of the comparison or across tiles, clears the flag.
+TEST(ApiTest, ASnapshotSaysWIsSymmetricOnlyWhenItIs) {
+  constexpr int kContacts = 30;
+  ContactProblem p;
+  p.contacts = kContacts;
+  p.rows = 3 * kContacts;
+  for (int c = 0; c <= kContacts; ++c) p.row_offset.push_back(3 * c);
+  p.mu.assign(kContacts, 0.3);
+  Eigen::MatrixXd w(p.rows, p.rows);
+  for (int i = 0; i < p.rows; ++i)
+    for (int j = 0; j <= i; ++j)
+      w(i, j) = w(j, i) = i == j ? 1.0 + 0.01 * i : 1e-3 * std::sin(0.7 * i + 1.3 * j);
+  p.W = w;
+  p.delta_free = Eigen::VectorXd::LinSpaced(p.rows, -1e-3, 1e-3);
+  p.f = Eigen::VectorXd::Zero(p.rows);
+  const shared::SnapshotLayout layout = shared::SnapshotLayout::forCapacity(128, 40);
+  std::vector<unsigned char> bytes(layout.total_bytes + 64, 0);
+  void* base = bytes.data() + (64 - reinterpret_cast<std::uintptr_t>(bytes.data()) % 64) % 64;
+  const auto symmetricFlag = [&](const Eigen::MatrixXd& written) {
+    p.W = written;
+    shared::SnapshotWriter slot(base, layout);
+    EXPECT_TRUE(writeSnapshotSlot(p, 1, 0, 0, slot));
+    return (slot.header().flags & shared::kSnapshotSymmetricW) != 0;
+  };
+  EXPECT_TRUE(symmetricFlag(w));
+  for (const auto& [i, j] : {std::pair{3, 70}, std::pair{40, 41}, std::pair{89, 0},
+                             std::pair{33, 64}}) {
+    Eigen::MatrixXd off = w;
+    off(i, j) = std::nextafter(off(i, j), 1.0);
+    EXPECT_FALSE(symmetricFlag(off)) << "W(" << i << ", " << j << ") off its mirror";
+  }
 }
 
 }  // namespace
