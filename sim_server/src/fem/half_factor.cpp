@@ -36,12 +36,6 @@ __attribute__((always_inline)) inline bool encodeHalf(float v, std::uint16_t& ou
   return true;
 }
 
-}  // namespace
-
-bool floatToHalf(float v, std::uint16_t& out) { return encodeHalf(v, out); }
-
-namespace {
-
 // halfToFloat, inlined into every kernel
 __attribute__((always_inline)) inline float decodeHalf(std::uint16_t h) {
   // exponent and mantissa moved to float's places, the exponent rebased (bias 15 to 127)
@@ -54,6 +48,8 @@ __attribute__((always_inline)) inline float decodeHalf(std::uint16_t h) {
 }
 
 }  // namespace
+
+bool floatToHalf(float v, std::uint16_t& out) { return encodeHalf(v, out); }
 
 float halfToFloat(std::uint16_t h) { return decodeHalf(h); }
 
@@ -387,7 +383,6 @@ bool halfSweepsPayOff() {
 }
 
 bool HalfFactor::assign(const cholmod_factor& f) {
-  held_ = false;
   if (!f.is_super || f.xtype != CHOLMOD_REAL || f.x == nullptr) return false;
   const int* super = static_cast<const int*>(f.super);
   const int* pi = static_cast<const int*>(f.pi);
@@ -416,7 +411,6 @@ bool HalfFactor::assign(const cholmod_factor& f) {
     }
   }
   std::fill(l1_.end() - kPadding, l1_.end(), std::uint16_t{0});
-  held_ = true;
   return true;
 }
 
@@ -437,10 +431,6 @@ void HalfFactor::solve(const cholmod_factor& f, const double* b, double* x) {
   for (long k = 0; k < n; ++k) x[perm ? perm[k] : k] = static_cast<double>(y_[static_cast<std::size_t>(k)]);
 }
 
-std::size_t HalfFactor::valueBytes() const {
-  return l1_.size() * sizeof(std::uint16_t) + d_inv2_.size() * sizeof(float);
-}
-
 float HalfFactor::touchPages() const {
   float sum = 0.0f;
   for (std::size_t i = 0; i < l1_.size(); i += 4096 / sizeof(std::uint16_t)) sum += static_cast<float>(l1_[i]);
@@ -452,7 +442,6 @@ void HalfFactor::swap(HalfFactor& other) noexcept {
   l1_.swap(other.l1_);
   d_inv2_.swap(other.d_inv2_);
   std::swap(most_rows_, other.most_rows_);
-  std::swap(held_, other.held_);
 }
 
 }  // namespace tactus::sim::fem_detail

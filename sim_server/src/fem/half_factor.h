@@ -25,19 +25,16 @@ namespace tactus::sim::fem_detail {
 /// (halfSweepKernelName); TACTUS_HALF_SWEEP_KERNEL=generic|f16c|avx512 picks one the CPU has.
 class HalfFactor {
  public:
-  /// Converts the numeric supernodal factor `f` (double values). False, and nothing held, when
-  /// an entry of L1 is not finite or beyond half's range (65504): the caller keeps its float
-  /// copy then. Allocates only when the factor's pattern grew.
+  /// Converts the numeric supernodal factor `f` (double values). False when an entry of L1 is
+  /// not finite or beyond half's range (65504): the values are then unusable and the caller
+  /// keeps its float copy (CholmodSolver holds whether they are current). Allocates only when
+  /// the factor's pattern grew.
   bool assign(const cholmod_factor& f);
-  void clear() { held_ = false; }
-  bool held() const { return held_; }
   /// x = P^T L^-T L^-1 P b for one right-hand side of length n (x may alias b), `f` the factor
   /// assign() converted (its pattern and permutation). No allocation after prepare().
   void solve(const cholmod_factor& f, const double* b, double* x);
   /// Sizes and writes the solve's workspaces for `f`.
   void prepare(const cholmod_factor& f);
-  /// Bytes of the values the sweeps read (L1's entries and D^-2).
-  std::size_t valueBytes() const;
   /// Reads one value per page; see CholmodSolver::touchPages.
   float touchPages() const;
   void swap(HalfFactor& other) noexcept;
@@ -47,7 +44,6 @@ class HalfFactor {
   std::vector<float> d_inv2_;       // 1 / L_jj^2 in the factor's order
   std::size_t most_rows_ = 0;       // the most rows of a supernode
   std::vector<float> y_, t_;        // the permuted right-hand side, a supernode's gathered rows
-  bool held_ = false;
 };
 
 /// The name of the kernel HalfFactor::solve uses in this process ("avx512", "f16c", "generic").

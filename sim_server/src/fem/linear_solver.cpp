@@ -164,29 +164,29 @@ bool CholmodSolver::factorize(Sparse& lower) {
   factorized_ = ok && common_.status == CHOLMOD_OK && factor_->minor == factor_->n;
   single_current_ = false;
   half_current_ = false;
-  syncSinglePrecisionCopy();
+  syncPreconditionerCopies();
   return factorized_;
 }
 
 void CholmodSolver::setBlasFreeSolves(bool on) {
   blas_free_solves_ = on;
-  syncSinglePrecisionCopy();
+  syncPreconditionerCopies();
 }
 
 void CholmodSolver::setSinglePrecisionPreconditioner(bool on) {
   single_precision_ = on;
   if (on) half_precision_ = false;
   if (!on) single_x_ = {};
-  syncSinglePrecisionCopy();
+  syncPreconditionerCopies();
 }
 
 void CholmodSolver::setHalfPrecisionPreconditioner(bool on) {
   half_precision_ = on;
   if (on) single_precision_ = false;
-  syncSinglePrecisionCopy();
+  syncPreconditionerCopies();
 }
 
-void CholmodSolver::syncSinglePrecisionCopy() {
+void CholmodSolver::syncPreconditionerCopies() {
   const bool copies = blas_free_solves_ && factorized_;
   if (!(half_precision_ && copies)) {
     half_current_ = false;

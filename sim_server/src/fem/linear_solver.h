@@ -152,8 +152,9 @@ class CholmodSolver {
   void supernodalSolveWithoutBlas(const double* b, double* x, int ncols);
   /// singlePrecisionPreconditioner: the float copy of the current supernodal factor's values
   void makeSinglePrecisionCopy();
-  /// The float copy made or dropped to match the settings and the factor held now.
-  void syncSinglePrecisionCopy();
+  /// The half and float copies made or dropped to match the settings and the factor held now
+  /// (the float one also in place of a half copy that could not be made).
+  void syncPreconditionerCopies();
   cholmod_common common_;
   cholmod_factor* factor_ = nullptr;
   cholmod_factor* symbolic_ = nullptr;   // the supernodal analysis (null when simplicial)
