@@ -77,7 +77,8 @@ struct StepReport {
   /// Tetrahedra inverted (det F <= 0) at the start of the step, over all tissues
   int inverted_elements = 0;
   /// Tetrahedra the strain limiter found below tissues[i].strain_limit.min_volume_ratio after
-  /// the constrained motion and lifted back (over all tissues), and those it left below
+  /// the constrained motion and lifted back (over all tissues and the step's contact passes), and
+  /// those it left below after the last pass
   int strain_limited_elements = 0;
   int strain_limit_unresolved = 0;
   /// The free motions' linear solves, over all tissues: CHOLMOD factorisations of the step's

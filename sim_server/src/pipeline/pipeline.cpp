@@ -25,15 +25,15 @@ namespace {
 // tet has another node to move, and what the sweeps cannot lift goes back to the step's start
 // (q_begin: every tet at its bound when the last step ended)
 void limitStrain(const SimulationModel& m, SimulationState& s, StepScratch& x, StepReport& report) {
-  report.strain_limited_elements = 0;
-  report.strain_limit_unresolved = 0;
+  report.strain_limit_unresolved = 0;   // the last pass's; the tets limited add up over the passes
   for (std::size_t t = 0; t < s.tissues.size(); ++t) {
     const TissueModel& tm = m.tissues[t];
     if (tm.min_volume_ratio <= 0.0) continue;
     TissueScratch& tx = x.tissues[t];
     const StrainLimitResult limited = limitVolumes(*s.tissues[t].body, tm.rest_volume6,
                                                    tm.min_volume_ratio, m.h_s, tx.rows.tissue,
-                                                   tx.strain_limit, &tx.q_begin);
+                                                   tx.rows.row_offset, tx.strain_limit,
+                                                   &tx.q_begin);
     report.strain_limited_elements += limited.limited;
     report.strain_limit_unresolved += limited.unresolved;
   }

@@ -61,6 +61,28 @@ void measureAround(const std::vector<int>& nodes, int stamp, const Eigen::Vector
   }
 }
 
+// Per node of a contact with friction rows, the unit mean of its contacts' normals (each turned
+// to agree with the sum so far, so that a node between both pads keeps their common axis), into
+// scratch.slide_normal; zero for the other nodes.
+void contactNormals(std::span<const TissueRow> rows, std::span<const int> row_offset, int nodes,
+                    StrainLimitScratch& scratch) {
+  scratch.slide_normal.assign(static_cast<std::size_t>(nodes), Eigen::Vector3d::Zero());
+  for (std::size_t c = 0; c + 1 < row_offset.size(); ++c) {
+    if (row_offset[c + 1] - row_offset[c] < 3) continue;   // frictionless: free to slide
+    const TissueRow& normal = rows[static_cast<std::size_t>(row_offset[c])];
+    for (std::size_t k = 0; k < 3; ++k) {
+      const int node = normal.node[k];
+      if (node < 0 || normal.weight[k] == 0.0) continue;
+      Eigen::Vector3d& sum = scratch.slide_normal[static_cast<std::size_t>(node)];
+      sum += (sum.dot(normal.dir) < 0.0 ? -1.0 : 1.0) * std::abs(normal.weight[k]) * normal.dir;
+    }
+  }
+  for (Eigen::Vector3d& n : scratch.slide_normal) {
+    const double length = n.norm();
+    if (length > 0.0) n /= length;
+  }
+}
+
 // node -> its tets (CSR), once per body
 void buildNodeTets(const FemBody& body, StrainLimitScratch& scratch) {
   const int n = body.nodeCount();
@@ -138,7 +160,8 @@ std::vector<double> restVolumes6(const TetMesh& mesh) {
 
 StrainLimitResult limitVolumes(FemBody& body, const std::vector<double>& rest6, double min_ratio,
                                double h, std::span<const TissueRow> rows,
-                               StrainLimitScratch& scratch, const Eigen::VectorXd* q_valid) {
+                               std::span<const int> row_offset, StrainLimitScratch& scratch,
+                               const Eigen::VectorXd* q_valid) {
   StrainLimitResult out;
   collectBelow(body, rest6, min_ratio, scratch.active);
   out.limited = static_cast<int>(scratch.active.size());
@@ -162,6 +185,7 @@ StrainLimitResult limitVolumes(FemBody& body, const std::vector<double>& rest6, 
       }
     }
   }
+  contactNormals(rows, row_offset, n, scratch);
   Eigen::VectorXd& q = body.positions();
   Eigen::VectorXd& v = body.velocities();
   const Eigen::VectorXd& mass = body.lumpedMass();
@@ -186,6 +210,14 @@ StrainLimitResult limitVolumes(FemBody& body, const std::vector<double>& rest6, 
       g[2] = d3.cross(d1);
       g[3] = d1.cross(d2);
       g[0] = -(g[1] + g[2] + g[3]);
+      // a node of a frictional contact moves along its normal only: the projection of the
+      // volume's gradient onto that line is the constraint's gradient for the node so restricted
+      for (std::size_t k = 0; k < 4; ++k) {
+        const Eigen::Vector3d& normal = scratch.slide_normal[static_cast<std::size_t>(t[k])];
+        if (scratch.pinned[static_cast<std::size_t>(t[k])] == 1 && normal.squaredNorm() > 0.0) {
+          g[k] = normal.dot(g[k]) * normal;
+        }
+      }
       // the free nodes move; a tet whose nodes are all in contact (or fixed) moves its contact
       // nodes, and the next contact pass or step sees what that did to the gaps
       std::array<double, 4> w{};
@@ -258,6 +290,7 @@ void prepareStrainLimit(const FemBody& body, StrainLimitScratch& scratch) {
   reserveWritten(scratch.moved, nodes, 0);
   reserveWritten(scratch.listed, tets, char{0});
   reserveWritten(scratch.checked, tets, 0);
+  reserveWritten(scratch.slide_normal, nodes, Eigen::Vector3d::Zero().eval());
 }
 
 }  // namespace tactus::sim

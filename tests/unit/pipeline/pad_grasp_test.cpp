@@ -367,18 +367,15 @@ void PrintTo(const FailingGridCase& c, std::ostream* os) {
 
 std::vector<FailingGridCase> failingGridApproaches() {
   // both scenes as shipped (docs/measurements.md, "The grasp anywhere", 2026-11-30). Every other
-  // approach of both grids meets all three: on both meshes the same two slip, and on
-  // liver_grasp_23k (-5, -5) mm rolled -20 deg at both grips sits at the criterion (86.5-92.1 %
-  // across the preconditioner's precision and PCG's tolerance: the lobe slides slowly out of
-  // the jaws in every run, and where it stands at 5.0 s follows the rounding)
+  // approach of both grids meets all three; the same (+5, -5) mm rolled -20 deg slips on both
+  // meshes (at both grips on liver_grasp_20k, at the light one on liver_grasp_23k). Not enabled
+  // though they pass: liver_grasp_23k's (-5, -5) mm rolled -20 deg (92.0-93.2 % as shipped,
+  // 86.3-94.6 % across the preconditioner's precision: its rise follows the rounding)
   const double light = test_support::kGridGripsNmprad[0], firm = test_support::kGridGripsNmprad[1];
   return {
       {"liver_grasp_20k.yaml", gridApproach(5, -5, -20, light), "slips (rise 71 %)"},
-      {"liver_grasp_20k.yaml", gridApproach(5, -5, -20, firm), "slips (rise 87 %)"},
-      {"liver_grasp_23k.yaml", gridApproach(5, -5, -20, light), "slips (rise 87.5 %)"},
-      {"liver_grasp_23k.yaml", gridApproach(5, -5, -20, firm), "slips (rise 89.0 %)"},
-      {"liver_grasp_23k.yaml", gridApproach(-5, -5, -20, light), "slips (rise 89.7 %)"},
-      {"liver_grasp_23k.yaml", gridApproach(-5, -5, -20, firm), "slips (rise 89.6 %)"},
+      {"liver_grasp_20k.yaml", gridApproach(5, -5, -20, firm), "slips (rise 86.5 %)"},
+      {"liver_grasp_23k.yaml", gridApproach(5, -5, -20, light), "slips (rise 87.9 %)"},
   };
 }
 

@@ -26,6 +26,7 @@ struct CrushedBite {
   Eigen::VectorXd deformed;      ///< after the pass's correction (3n)
   std::vector<int> fixed;        ///< the patch's border (and the liver's fixed nodes)
   std::vector<TissueRow> rows;   ///< one row per contact node
+  std::vector<int> row_offset;   ///< one contact per row (frictionless: free to slide)
 };
 
 // The fixture's format: '#' comments; "nodes N"; N lines "rest xyz, step start xyz, deformed xyz,
@@ -56,6 +57,7 @@ CrushedBite loadCrushedBite(const std::string& path) {
     if (flag == 2) bite.fixed.push_back(static_cast<int>(i));
     if (flag == 1) bite.rows.push_back({{static_cast<int>(i), -1, -1}, {1.0, 0.0, 0.0}, Eigen::Vector3d::UnitZ()});
   }
+  for (std::size_t r = 0; r <= bite.rows.size(); ++r) bite.row_offset.push_back(static_cast<int>(r));
   if (next()) std::istringstream(line) >> word >> count;
   for (std::size_t i = 0; i < count && next(); ++i) {
     std::array<int, 4> t{};
@@ -95,7 +97,7 @@ TEST(StrainLimit, LiftsEveryTetOfABiteCrushedBetweenThePadsBackToItsBound) {
     body.positions() = bite.deformed;
     body.velocities().setZero();
     StrainLimitScratch scratch;
-    return limitVolumes(body, rest6, 0.5, h, bite.rows, scratch, valid);
+    return limitVolumes(body, rest6, 0.5, h, bite.rows, bite.row_offset, scratch, valid);
   };
   // the sweeps alone (no valid state to go back to) leave tets below the bound, inverted ones
   FemBody sweeps_only(bite.mesh, material, bite.fixed, nullptr);
@@ -133,5 +135,68 @@ TEST(StrainLimit, LiftsEveryTetOfABiteCrushedBetweenThePadsBackToItsBound) {
   EXPECT_NEAR((body.velocities() - moved / h).norm(), 0.0, 1e-9 * (moved / h).norm());
 }
 
+
+// A tet squeezed between two pads, all four nodes in contact: three on the lower pad, one on the
+// upper, leaning sideways so that its volume's gradient has tangential parts. With friction the
+// limiter lifts it by moving the nodes along the pads' normal only (the friction solve decided
+// how far they slide); frictionless contacts let them slide, which the same tet then does.
+TEST(StrainLimit, NodesOfFrictionalContactsMoveAlongTheirNormalOnly) {
+  TetMesh mesh;
+  mesh.nodes.resize(3, 4);
+  mesh.nodes.col(0) = Eigen::Vector3d(0.0, 0.0, 0.0);
+  mesh.nodes.col(1) = Eigen::Vector3d(0.004, 0.0, 0.0);
+  mesh.nodes.col(2) = Eigen::Vector3d(0.0, 0.004, 0.0);
+  mesh.nodes.col(3) = Eigen::Vector3d(0.001, 0.001, 0.004);
+  mesh.tets.push_back({0, 1, 2, 3});
+  mesh.source = "one tet";
+  FemMaterial material;
+  material.young_pa = 15000.0;
+  material.poisson = 0.45;
+  material.density_kgpm3 = 1000.0;
+  const std::vector<double> rest6 = restVolumes6(mesh);
+  // crushed to a fifth of its height, the top node pushed sideways
+  Eigen::VectorXd crushed(12);
+  crushed << 0.0, 0.0, 0.0, 0.004, 0.0, 0.0, 0.0, 0.004, 0.0, 0.003, 0.002, 0.0008;
+  // n from the tissue to the tool: the lower pad's -z, the upper's +z; (t1, t2) along x, y
+  auto contactRows = [](bool friction, std::vector<TissueRow>& rows, std::vector<int>& offset) {
+    rows.clear();
+    offset.assign(1, 0);
+    for (int node = 0; node < 4; ++node) {
+      const Eigen::Vector3d n(0.0, 0.0, node == 3 ? 1.0 : -1.0);
+      rows.push_back({{node, -1, -1}, {-1.0, 0.0, 0.0}, n});
+      if (friction) {
+        rows.push_back({{node, -1, -1}, {-1.0, 0.0, 0.0}, Eigen::Vector3d::UnitX()});
+        rows.push_back({{node, -1, -1}, {-1.0, 0.0, 0.0}, Eigen::Vector3d::UnitY()});
+      }
+      offset.push_back(static_cast<int>(rows.size()));
+    }
+  };
+  auto limit = [&](bool friction) {
+    FemBody body(mesh, material, {}, nullptr);
+    body.positions() = crushed;
+    body.velocities().setZero();
+    std::vector<TissueRow> rows;
+    std::vector<int> offset;
+    contactRows(friction, rows, offset);
+    StrainLimitScratch scratch;
+    const StrainLimitResult r = limitVolumes(body, rest6, 0.5, 0.01, rows, offset, scratch);
+    EXPECT_EQ(r.limited, 1);
+    EXPECT_EQ(r.unresolved, 0);
+    EXPECT_GE(smallestVolumeRatio(body, rest6), 0.5);
+    return Eigen::VectorXd(body.positions() - crushed);
+  };
+  const Eigen::VectorXd with_friction = limit(true);
+  double slid = 0.0, lifted = 0.0;
+  for (int k = 0; k < 4; ++k) {
+    slid = std::max(slid, with_friction.segment<2>(3 * k).norm());
+    lifted = std::max(lifted, std::abs(with_friction[3 * k + 2]));
+  }
+  EXPECT_EQ(slid, 0.0);
+  EXPECT_GT(lifted, 1e-4);
+  const Eigen::VectorXd frictionless = limit(false);
+  double slid_frictionless = 0.0;
+  for (int k = 0; k < 4; ++k) slid_frictionless = std::max(slid_frictionless, frictionless.segment<2>(3 * k).norm());
+  EXPECT_GT(slid_frictionless, 1e-5);
+}
 }  // namespace
 }  // namespace tactus::sim
