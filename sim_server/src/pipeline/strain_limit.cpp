@@ -63,21 +63,27 @@ void measureAround(const std::vector<int>& nodes, int stamp, const Eigen::Vector
 
 // Per node of a contact with friction rows, the unit mean of its contacts' normals (each turned
 // to agree with the sum so far, so that a node between both pads keeps their common axis), into
-// scratch.slide_normal; zero for the other nodes.
-void contactNormals(std::span<const TissueRow> rows, std::span<const int> row_offset, int nodes,
+// scratch.slide_normal; zero for the other contact nodes (scratch.contact_nodes, whose entries
+// alone are written and read: the cost is the rows', not the mesh's).
+void contactNormals(std::span<const TissueRow> rows, std::span<const int> row_offset,
                     StrainLimitScratch& scratch) {
-  scratch.slide_normal.assign(static_cast<std::size_t>(nodes), Eigen::Vector3d::Zero());
+  if (scratch.slide_normal.size() < scratch.pinned.size()) {
+    scratch.slide_normal.resize(scratch.pinned.size(), Eigen::Vector3d::Zero());
+  }
+  for (int node : scratch.contact_nodes) scratch.slide_normal[static_cast<std::size_t>(node)].setZero();
   for (std::size_t c = 0; c + 1 < row_offset.size(); ++c) {
     if (row_offset[c + 1] - row_offset[c] < 3) continue;   // frictionless: free to slide
     const TissueRow& normal = rows[static_cast<std::size_t>(row_offset[c])];
     for (std::size_t k = 0; k < 3; ++k) {
       const int node = normal.node[k];
-      if (node < 0 || normal.weight[k] == 0.0) continue;
+      // fixed nodes never move
+      if (node < 0 || normal.weight[k] == 0.0 || scratch.pinned[static_cast<std::size_t>(node)] != 1) continue;
       Eigen::Vector3d& sum = scratch.slide_normal[static_cast<std::size_t>(node)];
       sum += (sum.dot(normal.dir) < 0.0 ? -1.0 : 1.0) * std::abs(normal.weight[k]) * normal.dir;
     }
   }
-  for (Eigen::Vector3d& n : scratch.slide_normal) {
+  for (int node : scratch.contact_nodes) {
+    Eigen::Vector3d& n = scratch.slide_normal[static_cast<std::size_t>(node)];
     const double length = n.norm();
     if (length > 0.0) n /= length;
   }
@@ -177,15 +183,17 @@ StrainLimitResult limitVolumes(FemBody& body, const std::vector<double>& rest6, 
   const std::vector<bool>& fixed = body.fixedMask();
   // 2: fixed, never moves; 1: in a contact row, moves only with no free node in its tet
   for (int i = 0; i < n; ++i) scratch.pinned[static_cast<std::size_t>(i)] = fixed[static_cast<std::size_t>(i)] ? 2 : 0;
+  scratch.contact_nodes.clear();
   for (const TissueRow& r : rows) {
     for (int k = 0; k < 3; ++k) {
       const int node = r.node[static_cast<std::size_t>(k)];
       if (node >= 0 && r.weight[static_cast<std::size_t>(k)] != 0.0 && scratch.pinned[static_cast<std::size_t>(node)] == 0) {
         scratch.pinned[static_cast<std::size_t>(node)] = 1;
+        scratch.contact_nodes.push_back(node);
       }
     }
   }
-  contactNormals(rows, row_offset, n, scratch);
+  contactNormals(rows, row_offset, scratch);
   Eigen::VectorXd& q = body.positions();
   Eigen::VectorXd& v = body.velocities();
   const Eigen::VectorXd& mass = body.lumpedMass();
@@ -291,6 +299,7 @@ void prepareStrainLimit(const FemBody& body, StrainLimitScratch& scratch) {
   reserveWritten(scratch.listed, tets, char{0});
   reserveWritten(scratch.checked, tets, 0);
   reserveWritten(scratch.slide_normal, nodes, Eigen::Vector3d::Zero().eval());
+  reserveWritten(scratch.contact_nodes, nodes, 0);
 }
 
 }  // namespace tactus::sim

@@ -36,8 +36,9 @@ struct StrainLimitScratch {
   std::vector<int> moved_nodes;    ///< the nodes the current sweep moved
   std::vector<int> checked;        ///< per tet: the last sweep that measured it
   std::vector<char> rolled;        ///< per node: moved back to the valid state
-  /// per node: the unit normal along which a node of a frictional contact may move (zero: any
-  /// direction)
+  std::vector<int> contact_nodes;  ///< the nodes of the call's rows, each once
+  /// per node of contact_nodes: the unit normal along which a node of a frictional contact may
+  /// move (zero: any direction); the other entries are not read
   std::vector<Eigen::Vector3d> slide_normal;
 };
 
