@@ -70,14 +70,18 @@ void contactNormals(std::span<const TissueRow> rows, std::span<const int> row_of
   if (scratch.slide_normal.size() < scratch.pinned.size()) {
     scratch.slide_normal.resize(scratch.pinned.size(), Eigen::Vector3d::Zero());
   }
-  for (int node : scratch.contact_nodes) scratch.slide_normal[static_cast<std::size_t>(node)].setZero();
+  for (int node : scratch.contact_nodes) {
+    scratch.slide_normal[static_cast<std::size_t>(node)].setZero();
+  }
   for (std::size_t c = 0; c + 1 < row_offset.size(); ++c) {
     if (row_offset[c + 1] - row_offset[c] < 3) continue;   // frictionless: free to slide
     const TissueRow& normal = rows[static_cast<std::size_t>(row_offset[c])];
     for (std::size_t k = 0; k < 3; ++k) {
       const int node = normal.node[k];
       // fixed nodes never move
-      if (node < 0 || normal.weight[k] == 0.0 || scratch.pinned[static_cast<std::size_t>(node)] != 1) continue;
+      if (node < 0 || normal.weight[k] == 0.0 || scratch.pinned[static_cast<std::size_t>(node)] != 1) {
+        continue;
+      }
       Eigen::Vector3d& sum = scratch.slide_normal[static_cast<std::size_t>(node)];
       sum += (sum.dot(normal.dir) < 0.0 ? -1.0 : 1.0) * std::abs(normal.weight[k]) * normal.dir;
     }

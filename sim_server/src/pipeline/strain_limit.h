@@ -7,10 +7,11 @@
 // last contact problem's rows touch move only after 10 sweeps, fixed nodes never, so the contacts
 // keep the solved gaps where the tissue behind them can take the compression; a node of a contact
 // with friction then moves along that contact's normal only, so that the limiter opens or closes
-// its gap but never slides it over the pad (its tangential motion is the friction solve's). Where the sweeps
-// cannot untangle what the correction inverted (a contact node pushed through several layers of
-// tets), the tets left below go back to the step's start, where every tet kept its bound, with
-// the ring of tets around them that this would leave below: no tet ends a pass below the bound.
+// its gap but never slides it over the pad (its tangential motion is the friction solve's).
+// Where the sweeps cannot untangle what the correction inverted (a contact node pushed through
+// several layers of tets), the tets left below go back to the step's start, where every tet kept
+// its bound, with the ring of tets around them that this would leave below: no tet ends a pass
+// below the bound.
 #include <Eigen/Core>
 #include <array>
 #include <span>
