@@ -221,7 +221,9 @@ TACTUS_F16C inline void axpyF16c(const std::uint16_t* const* l, const float* w, 
   }
 }
 
-TACTUS_F16C inline float reduceF16c(__m256 lo, __m256 hi) {
+// The 16 lanes of a dot product, held as two 8-lane halves (lanes 0-7, 8-15), added pairwise as
+// reduce16 does; AVX only, so that the F16C and the AVX-512F kernels both inline it
+__attribute__((target("avx"))) inline float reduceHalves(__m256 lo, __m256 hi) {
   const __m256 s8 = _mm256_add_ps(lo, hi);
   const __m128 s4 = _mm_add_ps(_mm256_castps256_ps128(s8), _mm256_extractf128_ps(s8, 1));
   const __m128 s2 = _mm_add_ps(s4, _mm_movehl_ps(s4, s4));
@@ -250,7 +252,7 @@ TACTUS_F16C inline void dotF16c(const std::uint16_t* const* l, const float* t, l
       hi[a] = _mm256_add_ps(hi[a], _mm256_mul_ps(loadHalf8(l[a] + i + 8), t1));
     }
   }
-  for (int a = 0; a < C; ++a) out[a] = reduceF16c(lo[a], hi[a]);
+  for (int a = 0; a < C; ++a) out[a] = reduceHalves(lo[a], hi[a]);
 }
 
 TACTUS_HALF_SWEEPS(sweepsF16cBody, TACTUS_F16C, axpyF16c, dotF16c)
@@ -309,10 +311,7 @@ TACTUS_AVX512 inline void dotAvx512(const std::uint16_t* const* l, const float* 
         _mm256_castpd_ps(_mm512_maskz_extractf64x4_pd(0xff, _mm512_castps_pd(acc[a]), 0));
     const __m256 hi =
         _mm256_castpd_ps(_mm512_maskz_extractf64x4_pd(0xff, _mm512_castps_pd(acc[a]), 1));
-    const __m256 s8 = _mm256_add_ps(lo, hi);
-    const __m128 s4 = _mm_add_ps(_mm256_castps256_ps128(s8), _mm256_extractf128_ps(s8, 1));
-    const __m128 s2 = _mm_add_ps(s4, _mm_movehl_ps(s4, s4));
-    out[a] = _mm_cvtss_f32(_mm_add_ss(s2, _mm_shuffle_ps(s2, s2, 1)));
+    out[a] = reduceHalves(lo, hi);
   }
 }
 

@@ -1,5 +1,5 @@
 // A supernodal Cholesky factor's values in half precision, for PCG's preconditioner solves
-// (CholmodSolver::setPreconditionerPrecision, PreconditionerPrecision::kHalf).
+// (CholmodSolver::setHalfPrecisionPreconditioner, PreconditionerPrecision::kHalf).
 #pragma once
 
 #include <cholmod.h>

@@ -244,7 +244,8 @@ StrainLimitResult limitVolumes(FemBody& body, const std::vector<double>& rest6, 
           denom += w[static_cast<std::size_t>(k)] * g[static_cast<std::size_t>(k)].squaredNorm();
         }
       }
-      if (!(denom > 0.0)) {   // fixed nodes only: it stays below
+      // fixed nodes only, or contact nodes whose normal is square to the gradient: it stays below
+      if (!(denom > 0.0)) {
         if (volume6At(q, t) < min_ratio * rest6[static_cast<std::size_t>(e)]) {
           scratch.checked[static_cast<std::size_t>(e)] = out.sweeps;
           scratch.below.push_back(e);
